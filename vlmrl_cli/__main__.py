@@ -1,0 +1,3 @@
+from vlmrl_cli.cli.app import main
+
+main()

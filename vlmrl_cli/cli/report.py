@@ -1,0 +1,8 @@
+"""`vlmrl report` (being built)."""
+
+from __future__ import annotations
+
+
+def report() -> None:
+    """Not implemented yet."""
+    raise SystemExit(2)

@@ -1,0 +1,83 @@
+"""Provenance recorded with every result: git commit, package versions, config hash."""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import hashlib
+import json
+import platform
+import subprocess
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+_PACKAGES = ("vlmrl", "torch", "gymnasium", "stable-baselines3", "transformers", "mlflow",
+             "numpy", "pandas", "scipy")
+
+
+def to_jsonable(obj: Any) -> Any:
+    """Dataclasses, enums and paths as plain JSON values (for hashing and logging)."""
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: to_jsonable(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, enum.Enum):
+        return obj.value
+    if isinstance(obj, Path):
+        return str(obj)
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    return obj
+
+
+def config_hash(obj: Any) -> str:
+    """A short stable hash of a config object's JSON form (12 hex digits).
+
+    Example:
+        >>> config_hash({"a": 1}) == config_hash({"a": 1}) != config_hash({"a": 2})
+        True
+    """
+    blob = json.dumps(to_jsonable(obj), sort_keys=True).encode()
+    return hashlib.sha256(blob).hexdigest()[:12]
+
+
+def flatten(obj: Any, prefix: str = "") -> dict[str, str]:
+    """Nested config as dotted keys -> strings (MLflow params).
+
+    Example:
+        >>> flatten({"a": {"b": 1}, "c": [1, 2]})
+        {'a.b': '1', 'c': '[1, 2]'}
+    """
+    out: dict[str, str] = {}
+    data = to_jsonable(obj)
+    if isinstance(data, dict):
+        for k, v in data.items():
+            key = f"{prefix}.{k}" if prefix else str(k)
+            if isinstance(v, dict):
+                out.update(flatten(v, key))
+            else:
+                out[key] = json.dumps(v) if isinstance(v, (list, bool)) or v is None else str(v)
+    return out
+
+
+def git_commit(cwd: Path | None = None) -> str:
+    """The current git commit (with ``-dirty`` if the tree has changes), or ``unknown``."""
+    try:
+        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True,
+                             text=True, check=True, timeout=5).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=cwd,
+                               capture_output=True, text=True, check=True, timeout=5).stdout.strip()
+        return f"{sha}-dirty" if dirty else sha
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def package_versions() -> dict[str, str]:
+    versions = {"python": platform.python_version()}
+    for name in _PACKAGES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions

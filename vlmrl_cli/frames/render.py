@@ -1,0 +1,78 @@
+"""Headless MountainCar-v0 frames at any chosen state, drawn by gymnasium's own renderer."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from vlmrl_cli.frames.geometry import MAX_POSITION, MAX_SPEED, MIN_POSITION
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One RGB frame, shape (400, 600, 3) uint8, and the SHA-256 of its bytes.
+
+    ``frame_id`` is an optional human tag (e.g. ``"x=-0.50"``) used to label tables and to
+    match replay transcripts; the simulated VLM never reads it.
+    """
+
+    pixels: np.ndarray = field(repr=False)
+    sha256: str
+    frame_id: str | None = None
+
+    @classmethod
+    def from_pixels(cls, pixels: np.ndarray, frame_id: str | None = None) -> Frame:
+        pixels = np.ascontiguousarray(pixels, dtype=np.uint8)
+        return cls(pixels=pixels, sha256=hashlib.sha256(pixels.tobytes()).hexdigest(),
+                   frame_id=frame_id)
+
+    def png_bytes(self) -> bytes:
+        """The frame encoded as PNG (what HTTP backends send)."""
+        import io
+
+        from PIL import Image
+
+        buf = io.BytesIO()
+        Image.fromarray(self.pixels).save(buf, format="PNG")
+        return buf.getvalue()
+
+
+class FrameRenderer:
+    """Renders MountainCar-v0 at arbitrary (x, v) with ``render_mode="rgb_array"``.
+
+    Holds one unwrapped gymnasium env; no display is needed.
+
+    Example:
+        >>> renderer = FrameRenderer()
+        >>> renderer.render(-0.5).pixels.shape
+        (400, 600, 3)
+        >>> renderer.close()
+    """
+
+    def __init__(self) -> None:
+        import gymnasium as gym
+
+        os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # harmless for rgb_array, needed by some SDL builds
+        self._env: Any = gym.make("MountainCar-v0", render_mode="rgb_array").unwrapped
+        self._env.reset(seed=0)
+
+    def render(self, x: float, velocity: float = 0.0, frame_id: str | None = None) -> Frame:
+        """Render the frame of position ``x`` (and ``velocity``, which the picture ignores)."""
+        if not MIN_POSITION <= x <= MAX_POSITION:
+            raise ValueError(f"x={x} is outside the track [{MIN_POSITION}, {MAX_POSITION}]")
+        self._env.state = np.array([x, np.clip(velocity, -MAX_SPEED, MAX_SPEED)], dtype=np.float64)
+        pixels = self._env.render()
+        return Frame.from_pixels(pixels, frame_id=frame_id)
+
+    def close(self) -> None:
+        self._env.close()
+
+    def __enter__(self) -> FrameRenderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,44 @@
+"""One frozen configuration object for the hybrid reward (paper Sections 3.2-3.4)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from vlmrl_cli.frames.geometry import Zone
+
+# Raw potential of each MCQ label (Phi_raw). The paper fixes only "0 -> 0.3 by reaching the
+# left peak"; the rest is our choice, documented in README: the two slopes are a small first
+# step, the left peak the paper's 0.3, the right hill before the flag 0.6, the goal 1.0.
+DEFAULT_LABEL_POTENTIALS: tuple[tuple[Zone, float], ...] = (
+    (Zone.LEFT_PEAK, 0.3),
+    (Zone.LEFT_SLOPE, 0.1),
+    (Zone.BOTTOM, 0.0),
+    (Zone.RIGHT_SLOPE, 0.1),
+    (Zone.NEAR_GOAL, 0.6),
+    (Zone.GOAL, 1.0),
+)
+
+
+@dataclass(frozen=True)
+class ShapingConfig:
+    """Knobs of the semantic potential and the reward fusion; each field says its unit."""
+
+    label_potentials: tuple[tuple[Zone, float], ...] = field(
+        default=DEFAULT_LABEL_POTENTIALS, metadata={"help": "MCQ label -> raw potential"}
+    )
+    alpha: float = field(default=5.0, metadata={"help": "PBRS scale (the paper gives none)"})
+    gamma: float | None = field(default=None, metadata={"help": "PBRS discount; None = PPO's gamma"})
+    query_every: int = field(default=10, metadata={"help": "ask the VLM at most every k env steps"})
+    confirm: int = field(default=2, metadata={"help": "agreeing labels that confirm a milestone"})
+    bandwidth: float = field(default=0.5, metadata={"help": "RBF kernel width, feature-distance units"})
+    reuse_radius: float = field(
+        default=0.15, metadata={"help": "reuse a prototype's label within this feature distance"}
+    )
+    kin_scale: float = field(default=2.0, metadata={"help": "R_kin = max(0, scale (x + offset))"})
+    kin_offset: float = field(default=0.4, metadata={"help": "see kin_scale (Eq. 1)"})
+    render_quantum: float = field(
+        default=0.001, metadata={"help": "render positions on this grid (x units; 1 px = 0.0054)"}
+    )
+
+    def potential_of(self, label: Zone) -> float:
+        return dict(self.label_potentials)[label]

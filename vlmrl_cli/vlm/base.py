@@ -1,0 +1,53 @@
+"""The one interface every VLM backend implements, and what a query returns."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+from vlmrl_cli.frames.render import Frame
+from vlmrl_cli.vlm.prompts import Prompt
+
+
+@dataclass(frozen=True)
+class Answer:
+    """A VLM's raw text answer to one (prompt, frame) query, with its provenance."""
+
+    text: str
+    latency_s: float
+    backend: str
+    model: str
+    simulated: bool
+    cached: bool = False
+
+
+@runtime_checkable
+class Backend(Protocol):
+    """A VLM: ``answer`` maps (prompt, frame) to raw text; nothing else is shared.
+
+    ``name`` is the backend kind (``sim``, ``hf``, ``openai``, ``replay``), ``model`` names the
+    model (hub id, path, server model), ``simulated`` is True when no real VLM produced the
+    text. Implementations raise ``BackendUnavailable`` when they cannot answer at all
+    (server down, malformed response) and ``MissingAnswer`` (replay only) for an unknown query.
+    """
+
+    name: str
+    model: str
+    simulated: bool
+
+    def answer(self, prompt: Prompt, frame: Frame) -> str: ...
+
+    def close(self) -> None: ...
+
+
+def describe(backend: Backend) -> str:
+    """One label for tables, captions and MLflow tags, saying plainly when it is simulated.
+
+    Example:
+        >>> class B:
+        ...     name, model, simulated = "sim", "pixel-reader", True
+        >>> describe(B())  # doctest: +SKIP
+        'sim:pixel-reader (SIMULATED VLM, not a real model)'
+    """
+    label = f"{backend.name}:{backend.model}"
+    return f"{label} (SIMULATED VLM, not a real model)" if backend.simulated else label

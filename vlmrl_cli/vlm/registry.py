@@ -1,0 +1,39 @@
+"""Build a backend (and its client) from a ``VLMConfig``; the one place that dispatches."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.vlm.base import Backend
+from vlmrl_cli.vlm.cache import ResponseCache
+from vlmrl_cli.vlm.client import VLMClient
+from vlmrl_cli.vlm.config import BACKENDS, VLMConfig
+
+
+def build_backend(cfg: VLMConfig) -> Backend:
+    """Instantiate the backend ``cfg.backend``; unknown names are a ``BadInput``."""
+    if cfg.backend == "sim":
+        from vlmrl_cli.vlm.sim import SimulatedVLM
+
+        return SimulatedVLM(cfg.sim)
+    if cfg.backend == "hf":
+        from vlmrl_cli.vlm.hf import HFBackend
+
+        return HFBackend.from_config(cfg)
+    if cfg.backend == "openai":
+        from vlmrl_cli.vlm.openai_compat import OpenAIBackend
+
+        return OpenAIBackend.from_config(cfg)
+    if cfg.backend == "replay":
+        from vlmrl_cli.vlm.replay import ReplayBackend
+
+        return ReplayBackend.from_config(cfg)
+    raise BadInput(f"unknown VLM backend '{cfg.backend}'; choose one of {', '.join(BACKENDS)}.")
+
+
+def build_client(cfg: VLMConfig, transcript: Path | None = None) -> VLMClient:
+    """The backend of ``cfg`` behind the shared response cache (unless disabled)."""
+    backend = build_backend(cfg)
+    cache = ResponseCache(cfg.cache_path) if cfg.use_cache and cfg.cache_path is not None else None
+    return VLMClient(backend, cache=cache, transcript=transcript)
