@@ -27,7 +27,7 @@ VlmModel = Annotated[
 ]
 VlmBaseUrl = Annotated[str | None, typer.Option("--base-url", help="openai: server URL, e.g. http://localhost:11434/v1.")]
 VlmApiKeyEnv = Annotated[str, typer.Option("--api-key-env", help="openai: environment variable holding the API key.")]
-VlmDevice = Annotated[str | None, typer.Option("--device", help="hf: torch device (default cuda when present, else cpu).")]
+VlmDevice = Annotated[str | None, typer.Option("--device", help="hf: torch device (default: cuda if present).")]
 VlmDtype = Annotated[str, typer.Option("--dtype", help="hf: torch dtype (auto, float32, float16, bfloat16).")]
 VlmMaxNewTokens = Annotated[int, typer.Option("--max-new-tokens", min=1, help="hf/openai: answer length cap.")]
 VlmTimeout = Annotated[float, typer.Option("--timeout", min=0.1, help="openai: seconds per request.")]
@@ -38,7 +38,7 @@ VlmTranscript = Annotated[
 NoCache = Annotated[bool, typer.Option("--no-cache", help="Bypass the on-disk VLM response cache.")]
 CachePath = Annotated[Path, typer.Option("--cache-path", help="sqlite file of the VLM response cache.")]
 SimFlicker = Annotated[float, typer.Option("--sim-flicker", min=0.0, max=1.0, help="sim: P(neighbouring MCQ label).")]
-SimFloatNoise = Annotated[float, typer.Option("--sim-float-noise", min=0.0, help="sim: std of float answers (x units).")]
+SimFloatNoise = Annotated[float, typer.Option("--sim-float-noise", min=0.0, help="sim: std of float answers, x units.")]
 SimSeed = Annotated[int, typer.Option("--sim-seed", help="sim: seed of the simulated answers.")]
 SimLatency = Annotated[float, typer.Option("--sim-latency", min=0.0, help="sim: fixed seconds per query.")]
 
