@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import inspect
 import typing
@@ -122,3 +123,32 @@ def with_vlm_options(command: Callable[..., None]) -> Callable[..., None]:
     wrapper.__annotations__ = {p.name: p.annotation for p in params}
     del wrapper.__wrapped__  # typer must see the merged signature, not the original
     return wrapper
+
+
+# CLI parameter -> VLMConfig field (SimKnobs fields under "sim.").
+_VLM_FIELDS = {
+    "vlm": "backend", "model": "model", "base_url": "base_url", "api_key_env": "api_key_env", "device": "device",
+    "dtype": "dtype", "max_new_tokens": "max_new_tokens", "timeout": "timeout_s", "retries": "retries",
+    "transcript": "transcript_in", "no_cache": "use_cache", "cache_path": "cache_path",
+    "sim_flicker": "sim.flicker", "sim_float_noise": "sim.float_noise", "sim_seed": "sim.seed",
+    "sim_latency": "sim.latency_s",
+}
+
+
+def vlm_overrides(base: VLMConfig, flags: VLMConfig, explicit: set[str] | None) -> VLMConfig:
+    """``flags`` when no config file is in play (``explicit`` is None); else ``base`` (from the
+    file) with only the explicitly given VLM flags laid over it."""
+    if explicit is None:
+        return flags
+    top: dict[str, Any] = {}
+    sim: dict[str, Any] = {}
+    for param, target in _VLM_FIELDS.items():
+        if param not in explicit:
+            continue
+        if target.startswith("sim."):
+            sim[target[4:]] = getattr(flags.sim, target[4:])
+        else:
+            top[target] = getattr(flags, target)
+    if sim:
+        top["sim"] = dataclasses.replace(base.sim, **sim)
+    return dataclasses.replace(base, **top)

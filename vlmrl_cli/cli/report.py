@@ -1,8 +1,64 @@
-"""`vlmrl report` (being built)."""
+"""`vlmrl report`: Table 2, Figures 2-4 and the claims table from the runs in MLflow (never retrains)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Annotated
 
-def report() -> None:
-    """Not implemented yet."""
-    raise SystemExit(2)
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from vlmrl_cli.cli.errors import exit_codes
+from vlmrl_cli.cli.options import Experiment, OutDir, TrackingUri
+from vlmrl_cli.core.errors import BadInput
+
+DEFAULT_OUT = Path("results/report")
+DEFAULT_THR = "-190,-160,-130"
+
+
+def parse_thresholds(text: str) -> tuple[float, ...]:
+    """``"-190,-160,-130"`` -> ``(-190.0, -160.0, -130.0)``; anything else is ``BadInput``.
+
+    Example:
+        >>> parse_thresholds("-190, -130")
+        (-190.0, -130.0)
+    """
+    try:
+        values = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise BadInput(f"--thresholds must be comma-separated numbers like -190,-160,-130, got '{text}'.") from None
+    if not values:
+        raise BadInput("--thresholds is empty; pass numbers like -190,-160,-130.")
+    return values
+
+
+def report(
+    experiment: Experiment = "vlmrl",
+    tracking_uri: TrackingUri = None,
+    out: OutDir = None,
+    thresholds: Annotated[str, typer.Option("--thresholds", help="Reward targets, comma-separated.")] = DEFAULT_THR,
+    window: Annotated[int, typer.Option("--window", help="Episodes in the rolling mean return.")] = 100,
+) -> None:
+    """Write Table 2, Figures 2-4, the claims table and report.md from finished runs in MLflow."""
+    from vlmrl_cli.report.table2 import display_frame
+    from vlmrl_cli.report.writer import ReportConfig, write_report
+
+    with exit_codes():
+        cfg = ReportConfig(experiment=experiment, tracking_uri=tracking_uri, out=out or DEFAULT_OUT,
+                           thresholds=parse_thresholds(thresholds), window=window)
+        result = write_report(cfg)
+        console = Console()
+        df = display_frame(result.table)
+        keep = [c for c in df.columns if "(paper)" not in c or "speedup" in c]
+        table = Table(title=f"Table 2 — experiment {experiment}", show_lines=False)
+        for col in keep:
+            table.add_column(col, overflow="fold")
+        for row in df[keep].itertuples(index=False):
+            table.add_row(*map(str, row))
+        console.print(table)
+        for w in result.warnings:
+            console.print(f"[yellow]warning:[/] {w}")
+        console.print(f"Report written to {result.out}/ ({len(result.files)} files; see report.md)")
+        if result.report_run_id:
+            console.print(f"Logged as MLflow run {result.report_run_id} (vlmrl.kind=report).")

@@ -30,14 +30,16 @@ class ShapingConfig:
     gamma: float | None = field(default=None, metadata={"help": "PBRS discount; None = PPO's gamma"})
     query_every: int = field(default=10, metadata={"help": "ask the VLM at most every k env steps"})
     confirm: int = field(default=2, metadata={"help": "agreeing labels that confirm a milestone"})
-    bandwidth: float = field(default=0.5, metadata={"help": "RBF kernel width, feature-distance units"})
+    # Feature distance grows ~0.075 per pixel of car shift and saturates (~1.4) beyond ~40 px
+    # (measured, see shaping/features.py): 0.3 keeps far prototypes from pulling Phi to the mean.
+    bandwidth: float = field(default=0.3, metadata={"help": "RBF kernel width, feature-distance units"})
     reuse_radius: float = field(
-        default=0.15, metadata={"help": "reuse a prototype's label within this feature distance"}
+        default=0.3, metadata={"help": "reuse a prototype's label within this feature distance (~4 px)"}
     )
     kin_scale: float = field(default=2.0, metadata={"help": "R_kin = max(0, scale (x + offset))"})
     kin_offset: float = field(default=0.4, metadata={"help": "see kin_scale (Eq. 1)"})
     render_quantum: float = field(
-        default=0.001, metadata={"help": "render positions on this grid (x units; 1 px = 0.0054)"}
+        default=0.001, metadata={"help": "render positions on this grid (x units; 1 px = 0.003)"}
     )
 
     def potential_of(self, label: Zone) -> float:

@@ -42,6 +42,8 @@ def connect(uri: str | None) -> Any:
                 parent.mkdir(parents=True, exist_ok=True)
             except OSError as exc:
                 raise BadInput(f"cannot create the folder of the tracking database {db_path}.") from exc
+    if resolved.startswith(("http://", "https://")):
+        _check_server(resolved)
     try:
         client = MlflowClient(tracking_uri=resolved)
         client.search_experiments(max_results=1)
@@ -51,6 +53,17 @@ def connect(uri: str | None) -> Any:
             "sqlite:///PATH/mlflow.db or start the server."
         ) from exc
     return client
+
+
+def _check_server(uri: str) -> None:
+    """Fail fast on a tracking server that does not answer (MLflow's own client retries for
+    minutes before giving up)."""
+    import httpx
+
+    try:
+        httpx.get(uri.rstrip("/") + "/health", timeout=5.0)
+    except httpx.HTTPError as exc:
+        raise BadInput(f"the MLflow tracking server '{uri}' cannot be reached; check --tracking-uri.") from exc
 
 
 def artifact_root(tracking_uri: str) -> str | None:

@@ -1,0 +1,141 @@
+"""`vlmrl report` end to end on a fake experiment in a temporary sqlite MLflow store."""
+
+from __future__ import annotations
+
+import functools
+import os
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from tests.report.fake_mlflow import EXPECTED, WINDOW, build_fake_experiment
+from vlmrl_cli.cli.app import app
+from vlmrl_cli.report import writer
+
+runner = CliRunner()
+
+
+@pytest.fixture(autouse=True)
+def few_resamples(monkeypatch):
+    monkeypatch.setattr(writer, "ReportConfig", functools.partial(writer.ReportConfig, n_boot=100))
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory) -> tuple[str, dict[str, str]]:
+    root = tmp_path_factory.mktemp("mlflow")
+    uri = f"sqlite:///{root / 'mlflow.db'}"
+    kept = build_fake_experiment(uri, "E")
+    build_fake_experiment(uri, "ONLY_HYBRID", arms=("hybrid",))
+    from mlflow.tracking import MlflowClient
+
+    MlflowClient(tracking_uri=uri).create_experiment("EMPTY")
+    return uri, kept
+
+
+def _report(uri: str, experiment: str, out: Path):
+    return runner.invoke(app, ["report", "--experiment", experiment, "--tracking-uri", uri, "--out", str(out),
+                               "--window", str(WINDOW), "--thresholds", "-190,-160,-130"])
+
+
+def _mean(xs: list[int | None]) -> float:
+    done = [x for x in xs if x is not None]
+    return sum(done) / len(done)
+
+
+def test_report_writes_every_file_with_hand_computed_values(store, tmp_path):
+    uri, kept = store
+    out = tmp_path / "rep"
+    res = _report(uri, "E", out)
+    assert res.exit_code == 0, res.output
+    for name in ["table2.md", "table2.csv", "table2.tex", "report.md", "claims.md", "claims.csv", "per_seed.csv",
+                 *[f"figure{i}.{ext}" for i in (2, 3, 4) for ext in ("png", "pdf")]]:
+        assert (out / name).stat().st_size > 0, name
+
+    per_seed = pd.read_csv(out / "per_seed.csv")
+    assert set(per_seed["run_id"]) == set(kept.values())  # stale duplicate and FAILED run ignored
+    for arm, by_t in EXPECTED.items():
+        d = per_seed[per_seed["arm"] == arm].sort_values("seed")
+        for t, steps in by_t.items():
+            got = [None if pd.isna(v) else int(v) for v in d[f"steps_{t}"]]
+            assert got == steps, (arm, t)
+
+    long = pd.read_csv(out / "table2.csv")
+    cell = long.set_index(["metric", "arm"])
+    for arm, by_t in EXPECTED.items():
+        for t, steps in by_t.items():
+            assert cell.loc[(f"steps_{t}", arm), "value"] == pytest.approx(_mean(steps))
+    assert cell.loc[("steps_-130", "baseline"), "n_reached"] == 2
+    assert cell.loc[("reliability", "hybrid"), "value"] == 1.0
+    assert cell.loc[("reliability", "baseline"), "value"] == pytest.approx(2 / 3)
+    assert cell.loc[("eval_length", "hybrid"), "value"] == pytest.approx(125.0)
+    assert cell.loc[("speedup_-130", "hybrid"), "value"] == pytest.approx(49000 / 39000)
+    assert cell.loc[("speedup_-190", "hybrid"), "value"] == pytest.approx((113000 / 3) / 27000)
+
+    md = (out / "table2.md").read_text()
+    assert "39,000" in md and "49,000" in md and "(DNF 1/3)" in md and "1.26x" in md
+    assert "200,379" in md and "272,448" in md  # the paper's values beside ours
+    report = (out / "report.md").read_text()
+    assert "SIMULATED VLM" in report and "Verdict rule" in report and kept["hybrid-0"] in report
+    assert "cfg-hybrid" in report
+    assert str(out) in res.output.replace("\n", "")
+
+
+def test_report_logs_a_report_run(store, tmp_path):
+    uri, _ = store
+    assert _report(uri, "E", tmp_path / "rep").exit_code == 0
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient(tracking_uri=uri)
+    exp = client.get_experiment_by_name("E")
+    runs = client.search_runs([exp.experiment_id], "tags.`vlmrl.kind` = 'report'")
+    assert runs and runs[0].info.status == "FINISHED"
+    names = {a.path for a in client.list_artifacts(runs[0].info.run_id, "report")}
+    assert "report/table2.md" in names and "report/figure4.pdf" in names
+
+
+def test_report_without_baseline_says_speedups_need_it(store, tmp_path):
+    uri, _ = store
+    out = tmp_path / "one"
+    res = _report(uri, "ONLY_HYBRID", out)
+    assert res.exit_code == 0, res.output
+    assert "needs baseline" in (out / "table2.md").read_text()
+    assert "Speedups need the `baseline` arm" in (out / "report.md").read_text()
+    assert (out / "figure4.png").exists()
+
+
+@pytest.mark.parametrize("experiment", ["NOPE", "EMPTY"])
+def test_missing_or_empty_experiment_exits_2_with_one_line(store, tmp_path, experiment):
+    uri, _ = store
+    res = _report(uri, experiment, tmp_path / "x")
+    assert res.exit_code == 2
+    err = res.stderr.strip()
+    assert err.startswith("error:") and len(err.splitlines()) == 1 and experiment in err
+
+
+@pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="needs a non-root POSIX user")
+def test_unwritable_out_exits_2_before_reading_mlflow(tmp_path):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        res = _report("sqlite:///" + str(tmp_path / "never" / "mlflow.db"), "E", locked / "rep")
+    finally:
+        locked.chmod(0o700)
+    assert res.exit_code == 2
+    assert "output folder" in res.stderr and len(res.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "never").exists()  # failed before touching the tracking store
+
+
+def test_out_under_a_file_exits_2_before_reading_mlflow(tmp_path):
+    f = tmp_path / "file"
+    f.write_text("x")
+    res = _report("sqlite:///" + str(tmp_path / "never" / "m.db"), "E", f / "rep")
+    assert res.exit_code == 2 and "output folder" in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and not (tmp_path / "never").exists()
+
+
+def test_bad_thresholds_exit_2(tmp_path):
+    res = runner.invoke(app, ["report", "--thresholds", "a,b", "--out", str(tmp_path)])
+    assert res.exit_code == 2 and "--thresholds" in res.stderr

@@ -1,0 +1,53 @@
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from vlmrl_cli.report.table2 import NEEDS_BASELINE, build_table2, format_cell, to_latex, to_long, to_markdown
+
+REPORTED = json.loads((Path(__file__).resolve().parents[2] / "paper" / "reported.json").read_text())
+THRESHOLDS = (-190.0, -160.0, -130.0)
+
+
+def _per_seed(arms: dict[str, list[list[float]]]) -> pd.DataFrame:
+    rows = []
+    for arm, seeds in arms.items():
+        for seed, steps in enumerate(seeds):
+            rows.append({"arm": arm, "seed": seed, "run_id": f"{arm}{seed}", "config_hash": "h", "preset": "p",
+                         "budget": 1000, **{f"steps_{t:g}": s for t, s in zip(THRESHOLDS, steps, strict=True)},
+                         "final_return": -100.0 - seed, "episodes": 10, "eval_success_rate": 1.0,
+                         "eval_mean_length": 120.0 + seed, "eval_mean_return": -120.0})
+    return pd.DataFrame(rows)
+
+
+def _build(per_seed: pd.DataFrame):
+    empty = pd.DataFrame(columns=["run_id", "arm", "seed", "episode", "length"])
+    return build_table2(per_seed, empty, REPORTED, THRESHOLDS, np.random.default_rng(0), window=10, n_boot=50)
+
+
+def test_reported_json_holds_the_papers_table2():
+    rows = {r["threshold"]: r for r in REPORTED["table2"]["steps_to_threshold"]}
+    assert rows[-130]["hybrid"] == 200379 and rows[-130]["baseline"] == 272448 and rows[-130]["speedup"] == 1.4
+    assert rows[-190]["baseline"] == 196717 and rows[-160]["baseline"] == 219679
+    assert REPORTED["table2"]["final_reliability"]["baseline"] == 0.6
+    assert REPORTED["table1"]["rows"][1]["b"] == "Box [450, 210, 480, 230]"
+
+
+def test_without_baseline_speedups_say_so():
+    t = _build(_per_seed({"hybrid": [[100, 200, 300], [110, 210, np.nan]]}))
+    assert not t.has_baseline
+    md = to_markdown(t)
+    assert NEEDS_BASELINE in md and "272,448" in md  # the paper's baseline still shown
+    assert "(DNF 1/2)" in md
+    assert "\\toprule" in to_latex(t)
+
+
+def test_all_dnf_cell_and_long_form():
+    t = _build(_per_seed({"hybrid": [[100, 200, 300]] * 3, "baseline": [[150, np.nan, np.nan]] * 3}))
+    assert format_cell(t.cell("steps_-130", "baseline")) == "DNF 3/3"
+    long = to_long(t).set_index(["metric", "arm"])
+    assert long.loc[("speedup_-190", "hybrid"), "value"] == 1.5
+    assert np.isnan(long.loc[("speedup_-130", "hybrid"), "value"])

@@ -1,0 +1,48 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from vlmrl_cli.frames.geometry import SCALE
+from vlmrl_cli.frames.render import FrameRenderer
+from vlmrl_cli.shaping.features import BLOCK, FEATURE_DIM, frame_features
+
+
+@pytest.fixture(scope="module")
+def renderer():
+    with FrameRenderer() as r:
+        yield r
+
+
+@settings(max_examples=25, deadline=None)
+@given(arrays(np.uint8, (400, 600, 3), elements=st.integers(0, 255), fill=st.integers(0, 255)))
+def test_features_are_block_means_of_darkness(pixels: np.ndarray) -> None:
+    f = frame_features(pixels)
+    assert f.shape == (FEATURE_DIM,) and f.dtype == np.float32
+    assert np.all((f >= -1e-6) & (f <= 1 + 1e-6))
+    grey = pixels.astype(np.float64) @ np.array([0.299, 0.587, 0.114])
+    block = (255.0 - grey[:BLOCK, :BLOCK]) / 255.0
+    assert f[0] == pytest.approx(block.mean(), abs=1e-5)
+
+
+def test_rejects_a_frame_of_the_wrong_shape() -> None:
+    with pytest.raises(ValueError, match="shape"):
+        frame_features(np.zeros((10, 10, 3), dtype=np.uint8))
+
+
+@pytest.mark.parametrize("x", [-1.0, -0.52, -0.2, 0.3])
+def test_distance_grows_smoothly_with_small_displacements(renderer: FrameRenderer, x: float) -> None:
+    """Block averaging: d(1 px) < d(5 px) < d(20 px), about 0.075 per pixel, and no jump at 1 px."""
+    f0 = frame_features(renderer.render(x).pixels)
+    d = {px: float(np.linalg.norm(frame_features(renderer.render(x + px / SCALE).pixels) - f0)) for px in (1, 5, 20)}
+    assert 0 < d[1] < d[5] < d[20]
+    assert d[1] < 0.15
+    assert 0.2 < d[5] < 0.6
+
+
+def test_far_apart_frames_are_at_the_saturated_distance(renderer: FrameRenderer) -> None:
+    a, b = (frame_features(renderer.render(x).pixels) for x in (-1.0, -0.2))
+    assert 1.2 < float(np.linalg.norm(a - b)) < 1.7

@@ -1,0 +1,32 @@
+from __future__ import annotations
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+from vlmrl_cli.shaping.kinematic import kinematic_reward
+
+positions = st.floats(-1.2, 0.6)
+scales = st.floats(0.0, 10.0)
+offsets = st.floats(-1.0, 1.5)
+
+
+@given(positions, scales, offsets)
+def test_non_negative(x: float, scale: float, offset: float) -> None:
+    assert kinematic_reward(x, scale, offset) >= 0.0
+
+
+@given(positions, positions, scales, offsets)
+def test_monotone_non_decreasing_in_x(a: float, b: float, scale: float, offset: float) -> None:
+    lo, hi = sorted((a, b))
+    assert kinematic_reward(lo, scale, offset) <= kinematic_reward(hi, scale, offset)
+
+
+@given(positions, scales, offsets)
+def test_zero_left_of_minus_offset(x: float, scale: float, offset: float) -> None:
+    if x <= -offset:
+        assert kinematic_reward(x, scale, offset) == 0.0
+
+
+def test_paper_defaults_eq1() -> None:
+    assert kinematic_reward(-0.4) == 0.0
+    assert kinematic_reward(0.5) == 2.0 * 0.9

@@ -1,0 +1,153 @@
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from tests.shaping import ScriptedBackend, sim_client
+from vlmrl_cli.frames.geometry import Zone
+from vlmrl_cli.shaping.camera import Camera
+from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.shaping.semantic import STAT_KEYS, EpisodePotential, SemanticOracle, float_potential
+from vlmrl_cli.training.arms import PotentialSource
+from vlmrl_cli.vlm.client import VLMClient
+
+MCQ, FLOAT = PotentialSource.MCQ, PotentialSource.FLOAT
+
+
+@pytest.fixture(scope="module")
+def camera():
+    cam = Camera(0.001)
+    yield cam
+    cam.close()
+
+
+def scripted(*answers: str) -> tuple[VLMClient, ScriptedBackend]:
+    backend = ScriptedBackend(list(answers))
+    return VLMClient(backend), backend  # type: ignore[arg-type]
+
+
+def test_stats_have_exactly_the_documented_keys() -> None:
+    oracle = SemanticOracle(sim_client(), ShapingConfig(), MCQ)
+    assert tuple(oracle.stats()) == STAT_KEYS == (
+        "vlm/queries", "vlm/cache_hits", "vlm/prototypes", "vlm/label_reuses", "vlm/parse_failures")
+    assert all(v == 0.0 for v in oracle.stats().values())
+
+
+def test_near_frames_reuse_a_prototype_and_far_frames_ask(camera: Camera) -> None:
+    cfg = ShapingConfig()
+    oracle = SemanticOracle(sim_client(flicker=0.0), cfg, MCQ)
+    assert oracle.label(camera.view(-0.52)) == cfg.potential_of(Zone.BOTTOM)
+    assert oracle.label(camera.view(-0.5203)) == 0.0  # a third of a pixel away: reused
+    assert oracle.label(camera.view(-1.0)) == cfg.potential_of(Zone.LEFT_PEAK)  # far: asked
+    assert oracle.stats() == {"vlm/queries": 2.0, "vlm/cache_hits": 0.0, "vlm/prototypes": 2.0,
+                              "vlm/label_reuses": 1.0, "vlm/parse_failures": 0.0}
+
+
+def test_without_reuse_the_same_frame_is_asked_again_but_stored_once(camera: Camera) -> None:
+    client, backend = scripted("BOTTOM")
+    oracle = SemanticOracle(client, ShapingConfig(reuse_radius=0.0), MCQ)
+    for _ in range(3):
+        oracle.label(camera.view(-0.5))
+    assert backend.calls == 3 and oracle.prototypes == 1
+
+
+def test_unparsed_answers_are_counted_and_add_no_prototype(camera: Camera) -> None:
+    client, _ = scripted("I cannot tell.")
+    oracle = SemanticOracle(client, ShapingConfig(), MCQ)
+    assert oracle.label(camera.view(-0.5)) is None
+    assert oracle.stats()["vlm/parse_failures"] == 1.0 and oracle.prototypes == 0
+
+
+def test_float_answers_map_x_onto_zero_one(camera: Camera) -> None:
+    client, _ = scripted("x = -0.3", "far away", "7.5")
+    oracle = SemanticOracle(client, ShapingConfig(reuse_radius=0.0), FLOAT, rbf=False)
+    assert oracle.label(camera.view(-0.5)) == pytest.approx(0.5)
+    assert oracle.label(camera.view(-0.5)) is None
+    assert oracle.label(camera.view(-0.5)) is None  # out of range is not a parsed answer
+    assert oracle.stats()["vlm/parse_failures"] == 2.0
+    assert float_potential(-0.3) == pytest.approx(0.5)
+
+
+def test_phi_rbf_is_memoised_until_a_prototype_is_added(camera: Camera) -> None:
+    oracle = SemanticOracle(sim_client(flicker=0.0), ShapingConfig(), MCQ)
+    view = camera.view(-1.0)
+    assert oracle.phi_rbf(view) == 0.0  # no prototype yet
+    oracle.label(camera.view(-1.0))
+    assert oracle.phi_rbf(view) == pytest.approx(0.3)  # memo invalidated by the new prototype
+
+
+def test_labels_every_query_every_steps_including_step_zero(camera: Camera) -> None:
+    client, backend = scripted("BOTTOM")
+    oracle = SemanticOracle(client, ShapingConfig(reuse_radius=0.0, query_every=10), MCQ)
+    episode = EpisodePotential(oracle, lock=True)
+    view = camera.view(-0.5)
+    episode.reset(view)
+    calls = [backend.calls]
+    for _ in range(25):
+        episode.step(view)
+        calls.append(backend.calls)
+    assert [t for t in range(1, 26) if calls[t] > calls[t - 1]] == [10, 20]
+    assert calls[0] == 1
+
+
+def test_lock_holds_within_an_episode_and_resets_at_the_start(camera: Camera) -> None:
+    client, _ = scripted("GOAL", "GOAL", "BOTTOM", "LEFT_SLOPE", "BOTTOM")
+    cfg = ShapingConfig(reuse_radius=0.0, query_every=1, confirm=2)
+    episode = EpisodePotential(SemanticOracle(client, cfg, MCQ, rbf=False), lock=True)
+    view = camera.view(-0.5)
+    phis = [episode.reset(view)] + [episode.step(view) for _ in range(3)]
+    assert phis == [1.0, 1.0, 1.0, 1.0]  # held GOAL, then locked at GOAL despite BOTTOM / LEFT_SLOPE
+    assert episode.lock_state.level == 1.0
+    assert episode.reset(view) == 0.0 and episode.lock_state.level == 0.0  # new episode: BOTTOM, unlocked
+
+
+def test_hybrid_is_the_max_of_lock_and_rbf_and_no_lock_is_rbf(camera: Camera) -> None:
+    client, _ = scripted("NEAR_GOAL", "NEAR_GOAL", "BOTTOM")
+    cfg = ShapingConfig(reuse_radius=0.0, query_every=1, confirm=2)
+    oracle = SemanticOracle(client, cfg, MCQ, rbf=True)
+    locked, free = EpisodePotential(oracle, lock=True), EpisodePotential(oracle, lock=False)
+    near_goal, bottom = camera.view(0.3), camera.view(-0.5)
+    locked.reset(near_goal)
+    locked.step(near_goal)  # confirmed NEAR_GOAL: level 0.6
+    free.reset(bottom)  # asks once more: BOTTOM at the valley
+    rbf = oracle.phi_rbf(bottom)
+    assert rbf < 0.05  # the BOTTOM prototype dominates; NEAR_GOAL is far in feature space
+    assert locked._phi(bottom) == max(0.6, rbf) == 0.6
+    assert free._phi(bottom) == rbf
+
+
+def test_parse_failure_keeps_the_previous_potential(camera: Camera) -> None:
+    client, _ = scripted("x = -0.3", "nothing", "nothing")
+    cfg = ShapingConfig(reuse_radius=0.0, query_every=1)
+    episode = EpisodePotential(SemanticOracle(client, cfg, FLOAT, rbf=False), lock=False)
+    view = camera.view(-0.5)
+    assert [episode.reset(view), episode.step(view), episode.step(view)] == pytest.approx([0.5, 0.5, 0.5])
+
+
+@pytest.mark.parametrize("change", [{"bandwidth": 0.0}, {"reuse_radius": -1.0}, {"query_every": 0}, {"confirm": 0}])
+def test_invalid_config_is_rejected(change: dict) -> None:
+    with pytest.raises(ValueError):
+        SemanticOracle(sim_client(), dataclasses.replace(ShapingConfig(), **change), MCQ)
+
+
+def test_an_arm_without_potential_needs_no_oracle() -> None:
+    with pytest.raises(ValueError, match="potential source"):
+        SemanticOracle(sim_client(), ShapingConfig(), PotentialSource.NONE)
+
+
+def test_deep_copies_of_an_env_share_the_oracle_and_its_cached_client(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """RecordConstructorArgs deep-copies wrapper arguments; the run's oracle (with an open sqlite
+    response cache) must be shared, not cloned."""
+    import copy
+
+    from vlmrl_cli.shaping.config import ShapingConfig
+    from vlmrl_cli.shaping.semantic import SemanticOracle
+    from vlmrl_cli.training.arms import PotentialSource
+    from vlmrl_cli.vlm.config import VLMConfig
+    from vlmrl_cli.vlm.registry import build_client
+
+    client = build_client(VLMConfig(backend="sim", cache_path=tmp_path / "c.sqlite"))
+    oracle = SemanticOracle(client, ShapingConfig(), PotentialSource.MCQ)
+    assert copy.deepcopy({"oracle": oracle})["oracle"] is oracle
+    client.close()

@@ -1,0 +1,63 @@
+from __future__ import annotations
+
+import socket
+from pathlib import Path
+
+import pytest
+
+from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.tracking import store
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_resolve_prefers_argument_then_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", "sqlite:///env.db")
+    assert store.resolve_tracking_uri("sqlite:///arg.db") == "sqlite:///arg.db"
+    assert store.resolve_tracking_uri(None) == "sqlite:///env.db"
+    monkeypatch.delenv("MLFLOW_TRACKING_URI")
+    assert store.resolve_tracking_uri(None) == store.DEFAULT_TRACKING_URI
+
+
+def test_down_http_server_is_bad_input_quickly() -> None:
+    with pytest.raises(BadInput, match="cannot be reached"):
+        store.connect(f"http://127.0.0.1:{_closed_port()}")
+
+
+def test_unwritable_sqlite_location_is_bad_input(tmp_path: Path) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    with pytest.raises(BadInput):
+        store.connect(f"sqlite:///{blocker}/sub/mlflow.db")
+
+
+def test_artifacts_live_beside_the_sqlite_database(tmp_path: Path) -> None:
+    client = store.connect(f"sqlite:///{tmp_path}/db/mlflow.db")
+    exp = client.get_experiment(store.ensure_experiment(client, "e"))
+    assert exp.artifact_location == (tmp_path / "db" / "mlartifacts").as_uri()
+    # idempotent: the same id the second time
+    assert store.ensure_experiment(client, "e") == exp.experiment_id
+
+
+def test_batch_logger_flushes_every_point(tmp_path: Path) -> None:
+    client = store.connect(f"sqlite:///{tmp_path}/mlflow.db")
+    run = client.create_run(store.ensure_experiment(client, "e"))
+    logger = store.BatchLogger(client, run.info.run_id, max_buffer=7)
+    for step in range(25):
+        logger.log({"a": step, "b": -step}, step=step)
+    logger.flush()
+    history = client.get_metric_history(run.info.run_id, "a")
+    assert sorted(m.step for m in history) == list(range(25))
+    assert {m.value for m in client.get_metric_history(run.info.run_id, "b")} == {-float(s) for s in range(25)}
+
+
+def test_simulated_runs_are_labelled() -> None:
+    tags = store.provenance_tags("sim:pixel-reader (SIMULATED VLM, not a real model)", simulated=True)
+    assert tags["vlmrl.simulated"] == "true"
+    assert "SIMULATED" in tags["vlmrl.note"]
+    assert "vlmrl.version.torch" in tags
+    assert "vlmrl.note" not in store.provenance_tags("hf:model", simulated=False)

@@ -1,0 +1,35 @@
+from __future__ import annotations
+
+import math
+
+from vlmrl_cli.training.callbacks import EpisodeTracker, ProgressEvent
+
+
+def _step(tracker: EpisodeTracker, t: int, infos: list[dict[str, object]]) -> bool:
+    tracker.num_timesteps = t
+    tracker.locals = {"infos": infos}
+    return tracker._on_step()
+
+
+def test_completed_episodes_become_native_and_shaped_records() -> None:
+    events: list[ProgressEvent] = []
+    tracker = EpisodeTracker("hybrid-s0", total=1000, progress=events.append, interval_s=0.0)
+    _step(tracker, 16, [{}, {}])
+    _step(tracker, 32, [{"episode": {"r": -200.0, "l": 200}, "is_success": False, "shaped_return": 35.5}, {}])
+    _step(tracker, 48, [{}, {"episode": {"r": -150.0, "l": 150}, "is_success": True, "shaped_return": 80.0}])
+    assert [e["timestep"] for e in tracker.episodes] == [32.0, 48.0]
+    assert [e["episode/native_return"] for e in tracker.episodes] == [-200.0, -150.0]
+    assert [e["episode/success"] for e in tracker.episodes] == [0.0, 1.0]
+    assert [e["episode/shaped_return"] for e in tracker.episodes] == [35.5, 80.0]
+    assert math.isnan(events[0].recent_return) and events[-1].recent_return == -175.0
+    assert events[-1].episodes == 2 and events[-1].timesteps == 48
+
+
+def test_success_falls_back_to_episode_length_and_stop_is_honoured() -> None:
+    stop = {"now": False}
+    tracker = EpisodeTracker("baseline-s0", total=100, should_stop=lambda: stop["now"])
+    assert _step(tracker, 1, [{"episode": {"r": -120.0, "l": 120}}])
+    assert tracker.episodes[0]["episode/success"] == 1.0
+    assert tracker.episodes[0]["episode/shaped_return"] == -120.0
+    stop["now"] = True
+    assert _step(tracker, 2, [{}]) is False and tracker.stopped

@@ -1,0 +1,109 @@
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.frames.geometry import Zone
+from vlmrl_cli.training.config import RunConfig, load_config_file
+from vlmrl_cli.vlm.config import SimKnobs, VLMConfig
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "run.toml"
+    path.write_text(text)
+    return path
+
+
+def test_every_knob_loads_from_one_toml_file(tmp_path: Path) -> None:
+    path = _write(tmp_path, """
+arms = ["baseline", "semantic"]
+seeds = [3, 7]
+preset = "smoke"
+timesteps = 512
+workers = 1
+experiment = "exp"
+
+[vlm]
+backend = "sim"
+cache_path = "c.sqlite"
+
+[vlm.sim]
+flicker = 0.3
+
+[shaping]
+alpha = 2.5
+query_every = 4
+
+[shaping.label_potentials]
+LEFT_PEAK = 0.4
+""")
+    cfg = RunConfig(**load_config_file(path))
+    cfg.validate()
+    assert cfg.arms == ("baseline", "semantic") and cfg.seeds == (3, 7)
+    assert cfg.budget == 512 and cfg.workers == 1 and cfg.experiment == "exp"
+    assert cfg.vlm.sim.flicker == 0.3 and cfg.vlm.cache_path == Path("c.sqlite")
+    assert cfg.shaping.alpha == 2.5 and cfg.shaping.query_every == 4
+    assert cfg.shaping.potential_of(Zone.LEFT_PEAK) == 0.4
+    assert cfg.shaping.potential_of(Zone.BOTTOM) == 0.0  # untouched labels keep the default
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("arms = [", "not valid TOML"),
+        ("colour = 'red'", "unknown key 'colour'"),
+        ("[shaping]\nbandwith = 1.0", "unknown key 'bandwith'"),
+        ("[shaping.label_potentials]\nSKY = 1.0", "unknown label 'SKY'"),
+        ("[vlm.sim]\nflick = 0.1", "unknown key 'flick'"),
+    ],
+)
+def test_malformed_config_files_are_bad_input(tmp_path: Path, text: str, match: str) -> None:
+    with pytest.raises(BadInput, match=match):
+        load_config_file(_write(tmp_path, text))
+
+
+def test_missing_config_file_is_bad_input(tmp_path: Path) -> None:
+    with pytest.raises(BadInput, match="cannot read"):
+        load_config_file(tmp_path / "nope.toml")
+
+
+@pytest.mark.parametrize(
+    ("changes", "match"),
+    [
+        ({"arms": ("baseline", "teleport")}, "unknown arm 'teleport'"),
+        ({"preset": "huge"}, "unknown preset 'huge'"),
+        ({"seeds": ()}, "no seed"),
+        ({"seeds": (1, 1)}, "twice"),
+        ({"timesteps": 0}, "at least 1"),
+        ({"workers": 0}, "at least 1"),
+        ({"vlm": VLMConfig(backend="gpt9")}, "unknown VLM backend"),
+    ],
+)
+def test_validate_rejects_bad_values_before_training(changes: dict[str, object], match: str) -> None:
+    with pytest.raises(BadInput, match=match):
+        dataclasses.replace(RunConfig(), **changes).validate()  # type: ignore[arg-type]
+
+
+def test_jobs_cover_every_arm_and_seed_with_the_preset_budget() -> None:
+    cfg = RunConfig(arms=("baseline", "hybrid"), seeds=(0, 1, 2), preset="smoke")
+    jobs = cfg.jobs()
+    assert [j.name for j in jobs] == ["baseline-s0", "baseline-s1", "baseline-s2", "hybrid-s0", "hybrid-s1",
+                                      "hybrid-s2"]
+    assert {j.timesteps for j in jobs} == {1_024}
+
+
+def test_config_hash_ignores_the_seed_and_knobs_an_arm_does_not_use() -> None:
+    base = RunConfig(arms=("baseline", "hybrid"), seeds=(0, 1), preset="smoke")
+    other_vlm = dataclasses.replace(base, vlm=VLMConfig(sim=SimKnobs(flicker=0.5)))
+    b0, b1, h0, _ = base.jobs()
+    assert b0.config_hash == b1.config_hash  # seed excluded
+    ob0, _, oh0, _ = other_vlm.jobs()
+    assert ob0.config_hash == b0.config_hash  # the baseline uses no VLM: not redone
+    assert oh0.config_hash != h0.config_hash  # the hybrid does
+    no_cache = dataclasses.replace(base, vlm=VLMConfig(use_cache=False))
+    assert no_cache.jobs()[2].config_hash == h0.config_hash  # the cache changes speed, not answers
+    longer = dataclasses.replace(base, timesteps=2_048)
+    assert longer.jobs()[0].config_hash != b0.config_hash

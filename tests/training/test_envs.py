@@ -1,0 +1,106 @@
+from __future__ import annotations
+
+import dataclasses
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+from tests.shaping import sim_client
+from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.shaping.semantic import SemanticOracle
+from vlmrl_cli.shaping.wrapper import HybridReward
+from vlmrl_cli.training.arms import ARMS
+from vlmrl_cli.training.envs import make_eval_env, make_train_env
+from vlmrl_cli.training.presets import PRESETS
+
+SMOKE = PRESETS["smoke"]  # 2 envs, VecNormalize on
+
+
+def wrappers(venv) -> list[HybridReward]:
+    base = venv.venv if isinstance(venv, VecNormalize) else venv
+    return list(base.envs)
+
+
+@pytest.mark.parametrize("name", list(ARMS))
+def test_every_arm_builds_steps_and_reports_native_episode_stats(name: str) -> None:
+    arm = ARMS[name]
+    venv, oracle = make_train_env(arm, SMOKE, ShapingConfig(), sim_client() if arm.uses_vlm else None, seed=3)
+    assert isinstance(venv, VecNormalize) and venv.num_envs == SMOKE.n_envs
+    assert (oracle is not None) == arm.uses_vlm
+    venv.reset()
+    rng = np.random.default_rng(0)
+    finished = []
+    for _ in range(201):
+        _, _, dones, infos = venv.step(rng.integers(0, 3, size=venv.num_envs))
+        assert all("native_reward" in info for info in infos)
+        finished += [info for info, done in zip(infos, dones, strict=True) if done]
+    assert finished, "random actions must hit the 200-step time limit"
+    for info in finished:
+        assert info["episode"]["r"] == -info["episode"]["l"]  # Monitor: the NATIVE return
+        assert "shaped_return" in info and "is_success" in info
+    if oracle is not None:
+        stats = oracle.stats()
+        assert stats["vlm/queries"] > 0 and stats["vlm/prototypes"] > 0
+    venv.close()
+
+
+def test_env_i_is_seeded_seed_plus_i() -> None:
+    preset = dataclasses.replace(SMOKE, n_envs=3, normalize=False)
+    venv, _ = make_train_env(ARMS["kinematic"], preset, ShapingConfig(), None, seed=40)
+    assert isinstance(venv, DummyVecEnv)
+    obs = venv.reset()
+    for i in range(3):
+        expected, _ = gym.make("MountainCar-v0").reset(seed=40 + i)
+        np.testing.assert_array_equal(obs[i], expected)
+
+
+def test_camera_and_oracle_are_shared_and_gamma_defaults_to_the_learner() -> None:
+    venv, oracle = make_train_env(ARMS["hybrid"], SMOKE, ShapingConfig(), sim_client(), seed=0)
+    envs = wrappers(venv)
+    assert envs[0].camera is envs[1].camera is not None
+    assert all(env._episode is not None and env._episode.oracle is oracle for env in envs)
+    assert isinstance(oracle, SemanticOracle)
+    assert all(env.gamma == SMOKE.gamma for env in envs)
+    venv.close()
+    venv, _ = make_train_env(ARMS["hybrid"], SMOKE, ShapingConfig(gamma=0.9), sim_client(), seed=0)
+    assert all(env.gamma == 0.9 for env in wrappers(venv))
+
+
+def test_same_seed_same_shaped_rewards() -> None:
+    preset = dataclasses.replace(SMOKE, normalize=False)
+    actions = np.random.default_rng(2).integers(0, 3, size=(300, preset.n_envs))
+    runs = []
+    for _ in range(2):
+        venv, _ = make_train_env(ARMS["hybrid"], preset, ShapingConfig(), sim_client(), seed=9)
+        venv.reset()
+        runs.append(np.array([venv.step(a)[1] for a in actions]))
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+def test_a_vlm_arm_needs_a_client() -> None:
+    with pytest.raises(ValueError, match="VLMClient"):
+        make_train_env(ARMS["hybrid"], SMOKE, ShapingConfig(), None, seed=0)
+
+
+def test_eval_env_is_native() -> None:
+    venv = make_eval_env(seed=5, n_envs=2)
+    assert isinstance(venv, DummyVecEnv) and venv.num_envs == 2
+    obs = venv.reset()
+    expected, _ = gym.make("MountainCar-v0").reset(seed=6)
+    np.testing.assert_array_equal(obs[1], expected)
+    _, rewards, _, _ = venv.step(np.array([2, 0]))
+    np.testing.assert_array_equal(rewards, [-1.0, -1.0])
+    assert all(env.camera is None and env._episode is None for env in venv.envs)
+
+
+def test_ppo_trains_on_the_hybrid_env() -> None:
+    from stable_baselines3 import PPO
+
+    venv, oracle = make_train_env(ARMS["hybrid"], SMOKE, ShapingConfig(), sim_client(), seed=0)
+    model = PPO("MlpPolicy", venv, n_steps=SMOKE.n_steps, batch_size=SMOKE.batch_size, n_epochs=1, seed=0,
+                device="cpu")
+    model.learn(total_timesteps=256)
+    assert oracle is not None and oracle.stats()["vlm/queries"] > 0
+    venv.close()

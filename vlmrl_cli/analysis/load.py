@@ -1,0 +1,151 @@
+"""Read finished training runs of one MLflow experiment into tidy DataFrames.
+
+Analysis reads tracked results only (never trainer internals). The contract it relies on is
+the one ``vlmrl run`` writes: child runs tagged ``vlmrl.kind=train`` with ``vlmrl.arm``,
+``vlmrl.seed``, ``vlmrl.config_hash``, ``vlmrl.vlm``, ``vlmrl.simulated``, ``vlmrl.preset``,
+param ``timesteps``; metrics ``episode/*`` stepped by global timestep and ``eval/*``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.tracking.store import TAG_PREFIX
+
+EPISODE_METRICS = {
+    "episode/native_return": "native_return",
+    "episode/length": "length",
+    "episode/success": "success",
+    "episode/shaped_return": "shaped_return",
+}
+EVAL_METRICS = {
+    "eval/success_rate": "eval_success_rate",
+    "eval/mean_length": "eval_mean_length",
+    "eval/mean_return": "eval_mean_return",
+}
+EVAL_EPISODE_METRIC = "eval/episode_length"
+
+RUN_COLUMNS = ["run_id", "arm", "seed", "config_hash", "preset", "budget", "vlm", "simulated", "end_time",
+               *EVAL_METRICS.values()]
+EPISODE_COLUMNS = ["run_id", "arm", "seed", "timestep", *EPISODE_METRICS.values()]
+EVAL_EPISODE_COLUMNS = ["run_id", "arm", "seed", "episode", "length"]
+
+
+@dataclass(frozen=True)
+class ExperimentData:
+    """Finished training runs of one experiment.
+
+    ``runs``: one row per kept run (columns ``RUN_COLUMNS``; ``end_time`` a UTC timestamp).
+    ``episodes``: one row per training episode (``EPISODE_COLUMNS``; ``timestep`` = global step
+    at the episode's end), sorted by run and timestep. ``eval_episodes``: one row per detached
+    evaluation episode when the runs logged ``eval/episode_length`` (else empty).
+    """
+
+    experiment_id: str
+    experiment_name: str
+    runs: pd.DataFrame
+    episodes: pd.DataFrame
+    eval_episodes: pd.DataFrame
+
+
+def _search_train_runs(client: Any, experiment_id: str) -> list[Any]:
+    runs: list[Any] = []
+    token: str | None = None
+    while True:
+        page = client.search_runs(
+            [experiment_id],
+            filter_string=f"tags.`{TAG_PREFIX}kind` = 'train' and attributes.status = 'FINISHED'",
+            max_results=1000,
+            page_token=token,
+        )
+        runs.extend(page)
+        token = page.token
+        if not token:
+            return runs
+
+
+def _history(client: Any, run_id: str, key: str) -> pd.DataFrame:
+    """One metric's history as (step, rank, value): ``rank`` numbers points logged at the same step."""
+    points = client.get_metric_history(run_id, key)
+    df = pd.DataFrame({"step": [int(p.step) for p in points], "ts": [int(p.timestamp) for p in points],
+                       "value": [float(p.value) for p in points]})
+    df = df.sort_values(["step", "ts"], kind="stable").reset_index(drop=True)
+    df["rank"] = df.groupby("step").cumcount()
+    return df[["step", "rank", "value"]]
+
+
+def _episodes(client: Any, run_id: str) -> pd.DataFrame:
+    merged: pd.DataFrame | None = None
+    for key, column in EPISODE_METRICS.items():
+        h = _history(client, run_id, key).rename(columns={"value": column})
+        merged = h if merged is None else merged.merge(h, on=["step", "rank"], how="outer")
+    assert merged is not None
+    merged = merged.sort_values(["step", "rank"]).rename(columns={"step": "timestep"})
+    return merged.drop(columns="rank").reset_index(drop=True)
+
+
+def _int_or_nan(text: str | None) -> float:
+    try:
+        return float(int(float(text))) if text is not None else float("nan")
+    except ValueError:
+        return float("nan")
+
+
+def _run_row(run: Any) -> dict[str, Any]:
+    tags, params, metrics = run.data.tags, run.data.params, run.data.metrics
+    seed = _int_or_nan(tags.get(f"{TAG_PREFIX}seed"))
+    return {
+        "run_id": run.info.run_id,
+        "arm": tags.get(f"{TAG_PREFIX}arm", "unknown"),
+        "seed": seed,
+        "config_hash": tags.get(f"{TAG_PREFIX}config_hash", ""),
+        "preset": tags.get(f"{TAG_PREFIX}preset", ""),
+        "budget": _int_or_nan(params.get("timesteps")),
+        "vlm": tags.get(f"{TAG_PREFIX}vlm", "unknown"),
+        "simulated": tags.get(f"{TAG_PREFIX}simulated", "false").lower() == "true",
+        "end_time": pd.Timestamp(run.info.end_time or 0, unit="ms", tz="UTC"),
+        **{col: float(metrics.get(key, np.nan)) for key, col in EVAL_METRICS.items()},
+    }
+
+
+def load_experiment(client: Any, experiment: str) -> ExperimentData:
+    """The finished training runs of ``experiment``, the latest per (arm, seed, config_hash).
+
+    Raises:
+        BadInput: the experiment does not exist, or holds no finished training run.
+    """
+    exp = client.get_experiment_by_name(experiment)
+    if exp is None or exp.lifecycle_stage == "deleted":
+        raise BadInput(f"MLflow experiment '{experiment}' does not exist; pass --experiment NAME of a run sweep.")
+    found = _search_train_runs(client, exp.experiment_id)
+    if not found:
+        raise BadInput(f"MLflow experiment '{experiment}' has no finished training runs; run `vlmrl run` first.")
+    runs = pd.DataFrame([_run_row(r) for r in found], columns=RUN_COLUMNS)
+    runs = (runs.sort_values("end_time", ascending=False, kind="stable")
+            .drop_duplicates(["arm", "seed", "config_hash"], keep="first"))
+    runs["seed"] = runs["seed"].astype("Int64")
+    runs["budget"] = runs["budget"].astype("Int64")
+    runs = runs.sort_values(["arm", "seed"], kind="stable").reset_index(drop=True)
+
+    episodes, evals = [], []
+    for row in runs.itertuples(index=False):
+        ep = _episodes(client, row.run_id)
+        ep.insert(0, "seed", row.seed)
+        ep.insert(0, "arm", row.arm)
+        ep.insert(0, "run_id", row.run_id)
+        episodes.append(ep)
+        h = _history(client, row.run_id, EVAL_EPISODE_METRIC)
+        if len(h):
+            h = h.sort_values(["step", "rank"])
+            evals.append(pd.DataFrame({"run_id": row.run_id, "arm": row.arm, "seed": row.seed,
+                                       "episode": h["step"].to_numpy(), "length": h["value"].to_numpy()}))
+    episodes_df = pd.concat(episodes, ignore_index=True)[EPISODE_COLUMNS] if episodes else pd.DataFrame(
+        columns=EPISODE_COLUMNS)
+    evals_df = pd.concat(evals, ignore_index=True)[EVAL_EPISODE_COLUMNS] if evals else pd.DataFrame(
+        columns=EVAL_EPISODE_COLUMNS)
+    return ExperimentData(str(exp.experiment_id), str(exp.name), runs, episodes_df, evals_df)

@@ -1,0 +1,346 @@
+"""Statistics over seeds: small pure functions over arrays whose shape each docstring states.
+
+Confidence intervals are percentile bootstrap intervals from ``scipy.stats.bootstrap``
+(percentile rather than BCa: with 3-10 seeds BCa is often undefined), resampling the seeds of
+each arm independently; randomness comes in as an explicit ``numpy.random.Generator``.
+Where an interval cannot be computed (fewer than 2 values, an arm that never reached the
+threshold) the bounds are NaN and ``Estimate.note`` says why.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy import stats as sps
+
+DEFAULT_N_BOOT = 2000
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A point estimate with a two-sided confidence interval (NaN bounds when not computable)."""
+
+    value: float
+    low: float = float("nan")
+    high: float = float("nan")
+    n: int = 0
+    note: str = ""
+
+    @property
+    def has_ci(self) -> bool:
+        return bool(np.isfinite(self.low) and np.isfinite(self.high))
+
+
+@dataclass(frozen=True)
+class StepsSummary:
+    """Steps to one threshold over the seeds of one arm.
+
+    ``mean``/``median`` are over seeds that reached the threshold (as the paper reports);
+    ``censored_mean`` counts a DNF seed at its budget (a lower bound on the true mean).
+    """
+
+    n: int
+    n_reached: int
+    mean: Estimate
+    median: float
+    censored_mean: float
+    std: float
+    iqr: float
+
+    @property
+    def n_dnf(self) -> int:
+        return self.n - self.n_reached
+
+
+def _finite(values: npt.ArrayLike) -> np.ndarray:
+    arr = np.asarray(values, dtype=float).reshape(-1)
+    return arr[np.isfinite(arr)]
+
+
+def bootstrap_ci(
+    samples: tuple[np.ndarray, ...],
+    statistic: Callable[..., np.ndarray],
+    rng: np.random.Generator,
+    n_boot: int = DEFAULT_N_BOOT,
+    ci: float = 0.95,
+) -> tuple[float, float]:
+    """Percentile bootstrap CI of ``statistic(*samples)``; each sample is resampled independently.
+
+    Args:
+        samples: one or more 1-D arrays, shape ``(n_i,)`` each, ``n_i >= 2``.
+        statistic: vectorised over the last axis (``axis=-1`` keyword), returns one value per resample.
+        rng: the source of randomness.
+
+    Returns:
+        ``(low, high)``; NaN when the statistic is undefined on some resamples.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # degenerate samples (all equal) warn but are fine here
+        res = sps.bootstrap(samples, statistic, n_resamples=n_boot, confidence_level=ci, method="percentile",
+                            vectorized=True, axis=-1, rng=rng)
+    return float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
+def mean_ci(values: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
+            ) -> Estimate:
+    """Mean of ``values`` (shape ``(n,)``, NaN ignored) with a bootstrap CI.
+
+    Example:
+        >>> e = mean_ci([1.0, 2.0, 3.0], np.random.default_rng(0), n_boot=200)
+        >>> e.value, e.low <= 2.0 <= e.high
+        (2.0, True)
+    """
+    x = _finite(values)
+    if x.size == 0:
+        return Estimate(float("nan"), n=0, note="no values")
+    if x.size < 2:
+        return Estimate(float(x.mean()), n=1, note="n=1: no CI")
+    low, high = bootstrap_ci((x,), np.mean, rng, n_boot, ci)
+    return Estimate(float(x.mean()), low, high, n=int(x.size))
+
+
+def summarize_steps(
+    steps: npt.ArrayLike, budget: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT,
+    ci: float = 0.95,
+) -> StepsSummary:
+    """Summary of steps to one threshold for one arm.
+
+    Args:
+        steps: shape ``(n_seeds,)``, steps to the threshold, NaN for a seed that did not reach it.
+        budget: shape ``(n_seeds,)`` or scalar, each seed's training budget (timesteps).
+
+    Example:
+        >>> s = summarize_steps([100.0, np.nan, 300.0], 1000, np.random.default_rng(0), n_boot=100)
+        >>> s.n_reached, s.n_dnf, s.mean.value, s.censored_mean
+        (2, 1, 200.0, 466.6666666666667)
+    """
+    x = np.asarray(steps, dtype=float).reshape(-1)
+    b = np.broadcast_to(np.asarray(budget, dtype=float), x.shape)
+    reached = x[np.isfinite(x)]
+    mean = mean_ci(reached, rng, n_boot, ci)
+    if x.size and reached.size < x.size:
+        note = f"mean over the {reached.size} of {x.size} seeds that reached it"
+        mean = Estimate(mean.value, mean.low, mean.high, mean.n, "; ".join(filter(None, [mean.note, note])))
+    censored = np.where(np.isfinite(x), x, b)
+    nan = float("nan")
+    return StepsSummary(
+        n=int(x.size),
+        n_reached=int(reached.size),
+        mean=mean,
+        median=float(np.median(reached)) if reached.size else nan,
+        censored_mean=float(censored.mean()) if x.size else nan,
+        std=float(reached.std(ddof=1)) if reached.size >= 2 else nan,
+        iqr=float(np.subtract(*np.percentile(reached, [75, 25]))) if reached.size else nan,
+    )
+
+
+def _ratio_of_means(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
+    return np.asarray(np.mean(a, axis=axis) / np.mean(b, axis=axis))
+
+
+def speedup(
+    baseline_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, rng: np.random.Generator,
+    n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95,
+) -> Estimate:
+    """Speedup = mean baseline steps / mean arm steps, over seeds that reached the threshold.
+
+    Args:
+        baseline_steps: shape ``(n_b,)``, NaN for DNF seeds (excluded, as in the paper's Table 2).
+        arm_steps: shape ``(n_a,)``, NaN for DNF seeds.
+
+    Returns:
+        The ratio with a bootstrap CI (seeds of each arm resampled independently); NaN CI with
+        a reason when either arm has fewer than 2 seeds that reached the threshold.
+
+    Example:
+        >>> speedup([280.0, 260.0], [200.0, 200.0], np.random.default_rng(0), n_boot=100).value
+        1.35
+    """
+    b, a = _finite(baseline_steps), _finite(arm_steps)
+    nb, na = np.asarray(baseline_steps).size, np.asarray(arm_steps).size
+    notes = []
+    if b.size < nb or a.size < na:
+        notes.append(f"DNF seeds excluded (baseline {nb - b.size}/{nb}, arm {na - a.size}/{na})")
+    if b.size == 0 or a.size == 0:
+        return Estimate(float("nan"), n=int(min(a.size, b.size)),
+                        note="; ".join([*notes, "an arm never reached the threshold"]))
+    value = float(b.mean() / a.mean())
+    if b.size < 2 or a.size < 2:
+        return Estimate(value, n=int(min(a.size, b.size)), note="; ".join([*notes, "fewer than 2 seeds: no CI"]))
+    low, high = bootstrap_ci((b, a), _ratio_of_means, rng, n_boot, ci)
+    return Estimate(value, low, high, n=int(min(a.size, b.size)), note="; ".join(notes))
+
+
+def wilson_ci(successes: int, n: int, ci: float = 0.95) -> Estimate:
+    """A proportion ``successes / n`` with its Wilson score interval.
+
+    Example:
+        >>> e = wilson_ci(3, 3)
+        >>> e.value, round(e.low, 3), e.high
+        (1.0, 0.439, 1.0)
+    """
+    if n <= 0:
+        return Estimate(float("nan"), n=0, note="no seeds")
+    interval = sps.binomtest(int(successes), int(n)).proportion_ci(confidence_level=ci, method="wilson")
+    return Estimate(successes / n, float(interval.low), float(interval.high), n=int(n))
+
+
+def reliability(reached: npt.ArrayLike, ci: float = 0.95) -> Estimate:
+    """Fraction of seeds that reached the threshold, shape ``(n_seeds,)`` of bools, with a Wilson CI."""
+    r = np.asarray(reached, dtype=bool).reshape(-1)
+    return wilson_ci(int(r.sum()), int(r.size), ci)
+
+
+def _diff_of_means(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
+    return np.asarray(np.mean(a, axis=axis) - np.mean(b, axis=axis))
+
+
+def difference_of_means(
+    a: npt.ArrayLike, b: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
+) -> Estimate:
+    """``mean(a) - mean(b)`` (shapes ``(n_a,)``, ``(n_b,)``) with an independent-resampling bootstrap CI.
+
+    Example:
+        >>> difference_of_means([1.0, 1.0], [0.0, 1.0], np.random.default_rng(0), n_boot=100).value
+        0.5
+    """
+    x, y = _finite(a), _finite(b)
+    if x.size == 0 or y.size == 0:
+        return Estimate(float("nan"), note="an arm has no values")
+    value = float(x.mean() - y.mean())
+    if x.size < 2 or y.size < 2:
+        return Estimate(value, n=int(min(x.size, y.size)), note="fewer than 2 seeds: no CI")
+    low, high = bootstrap_ci((x, y), _diff_of_means, rng, n_boot, ci)
+    return Estimate(value, low, high, n=int(min(x.size, y.size)))
+
+
+def _std_ratio(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.asarray(np.std(a, axis=axis, ddof=1) / np.std(b, axis=axis, ddof=1))
+
+
+def std_ratio(
+    a: npt.ArrayLike, b: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
+) -> Estimate:
+    """Spread across seeds of arm ``a`` relative to arm ``b``: ``std(a) / std(b)`` (ddof=1), shapes ``(n,)``.
+
+    Below 1 means ``a`` is narrower. The CI is NaN (with a reason) when either arm has fewer than
+    3 seeds, or when resamples of ``b`` have zero spread (the ratio is then undefined).
+
+    Example:
+        >>> std_ratio([1.0, 2.0, 3.0], [2.0, 4.0, 6.0], np.random.default_rng(0), n_boot=100).value
+        0.5
+    """
+    x, y = _finite(a), _finite(b)
+    if x.size < 2 or y.size < 2:
+        return Estimate(float("nan"), n=int(min(x.size, y.size)), note="fewer than 2 seeds: no spread")
+    sy = float(y.std(ddof=1))
+    value = float(x.std(ddof=1) / sy) if sy > 0 else float("inf") if x.std() > 0 else float("nan")
+    if x.size < 3 or y.size < 3:
+        return Estimate(value, n=int(min(x.size, y.size)), note="fewer than 3 seeds: no CI")
+    low, high = bootstrap_ci((x, y), _std_ratio, rng, n_boot, ci)
+    note = "" if np.isfinite(low) and np.isfinite(high) else "some resamples have zero spread: no CI"
+    return Estimate(value, low, high, n=int(min(x.size, y.size)), note=note)
+
+
+def _std_diff(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
+    return np.asarray(np.std(a, axis=axis, ddof=1) - np.std(b, axis=axis, ddof=1))
+
+
+def std_difference(
+    a: npt.ArrayLike, b: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
+) -> Estimate:
+    """``std(a) - std(b)`` across seeds (ddof=1; shapes ``(n_a,)``, ``(n_b,)``) with a bootstrap CI.
+
+    Below 0 means ``a`` is narrower. Unlike ``std_ratio`` it stays defined when an arm has zero spread.
+
+    Example:
+        >>> std_difference([1.0, 1.0, 1.0], [0.0, 2.0, 4.0], np.random.default_rng(0), n_boot=100).value
+        -2.0
+    """
+    x, y = _finite(a), _finite(b)
+    if x.size < 2 or y.size < 2:
+        return Estimate(float("nan"), n=int(min(x.size, y.size)), note="fewer than 2 seeds: no spread")
+    value = float(x.std(ddof=1) - y.std(ddof=1))
+    low, high = bootstrap_ci((x, y), _std_diff, rng, n_boot, ci)
+    return Estimate(value, low, high, n=int(min(x.size, y.size)))
+
+
+def iqm(values: npt.ArrayLike) -> float:
+    """Interquartile mean of ``values`` (shape ``(n,)``): the mean of the middle 50% (``trim_mean`` 0.25).
+
+    Example:
+        >>> iqm([0.0, 1.0, 2.0, 3.0, 100.0, -100.0, 1.5, 2.5])
+        1.75
+    """
+    x = _finite(values)
+    return float(sps.trim_mean(x, 0.25)) if x.size else float("nan")
+
+
+def _iqm_axis(a: np.ndarray, axis: int = -1) -> np.ndarray:
+    return np.asarray(sps.trim_mean(a, 0.25, axis=axis))
+
+
+def iqm_ci(values: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
+           ) -> Estimate:
+    """IQM of ``values`` (shape ``(n_seeds,)``) with a bootstrap CI over seeds."""
+    x = _finite(values)
+    if x.size < 2:
+        return Estimate(iqm(x), n=int(x.size), note="fewer than 2 seeds: no CI")
+    low, high = bootstrap_ci((x,), _iqm_axis, rng, n_boot, ci)
+    return Estimate(iqm(x), low, high, n=int(x.size))
+
+
+def final_return(returns: npt.ArrayLike, window: int = 100) -> float:
+    """Mean native return of the last ``window`` training episodes (shape ``(E,)``, time order).
+
+    Example:
+        >>> final_return([-200.0, -150.0, -100.0], window=2)
+        -125.0
+    """
+    r = np.asarray(returns, dtype=float).reshape(-1)
+    return float(r[-window:].mean()) if r.size else float("nan")
+
+
+def mean_band(
+    curves: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean over seeds of curves on a common grid, with a pointwise bootstrap band.
+
+    Args:
+        curves: shape ``(n_seeds, G)``; NaN where a seed has no value yet.
+
+    Returns:
+        ``(mean, low, high)``, each shape ``(G,)``: ``mean`` over available seeds; the band only
+        where every seed has a value and there are at least 2 seeds (NaN elsewhere).
+    """
+    c = np.asarray(curves, dtype=float)
+    if c.ndim != 2:
+        raise ValueError(f"curves must have shape (n_seeds, G), got {c.shape}.")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns
+        mean = np.nanmean(c, axis=0) if c.shape[0] else np.full(c.shape[1], np.nan)
+    low = np.full(c.shape[1], np.nan)
+    high = np.full(c.shape[1], np.nan)
+    full = np.all(np.isfinite(c), axis=0)
+    if c.shape[0] >= 2 and full.any():
+        lo, hi = _band(c[:, full], rng, n_boot, ci)
+        low[full], high[full] = lo, hi
+    return mean, low, high
+
+
+def _band(c: np.ndarray, rng: np.random.Generator, n_boot: int, ci: float) -> tuple[np.ndarray, np.ndarray]:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = sps.bootstrap((c,), np.mean, n_resamples=n_boot, confidence_level=ci, method="percentile",
+                            vectorized=True, axis=0, rng=rng)
+    lo = np.asarray(res.confidence_interval.low, dtype=float)
+    hi = np.asarray(res.confidence_interval.high, dtype=float)
+    # a column where all seeds agree has a zero-width band; scipy may return NaN there
+    same = np.all(c == c[0], axis=0)
+    lo[same], hi[same] = c[0, same], c[0, same]
+    return lo, hi

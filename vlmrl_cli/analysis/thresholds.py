@@ -1,0 +1,117 @@
+"""Steps to a reward threshold: the paper's sample-efficiency measure (Section 4.1, Table 2).
+
+The paper records "the exact timesteps that each agent required to reach specific reward
+targets". We read that as: the first global timestep at which the mean native return of the
+last ``window`` completed episodes is at or above the target -- the quantity Stable-Baselines3
+logs as ``rollout/ep_rew_mean`` (a 100-episode buffer). Like that buffer, the mean is taken
+over the episodes completed so far while fewer than ``window`` have completed; pass
+``min_episodes=window`` to demand a full window instead.
+
+All functions are pure and take one run's episodes as two aligned arrays of shape ``(E,)``:
+``timesteps`` (global environment step at which each episode ended, int) and ``returns``
+(native, unshaped episode return).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+#: Relative tolerance when comparing a rolling mean with a threshold, so that a mean which is
+#: exactly the threshold in exact arithmetic still counts after floating-point summation.
+RTOL = 1e-9
+
+
+def _check(timesteps: npt.ArrayLike, returns: npt.ArrayLike, window: int, min_episodes: int
+           ) -> tuple[np.ndarray, np.ndarray]:
+    ts = np.asarray(timesteps, dtype=np.int64).reshape(-1)
+    ret = np.asarray(returns, dtype=float).reshape(-1)
+    if ts.shape != ret.shape:
+        raise ValueError(f"timesteps {ts.shape} and returns {ret.shape} must have the same shape (E,).")
+    if window < 1:
+        raise ValueError(f"window must be >= 1, got {window}.")
+    if not 1 <= min_episodes <= window:
+        raise ValueError(f"min_episodes must be in [1, window={window}], got {min_episodes}.")
+    order = np.argsort(ts, kind="stable")
+    return ts[order], ret[order]
+
+
+def rolling_mean_return(
+    timesteps: npt.ArrayLike, returns: npt.ArrayLike, window: int = 100, min_episodes: int = 1
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rolling mean return as a step function of the global timestep.
+
+    Args:
+        timesteps: shape ``(E,)``, global step at which each episode ended (any order).
+        returns: shape ``(E,)``, native return of each episode.
+        window: number of most recent completed episodes averaged.
+        min_episodes: fewest completed episodes for a defined mean (earlier points are NaN).
+
+    Returns:
+        ``(steps, mean)``, both shape ``(K,)`` with ``K`` the number of distinct end steps:
+        ``mean[k]`` is the mean over the last ``window`` episodes completed at or before
+        ``steps[k]``. Episodes ending at the same step all count at that step (ties).
+
+    Example:
+        >>> rolling_mean_return([10, 20, 20, 30], [-200, -100, -150, -50], window=2)
+        (array([10, 20, 30]), array([-200., -125., -100.]))
+    """
+    ts, ret = _check(timesteps, returns, window, min_episodes)
+    if ts.size == 0:
+        return ts, ret
+    mean = pd.Series(ret).rolling(window, min_periods=min_episodes).mean().to_numpy()
+    last_of_step = np.r_[ts[1:] != ts[:-1], True]
+    return ts[last_of_step], mean[last_of_step]
+
+
+def steps_to_threshold(
+    timesteps: npt.ArrayLike,
+    returns: npt.ArrayLike,
+    threshold: float,
+    window: int = 100,
+    min_episodes: int = 1,
+) -> int | None:
+    """First global timestep at which the rolling mean return reaches ``threshold`` (>=).
+
+    Args:
+        timesteps: shape ``(E,)``, global step at which each episode ended.
+        returns: shape ``(E,)``, native return of each episode.
+        threshold: target mean return (native units, e.g. -130).
+        window: episodes in the rolling mean (the paper's logs: 100).
+        min_episodes: fewest completed episodes before a mean counts (default 1: partial
+            windows count, like SB3's ``ep_rew_mean``).
+
+    Returns:
+        The timestep (int), or ``None`` if the run never reaches it (did not finish, DNF).
+
+    Example:
+        >>> steps_to_threshold([100, 200, 300], [-200, -120, -100], -160, window=2)
+        200
+        >>> steps_to_threshold([100, 200], [-200, -199], -130) is None
+        True
+    """
+    steps, mean = rolling_mean_return(timesteps, returns, window, min_episodes)
+    tol = RTOL * max(1.0, abs(float(threshold)))
+    hit = np.flatnonzero(mean >= float(threshold) - tol)  # NaN compares False
+    return int(steps[hit[0]]) if hit.size else None
+
+
+def censored_steps_to_threshold(
+    timesteps: npt.ArrayLike,
+    returns: npt.ArrayLike,
+    threshold: float,
+    budget: int,
+    window: int = 100,
+    min_episodes: int = 1,
+) -> int:
+    """``steps_to_threshold``, with a run that never reaches the threshold counted at ``budget``.
+
+    The result is a lower bound on the true (unobserved) steps of a DNF run.
+
+    Example:
+        >>> censored_steps_to_threshold([100, 200], [-200, -199], -130, budget=1000)
+        1000
+    """
+    steps = steps_to_threshold(timesteps, returns, threshold, window, min_episodes)
+    return int(budget) if steps is None else min(steps, int(budget))

@@ -1,0 +1,84 @@
+"""Rich progress for a sweep: one row per (arm, seed) run and an overall row with the ETA."""
+
+from __future__ import annotations
+
+import math
+from types import TracebackType
+
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+
+from vlmrl_cli.training.callbacks import ProgressEvent
+from vlmrl_cli.training.config import TrainJob
+from vlmrl_cli.training.worker import JobResult
+
+
+class RichSweepReporter:
+    """Implements ``training.sweep.SweepReporter`` on a rich ``Progress``."""
+
+    def __init__(self, console: Console) -> None:
+        self.console = console
+        self._bars = Progress(
+            TextColumn("{task.description:<22}"),
+            BarColumn(bar_width=24),
+            MofNCompleteColumn(),
+            TextColumn("{task.fields[status]}"),
+            TimeElapsedColumn(),
+            TimeRemainingColumn(),
+            console=console,
+            transient=False,
+        )
+        self._tasks: dict[str, TaskID] = {}
+        self._seen: dict[str, int] = {}
+        self._overall: TaskID | None = None
+
+    def __enter__(self) -> RichSweepReporter:
+        self._bars.start()
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self._bars.stop()
+
+    def planned(self, pending: list[TrainJob], done: list[TrainJob]) -> None:
+        if done:
+            names = ", ".join(j.name for j in done)
+            self.console.print(f"[dim]{len(done)} run(s) already FINISHED, skipped: {names}[/]")
+        if not pending:
+            return
+        total = sum(j.timesteps for j in pending)
+        self._overall = self._bars.add_task("all runs", total=total, status="")
+        for job in pending:
+            self._tasks[job.name] = self._bars.add_task(job.name, total=job.timesteps, status="[dim]queued[/]")
+            self._seen[job.name] = 0
+
+    def progress(self, event: ProgressEvent) -> None:
+        task = self._tasks.get(event.job)
+        if task is None:
+            return
+        recent = "n/a" if math.isnan(event.recent_return) else f"{event.recent_return:7.1f}"
+        status = f"ep {event.episodes:5d}  R100 {recent}" + ("  [cyan]evaluating[/]" if event.phase == "eval" else "")
+        self._bars.update(task, completed=event.timesteps, status=status)
+        if self._overall is not None:
+            self._bars.advance(self._overall, max(0, event.timesteps - self._seen[event.job]))
+        self._seen[event.job] = max(self._seen[event.job], event.timesteps)
+
+    def finished(self, result: JobResult) -> None:
+        task = self._tasks.get(result.job)
+        if task is None:
+            return
+        if result.status == "FINISHED":
+            status = (f"[green]done[/] eval success {result.eval_success_rate:.0%}, "
+                      f"len {result.eval_mean_length:.0f}")
+        else:
+            status = f"[red]{result.status}[/] {result.error or ''}"[:80]
+        self._bars.update(task, status=status)

@@ -1,0 +1,207 @@
+"""Figures 2-4 of the paper, drawn with matplotlib's object API (no pyplot state, no global style).
+
+Each ``plot_*`` function draws on ``ax`` (a new figure's axes when ``None``) and returns the axes;
+each ``figure*`` function builds a whole ~7-inch-wide figure with the VLM backend named in its
+suptitle. Fonts are >= 8 pt so the figures stay readable at paper size.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+
+from vlmrl_cli.analysis import stats
+from vlmrl_cli.analysis.thresholds import rolling_mean_return
+from vlmrl_cli.report.table2 import Table2, order_arms, threshold_key
+
+WIDTH_IN = 7.0
+SMALL = 8
+_PALETTE = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:gray")
+
+
+def arm_color(arm: str, arms: Sequence[str]) -> str:
+    """A stable colour per arm, by its position in ``order_arms(arms)``."""
+    ordered = order_arms(arms)
+    return _PALETTE[ordered.index(arm) % len(_PALETTE)] if arm in ordered else "black"
+
+
+@dataclass(frozen=True)
+class SeedCurve:
+    """One seed's rolling mean return: ``steps`` and ``mean`` of shape ``(K,)`` (see ``rolling_mean_return``)."""
+
+    arm: str
+    seed: int
+    steps: np.ndarray
+    mean: np.ndarray
+
+
+def seed_curves(episodes: pd.DataFrame, window: int = 100, min_episodes: int = 1) -> list[SeedCurve]:
+    """Rolling mean native return per run, from the tidy ``episodes`` frame of ``load_experiment``."""
+    curves = []
+    for (arm, seed, _), ep in episodes.groupby(["arm", "seed", "run_id"], sort=True):
+        steps, mean = rolling_mean_return(ep["timestep"].to_numpy(), ep["native_return"].to_numpy(), window,
+                                          min_episodes)
+        curves.append(SeedCurve(str(arm), int(seed), steps, mean))
+    return curves
+
+
+def on_grid(curve: SeedCurve, grid: np.ndarray) -> np.ndarray:
+    """The curve's value at each grid step (shape ``(G,)``): the last value at or before it (the rolling
+    mean is a step function of time), NaN before the first completed episode."""
+    idx = np.searchsorted(curve.steps, grid, side="right") - 1
+    out = np.where(idx >= 0, curve.mean[np.clip(idx, 0, None)] if curve.mean.size else np.nan, np.nan)
+    return np.asarray(out, dtype=float)
+
+
+def _new_ax(figsize: tuple[float, float] = (WIDTH_IN, 3.0)) -> Axes:
+    return Figure(figsize=figsize, layout="constrained").subplots()
+
+
+def _style(ax: Axes) -> None:
+    ax.tick_params(labelsize=SMALL)
+    ax.grid(alpha=0.3, linewidth=0.5)
+
+
+def plot_steps_to_threshold(table: Table2, ax: Axes | None = None) -> Axes:
+    """Figure 2: mean steps to each threshold per arm (seeds that reached it) with CI error bars,
+    ``DNF k/n`` annotated, and the paper's values as hollow markers."""
+    ax = ax if ax is not None else _new_ax()
+    thresholds = list(table.thresholds)
+    arms = list(table.arms)
+    x = np.arange(len(thresholds), dtype=float)
+    width = 0.7 / max(len(arms), 1)
+    ymax = 0.0
+    for i, arm in enumerate(arms):
+        color = arm_color(arm, arms)
+        offset = (i - (len(arms) - 1) / 2) * width
+        for j, t in enumerate(thresholds):
+            c = table.cell(threshold_key(t), arm)
+            if c is None:
+                continue
+            val, lo, hi = c["value"], c["ci_low"], c["ci_high"]
+            if np.isfinite(val):
+                yerr = [[val - lo], [hi - val]] if np.isfinite(lo) and np.isfinite(hi) else None
+                ax.errorbar(x[j] + offset, val, yerr=yerr, fmt="o", color=color, capsize=3, markersize=5,
+                            label=f"{arm} (ours)" if j == 0 else None)
+                ymax = max(ymax, hi if np.isfinite(hi) else val)
+            if c["n_reached"] < c["n"]:
+                y = val if np.isfinite(val) else np.nan
+                dnf = f"DNF {int(c['n']) - int(c['n_reached'])}/{int(c['n'])}"
+                ax.annotate(dnf, (x[j] + offset, y if np.isfinite(y) else 0),
+                            xytext=(0, 8), textcoords="offset points", ha="center", fontsize=SMALL, color=color,
+                            annotation_clip=False)
+            paper = table.paper.get(threshold_key(t), {}).get(arm)
+            if paper is not None:
+                ax.plot(x[j] + offset, float(paper), marker="D", markersize=7, markerfacecolor="none",
+                        markeredgecolor=color, linestyle="none", label=f"{arm} (paper)" if j == 0 else None)
+                ymax = max(ymax, float(paper))
+    ax.set_xticks(x, [f"{t:g}" for t in thresholds])
+    ax.set_xlabel("reward threshold (rolling mean native return)", fontsize=SMALL + 1)
+    ax.set_ylabel("timesteps to reach", fontsize=SMALL + 1)
+    ax.set_ylim(0, ymax * 1.2 if ymax > 0 else 1)
+    ax.ticklabel_format(axis="y", style="sci", scilimits=(0, 0))
+    ax.yaxis.get_offset_text().set_fontsize(SMALL)
+    ax.legend(fontsize=SMALL, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    _style(ax)
+    return ax
+
+
+def plot_seed_curves(curves: Sequence[SeedCurve], ax: Axes | None = None, color: str = "tab:blue",
+                     thresholds: Sequence[float] = ()) -> Axes:
+    """Figure 3 panel: one line per seed (rolling mean return vs timestep), thresholds dashed."""
+    ax = ax if ax is not None else _new_ax()
+    shades = np.linspace(0.45, 1.0, max(len(curves), 1))
+    for curve, alpha in zip(curves, shades, strict=False):
+        ax.plot(curve.steps, curve.mean, color=color, alpha=float(alpha), linewidth=1.0, label=f"seed {curve.seed}")
+    for t in thresholds:
+        ax.axhline(t, color="gray", linestyle="--", linewidth=0.7)
+    _style(ax)
+    return ax
+
+
+def plot_mean_curve(grid: np.ndarray, mean: np.ndarray, low: np.ndarray, high: np.ndarray, ax: Axes | None = None,
+                    color: str = "tab:blue", label: str | None = None) -> Axes:
+    """Figure 4 layer: mean learning curve (shape ``(G,)``) with its band ``[low, high]``."""
+    ax = ax if ax is not None else _new_ax()
+    ax.plot(grid, mean, color=color, linewidth=1.5, label=label)
+    ax.fill_between(grid, low, high, color=color, alpha=0.25, linewidth=0)
+    _style(ax)
+    return ax
+
+
+def _suptitle(fig: Figure, title: str, vlm_note: str) -> None:
+    fig.suptitle(f"{title}\n{vlm_note}", fontsize=SMALL + 1)
+
+
+def figure2(table: Table2, vlm_note: str) -> Figure:
+    """Figure 2: average steps required to reach each reward threshold."""
+    fig = Figure(figsize=(WIDTH_IN, 3.4), layout="constrained")
+    plot_steps_to_threshold(table, fig.subplots())
+    _suptitle(fig, "Steps to reach reward thresholds (mean over seeds that reached it, 95% CI)", vlm_note)
+    return fig
+
+
+def figure3(curves: Sequence[SeedCurve], vlm_note: str, thresholds: Sequence[float] = (), window: int = 100
+            ) -> Figure:
+    """Figure 3: per-seed training curves, one panel per arm, shared axes."""
+    arms = order_arms(sorted({c.arm for c in curves}))
+    fig = Figure(figsize=(WIDTH_IN, 3.0), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1, max(len(arms), 1), sharex=True, sharey=True, squeeze=False)[0])
+    for ax, arm in zip(axes, arms, strict=False):
+        mine = [c for c in curves if c.arm == arm]
+        plot_seed_curves(mine, ax, arm_color(arm, arms), thresholds)
+        ax.set_title(f"{arm} ({len(mine)} seeds)", fontsize=SMALL + 1)
+        ax.set_xlabel("timestep", fontsize=SMALL + 1)
+        ax.xaxis.get_offset_text().set_fontsize(SMALL)
+        ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
+    axes[0].set_ylabel(f"mean return (last {window} ep.)", fontsize=SMALL + 1)
+    _suptitle(fig, "Individual training trajectories by seed", vlm_note)
+    return fig
+
+
+def mean_curves(curves: Sequence[SeedCurve], rng: np.random.Generator, n_points: int = 200,
+                n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95
+                ) -> tuple[np.ndarray, Mapping[str, tuple[np.ndarray, np.ndarray, np.ndarray]]]:
+    """Common grid (shape ``(n_points,)``) and per arm ``(mean, low, high)`` over seeds on it."""
+    end = max((float(c.steps[-1]) for c in curves if c.steps.size), default=1.0)
+    grid = np.linspace(0.0, end, n_points)
+    out = {}
+    for arm in order_arms(sorted({c.arm for c in curves})):
+        values = np.stack([on_grid(c, grid) for c in curves if c.arm == arm])
+        out[arm] = stats.mean_band(values, rng, n_boot, ci)
+    return grid, out
+
+
+def figure4(curves: Sequence[SeedCurve], vlm_note: str, rng: np.random.Generator, thresholds: Sequence[float] = (),
+            window: int = 100, n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95) -> Figure:
+    """Figure 4: aggregated learning curve per arm, mean over seeds with a pointwise bootstrap band."""
+    grid, bands = mean_curves(curves, rng, n_boot=n_boot, ci=ci)
+    arms = list(bands)
+    fig = Figure(figsize=(WIDTH_IN, 3.2), layout="constrained")
+    ax = fig.subplots()
+    for arm, (mean, low, high) in bands.items():
+        n = sum(c.arm == arm for c in curves)
+        plot_mean_curve(grid, mean, low, high, ax, arm_color(arm, arms), f"{arm} (n={n})")
+    for t in thresholds:
+        ax.axhline(t, color="gray", linestyle="--", linewidth=0.7)
+    ax.set_xlabel("timestep", fontsize=SMALL + 1)
+    ax.set_ylabel(f"mean return (last {window} ep.)", fontsize=SMALL + 1)
+    ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
+    ax.xaxis.get_offset_text().set_fontsize(SMALL)
+    ax.legend(fontsize=SMALL, loc="lower right")
+    _suptitle(fig, f"Aggregated training return (mean over seeds, {100 * ci:g}% bootstrap band)", vlm_note)
+    return fig
+
+
+def save_figure(fig: Figure, out: Path, stem: str, dpi: int = 200) -> list[Path]:
+    """Save ``fig`` as ``out/stem.png`` and ``out/stem.pdf``; returns both paths."""
+    paths = [out / f"{stem}.png", out / f"{stem}.pdf"]
+    fig.savefig(paths[0], dpi=dpi)
+    fig.savefig(paths[1])
+    return paths

@@ -1,0 +1,241 @@
+"""`vlmrl report`: read finished runs from MLflow (never retrain) and write Table 2, Figures 2-4,
+the claims table and ``report.md``, then log them as artifacts of a ``vlmrl.kind=report`` run."""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from vlmrl_cli.analysis import stats
+from vlmrl_cli.analysis.load import ExperimentData, load_experiment
+from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.core.provenance import flatten
+from vlmrl_cli.report import claims as claims_mod
+from vlmrl_cli.report import figures
+from vlmrl_cli.report.table2 import (
+    BASELINE,
+    Table2,
+    build_table2,
+    format_cell,
+    per_seed_table,
+    to_markdown,
+    write_table2,
+)
+from vlmrl_cli.tracking import store
+
+DEFAULT_REPORTED = Path(__file__).resolve().parents[2] / "paper" / "reported.json"
+
+
+@dataclass(frozen=True)
+class ReportConfig:
+    """Everything one report depends on (logged whole as the report run's params)."""
+
+    experiment: str = "vlmrl"  # MLflow experiment holding the training runs
+    tracking_uri: str | None = None  # MLflow store (None: $MLFLOW_TRACKING_URI or sqlite:///mlflow.db)
+    out: Path = Path("results/report")  # output folder
+    thresholds: tuple[float, ...] = (-190.0, -160.0, -130.0)  # reward targets (rolling mean native return)
+    window: int = 100  # episodes in the rolling mean
+    min_episodes: int = 1  # fewest completed episodes before a rolling mean counts
+    ci: float = 0.95  # confidence level of every interval
+    n_boot: int = stats.DEFAULT_N_BOOT  # bootstrap resamples
+    seed: int = 0  # seed of the bootstrap generator
+    reported: Path | None = None  # the paper's numbers (default: paper/reported.json)
+    log_to_mlflow: bool = True  # log the outputs as artifacts of a vlmrl.kind=report run
+
+
+@dataclass(frozen=True)
+class ReportResult:
+    out: Path
+    files: tuple[Path, ...]
+    table: Table2
+    claims: tuple[claims_mod.ClaimResult, ...]
+    report_run_id: str | None
+    warnings: tuple[str, ...] = field(default_factory=tuple)
+
+
+def _validate(cfg: ReportConfig) -> None:
+    if not cfg.thresholds:
+        raise BadInput("no reward threshold given; pass --thresholds like -190,-160,-130.")
+    if cfg.window < 1:
+        raise BadInput(f"--window must be at least 1, got {cfg.window}.")
+    if not 1 <= cfg.min_episodes <= cfg.window:
+        raise BadInput(f"min_episodes must be between 1 and the window ({cfg.window}), got {cfg.min_episodes}.")
+    if not 0.0 < cfg.ci < 1.0:
+        raise BadInput(f"the confidence level must be between 0 and 1, got {cfg.ci}.")
+    if cfg.n_boot < 10:
+        raise BadInput(f"use at least 10 bootstrap resamples, got {cfg.n_boot}.")
+
+
+def ensure_writable(out: Path) -> None:
+    """Create ``out`` and check a file can be written there; else ``BadInput``."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out, prefix=".write-test-"):
+            pass
+    except OSError as exc:
+        raise BadInput(f"cannot write to the output folder {out} ({exc.strerror}); pass --out to a writable folder."
+                       ) from exc
+
+
+def load_reported(path: Path | None) -> dict[str, Any]:
+    """The paper's numbers (``paper/reported.json``); ``BadInput`` when missing or malformed."""
+    p = path or DEFAULT_REPORTED
+    try:
+        return dict(json.loads(p.read_text(encoding="utf-8")))
+    except (OSError, json.JSONDecodeError) as exc:
+        raise BadInput(f"cannot read the paper's reported numbers from {p}; check the file exists and is JSON."
+                       ) from exc
+
+
+def vlm_note(runs: pd.DataFrame) -> str:
+    """One line naming the VLM backend(s); says SIMULATED VLM when any run used the simulated one."""
+    labels = sorted({str(v) for v in runs["vlm"].dropna()})
+    text = "VLM backend: " + ("; ".join(labels) if labels else "unknown")
+    if bool(runs["simulated"].any()) and "SIMULATED VLM" not in text:
+        text += " — SIMULATED VLM, not a real model"
+    return text
+
+
+def _warnings(data: ExperimentData, table: Table2) -> list[str]:
+    out = []
+    for arm, hashes in data.runs.groupby("arm")["config_hash"].unique().items():
+        if len(hashes) > 1:
+            out.append(f"arm `{arm}` mixes {len(hashes)} configurations ({', '.join(map(str, hashes))}); "
+                       "its statistics pool them.")
+    if not table.has_baseline:
+        out.append("No `baseline` arm in this experiment: speedups need the baseline arm and are not computed.")
+    for arm, n in data.runs.groupby("arm").size().items():
+        if n < claims_mod.MIN_SEEDS:
+            out.append(f"arm `{arm}` has only {n} seed(s); claims that use it are inconclusive.")
+    return out
+
+
+def _disagreements(table: Table2, results: Sequence[claims_mod.ClaimResult]) -> list[str]:
+    lines = []
+    for r in results:
+        if r.verdict == claims_mod.NOT_REPRODUCED:
+            lines.append(f"- **{r.claim}** ({r.section}): {r.reason}.")
+    for metric, label in table.labels.items():
+        for arm in table.arms:
+            c = table.cell(metric, arm)
+            if c is None or not np.isfinite(c["paper"]) or not np.isfinite(c["value"]):
+                continue
+            lo, hi = c["ci_low"], c["ci_high"]
+            if np.isfinite(lo) and np.isfinite(hi) and lo <= c["paper"] <= hi:
+                continue
+            where = "outside our CI" if np.isfinite(lo) else "no CI"
+            paper = format_cell({**c, "value": c["paper"], "ci_low": np.nan, "ci_high": np.nan, "n_reached": c["n"]})
+            lines.append(f"- {label}, {arm}: paper {paper}, ours {format_cell(c)} ({where}).")
+    for t in table.thresholds:
+        s = table.speedup(t, "hybrid")
+        if s is not None and np.isfinite(s["paper"]) and np.isfinite(s["value"]):
+            lines.append(f"- Speedup to {t:g}: paper {s['paper']:.1f}x, ours {s['value']:.2f}x"
+                         + (f" [{s['ci_low']:.2f}, {s['ci_high']:.2f}]" if np.isfinite(s["ci_low"]) else "") + ".")
+    return lines
+
+
+def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: Sequence[claims_mod.ClaimResult],
+               per_seed: pd.DataFrame, note: str, warns: Sequence[str]) -> str:
+    simulated = bool(data.runs["simulated"].any())
+    parts = [f"# Reproduction report: experiment `{data.experiment_name}`", ""]
+    if simulated:
+        parts += ["> **SIMULATED VLM.** These runs used a simulated VLM (a pixel-reading stand-in), not a real "
+                  "vision-language model. The numbers test the training pipeline, not the paper's VLM.", ""]
+    parts += [f"- {note}", f"- Arms: {', '.join(table.arms)}; seeds per arm: "
+              + ", ".join(f"{a}={int((per_seed['arm'] == a).sum())}" for a in table.arms),
+              f"- Steps to a threshold: first global timestep at which the mean native return of the last "
+              f"{cfg.window} completed episodes reaches it (partial windows count once {cfg.min_episodes} "
+              "episode(s) completed); means are over seeds that reached it, DNF = did not reach it within the "
+              "budget.",
+              f"- Intervals: {100 * cfg.ci:g}% percentile bootstrap over seeds ({cfg.n_boot} resamples, seed "
+              f"{cfg.seed}); reliability uses a Wilson interval.", ""]
+    if warns:
+        parts += ["## Warnings", "", *[f"- {w}" for w in warns], ""]
+    parts += ["## Table 2: ours vs the paper", "", to_markdown(table)]
+    if not table.has_baseline:
+        parts += ["Speedups need the `baseline` arm, which this experiment does not have.", ""]
+    parts += ["Files: [table2.md](table2.md), [table2.csv](table2.csv), [table2.tex](table2.tex).", "",
+              "## Where ours and the paper disagree", ""]
+    dis = _disagreements(table, results)
+    parts += (dis or ["- No claim is contradicted by our intervals (see the verdicts below)."]) + [""]
+    parts += ["## Claims", "", "Verdict rule: " + claims_mod.VERDICT_RULE, "",
+              claims_mod.claims_markdown(list(results)),
+              "## Figures", "",
+              "![Figure 2](figure2.png)", "", "Figure 2: mean steps to each threshold (hollow diamonds: the paper).",
+              "", "![Figure 3](figure3.png)", "", "Figure 3: per-seed training curves.", "",
+              "![Figure 4](figure4.png)", "", "Figure 4: mean learning curve per arm with a bootstrap band.", "",
+              "## Runs", "", "| arm | seed | run id | config hash | preset | budget |",
+              "| --- | --- | --- | --- | --- | --- |"]
+    parts += [f"| {r.arm} | {r.seed} | `{r.run_id}` | `{r.config_hash}` | {r.preset} | {r.budget} |"
+              for r in per_seed.itertuples(index=False)]
+    parts += ["", "Per-seed values: [per_seed.csv](per_seed.csv).", ""]
+    return "\n".join(parts)
+
+
+def _log_report_run(client: Any, data: ExperimentData, cfg: ReportConfig, files: Sequence[Path], note: str,
+                    simulated: bool) -> str:
+    run = client.create_run(data.experiment_id, run_name="report",
+                            tags={f"{store.TAG_PREFIX}kind": "report", **store.provenance_tags(note, simulated)})
+    rid = str(run.info.run_id)
+    try:
+        store.log_params(client, rid, flatten(cfg))
+        store.set_tags(client, rid, {f"{store.TAG_PREFIX}report.runs": ",".join(data.runs["run_id"])[:5000]})
+        store.log_artifacts(client, rid, files, "report")
+    except Exception:
+        client.set_terminated(rid, status="FAILED")
+        raise
+    client.set_terminated(rid)
+    return rid
+
+
+def write_report(cfg: ReportConfig) -> ReportResult:
+    """Read the experiment's finished runs and write every report file under ``cfg.out``.
+
+    Raises:
+        BadInput: bad settings, unwritable ``out``, unreachable store, missing or empty experiment.
+    """
+    _validate(cfg)
+    ensure_writable(cfg.out)  # before touching MLflow, so a bad --out fails fast
+    reported = load_reported(cfg.reported)
+    client = store.connect(cfg.tracking_uri)
+    data = load_experiment(client, cfg.experiment)
+    rng = np.random.default_rng(cfg.seed)
+    thresholds = tuple(float(t) for t in cfg.thresholds)
+
+    per_seed = per_seed_table(data, thresholds, cfg.window, cfg.min_episodes)
+    table = build_table2(per_seed, data.eval_episodes, reported, thresholds, rng, cfg.window, cfg.ci, cfg.n_boot)
+    results = claims_mod.evaluate_claims(table, per_seed, reported, rng, cfg.n_boot, cfg.ci)
+    note = vlm_note(data.runs)
+    warns = _warnings(data, table)
+
+    out = cfg.out
+    files: list[Path] = []
+    files += write_table2(table, out)
+    curves = figures.seed_curves(data.episodes, cfg.window, cfg.min_episodes)
+    figs = {"figure2": figures.figure2(table, note),
+            "figure3": figures.figure3(curves, note, thresholds, cfg.window),
+            "figure4": figures.figure4(curves, note, rng, thresholds, cfg.window, cfg.n_boot, cfg.ci)}
+    for stem, fig in figs.items():
+        files += figures.save_figure(fig, out, stem)
+    files += claims_mod.write_claims(results, out)
+    per_seed_path = out / "per_seed.csv"
+    per_seed.to_csv(per_seed_path, index=False)
+    files.append(per_seed_path)
+    report_path = out / "report.md"
+    report_path.write_text(_report_md(cfg, data, table, results, per_seed, note, warns), encoding="utf-8")
+    files.append(report_path)
+
+    run_id = None
+    if cfg.log_to_mlflow:
+        run_id = _log_report_run(client, data, cfg, files, note, bool(data.runs["simulated"].any()))
+    return ReportResult(out, tuple(files), table, tuple(results), run_id, tuple(warns))
+
+
+__all__ = ["BASELINE", "ReportConfig", "ReportResult", "write_report"]

@@ -1,0 +1,120 @@
+"""The simulator's camera: the only component of the visual pipeline that knows the state.
+
+MountainCar's picture depends on the position ``x`` alone, so the camera snaps ``x`` to a
+grid of ``render_quantum`` (0.001 x units, a third of a pixel), renders each grid cell once
+with gymnasium's own renderer and memoises the cell's SHA-256 and features. Pixels are kept
+in a small LRU and re-rendered on demand (a render costs about 2 ms). Everything downstream
+(features, VLM, RBF, lock) receives a ``FrameView`` that carries no state: this is the
+modality separation of paper Section 3.3.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION
+from vlmrl_cli.frames.render import Frame, FrameRenderer
+from vlmrl_cli.shaping.features import frame_features
+
+
+@dataclass(frozen=True, eq=False)
+class FrameView:
+    """What the camera shows: a frame's ``key`` (SHA-256 of its pixels), its ``features``
+    ((D,) float32, see ``frame_features``) and the frame itself, loaded lazily by ``frame()``.
+    """
+
+    key: str
+    features: np.ndarray = field(repr=False)
+    _load: Callable[[], Frame] = field(repr=False)
+
+    def frame(self) -> Frame:
+        """The full frame (rendered again if the camera's pixel cache dropped it)."""
+        return self._load()
+
+    @classmethod
+    def of_frame(cls, frame: Frame) -> FrameView:
+        """A view of an already rendered frame (e.g. from ``FrameRenderer``)."""
+        return cls(key=frame.sha256, features=frame_features(frame.pixels), _load=lambda: frame)
+
+
+class Camera:
+    """Renders MountainCar at a position snapped to ``render_quantum``; memoises per grid cell.
+
+    ``renders`` counts calls to gymnasium's renderer; ``pixel_cache`` is how many frames'
+    pixels are kept (about 0.7 MB each).
+
+    Example:
+        >>> cam = Camera(render_quantum=0.001)
+        >>> a, b = cam.view(-0.5), cam.view(-0.50001)  # the same grid cell
+        >>> a.key == b.key, cam.renders, a.features.shape
+        (True, 1, (600,))
+        >>> a.frame().pixels.shape
+        (400, 600, 3)
+        >>> cam.close()
+    """
+
+    def __init__(self, render_quantum: float = 0.001, pixel_cache: int = 256) -> None:
+        if not (math.isfinite(render_quantum) and 0 < render_quantum <= MAX_POSITION - MIN_POSITION):
+            raise ValueError(
+                f"render_quantum must be in (0, {MAX_POSITION - MIN_POSITION}] x units, got {render_quantum}"
+            )
+        if pixel_cache < 1:
+            raise ValueError(f"pixel_cache must be >= 1 frame, got {pixel_cache}")
+        self.render_quantum = float(render_quantum)
+        self.pixel_cache = int(pixel_cache)
+        self.renders = 0
+        self._renderer: FrameRenderer | None = None
+        self._cells: dict[int, tuple[str, np.ndarray]] = {}
+        self._frames: OrderedDict[int, Frame] = OrderedDict()
+
+    def _cell(self, x: float) -> int:
+        if not math.isfinite(x):
+            raise ValueError(f"x must be finite, got {x}")
+        last = round((MAX_POSITION - MIN_POSITION) / self.render_quantum)
+        return min(max(round((x - MIN_POSITION) / self.render_quantum), 0), last)
+
+    def _render(self, cell: int) -> Frame:
+        if self._renderer is None:
+            self._renderer = FrameRenderer()
+        x = min(max(MIN_POSITION + cell * self.render_quantum, MIN_POSITION), MAX_POSITION)
+        self.renders += 1
+        return self._renderer.render(x)
+
+    def _frame(self, cell: int) -> Frame:
+        frame = self._frames.get(cell)
+        if frame is None:
+            frame = self._render(cell)
+            self._frames[cell] = frame
+            if len(self._frames) > self.pixel_cache:
+                self._frames.popitem(last=False)
+        else:
+            self._frames.move_to_end(cell)
+        return frame
+
+    def view(self, x: float) -> FrameView:
+        """The view of the car at position ``x`` (x units), rendered at most once per grid cell."""
+        cell = self._cell(float(x))
+        memo = self._cells.get(cell)
+        if memo is None:
+            frame = self._frame(cell)
+            memo = (frame.sha256, frame_features(frame.pixels))
+            memo[1].setflags(write=False)
+            self._cells[cell] = memo
+        key, features = memo
+        return FrameView(key=key, features=features, _load=lambda: self._frame(cell))
+
+    @property
+    def cells(self) -> int:
+        """How many grid cells have been seen (memoised)."""
+        return len(self._cells)
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        self._frames.clear()

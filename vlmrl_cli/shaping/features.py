@@ -1,0 +1,54 @@
+"""A low-dimensional visual descriptor of a frame, computed from its pixels only.
+
+Darkness ``(255 - grey) / 255`` averaged over ``BLOCK x BLOCK`` pixel blocks: a (400, 600)
+frame becomes a 20 x 30 grid, flattened to ``D = 600`` float32 values in ``[0, 1]``. The
+static parts of the picture (track, flag) are the same in every frame and cancel in a
+difference, so the Euclidean distance between two frames' features measures how far the car
+moved. Block averaging makes that distance grow smoothly (about linearly) with small moves
+instead of jumping pixel by pixel; once the two car positions no longer share a block the
+distance saturates at the car's own "mass" in feature space.
+
+Measured with gymnasium's renderer at 40 positions x in [-1.15, 0.25], the car shifted right
+by ``dx`` pixels (1 px = 1.8 / 600 = 0.003 x units); L2 distance, median [min, max]:
+
+=========  ================================================
+shift      feature distance
+=========  ================================================
+1 px       0.077 [0.039, 0.110]
+5 px       0.37  [0.25, 0.50]
+20 px      1.14  [0.71, 1.35]
+100 px     1.44  [1.33, 1.51]  (saturated from about 40 px on)
+=========  ================================================
+
+So distance is about 0.075 per pixel of displacement up to ~15 px, and ~1.4 for any two
+frames whose cars do not overlap. An RBF bandwidth of 0.25-0.3 blends labels over a few
+pixels while far prototypes (weight ~exp(-1.4^2 / (2 h^2)) < 1e-5) cannot swamp near ones.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+BLOCK = 20  # pixels per block side; 400 x 600 frames -> a 20 x 30 grid
+FRAME_SHAPE = (400, 600, 3)
+FEATURE_DIM = (FRAME_SHAPE[0] // BLOCK) * (FRAME_SHAPE[1] // BLOCK)
+# ITU-R BT.601 luma weights: grey level of an RGB pixel.
+_LUMA = np.array([0.299, 0.587, 0.114], dtype=np.float32)
+
+
+def frame_features(pixels: np.ndarray) -> np.ndarray:
+    """Block-mean darkness of an RGB frame: ``(400, 600, 3)`` uint8 -> ``(600,)`` float32 in [0, 1].
+
+    Example:
+        >>> white = np.full((400, 600, 3), 255, dtype=np.uint8)
+        >>> f = frame_features(white)
+        >>> f.shape, f.dtype, float(f.max())
+        ((600,), dtype('float32'), 0.0)
+    """
+    if pixels.shape != FRAME_SHAPE:
+        raise ValueError(f"expected a frame of shape {FRAME_SHAPE}, got {pixels.shape}")
+    grey = pixels.astype(np.float32) @ _LUMA
+    darkness = (255.0 - grey) / 255.0
+    h, w = FRAME_SHAPE[0] // BLOCK, FRAME_SHAPE[1] // BLOCK
+    blocks = darkness.reshape(h, BLOCK, w, BLOCK).mean(axis=(1, 3), dtype=np.float32)
+    return np.ascontiguousarray(blocks.reshape(-1), dtype=np.float32)

@@ -1,0 +1,46 @@
+"""Hysteresis lock on confirmed milestones (paper Section 3.2), as a pure step function."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class LockState:
+    """The lock of one episode.
+
+    ``level`` is the locked baseline potential (dimensionless, starts at 0); ``candidate`` the
+    raw potential of the latest label and ``count`` how many consecutive labels agreed on it.
+    """
+
+    level: float = 0.0
+    candidate: float | None = None
+    count: int = 0
+
+    @classmethod
+    def reset(cls) -> LockState:
+        """The state at the start of an episode: nothing confirmed, level 0."""
+        return cls()
+
+
+def lock_step(state: LockState, label_potential: float, confirm: int) -> LockState:
+    """Feed one label's raw potential to the lock and return the next state.
+
+    Labels agree when their raw potentials are equal (two labels with one potential are one
+    milestone). A potential is confirmed once ``confirm`` consecutive labels agreed on it; a
+    confirmed potential above ``level`` becomes the new level, and the level never drops
+    within the episode, whatever the VLM says afterwards (flicker cannot undo a milestone).
+
+    Example:
+        >>> s = LockState.reset()
+        >>> for p in (0.3, 0.3, 0.0, 0.1):
+        ...     s = lock_step(s, p, confirm=2)
+        >>> s.level
+        0.3
+    """
+    if confirm < 1:
+        raise ValueError(f"confirm must be >= 1, got {confirm}")
+    p = float(label_potential)
+    count = state.count + 1 if state.candidate == p else 1
+    level = max(state.level, p) if count >= confirm else state.level
+    return LockState(level=level, candidate=p, count=count)

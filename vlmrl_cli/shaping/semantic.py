@@ -1,0 +1,211 @@
+"""The macro-semantic potential Phi(s) (paper Section 3.2), built from camera views only.
+
+``SemanticOracle`` is shared by all envs of one run. It holds the Visual Prototype Cache:
+every frame the VLM labelled, with its features, label and raw potential. At a labelling step
+it reuses the nearest prototype's label when that prototype is within ``reuse_radius``
+(feature distance) and asks the VLM otherwise. ``phi_rbf`` smooths the prototypes' raw
+potentials with ``rbf_potential`` and memoises the result per frame key until a prototype is
+added, so the per-step cost is a dict lookup.
+
+``EpisodePotential`` is the per-env part: when to label (every ``query_every`` steps, step 0
+of an episode included), the hysteresis lock, and the potential of the arm:
+
+============================  ======================================================
+arm (source, rbf, lock)       Phi(s)
+============================  ======================================================
+hybrid (MCQ, rbf, lock)       max(lock level, Phi_rbf(s))
+hybrid-no-lock (MCQ, rbf)     Phi_rbf(s)
+hybrid-no-rbf (MCQ, lock)     max(lock level, latest label's raw potential)
+vision-float (FLOAT)          latest float potential (parsed x mapped to [0, 1])
+============================  ======================================================
+
+Nothing here sees the environment state: the only input is a ``FrameView``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION
+from vlmrl_cli.probe.parsers import ParseStatus, parse_float, parse_mcq
+from vlmrl_cli.shaping.camera import FrameView
+from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.shaping.hysteresis import LockState, lock_step
+from vlmrl_cli.shaping.rbf import rbf_potential
+from vlmrl_cli.training.arms import PotentialSource
+from vlmrl_cli.vlm.client import VLMClient
+from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
+
+STAT_KEYS: tuple[str, ...] = (
+    "vlm/queries", "vlm/cache_hits", "vlm/prototypes", "vlm/label_reuses", "vlm/parse_failures",
+)
+
+
+def float_potential(x: float) -> float:
+    """A position answer (x units) mapped linearly onto [0, 1] over the track, clipped.
+
+    Example:
+        >>> float_potential(-1.2), float_potential(0.6), float_potential(7.0)
+        (0.0, 1.0, 1.0)
+    """
+    return float(np.clip((x - MIN_POSITION) / (MAX_POSITION - MIN_POSITION), 0.0, 1.0))
+
+
+class SemanticOracle:
+    """The VLM behind a Visual Prototype Cache, shared by the envs of one run.
+
+    ``source`` picks the prompt: ``MCQ`` (label -> ``cfg.potential_of(label)``) or ``FLOAT``
+    (the parsed x through ``float_potential``). ``rbf`` says whether arms read the smoothed
+    ``phi_rbf`` or the raw label potentials. Unparsed answers count as parse failures and add
+    no prototype.
+    """
+
+    def __init__(self, client: VLMClient, cfg: ShapingConfig, source: PotentialSource, rbf: bool = True) -> None:
+        if source is PotentialSource.NONE:
+            raise ValueError("a SemanticOracle needs a potential source (MCQ or FLOAT); arms without one need none.")
+        if not (math.isfinite(cfg.bandwidth) and cfg.bandwidth > 0):
+            raise ValueError(f"ShapingConfig.bandwidth must be > 0 (feature-distance units), got {cfg.bandwidth}.")
+        if not (math.isfinite(cfg.reuse_radius) and cfg.reuse_radius >= 0):
+            raise ValueError(f"ShapingConfig.reuse_radius must be >= 0 (0 disables reuse), got {cfg.reuse_radius}.")
+        if cfg.query_every < 1 or cfg.confirm < 1:
+            raise ValueError(
+                f"ShapingConfig.query_every and confirm must be >= 1, got {cfg.query_every} and {cfg.confirm}."
+            )
+        self.client = client
+        self.cfg = cfg
+        self.source = source
+        self.rbf = rbf
+        self._prompt = PROMPTS[PromptKind.MCQ if source is PotentialSource.MCQ else PromptKind.FLOAT]
+        self._potential_of = dict(cfg.label_potentials)
+        self._features = np.empty((0, 0), dtype=np.float64)
+        self._potentials = np.empty(0, dtype=np.float64)
+        self._n = 0
+        self._keys: set[str] = set()
+        self._phi_memo: dict[str, float] = {}
+        self._queries = 0
+        self._cache_hits = 0
+        self._reuses = 0
+        self._parse_failures = 0
+
+    def __deepcopy__(self, memo: dict[int, object]) -> SemanticOracle:
+        # One oracle (its VLM client, response cache and prototypes) is shared by the envs of a
+        # run; gymnasium's RecordConstructorArgs deep-copies wrapper arguments, and a copied env
+        # must keep sharing it rather than clone an open sqlite connection.
+        return self
+
+    @property
+    def prototypes(self) -> int:
+        return self._n
+
+    def prototype_potentials(self) -> np.ndarray:
+        """The raw potentials of the cached prototypes, shape (N,), in insertion order."""
+        return self._potentials[: self._n].copy()
+
+    def label(self, view: FrameView) -> float | None:
+        """The raw potential of the view's label (reused or asked), or None if unparsed."""
+        if self._n:
+            diff = self._features[: self._n] - view.features.astype(np.float64)[None, :]
+            sq = np.einsum("nd,nd->n", diff, diff)
+            nearest = int(np.argmin(sq))
+            if math.sqrt(float(sq[nearest])) < self.cfg.reuse_radius:
+                self._reuses += 1
+                return float(self._potentials[nearest])
+        potential = self._ask(view)
+        if potential is None:
+            self._parse_failures += 1
+            return None
+        self._add(view, potential)
+        return potential
+
+    def _ask(self, view: FrameView) -> float | None:
+        answer = self.client.ask(self._prompt, view.frame())
+        self._queries += 1
+        self._cache_hits += int(answer.cached)
+        if self.source is PotentialSource.MCQ:
+            mcq = parse_mcq(answer.text)
+            if mcq.status is not ParseStatus.OK or mcq.label is None:
+                return None
+            return float(self._potential_of[mcq.label])
+        number = parse_float(answer.text)
+        if number.status is not ParseStatus.OK or number.value is None or not math.isfinite(number.value):
+            return None
+        return float_potential(number.value)
+
+    def _add(self, view: FrameView, potential: float) -> None:
+        if view.key in self._keys:  # the same picture asked again (reuse disabled): keep the first
+            return
+        if self._n == self._features.shape[0]:
+            grown = np.empty((max(64, 2 * self._n), view.features.shape[0]), dtype=np.float64)
+            if self._n:
+                grown[: self._n] = self._features[: self._n]
+            self._features = grown
+            self._potentials = np.resize(self._potentials, grown.shape[0])
+        self._features[self._n] = view.features
+        self._potentials[self._n] = potential
+        self._n += 1
+        self._keys.add(view.key)
+        self._phi_memo.clear()
+
+    def phi_rbf(self, view: FrameView) -> float:
+        """RBF-smoothed potential of the view over the prototypes (0.0 before the first one)."""
+        phi = self._phi_memo.get(view.key)
+        if phi is None:
+            phi = rbf_potential(view.features, self._features[: self._n], self._potentials[: self._n],
+                                self.cfg.bandwidth)
+            self._phi_memo[view.key] = phi
+        return phi
+
+    def stats(self) -> dict[str, float]:
+        """Counters since construction, under the keys of ``STAT_KEYS``."""
+        return {
+            "vlm/queries": float(self._queries),
+            "vlm/cache_hits": float(self._cache_hits),
+            "vlm/prototypes": float(self._n),
+            "vlm/label_reuses": float(self._reuses),
+            "vlm/parse_failures": float(self._parse_failures),
+        }
+
+
+class EpisodePotential:
+    """Phi(s) of one env: labelling schedule, hysteresis lock and the arm's combination.
+
+    Call ``reset(view)`` at the start of each episode (it labels step 0 and resets the lock)
+    and ``step(view)`` with the view of every next state; both return Phi of that state.
+    """
+
+    def __init__(self, oracle: SemanticOracle, lock: bool) -> None:
+        self.oracle = oracle
+        self.lock = lock
+        self.query_every = oracle.cfg.query_every
+        self.confirm = oracle.cfg.confirm
+        self.lock_state = LockState.reset()
+        self.held = 0.0  # the latest label's raw potential, held between labels
+        self.steps_since_label = 0
+
+    def reset(self, view: FrameView) -> float:
+        self.lock_state = LockState.reset()
+        self.held = 0.0
+        self.steps_since_label = 0
+        self._label(view)
+        return self._phi(view)
+
+    def step(self, view: FrameView) -> float:
+        self.steps_since_label += 1
+        if self.steps_since_label >= self.query_every:
+            self.steps_since_label = 0
+            self._label(view)
+        return self._phi(view)
+
+    def _label(self, view: FrameView) -> None:
+        potential = self.oracle.label(view)
+        if potential is None:  # unparsed: keep the previous potential, the lock sees nothing
+            return
+        self.held = potential
+        if self.lock:
+            self.lock_state = lock_step(self.lock_state, potential, self.confirm)
+
+    def _phi(self, view: FrameView) -> float:
+        base = self.oracle.phi_rbf(view) if self.oracle.rbf else self.held
+        return max(self.lock_state.level, base) if self.lock else base

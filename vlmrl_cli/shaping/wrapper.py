@@ -1,0 +1,132 @@
+"""The hybrid reward of paper Eq. 2 as a gymnasium wrapper."""
+
+from __future__ import annotations
+
+import math
+from typing import Any, SupportsFloat, cast
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.envs.classic_control.mountain_car import MountainCarEnv
+
+from vlmrl_cli.shaping.camera import Camera, FrameView
+from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.shaping.kinematic import kinematic_reward
+from vlmrl_cli.shaping.pbrs import pbrs_term
+from vlmrl_cli.shaping.semantic import EpisodePotential, SemanticOracle
+from vlmrl_cli.training.arms import ArmSpec
+
+
+class HybridReward(gym.Wrapper[np.ndarray, int, np.ndarray, int], gym.utils.RecordConstructorArgs):
+    """``R_total = R_env [+ R_kin(x)] [+ alpha (gamma Phi(s') - Phi(s))]``, terms chosen by ``arm``.
+
+    Observations pass through unchanged: the policy sees MountainCar's native ``[x, v]``.
+    ``R_kin`` reads ``x`` from the observation (proprioception); the potential reads the
+    simulator only through ``camera`` (exteroception), whose ``FrameView`` is all the
+    ``oracle`` ever gets. Every step puts the env's own reward in ``info["native_reward"]``;
+    the last step of an episode adds ``info["shaped_return"]`` (the sum of ``R_total``) and
+    ``info["is_success"]`` (terminated at the goal, not truncated by the time limit). An arm
+    without shaping (``baseline``) passes rewards through and still adds these keys.
+
+    Args:
+        env: a MountainCar-v0 env (observation ``[x, v]``).
+        arm: which terms to add.
+        shaping: alpha, the kinematic coefficients and the label schedule.
+        gamma: PBRS discount in (0, 1], normally the learner's.
+        camera, oracle: required when ``arm.uses_vlm``; shared by the envs of one run.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from vlmrl_cli.training.arms import ARMS
+        >>> env = HybridReward(gym.make("MountainCar-v0"), ARMS["kinematic"], ShapingConfig(), gamma=0.99)
+        >>> obs, _ = env.reset(seed=0)
+        >>> obs, reward, terminated, truncated, info = env.step(2)
+        >>> info["native_reward"], reward == -1.0 + max(0.0, 2.0 * (float(obs[0]) + 0.4))
+        (-1.0, True)
+        >>> env.close()
+    """
+
+    def __init__(
+        self,
+        env: gym.Env[np.ndarray, int],
+        arm: ArmSpec,
+        shaping: ShapingConfig,
+        gamma: float,
+        camera: Camera | None = None,
+        oracle: SemanticOracle | None = None,
+    ) -> None:
+        gym.utils.RecordConstructorArgs.__init__(
+            self, arm=arm, shaping=shaping, gamma=gamma, camera=camera, oracle=oracle
+        )
+        gym.Wrapper.__init__(self, env)
+        shape = getattr(env.observation_space, "shape", None)
+        if shape != (2,):
+            raise ValueError(f"HybridReward wraps MountainCar (observation [x, v], shape (2,)), got shape {shape}.")
+        if not (math.isfinite(gamma) and 0.0 < gamma <= 1.0):
+            raise ValueError(f"gamma must be in (0, 1], got {gamma}; pass the learner's discount.")
+        if not (math.isfinite(shaping.alpha) and shaping.alpha >= 0):
+            raise ValueError(f"ShapingConfig.alpha must be a finite value >= 0, got {shaping.alpha}.")
+        if arm.uses_vlm:
+            if camera is None or oracle is None:
+                raise ValueError(f"arm '{arm.name}' shapes with the VLM; pass the run's camera and oracle.")
+            if oracle.source is not arm.potential or oracle.rbf != arm.rbf:
+                raise ValueError(
+                    f"the oracle ({oracle.source}, rbf={oracle.rbf}) does not match arm '{arm.name}' "
+                    f"({arm.potential}, rbf={arm.rbf}); build it with the arm's potential and rbf."
+                )
+            if not isinstance(env.unwrapped, MountainCarEnv):
+                raise ValueError("the camera images MountainCar's simulator; wrap a MountainCar-v0 env.")
+        self.arm = arm
+        self.shaping = shaping
+        self.gamma = float(gamma)
+        self.camera = camera
+        self._episode = EpisodePotential(oracle, arm.lock) if arm.uses_vlm and oracle is not None else None
+        self._phi = 0.0
+        self._return = 0.0
+
+    @property
+    def potential(self) -> float:
+        """Phi of the current state (0.0 for arms without a potential)."""
+        return self._phi
+
+    @property
+    def lock_level(self) -> float:
+        """The hysteresis lock's level in this episode (0.0 without a lock)."""
+        return self._episode.lock_state.level if self._episode is not None else 0.0
+
+    def _view(self) -> FrameView:
+        assert self.camera is not None
+        # The camera images the simulator (as env.render() would), not the agent's observation.
+        sim = cast(MountainCarEnv, self.env.unwrapped)
+        x = float(sim.state[0])
+        return self.camera.view(x)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._return = 0.0
+        self._phi = self._episode.reset(self._view()) if self._episode is not None else 0.0
+        return obs, info
+
+    def step(self, action: int) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, native, terminated, truncated, info = self.env.step(action)
+        reward = float(native)
+        if self.arm.kinematic:
+            reward += kinematic_reward(float(obs[0]), self.shaping.kin_scale, self.shaping.kin_offset)
+        if self._episode is not None:
+            phi_next = self._episode.step(self._view())
+            reward += pbrs_term(self._phi, phi_next, self.gamma, self.shaping.alpha, terminated)
+            self._phi = phi_next
+        self._return += reward
+        info = dict(info)
+        info["native_reward"] = float(native)
+        if terminated or truncated:
+            info["shaped_return"] = self._return
+            info["is_success"] = bool(terminated)
+        return obs, reward, terminated, truncated, info
+
+    def close(self) -> None:
+        if self.camera is not None:
+            self.camera.close()  # idempotent; a camera shared by other envs reopens on demand
+        super().close()

@@ -1,0 +1,109 @@
+"""The SB3 callback that turns completed episodes into tracked metrics and progress events."""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+
+from vlmrl_cli.tracking.store import BatchLogger
+
+SUCCESS_LENGTH = 200  # MountainCar-v0's time limit: an episode shorter than this reached the flag
+
+
+@dataclass(frozen=True)
+class ProgressEvent:
+    """What a worker reports about one run, at most every ``interval_s``."""
+
+    job: str
+    timesteps: int
+    total: int
+    episodes: int
+    recent_return: float  # mean native return of the last 100 episodes (nan before the first)
+    phase: str = "train"
+
+
+class EpisodeTracker(BaseCallback):
+    """Logs every completed episode (native return, length, success, shaped return) stepped by
+    the global timestep, VLM and throughput figures at each rollout end, and sends progress.
+
+    ``should_stop`` is polled every step; when it returns True training ends cleanly.
+    """
+
+    def __init__(
+        self,
+        job: str,
+        total: int,
+        metrics: BatchLogger | None = None,
+        progress: Callable[[ProgressEvent], None] | None = None,
+        should_stop: Callable[[], bool] | None = None,
+        vlm_stats: Callable[[], dict[str, float]] | None = None,
+        interval_s: float = 0.5,
+    ) -> None:
+        super().__init__(verbose=0)
+        self.job = job
+        self.total = total
+        self.metrics = metrics
+        self.progress = progress
+        self.should_stop = should_stop
+        self.vlm_stats = vlm_stats
+        self.interval_s = interval_s
+        self.episodes: list[dict[str, float]] = []
+        self.recent: deque[float] = deque(maxlen=100)
+        self.stopped = False
+        self._last_report = 0.0
+        self._start = time.perf_counter()
+
+    def _on_training_start(self) -> None:
+        self._start = time.perf_counter()
+
+    def _on_step(self) -> bool:
+        infos: list[dict[str, Any]] = self.locals["infos"]
+        for info in infos:
+            ep = info.get("episode")
+            if ep is None:
+                continue
+            length = int(ep["l"])
+            record = {
+                "episode/native_return": float(ep["r"]),
+                "episode/length": float(length),
+                "episode/success": float(info.get("is_success", length < SUCCESS_LENGTH)),
+                "episode/shaped_return": float(info.get("shaped_return", ep["r"])),
+            }
+            self.episodes.append({"timestep": float(self.num_timesteps), **record})
+            self.recent.append(record["episode/native_return"])
+            if self.metrics is not None:
+                self.metrics.log(record, step=self.num_timesteps)
+        now = time.perf_counter()
+        if self.progress is not None and now - self._last_report >= self.interval_s:
+            self._last_report = now
+            self._send_progress()
+        if self.should_stop is not None and self.should_stop():
+            self.stopped = True
+            return False
+        return True
+
+    def _send_progress(self, phase: str = "train") -> None:
+        if self.progress is not None:
+            recent = float(np.mean(self.recent)) if self.recent else float("nan")
+            self.progress(ProgressEvent(self.job, self.num_timesteps, self.total, len(self.episodes), recent, phase))
+
+    def _on_rollout_end(self) -> None:
+        if self.metrics is None:
+            return
+        elapsed = max(time.perf_counter() - self._start, 1e-9)
+        figures = {"perf/steps_per_s": self.num_timesteps / elapsed}
+        if self.vlm_stats is not None:
+            figures.update(self.vlm_stats())
+        self.metrics.log(figures, step=self.num_timesteps)
+
+    def _on_training_end(self) -> None:
+        self._on_rollout_end()
+        self._send_progress()
+        if self.metrics is not None:
+            self.metrics.flush()

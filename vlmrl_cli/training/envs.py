@@ -1,0 +1,75 @@
+"""Build the training and evaluation envs; the wrapper stack is spelled out here, in order."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import gymnasium as gym
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecNormalize
+
+from vlmrl_cli.shaping.camera import Camera
+from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.shaping.semantic import SemanticOracle
+from vlmrl_cli.shaping.wrapper import HybridReward
+from vlmrl_cli.training.arms import ARMS, ArmSpec
+from vlmrl_cli.training.presets import PPOPreset
+from vlmrl_cli.vlm.client import VLMClient
+
+ENV_ID = "MountainCar-v0"
+
+
+def make_train_env(
+    arm: ArmSpec,
+    preset: PPOPreset,
+    shaping: ShapingConfig,
+    client: VLMClient | None,
+    seed: int,
+) -> tuple[VecEnv, SemanticOracle | None]:
+    """The training VecEnv of one run and its oracle (None for arms without a VLM).
+
+    Per env: ``gym.make(MountainCar-v0)`` -> ``Monitor`` (SB3's episode stats are the NATIVE
+    return and length) -> ``HybridReward`` (the arm's reward; a pass-through adding the info
+    keys for ``baseline``). Then ``DummyVecEnv`` of ``preset.n_envs`` (one process, so the
+    camera and oracle are shared by all envs) -> ``VecNormalize`` (obs and reward, with the
+    learner's gamma) when ``preset.normalize``. Env ``i`` is seeded ``seed + i``. The PBRS
+    discount is ``shaping.gamma``, or ``preset.gamma`` when that is None.
+    """
+    if arm.uses_vlm and client is None:
+        raise ValueError(f"arm '{arm.name}' queries a VLM; pass a VLMClient (e.g. the simulated one).")
+    if preset.n_envs < 1:
+        raise ValueError(f"preset '{preset.name}' has n_envs={preset.n_envs}; it needs at least one env.")
+    gamma = shaping.gamma if shaping.gamma is not None else preset.gamma
+    camera = Camera(shaping.render_quantum) if arm.uses_vlm else None
+    oracle = SemanticOracle(client, shaping, arm.potential, rbf=arm.rbf) if arm.uses_vlm and client else None
+
+    def make_one() -> gym.Env:
+        env: gym.Env = gym.make(ENV_ID)
+        env = Monitor(env)
+        return HybridReward(env, arm, shaping, gamma=gamma, camera=camera, oracle=oracle)
+
+    fns: list[Callable[[], gym.Env]] = [make_one] * preset.n_envs
+    venv: VecEnv = DummyVecEnv(fns)
+    venv.seed(seed)
+    if preset.normalize:
+        venv = VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=preset.gamma)
+    return venv, oracle
+
+
+def make_eval_env(seed: int, n_envs: int = 1) -> VecEnv:
+    """The native env for detached evaluation: no shaping, no camera, no VLM, no normalisation.
+
+    ``gym.make`` -> ``Monitor`` -> the ``baseline`` pass-through (which only adds
+    ``info["is_success"]`` and friends) -> ``DummyVecEnv``; env ``i`` seeded ``seed + i``.
+    Copy the training ``VecNormalize``'s observation statistics into a wrapper around it.
+    """
+    if n_envs < 1:
+        raise ValueError(f"n_envs must be >= 1, got {n_envs}.")
+    baseline = ARMS["baseline"]
+
+    def make_one() -> gym.Env:
+        return HybridReward(Monitor(gym.make(ENV_ID)), baseline, ShapingConfig(), gamma=1.0)
+
+    venv: VecEnv = DummyVecEnv([make_one] * n_envs)
+    venv.seed(seed)
+    return venv

@@ -1,0 +1,176 @@
+"""Run every (arm, seed) job of a ``RunConfig`` in worker processes, resumably.
+
+Resume rule: a job whose (arm, seed, config hash) already has a FINISHED run in the experiment
+is skipped; runs of a pending job left RUNNING by a crash or Ctrl-C are marked FAILED first
+and the job is trained again. One parent run records each invocation that trains anything.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import queue as queue_mod
+import time
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from vlmrl_cli.core.provenance import config_hash, flatten
+from vlmrl_cli.tracking import store
+from vlmrl_cli.training.arms import ARMS
+from vlmrl_cli.training.callbacks import ProgressEvent
+from vlmrl_cli.training.config import RunConfig, TrainJob
+from vlmrl_cli.training.worker import JobResult, init_worker, train_job
+
+
+class SweepReporter(Protocol):
+    """What the sweep tells its caller (the CLI draws it with rich)."""
+
+    def planned(self, pending: list[TrainJob], done: list[TrainJob]) -> None: ...
+
+    def progress(self, event: ProgressEvent) -> None: ...
+
+    def finished(self, result: JobResult) -> None: ...
+
+
+@dataclass
+class SweepSummary:
+    parent_run_id: str | None
+    experiment_id: str
+    skipped: list[str] = field(default_factory=list)
+    marked_failed: list[str] = field(default_factory=list)
+    results: list[JobResult] = field(default_factory=list)
+    wall_s: float = 0.0
+
+    @property
+    def failed(self) -> list[JobResult]:
+        return [r for r in self.results if r.status != "FINISHED"]
+
+
+def vlm_identity(cfg: RunConfig) -> tuple[str, bool]:
+    """The VLM label and simulated flag of the sweep, checking the backend answers at all
+    (unreachable server, missing model: ``BadInput`` before anything trains)."""
+    if not any(ARMS[name].uses_vlm for name in cfg.arms):
+        return "none (no arm uses a VLM)", False
+    from vlmrl_cli.vlm.base import describe
+    from vlmrl_cli.vlm.registry import build_backend
+
+    backend = build_backend(cfg.vlm)
+    try:
+        return describe(backend), bool(backend.simulated)
+    finally:
+        backend.close()
+
+
+def _existing_runs(client: Any, experiment_id: str) -> list[Any]:
+    runs: list[Any] = []
+    token = None
+    while True:
+        page = client.search_runs(
+            [experiment_id], filter_string=f"tags.`{store.TAG_PREFIX}kind` = 'train'",
+            max_results=1000, page_token=token,
+        )
+        runs.extend(page)
+        token = page.token
+        if not token:
+            return runs
+
+
+def plan(client: Any, experiment_id: str, jobs: list[TrainJob]) -> tuple[list[TrainJob], list[TrainJob], list[Any]]:
+    """Split jobs into (pending, done) and list the stale RUNNING runs of pending jobs."""
+    by_key: dict[tuple[str, str, str], list[Any]] = {}
+    for run in _existing_runs(client, experiment_id):
+        t = run.data.tags
+        key = (t.get(f"{store.TAG_PREFIX}arm", ""), t.get(f"{store.TAG_PREFIX}seed", ""),
+               t.get(f"{store.TAG_PREFIX}config_hash", ""))
+        by_key.setdefault(key, []).append(run)
+    pending: list[TrainJob] = []
+    done: list[TrainJob] = []
+    stale: list[Any] = []
+    for job in jobs:
+        runs = by_key.get((job.arm.name, str(job.seed), job.config_hash), [])
+        if any(r.info.status == "FINISHED" for r in runs):
+            done.append(job)
+        else:
+            pending.append(job)
+            stale.extend(r for r in runs if r.info.status in ("RUNNING", "SCHEDULED"))
+    return pending, done, stale
+
+
+def run_sweep(cfg: RunConfig, reporter: SweepReporter) -> SweepSummary:
+    """Validate, plan, train the pending jobs in ``cfg.workers`` processes, record the sweep."""
+    start = time.perf_counter()
+    cfg.validate()
+    client = store.connect(cfg.tracking_uri)
+    tracking_uri = store.resolve_tracking_uri(cfg.tracking_uri)
+    vlm_label, simulated = vlm_identity(cfg)
+    experiment_id = store.ensure_experiment(client, cfg.experiment)
+    pending, done, stale = plan(client, experiment_id, cfg.jobs())
+    summary = SweepSummary(None, experiment_id, skipped=[j.name for j in done])
+    for run in stale:
+        store.set_tags(client, run.info.run_id, {f"{store.TAG_PREFIX}error": "left RUNNING by an interrupted sweep"})
+        client.set_terminated(run.info.run_id, "FAILED")
+        summary.marked_failed.append(run.info.run_id)
+    reporter.planned(pending, done)
+    if not pending:
+        summary.wall_s = time.perf_counter() - start
+        return summary
+
+    parent = client.create_run(experiment_id, tags={
+        **store.provenance_tags(vlm_label, simulated),
+        "mlflow.runName": f"sweep-{time.strftime('%Y%m%d-%H%M%S')}",
+        f"{store.TAG_PREFIX}kind": "sweep",
+        f"{store.TAG_PREFIX}config_hash": config_hash(cfg),
+    })
+    summary.parent_run_id = parent.info.run_id
+    store.log_params(client, parent.info.run_id, flatten(cfg))
+
+    ctx = mp.get_context("spawn")
+    events: Any = ctx.Queue()
+    stop: Any = ctx.Event()
+    status = "FINISHED"
+    try:
+        with ProcessPoolExecutor(max_workers=min(cfg.workers, len(pending)), mp_context=ctx,
+                                 initializer=init_worker, initargs=(events, stop)) as pool:
+            futures: dict[Future[JobResult], TrainJob] = {
+                pool.submit(train_job, job, tracking_uri, experiment_id, parent.info.run_id, vlm_label,
+                            simulated): job
+                for job in pending
+            }
+            try:
+                remaining = set(futures)
+                while remaining:
+                    finished, remaining = wait(remaining, timeout=0.2, return_when=FIRST_COMPLETED)
+                    _drain(events, reporter)
+                    for fut in finished:
+                        result = fut.result()
+                        summary.results.append(result)
+                        reporter.finished(result)
+            except KeyboardInterrupt:
+                status = "KILLED"
+                stop.set()
+                for fut in futures:
+                    fut.cancel()
+                raise
+            finally:
+                if status == "KILLED":
+                    for fut in futures:
+                        if fut.done() and not fut.cancelled():
+                            summary.results.append(fut.result())
+        _drain(events, reporter)
+        if summary.failed:
+            status = "FAILED"
+    finally:
+        summary.wall_s = time.perf_counter() - start
+        store.log_params(client, parent.info.run_id, {"sweep.pending": ",".join(j.name for j in pending)})
+        client.log_metric(parent.info.run_id, "perf/sweep_wall_s", summary.wall_s)
+        client.set_terminated(parent.info.run_id, status)
+    return summary
+
+
+def _drain(events: Any, reporter: SweepReporter) -> None:
+    while True:
+        try:
+            event = events.get_nowait()
+        except (queue_mod.Empty, OSError, EOFError):
+            return
+        reporter.progress(event)

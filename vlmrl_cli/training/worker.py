@@ -1,0 +1,178 @@
+"""One (arm, seed) job: train PPO, evaluate detached, record everything in its MLflow child run.
+
+Runs inside a worker process (one torch thread each: 2 cores, 2 workers). The process-wide
+progress queue and stop event arrive once through ``init_worker`` (they can only be shared by
+inheritance), never as module state that the library reads elsewhere.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import tempfile
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from vlmrl_cli.core.provenance import config_hash, flatten
+from vlmrl_cli.tracking import store
+from vlmrl_cli.training.callbacks import EpisodeTracker, ProgressEvent
+from vlmrl_cli.training.config import EVAL_SEED, TrainJob
+from vlmrl_cli.training.evaluation import EvalResult, evaluate_detached
+
+
+@dataclass(frozen=True)
+class JobResult:
+    job: str
+    run_id: str
+    status: str  # FINISHED, KILLED or FAILED
+    wall_s: float
+    eval_success_rate: float = float("nan")
+    eval_mean_length: float = float("nan")
+    error: str | None = None
+
+
+@dataclass
+class _Channels:
+    progress: Any = None  # multiprocessing queue of ProgressEvent
+    stop: Any = None  # multiprocessing event
+
+
+_channels = _Channels()
+
+
+def init_worker(progress: Any, stop: Any) -> None:
+    """Pool initializer: single-threaded torch, Ctrl-C left to the parent, channels kept."""
+    import torch
+
+    torch.set_num_threads(1)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _channels.progress = progress
+    _channels.stop = stop
+
+
+def run_tags(job: TrainJob, parent_run_id: str | None, vlm_label: str, simulated: bool) -> dict[str, str]:
+    if not job.arm.uses_vlm:
+        vlm_label, simulated = "none (this arm queries no VLM)", False
+    tags = {
+        **store.provenance_tags(vlm_label, simulated),
+        "mlflow.runName": job.name,
+        f"{store.TAG_PREFIX}kind": "train",
+        f"{store.TAG_PREFIX}arm": job.arm.name,
+        f"{store.TAG_PREFIX}seed": str(job.seed),
+        f"{store.TAG_PREFIX}config_hash": job.config_hash,
+        f"{store.TAG_PREFIX}preset": job.preset.name,
+    }
+    if parent_run_id is not None:
+        tags["mlflow.parentRunId"] = parent_run_id
+    return tags
+
+
+def _policy(model: Any, env: Any) -> Any:
+    """The trained policy on raw observations, applying the training obs normalisation."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    def act(obs: np.ndarray) -> int:
+        x = np.asarray(obs, dtype=np.float32)[None, :]
+        if isinstance(env, VecNormalize):
+            x = np.asarray(env.normalize_obs(x), dtype=np.float32)
+        action, _ = model.predict(x, deterministic=True)
+        return int(np.asarray(action).reshape(-1)[0])
+
+    return act
+
+
+def train_job(
+    job: TrainJob,
+    tracking_uri: str,
+    experiment_id: str,
+    parent_run_id: str | None,
+    vlm_label: str,
+    simulated: bool,
+) -> JobResult:
+    """Train, evaluate and record one job. Never raises: failures end as a FAILED run."""
+    from stable_baselines3 import PPO
+
+    from vlmrl_cli.training.envs import make_train_env
+    from vlmrl_cli.vlm.registry import build_client
+
+    start = time.perf_counter()
+    client = store.connect(tracking_uri)
+    run = client.create_run(experiment_id, tags=run_tags(job, parent_run_id, vlm_label, simulated))
+    run_id = run.info.run_id
+    progress = _channels.progress
+    stop = _channels.stop
+
+    def send(event: ProgressEvent) -> None:
+        if progress is not None:
+            progress.put(event)
+
+    with tempfile.TemporaryDirectory(prefix="vlmrl-") as tmp:
+        out = Path(tmp)
+        vlm_client = None
+        try:
+            store.log_params(client, run_id, {"timesteps": str(job.timesteps), **flatten(job.params())})
+            if job.arm.uses_vlm:
+                vlm_client = build_client(job.vlm, transcript=out / "transcript.jsonl")
+            env, oracle = make_train_env(job.arm, job.preset, job.shaping, vlm_client, job.seed)
+            p = job.preset
+            model = PPO(
+                "MlpPolicy", env, n_steps=p.n_steps, batch_size=p.batch_size, gae_lambda=p.gae_lambda,
+                gamma=p.gamma, n_epochs=p.n_epochs, ent_coef=p.ent_coef, learning_rate=p.learning_rate,
+                seed=job.seed, device="cpu", verbose=0,
+            )
+            metrics = store.BatchLogger(client, run_id)
+            tracker = EpisodeTracker(
+                job.name, job.timesteps, metrics=metrics, progress=send,
+                should_stop=(lambda: bool(stop.is_set())) if stop is not None else None,
+                vlm_stats=oracle.stats if oracle is not None else None,
+            )
+            model.learn(total_timesteps=job.timesteps, callback=tracker)
+            if tracker.stopped:
+                client.set_terminated(run_id, "KILLED")
+                return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start)
+            send(ProgressEvent(job.name, job.timesteps, job.timesteps, len(tracker.episodes),
+                               float(np.mean(tracker.recent)) if tracker.recent else float("nan"), "eval"))
+            result = evaluate_detached(_policy(model, env), job.eval_episodes, EVAL_SEED)
+            _log_eval(metrics, result)
+            metrics.log({"perf/wall_s": time.perf_counter() - start}, step=job.timesteps)
+            metrics.flush()
+            _save_artifacts(out, job, model, env)
+            store.log_artifacts(client, run_id, [p for p in out.iterdir()])
+            client.set_terminated(run_id, "FINISHED")
+            return JobResult(job.name, run_id, "FINISHED", time.perf_counter() - start,
+                             result.success_rate, result.mean_length)
+        except BaseException as exc:  # a failed job must not take the sweep down
+            message = f"{type(exc).__name__}: {exc}"
+            try:
+                store.set_tags(client, run_id, {f"{store.TAG_PREFIX}error": message[:4000],
+                                                f"{store.TAG_PREFIX}traceback": traceback.format_exc()[-4000:]})
+                client.set_terminated(run_id, "FAILED")
+            except Exception:  # the store itself failed; the parent reports the error
+                pass
+            return JobResult(job.name, run_id, "FAILED", time.perf_counter() - start, error=message)
+        finally:
+            if vlm_client is not None:
+                vlm_client.close()
+
+
+def _log_eval(metrics: store.BatchLogger, result: EvalResult) -> None:
+    metrics.log({"eval/success_rate": result.success_rate, "eval/mean_length": result.mean_length,
+                 "eval/mean_return": result.mean_return}, step=0)
+    for i, (ret, length, ok) in enumerate(zip(result.returns, result.lengths, result.successes, strict=True)):
+        metrics.log({"eval/episode_return": float(ret), "eval/episode_length": float(length),
+                     "eval/episode_success": float(ok)}, step=i)
+
+
+def _save_artifacts(out: Path, job: TrainJob, model: Any, env: Any) -> None:
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    model.save(out / "model.zip")
+    if isinstance(env, VecNormalize):
+        env.save(str(out / "vecnormalize.pkl"))
+    config = {"config_hash": config_hash(job.identity()), **job.params()}
+    (out / "config.json").write_text(json.dumps(config, indent=2, sort_keys=True))
