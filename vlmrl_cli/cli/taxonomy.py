@@ -1,8 +1,68 @@
-"""`vlmrl taxonomy` (being built)."""
+"""`vlmrl taxonomy`: the paper's Table 1 and Figure 1, recomputed for one VLM backend."""
 
 from __future__ import annotations
 
+import math
+import sys
+from pathlib import Path
+from typing import Annotated
 
-def taxonomy() -> None:
-    """Not implemented yet."""
-    raise SystemExit(2)
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from vlmrl_cli.cli.errors import exit_codes
+from vlmrl_cli.cli.options import Experiment, OutDir, TrackingUri, with_vlm_options
+from vlmrl_cli.vlm.config import VLMConfig
+
+States = Annotated[
+    int | None,
+    typer.Option("--states", min=2, help="Sweep positions over the track (default 25; replay: its frames only)."),
+]
+
+
+@with_vlm_options
+def taxonomy(
+    vlm_cfg: VLMConfig,
+    states: States = None,
+    out: OutDir = None,
+    tracking_uri: TrackingUri = None,
+    experiment: Experiment = "vlmrl-taxonomy",
+) -> None:
+    """Probe a VLM with float, box and MCQ prompts (paper Section 2); write Table 1 and Figure 1."""
+    from vlmrl_cli.probe.taxonomy import DEFAULT_STATES, TaxonomyConfig, run_taxonomy
+
+    console = Console(stderr=True)
+    with exit_codes():
+        resolved_states = states if states is not None or vlm_cfg.backend == "replay" else DEFAULT_STATES
+        cfg = TaxonomyConfig(
+            vlm=vlm_cfg,
+            states=resolved_states,
+            out=out if out is not None else Path("results") / "taxonomy" / vlm_cfg.backend,
+            tracking_uri=tracking_uri,
+            experiment=experiment,
+        )
+        with Progress(TextColumn("probing frames"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      console=console, transient=True, disable=not sys.stderr.isatty()) as bar:
+            task = bar.add_task("probe", total=None)
+
+            def progress(done: int, total: int) -> None:
+                bar.update(task, completed=done, total=total)
+
+            result = run_taxonomy(cfg, progress=progress)
+
+    if result.simulated:
+        typer.secho("WARNING: SIMULATED VLM (not a real model): the answers come from a pixel reader with "
+                    "noise.", fg=typer.colors.YELLOW, err=True)
+    typer.echo(f"backend:   {result.backend_label}")
+    typer.echo(f"frames:    {len(result.probes)} probed, {result.queries} queries "
+               f"(cache: {result.cache_hits} hits, {result.cache_misses} misses)")
+    sweep = result.sweep
+    if math.isfinite(sweep.get("mcq.accuracy", math.nan)):
+        typer.echo(f"sweep:     MCQ accuracy {sweep['mcq.accuracy']:.2f}, float Spearman "
+                   f"{sweep['float.spearman']:.2f}, box IoU {sweep['box.mean_iou']:.2f}, MCQ dPhi dead zone "
+                   f"{sweep['mcq.dphi.dead_zone']:.2f}")
+    else:
+        typer.echo("sweep:     n/a (only the transcript's frames were probed)")
+    typer.echo(f"outputs:   {result.out}/ ({', '.join(p.name for p in result.files)})")
+    typer.echo(f"MLflow:    run {result.run_id}")

@@ -1,0 +1,116 @@
+"""Properties of the probe's statistics."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from vlmrl_cli.frames.geometry import Zone, zone_of
+from vlmrl_cli.probe import metrics
+from vlmrl_cli.probe.parsers import ParseStatus
+
+_coord = st.floats(-50, 700, allow_nan=False)
+_box = st.tuples(_coord, _coord, _coord, _coord)
+_valid_box = st.tuples(st.floats(0, 500), st.floats(0, 300), st.floats(1, 100), st.floats(1, 100)).map(
+    lambda t: (t[0], t[1], t[0] + t[2], t[1] + t[3]))
+
+
+@given(_box, _box)
+def test_iou_is_bounded_and_symmetric(a: tuple[float, ...], b: tuple[float, ...]) -> None:
+    v = metrics.iou(a, b)  # type: ignore[arg-type]
+    assert 0.0 <= v <= 1.0
+    assert v == pytest.approx(metrics.iou(b, a))  # type: ignore[arg-type]
+
+
+@given(_valid_box)
+def test_iou_of_a_box_with_itself_is_one(b: tuple[float, float, float, float]) -> None:
+    assert metrics.iou(b, b) == pytest.approx(1.0)
+    assert metrics.centre_error_px(b, b) == 0.0
+
+
+@given(_valid_box, st.floats(-100, 100), st.floats(-100, 100))
+def test_centre_error_is_the_shift(b: tuple[float, float, float, float], dx: float, dy: float) -> None:
+    shifted = (b[0] + dx, b[1] + dy, b[2] + dx, b[3] + dy)
+    assert metrics.centre_error_px(b, shifted) == pytest.approx(math.hypot(dx, dy), abs=1e-6)
+
+
+def test_spearman_handles_constant_and_nan() -> None:
+    assert math.isnan(metrics.spearman([0.1, 0.1, 0.1], [1, 2, 3]))
+    assert math.isnan(metrics.spearman([1.0], [1.0]))
+    assert metrics.spearman([1, np.nan, 3, 4], [1, 2, 3, 4]) == pytest.approx(1.0)
+    assert metrics.spearman([3, 2, 1], [1, 2, 3]) == pytest.approx(-1.0)
+
+
+@given(st.lists(st.sampled_from(list(ParseStatus)), max_size=30))
+def test_format_failure_rate_is_a_fraction(statuses: list[ParseStatus]) -> None:
+    rate = metrics.format_failure_rate(statuses)
+    if all(s is ParseStatus.NO_ANSWER for s in statuses):
+        assert math.isnan(rate)
+    else:
+        assert 0.0 <= rate <= 1.0
+
+
+@given(st.lists(st.tuples(st.sampled_from(list(Zone)), st.one_of(st.none(), st.sampled_from(list(Zone)))),
+                max_size=40))
+def test_confusion_matrix_counts_every_answer(pairs: list[tuple[Zone, Zone | None]]) -> None:
+    truth = [t for t, _ in pairs]
+    pred = [p for _, p in pairs]
+    cm = metrics.confusion_matrix(pred, truth)
+    assert cm.shape == (6, 7) and list(cm.columns)[-1] == metrics.UNPARSED
+    assert int(cm.to_numpy().sum()) == len(pairs)
+    correct = sum(int(cm.loc[z.value, z.value]) for z in Zone)
+    if pairs:
+        assert metrics.mcq_accuracy(pred, truth) == pytest.approx(correct / len(pairs))
+
+
+_phis = st.lists(st.one_of(st.floats(-2, 2), st.just(math.nan)), min_size=0, max_size=40)
+
+
+@settings(max_examples=200)
+@given(_phis, st.data())
+def test_delta_phi_fractions_are_bounded(vlm: list[float], data: st.DataObject) -> None:
+    true = data.draw(st.lists(st.floats(-2, 2), min_size=len(vlm), max_size=len(vlm)))
+    s = metrics.delta_phi_stats(vlm, true)
+    for value in (s.dead_zone, s.sign_disagreement, s.dead_zone_while_truth_moves, s.phi_unavailable):
+        assert math.isnan(value) or 0.0 <= value <= 1.0
+    assert s.n_pairs <= max(0, len(vlm) - 1)
+    if s.n_pairs:
+        assert s.dead_zone_while_truth_moves <= s.dead_zone
+
+
+@given(st.lists(st.floats(-1.2, 0.6), min_size=2, max_size=40))
+def test_perfect_answers_have_no_dphi_error(xs: list[float]) -> None:
+    xs = sorted(xs)
+    for phi in ([metrics.position_potential(x) for x in xs], [metrics.label_potential(zone_of(x)) for x in xs]):
+        s = metrics.delta_phi_stats(phi, phi)
+        assert s.sign_disagreement == 0.0
+        assert s.mean_abs_dphi_error == 0.0
+        assert s.dead_zone_while_truth_moves == 0.0
+        assert s.phi_unavailable == 0.0
+
+
+def test_paper_mcq_pair_is_a_dead_zone() -> None:
+    vlm = [metrics.label_potential(Zone.BOTTOM), metrics.label_potential(Zone.BOTTOM)]
+    true = [metrics.label_potential(zone_of(-0.50)), metrics.label_potential(zone_of(-0.69))]
+    s = metrics.delta_phi_stats(vlm, true)
+    assert s.dead_zone == 1.0 and s.dead_zone_while_truth_moves == 1.0
+
+
+def test_unparsed_answers_make_phi_unavailable() -> None:
+    s = metrics.delta_phi_stats([0.1, math.nan, 0.3, 0.4], [0.1, 0.2, 0.3, 0.4])
+    assert s.phi_unavailable == 0.25 and s.n_pairs == 1
+
+
+def test_potentials_span_the_unit_interval() -> None:
+    assert metrics.position_potential(-1.2) == 0.0 and metrics.position_potential(0.6) == pytest.approx(1.0)
+    assert metrics.box_potential((0, 0, 600, 10)) == 0.5
+    assert math.isnan(metrics.box_potential(None)) and math.isnan(metrics.label_potential(None))
+
+
+def test_absolute_error_shape() -> None:
+    err = metrics.absolute_error([0.1, np.nan], [0.2, 0.2])
+    assert err.shape == (2,) and err[0] == pytest.approx(0.1) and math.isnan(err[1])

@@ -1,0 +1,110 @@
+"""The simulated VLM reads the car from pixels only, and answers deterministically."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from vlmrl_cli.frames import geometry
+from vlmrl_cli.frames.render import Frame, FrameRenderer
+from vlmrl_cli.probe.parsers import ParseStatus, parse_box, parse_float, parse_mcq
+from vlmrl_cli.vlm.base import Backend
+from vlmrl_cli.vlm.config import SimKnobs
+from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
+from vlmrl_cli.vlm.sim import REFUSAL, SimulatedVLM, wheel_column
+
+EXACT = SimKnobs(flicker=0.0, float_noise=0.0, box_noise_px=0.0, box_failure=0.0)
+
+
+@pytest.fixture(scope="module")
+def renderer():
+    with FrameRenderer() as r:
+        yield r
+
+
+def test_is_a_backend_and_says_it_is_simulated() -> None:
+    vlm = SimulatedVLM()
+    assert isinstance(vlm, Backend)
+    assert vlm.simulated is True and vlm.name == "sim"
+    assert "SIMULATED" in (SimulatedVLM.__doc__ or "")
+
+
+def test_blank_frame_gets_a_refusal() -> None:
+    blank = Frame.from_pixels(np.full((400, 600, 3), 255, dtype=np.uint8), frame_id="x=-0.50")
+    vlm = SimulatedVLM(EXACT)
+    for kind in PromptKind:
+        assert vlm.answer(PROMPTS[kind], blank) == REFUSAL
+    assert parse_float(REFUSAL).status is ParseStatus.FORMAT_COLLAPSE
+    assert parse_mcq(REFUSAL).status is ParseStatus.FORMAT_COLLAPSE
+
+
+def test_frame_id_is_never_read(renderer: FrameRenderer) -> None:
+    vlm = SimulatedVLM()
+    a = renderer.render(-0.5, frame_id="x=-0.50")
+    b = renderer.render(-0.5, frame_id="x=0.40")  # a lying tag must change nothing
+    for kind in PromptKind:
+        assert vlm.answer(PROMPTS[kind], a) == vlm.answer(PROMPTS[kind], b)
+
+
+@pytest.mark.parametrize("x", np.round(np.linspace(-1.15, 0.55, 12), 3).tolist())
+def test_noise_free_estimate_is_within_one_patch(renderer: FrameRenderer, x: float) -> None:
+    vlm = SimulatedVLM(EXACT)
+    frame = renderer.render(x)
+    parsed = parse_float(vlm.answer(PROMPTS[PromptKind.FLOAT], frame))
+    assert parsed.status is ParseStatus.OK and parsed.value is not None
+    assert abs(parsed.value - x) <= EXACT.patch_px / geometry.SCALE
+    box = parse_box(vlm.answer(PROMPTS[PromptKind.BOX], frame))
+    assert box.status is ParseStatus.OK
+
+
+def test_wheel_column_tracks_the_car(renderer: FrameRenderer) -> None:
+    for x in (-1.0, -0.5, 0.0, 0.4):
+        column = wheel_column(renderer.render(x).pixels)
+        assert column is not None
+        assert abs(column - (x - geometry.MIN_POSITION) * geometry.SCALE) <= 3
+
+
+def test_same_inputs_same_answer_and_seed_matters(renderer: FrameRenderer) -> None:
+    frame = renderer.render(-0.3)
+    a, b = SimulatedVLM(SimKnobs(seed=1)), SimulatedVLM(SimKnobs(seed=1))
+    answers = [a.answer(PROMPTS[k], frame) for k in PromptKind]
+    assert answers == [b.answer(PROMPTS[k], frame) for k in PromptKind]
+    others = {SimulatedVLM(SimKnobs(seed=s)).answer(PROMPTS[PromptKind.FLOAT], frame) for s in range(8)}
+    assert len(others) > 1
+
+
+def test_model_name_changes_with_answer_shaping_knobs() -> None:
+    assert SimulatedVLM(SimKnobs(seed=0)).model != SimulatedVLM(SimKnobs(seed=1)).model
+    assert SimulatedVLM(SimKnobs()).model == SimulatedVLM(SimKnobs(latency_s=0.5)).model
+
+
+def test_box_failure_one_always_collapses(renderer: FrameRenderer) -> None:
+    vlm = SimulatedVLM(SimKnobs(box_failure=1.0))
+    assert parse_box(vlm.answer(PROMPTS[PromptKind.BOX], renderer.render(-0.4))).status is (
+        ParseStatus.FORMAT_COLLAPSE)
+
+
+def test_flicker_gives_a_neighbouring_label(renderer: FrameRenderer) -> None:
+    frame = renderer.render(-0.5)
+    labels = {parse_mcq(SimulatedVLM(SimKnobs(flicker=1.0, seed=s)).answer(PROMPTS[PromptKind.MCQ], frame)).label
+              for s in range(20)}
+    assert labels <= {geometry.Zone.LEFT_SLOPE, geometry.Zone.RIGHT_SLOPE}
+
+
+@pytest.mark.parametrize("knobs", [SimKnobs(flicker=1.5), SimKnobs(patch_px=0), SimKnobs(float_noise=-1)])
+def test_rejects_bad_knobs(knobs: SimKnobs) -> None:
+    with pytest.raises(ValueError):
+        SimulatedVLM(knobs)
+
+
+def test_is_fast(renderer: FrameRenderer) -> None:
+    vlm = SimulatedVLM()
+    frame = renderer.render(-0.2)
+    start = time.perf_counter()
+    for _ in range(50):
+        for kind in PromptKind:
+            vlm.answer(PROMPTS[kind], frame)
+    per_call = (time.perf_counter() - start) / 150
+    assert per_call < 0.01  # budget is 2 ms; loose bound so a loaded CI machine does not flake

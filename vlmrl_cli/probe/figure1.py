@@ -1,0 +1,90 @@
+"""Figure 1 of the paper, redrawn: the two frames, the true box and the VLM's box and answers.
+
+Uses matplotlib's object API only (``Figure`` + the Agg canvas): no pyplot state, no style
+set at import.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from vlmrl_cli.vlm.prompts import PromptKind
+
+if TYPE_CHECKING:
+    from vlmrl_cli.probe.taxonomy import FrameProbe
+
+TRUE_COLOUR = "tab:green"
+VLM_COLOUR = "tab:red"
+
+
+def _short(text: str | None, limit: int = 34) -> str:
+    if text is None:
+        return "(no answer)"
+    flat = " ".join(text.split())
+    return flat if len(flat) <= limit else flat[: limit - 1] + "…"
+
+
+def draw_panel(ax: Any, probe: FrameProbe) -> Any:
+    """Draw one frame with its true box (green) and the parsed VLM box (red) on ``ax``; return ``ax``."""
+    from matplotlib.patches import Rectangle
+
+    if probe.frame is None:
+        raise ValueError(f"frame {probe.frame_id} was not kept; Figure 1 needs the panel frames' pixels.")
+    ax.imshow(probe.frame.pixels, interpolation="nearest")
+    x0, y0, x1, y1 = probe.truth.box_px
+    ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, edgecolor=TRUE_COLOUR, linewidth=2,
+                           label="true box"))
+    box = probe.box_result.box
+    if box is not None:
+        bx0, by0, bx1, by1 = box
+        style = "-" if probe.box_result.ok else ":"  # dotted: parsed but out of range
+        ax.add_patch(Rectangle((bx0, by0), bx1 - bx0, by1 - by0, fill=False, edgecolor=VLM_COLOUR, linewidth=2,
+                               linestyle=style, label="VLM box"))
+    ax.set_xticks([])
+    ax.set_yticks([])
+    title = f"({probe.panel}) {probe.caption or ''} (x = {probe.truth.x:.2f})"
+    ax.set_title(title, fontsize=10)
+    answers = probe.answers
+    ax.set_xlabel(
+        f"float: {_short(answers.get(PromptKind.FLOAT))} [{probe.float_result.status.value}]\n"
+        f"box: {_short(answers.get(PromptKind.BOX))} [{probe.box_result.status.value}]\n"
+        f"MCQ: {_short(answers.get(PromptKind.MCQ))} [{probe.mcq_result.status.value}]"
+        f" (true {probe.truth.zone.value})",
+        fontsize=8,
+    )
+    return ax
+
+
+def figure1(probes: Sequence[FrameProbe], *, label: str, simulated: bool, note: str = "") -> Any:
+    """A ``matplotlib.figure.Figure`` with the paper's two frames (panels a and b) side by side.
+
+    ``label`` names the backend (``name:model``); ``note`` is appended to the suptitle.
+    """
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+
+    panels = sorted((p for p in probes if p.panel is not None), key=lambda p: p.panel or "")
+    if not panels:
+        raise ValueError("Figure 1 needs the paper's frames (a) x=-0.50 and (b) x=-0.69 among the probes.")
+    fig = Figure(figsize=(6.0 * len(panels), 5.2), layout="constrained")
+    axes = fig.subplots(1, len(panels), squeeze=False)[0]
+    for ax, probe in zip(axes, panels, strict=True):
+        draw_panel(ax, probe)
+    flag = "SIMULATED VLM (not a real model) - " if simulated else ""
+    fig.suptitle(f"Figure 1 (recomputed): {flag}{label}{' - ' + note if note else ''}", fontsize=11,
+                 color="darkred" if simulated else "black")
+    handles = [Line2D([], [], color=TRUE_COLOUR, lw=2, label="true box (gymnasium geometry)"),
+               Line2D([], [], color=VLM_COLOUR, lw=2, label="VLM box (parsed)")]
+    fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize=8, frameon=False)
+    return fig
+
+
+def save_figure1(
+    probes: Sequence[FrameProbe], path: Path, *, label: str, simulated: bool, note: str = "", dpi: int = 150
+) -> Path:
+    """Draw Figure 1 and save it as PNG at ``dpi``; returns ``path``."""
+    fig = figure1(probes, label=label, simulated=simulated, note=note)
+    fig.savefig(path, dpi=dpi, format="png")
+    return path

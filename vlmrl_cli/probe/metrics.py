@@ -1,0 +1,194 @@
+"""Statistics of the taxonomy probe: small pure functions over arrays whose shapes are stated.
+
+Positions are in x units (track [-1.2, 0.6]), boxes are (x0, y0, x1, y1) in image pixels of
+the 600x400 frame, potentials are unitless. Missing answers are NaN (arrays) or None (labels).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION, SCREEN_WIDTH, Zone
+from vlmrl_cli.probe.parsers import Box, ParseStatus
+from vlmrl_cli.shaping.config import DEFAULT_LABEL_POTENTIALS
+
+UNPARSED = "UNPARSED"
+# Statuses where the model's text itself failed (NO_ANSWER is the transcript's gap, not the model's).
+FORMAT_FAILURES = frozenset({ParseStatus.FORMAT_COLLAPSE, ParseStatus.EMPTY, ParseStatus.AMBIGUOUS})
+# Below this a potential difference counts as zero: the potentials are sums of a few decimals.
+DPHI_ZERO_TOL = 1e-9
+
+
+def absolute_error(predicted: Sequence[float] | np.ndarray, truth: Sequence[float] | np.ndarray) -> np.ndarray:
+    """|predicted - truth| elementwise; shapes (n,) -> (n,), NaN where predicted is NaN (x units)."""
+    return np.abs(np.asarray(predicted, dtype=float) - np.asarray(truth, dtype=float))
+
+
+def spearman(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> float:
+    """Spearman rank correlation of two (n,) arrays over the pairs where both are finite.
+
+    NaN when fewer than two such pairs remain or either side is constant (no ranking to compare).
+
+    Example:
+        >>> spearman([1, 2, 3], [10, 20, 30]), math.isnan(spearman([1, 1, 1], [1, 2, 3]))
+        (1.0, True)
+    """
+    x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    keep = np.isfinite(x) & np.isfinite(y)
+    x, y = x[keep], y[keep]
+    if x.size < 2 or np.all(x == x[0]) or np.all(y == y[0]):
+        return math.nan
+    return float(stats.spearmanr(x, y).statistic)
+
+
+def iou(a: Box, b: Box) -> float:
+    """Intersection over union of two boxes (x0, y0, x1, y1) in pixels; in [0, 1], 0 if either is empty.
+
+    Example:
+        >>> iou((0, 0, 10, 10), (5, 0, 15, 10))
+        0.3333333333333333
+    """
+    ix = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
+    iy = max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
+    inter = ix * iy
+    area_a = max(0.0, a[2] - a[0]) * max(0.0, a[3] - a[1])
+    area_b = max(0.0, b[2] - b[0]) * max(0.0, b[3] - b[1])
+    union = area_a + area_b - inter
+    if not union > 0 or not math.isfinite(union):
+        return 0.0
+    return float(min(1.0, max(0.0, inter / union)))
+
+
+def box_centre(box: Box) -> tuple[float, float]:
+    """Centre (column, row) of a box, in pixels."""
+    return (box[0] + box[2]) / 2.0, (box[1] + box[3]) / 2.0
+
+
+def centre_error_px(a: Box, b: Box) -> float:
+    """Euclidean distance between the centres of two boxes, in pixels."""
+    (ca, ra), (cb, rb) = box_centre(a), box_centre(b)
+    return float(math.hypot(ca - cb, ra - rb))
+
+
+def format_failure_rate(statuses: Iterable[ParseStatus]) -> float:
+    """Fraction of answered queries whose text could not be parsed (collapse, empty, ambiguous).
+
+    NO_ANSWER (no text existed) is left out of the denominator; NaN when nothing was answered.
+    """
+    answered = [s for s in statuses if s is not ParseStatus.NO_ANSWER]
+    if not answered:
+        return math.nan
+    return sum(s in FORMAT_FAILURES for s in answered) / len(answered)
+
+
+def mcq_accuracy(predicted: Sequence[Zone | None], truth: Sequence[Zone]) -> float:
+    """Fraction of (n,) predictions equal to the (n,) true zones; None counts as wrong. NaN if n=0."""
+    if len(predicted) != len(truth):
+        raise ValueError(f"{len(predicted)} predictions for {len(truth)} true labels; pass one per frame.")
+    if not truth:
+        return math.nan
+    return sum(p == t for p, t in zip(predicted, truth, strict=True)) / len(truth)
+
+
+def confusion_matrix(predicted: Sequence[Zone | None], truth: Sequence[Zone]) -> pd.DataFrame:
+    """Counts of (true zone, predicted zone): rows every Zone, columns every Zone plus UNPARSED.
+
+    Example:
+        >>> cm = confusion_matrix([Zone.BOTTOM, None], [Zone.BOTTOM, Zone.LEFT_SLOPE])
+        >>> int(cm.loc["BOTTOM", "BOTTOM"]), int(cm.loc["LEFT_SLOPE", "UNPARSED"]), cm.shape
+        (1, 1, (6, 7))
+    """
+    labels = [z.value for z in Zone]
+    true_col = pd.Series([t.value for t in truth], name="true", dtype=object)
+    pred_col = pd.Series([p.value if p is not None else UNPARSED for p in predicted], name="predicted",
+                         dtype=object)
+    table = pd.crosstab(true_col, pred_col) if len(true_col) else pd.DataFrame()
+    table = table.reindex(index=labels, columns=[*labels, UNPARSED], fill_value=0).fillna(0).astype(int)
+    table.index.name, table.columns.name = "true", "predicted"
+    return table
+
+
+# --- the consequence on the potential ------------------------------------------------------
+
+def label_potential(label: Zone | None, mapping: Mapping[Zone, float] | None = None) -> float:
+    """Raw potential Phi_raw of an MCQ label (``DEFAULT_LABEL_POTENTIALS``); NaN for None."""
+    table = dict(DEFAULT_LABEL_POTENTIALS) if mapping is None else mapping
+    return math.nan if label is None else float(table[label])
+
+
+def position_potential(x: float | None) -> float:
+    """A float answer's potential: x normalised to [0, 1] over the track; NaN for None."""
+    return math.nan if x is None else (x - MIN_POSITION) / (MAX_POSITION - MIN_POSITION)
+
+
+def box_potential(box: Box | None) -> float:
+    """A box answer's potential: the box centre column normalised to [0, 1] by the frame width."""
+    return math.nan if box is None else box_centre(box)[0] / SCREEN_WIDTH
+
+
+@dataclass(frozen=True)
+class DeltaPhiStats:
+    """What a VLM-derived potential does to PBRS over consecutive states of a sweep.
+
+    Fractions are over the ``n_pairs`` consecutive pairs where both potentials are available;
+    ``phi_unavailable`` is over the states. All NaN when no pair is usable.
+    """
+
+    n_states: int
+    n_pairs: int
+    phi_unavailable: float
+    dead_zone: float
+    dead_zone_while_truth_moves: float
+    sign_disagreement: float
+    mean_abs_dphi_error: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {k: float(v) for k, v in self.__dict__.items()}
+
+
+def delta_phi_stats(phi_vlm: Sequence[float] | np.ndarray, phi_true: Sequence[float] | np.ndarray) -> DeltaPhiStats:
+    """Compare dPhi = Phi(s_{i+1}) - Phi(s_i) of the VLM with the truth over consecutive states.
+
+    ``phi_vlm`` and ``phi_true`` have shape (n,), the states sorted along the track; NaN in
+    ``phi_vlm`` marks an unparsed answer (Phi unavailable); pairs touching one are skipped.
+
+    - ``dead_zone``: fraction of pairs with dPhi == 0 (the shaping term is flat);
+    - ``dead_zone_while_truth_moves``: fraction with dPhi == 0 but true dPhi != 0;
+    - ``sign_disagreement``: fraction with sign(dPhi) != sign(true dPhi) (noise);
+    - ``mean_abs_dphi_error``: mean |dPhi - true dPhi| (potential units).
+
+    Example:
+        >>> s = delta_phi_stats([0.0, 0.0, 0.1], [0.0, 0.1, 0.1])
+        >>> s.dead_zone, s.sign_disagreement
+        (0.5, 1.0)
+    """
+    vlm = np.asarray(phi_vlm, dtype=float)
+    true = np.asarray(phi_true, dtype=float)
+    if vlm.shape != true.shape or vlm.ndim != 1:
+        raise ValueError(f"phi_vlm {vlm.shape} and phi_true {true.shape} must be equal (n,) arrays.")
+    n = int(vlm.size)
+    unavailable = float(np.mean(~np.isfinite(vlm))) if n else math.nan
+    d_vlm, d_true = np.diff(vlm), np.diff(true)
+    keep = np.isfinite(d_vlm) & np.isfinite(d_true)
+    d_vlm, d_true = d_vlm[keep], d_true[keep]
+    if d_vlm.size == 0:
+        return DeltaPhiStats(n, 0, unavailable, math.nan, math.nan, math.nan, math.nan)
+    flat = np.abs(d_vlm) <= DPHI_ZERO_TOL
+    flat_true = np.abs(d_true) <= DPHI_ZERO_TOL
+    sign_vlm = np.where(flat, 0.0, np.sign(d_vlm))
+    sign_true = np.where(flat_true, 0.0, np.sign(d_true))
+    return DeltaPhiStats(
+        n_states=n,
+        n_pairs=int(d_vlm.size),
+        phi_unavailable=unavailable,
+        dead_zone=float(np.mean(flat)),
+        dead_zone_while_truth_moves=float(np.mean(flat & ~flat_true)),
+        sign_disagreement=float(np.mean(sign_vlm != sign_true)),
+        mean_abs_dphi_error=float(np.mean(np.abs(d_vlm - d_true))),
+    )

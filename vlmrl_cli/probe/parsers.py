@@ -1,0 +1,245 @@
+"""Parse raw VLM text into typed answers; a parser never raises, it reports a status.
+
+Each parser accepts the formats small VLMs actually emit (bare values, values in prose,
+``x = -0.5``, ``Box [..]``, JSON, ``Choice = BOTTOM``) and classifies everything else:
+
+- ``FORMAT_COLLAPSE``: nothing parseable, or the all-zero ``Error [0, 0, 0, 0]`` box;
+- ``OUT_OF_RANGE``: a float outside the track [-1.2, 0.6], a box outside the 600x400 frame
+  or degenerate (zero or negative width/height);
+- ``AMBIGUOUS``: several different answers in one text (two labels, two numbers, two boxes);
+- ``EMPTY``: blank text; ``NO_ANSWER``: there was no text at all (replay had no record).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import re
+from dataclasses import dataclass
+from enum import StrEnum
+
+from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION, SCREEN_HEIGHT, SCREEN_WIDTH, Zone
+
+Box = tuple[float, float, float, float]
+
+
+class ParseStatus(StrEnum):
+    """How a raw answer parsed; only ``OK`` answers carry a usable value."""
+
+    OK = "ok"
+    FORMAT_COLLAPSE = "format_collapse"
+    OUT_OF_RANGE = "out_of_range"
+    AMBIGUOUS = "ambiguous"
+    EMPTY = "empty"
+    NO_ANSWER = "no_answer"
+
+
+@dataclass(frozen=True)
+class FloatResult:
+    """A parsed position. ``value`` (x units) is set for OK and OUT_OF_RANGE, else None."""
+
+    status: ParseStatus
+    value: float | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.status is ParseStatus.OK
+
+
+@dataclass(frozen=True)
+class BoxResult:
+    """A parsed box (x0, y0, x1, y1) in image pixels, set for OK and OUT_OF_RANGE, else None.
+
+    ``normalised`` is True when the text gave 0-1 coordinates, which were scaled to pixels.
+    """
+
+    status: ParseStatus
+    box: Box | None = None
+    normalised: bool = False
+
+    @property
+    def ok(self) -> bool:
+        return self.status is ParseStatus.OK
+
+
+@dataclass(frozen=True)
+class MCQResult:
+    """A parsed zone label, set only for OK."""
+
+    status: ParseStatus
+    label: Zone | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.status is ParseStatus.OK
+
+
+_NUM = r"[-+\u2212]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?"
+_NUMBER = re.compile(_NUM)
+# "x = -0.5", "x: -0.5", "x ≈ -0.5", "position is -0.5"
+_ASSIGNED = re.compile(rf"(?:\bx\b|position)\s*(?:=|:|≈|~|is(?:\s+about|\s+approximately)?)\s*({_NUM})", re.I)
+_SEP = r"\s*[,;]\s*|\s+"
+_BOX = re.compile(
+    rf"[\[(]\s*({_NUM})(?:{_SEP})({_NUM})(?:{_SEP})({_NUM})(?:{_SEP})({_NUM})\s*[\])]"
+)
+_JSON_OBJECT = re.compile(r"\{[^{}]*\}")
+_JSON_KEYS: tuple[tuple[str, str, str, str], ...] = (
+    ("x_min", "y_min", "x_max", "y_max"),
+    ("xmin", "ymin", "xmax", "ymax"),
+    ("x0", "y0", "x1", "y1"),
+    ("x1", "y1", "x2", "y2"),
+    ("left", "top", "right", "bottom"),
+)
+_LABEL = re.compile(r"\b(LEFT PEAK|LEFT SLOPE|BOTTOM|RIGHT SLOPE|NEAR GOAL|GOAL)\b")
+# "Choice = BOTTOM", "Answer: LEFT_SLOPE", "Zone is GOAL" (after _normalise_label_text)
+_CHOICE = re.compile(r"\b(?:CHOICE|ANSWER|LABEL|ZONE)\s*(?:=|:|IS)\s*(LEFT PEAK|LEFT SLOPE|BOTTOM|RIGHT SLOPE|"
+                     r"NEAR GOAL|GOAL)\b")
+
+
+def _to_float(token: str) -> float | None:
+    try:
+        value = float(token.replace("\u2212", "-"))
+    except (ValueError, OverflowError):
+        return None
+    return None if math.isnan(value) else value
+
+
+def parse_float(text: str | None) -> FloatResult:
+    """The position x in a float answer.
+
+    An explicit ``x = ...`` wins; otherwise the text must hold exactly one distinct number.
+
+    Example:
+        >>> parse_float("The car is at approximately -0.52.")
+        FloatResult(status=<ParseStatus.OK: 'ok'>, value=-0.52)
+        >>> parse_float("7").status, parse_float("no idea").status
+        (<ParseStatus.OUT_OF_RANGE: 'out_of_range'>, <ParseStatus.FORMAT_COLLAPSE: 'format_collapse'>)
+    """
+    try:
+        if text is None:
+            return FloatResult(ParseStatus.NO_ANSWER)
+        if not text.strip():
+            return FloatResult(ParseStatus.EMPTY)
+        assigned = [v for v in (_to_float(m) for m in _ASSIGNED.findall(text)) if v is not None]
+        candidates = assigned or [v for v in (_to_float(m) for m in _NUMBER.findall(text)) if v is not None]
+        distinct = list(dict.fromkeys(candidates))
+        if not distinct:
+            return FloatResult(ParseStatus.FORMAT_COLLAPSE)
+        if len(distinct) > 1:
+            return FloatResult(ParseStatus.AMBIGUOUS)
+        value = distinct[0]
+        if not (math.isfinite(value) and MIN_POSITION <= value <= MAX_POSITION):
+            return FloatResult(ParseStatus.OUT_OF_RANGE, value)
+        return FloatResult(ParseStatus.OK, value)
+    except Exception:  # a parser must never take the probe down; odd input is a collapse
+        return FloatResult(ParseStatus.FORMAT_COLLAPSE)
+
+
+def _json_boxes(text: str) -> list[tuple[float, ...]]:
+    boxes: list[tuple[float, ...]] = []
+    for blob in _JSON_OBJECT.findall(text):
+        try:
+            obj = json.loads(blob)
+        except ValueError:
+            continue
+        if not isinstance(obj, dict):
+            continue
+        lowered = {str(k).lower(): v for k, v in obj.items()}
+        for keys in _JSON_KEYS:
+            if all(k in lowered for k in keys):
+                with contextlib.suppress(TypeError, ValueError, OverflowError):
+                    boxes.append(tuple(float(lowered[k]) for k in keys))
+                break
+    return boxes
+
+
+def _validate_box(raw: tuple[float, ...]) -> BoxResult:
+    if any(math.isnan(v) for v in raw):
+        return BoxResult(ParseStatus.FORMAT_COLLAPSE)
+    if all(v == 0 for v in raw):
+        return BoxResult(ParseStatus.FORMAT_COLLAPSE)  # "Error [0, 0, 0, 0]": the model gave up
+    normalised = all(0.0 <= v <= 1.0 for v in raw)
+    if normalised:  # 0-1 coordinates (fractions of width and height) are scaled to pixels
+        raw = (raw[0] * SCREEN_WIDTH, raw[1] * SCREEN_HEIGHT, raw[2] * SCREEN_WIDTH, raw[3] * SCREEN_HEIGHT)
+    x0, y0, x1, y1 = raw
+    box = (float(x0), float(y0), float(x1), float(y1))
+    inside = x0 >= 0 and y0 >= 0 and x1 <= SCREEN_WIDTH and y1 <= SCREEN_HEIGHT
+    if not inside or x1 <= x0 or y1 <= y0:
+        return BoxResult(ParseStatus.OUT_OF_RANGE, box, normalised)
+    return BoxResult(ParseStatus.OK, box, normalised)
+
+
+def parse_box(text: str | None) -> BoxResult:
+    """The box (x0, y0, x1, y1) in image pixels in a box answer.
+
+    Accepts ``[a, b, c, d]``, ``(a, b, c, d)``, ``Box [..]``, JSON objects with ``x_min``..
+    ``y_max`` (or ``xmin``.., ``x1``..``y2``, ``left``..``bottom``), and four bare numbers.
+    Boxes whose four coordinates all lie in [0, 1] are read as fractions of the 600x400
+    frame and scaled to pixels (``normalised=True``).
+
+    Example:
+        >>> parse_box("Box [450, 210, 480, 230]").box
+        (450.0, 210.0, 480.0, 230.0)
+        >>> parse_box("Error [0, 0, 0, 0]").status
+        <ParseStatus.FORMAT_COLLAPSE: 'format_collapse'>
+        >>> parse_box('{"x_min": 0.5, "y_min": 0.5, "x_max": 0.75, "y_max": 1.0}').box
+        (300.0, 200.0, 450.0, 400.0)
+    """
+    try:
+        if text is None:
+            return BoxResult(ParseStatus.NO_ANSWER)
+        if not text.strip():
+            return BoxResult(ParseStatus.EMPTY)
+        boxes: list[tuple[float, ...]] = _json_boxes(text)
+        if not boxes:
+            for match in _BOX.finditer(text):
+                values = tuple(_to_float(g) for g in match.groups())
+                if all(v is not None for v in values):
+                    boxes.append(tuple(float(v) for v in values if v is not None))
+        if not boxes:
+            numbers = [_to_float(m) for m in _NUMBER.findall(text)]
+            if len(numbers) == 4 and all(v is not None for v in numbers):
+                boxes.append(tuple(float(v) for v in numbers if v is not None))
+        distinct = list(dict.fromkeys(boxes))
+        if not distinct:
+            return BoxResult(ParseStatus.FORMAT_COLLAPSE)
+        if len(distinct) > 1:
+            return BoxResult(ParseStatus.AMBIGUOUS)
+        return _validate_box(distinct[0])
+    except Exception:  # a parser must never take the probe down; odd input is a collapse
+        return BoxResult(ParseStatus.FORMAT_COLLAPSE)
+
+
+def _normalise_label_text(text: str) -> str:
+    return re.sub(r"[\s_\-]+", " ", text.upper())
+
+
+def parse_mcq(text: str | None) -> MCQResult:
+    """The zone label in an MCQ answer, in any case, with ``_``, ``-`` or spaces inside.
+
+    ``Choice = X`` / ``Answer: X`` wins; otherwise exactly one distinct label must appear
+    (a text naming two labels, e.g. an echo of the choices, is AMBIGUOUS).
+
+    Example:
+        >>> parse_mcq("Choice = BOTTOM").label
+        <Zone.BOTTOM: 'BOTTOM'>
+        >>> parse_mcq("left-slope.").label
+        <Zone.LEFT_SLOPE: 'LEFT_SLOPE'>
+        >>> parse_mcq("BOTTOM or LEFT_SLOPE").status
+        <ParseStatus.AMBIGUOUS: 'ambiguous'>
+    """
+    try:
+        if text is None:
+            return MCQResult(ParseStatus.NO_ANSWER)
+        if not text.strip():
+            return MCQResult(ParseStatus.EMPTY)
+        norm = _normalise_label_text(text)
+        chosen = list(dict.fromkeys(_CHOICE.findall(norm))) or list(dict.fromkeys(_LABEL.findall(norm)))
+        if not chosen:
+            return MCQResult(ParseStatus.FORMAT_COLLAPSE)
+        if len(chosen) > 1:
+            return MCQResult(ParseStatus.AMBIGUOUS)
+        return MCQResult(ParseStatus.OK, Zone(chosen[0].replace(" ", "_")))
+    except Exception:  # a parser must never take the probe down; odd input is a collapse
+        return MCQResult(ParseStatus.FORMAT_COLLAPSE)

@@ -1,0 +1,281 @@
+"""Table 1 of the paper, recomputed: raw outputs, ground truth and the consequence on dPhi.
+
+One row per error taxonomy (I float regression, II box grounding, III semantic MCQ) for the
+paper's frame pair (a) x=-0.50 -> (b) x=-0.69, with the dPhi each kind of answer would give
+PBRS computed from the parsed answers, and a second table of the same statistics over the
+whole sweep. Written as Markdown (by hand: pandas' ``to_markdown`` needs ``tabulate``), CSV
+and LaTeX (by hand, to control escaping).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import pandas as pd
+
+from vlmrl_cli.probe import metrics
+from vlmrl_cli.vlm.prompts import PromptKind
+
+if TYPE_CHECKING:
+    from vlmrl_cli.probe.taxonomy import FrameProbe
+
+TAXONOMY_ROWS: tuple[tuple[PromptKind, str], ...] = (
+    (PromptKind.FLOAT, "I. Float Regression"),
+    (PromptKind.BOX, "II. Box Grounding"),
+    (PromptKind.MCQ, "III. Semantic MCQ"),
+)
+PAPER_TRUE_CENTRES_NOTE = (
+    "The paper prints the box truth as 'True Center: (120px,450px) -> (108px,446px)', which does not "
+    "fit the 600x400 MountainCar frame; the centres shown here are computed from gymnasium's drawing "
+    "geometry (column, row) in our 600x400 renders."
+)
+MCQ_TRUTH_NOTE = (
+    "The paper's MCQ truth is 'Velocity v > 0 but x < 0'; a single frame shows no velocity, so the "
+    "truth shown is the velocity-free zone of each position."
+)
+
+
+@dataclass(frozen=True)
+class PairConsequence:
+    """dPhi = Phi(b) - Phi(a) of one prompt kind for the pair (a) -> (b), VLM and truth."""
+
+    kind: PromptKind
+    phi_a: float
+    phi_b: float
+    true_dphi: float
+
+    @property
+    def dphi(self) -> float:
+        return self.phi_b - self.phi_a
+
+    def describe(self) -> str:
+        """The Consequence cell, e.g. ``dPhi = 0.0 (dead zone; true dPhi = +0.100)``."""
+        true_txt = f"true ΔΦ = {self.true_dphi:+.3f}"
+        if not (math.isfinite(self.phi_a) and math.isfinite(self.phi_b)):
+            missing = " and ".join(n for n, v in (("(a)", self.phi_a), ("(b)", self.phi_b)) if not math.isfinite(v))
+            return f"ΔΦ undefined: no potential for {missing} (unparsed answer); {true_txt}"
+        if abs(self.dphi) <= metrics.DPHI_ZERO_TOL:
+            moving = "the truth moves" if abs(self.true_dphi) > metrics.DPHI_ZERO_TOL else "the truth is flat too"
+            return f"ΔΦ = 0.0 (dead zone; {true_txt}; {moving})"
+        if abs(self.true_dphi) <= metrics.DPHI_ZERO_TOL:
+            return f"ΔΦ = {self.dphi:+.4f} ({true_txt}: spurious gradient)"
+        agree = math.copysign(1, self.dphi) == math.copysign(1, self.true_dphi)
+        verdict = "sign right" if agree else "sign WRONG (noise)"
+        return f"ΔΦ = {self.dphi:+.4f} ({true_txt}: {verdict}, |error| {abs(self.dphi - self.true_dphi):.4f})"
+
+
+def pair_consequence(kind: PromptKind, a: FrameProbe, b: FrameProbe) -> PairConsequence:
+    """The dPhi that the answers of ``kind`` for frames a and b give, against the truth."""
+    from vlmrl_cli.probe.taxonomy import phi_series
+
+    vlm, true = phi_series([a, b], kind)
+    return PairConsequence(kind, float(vlm[0]), float(vlm[1]), float(true[1] - true[0]))
+
+
+def _parsed(probe: FrameProbe, kind: PromptKind) -> str:
+    if kind is PromptKind.FLOAT:
+        f = probe.float_result
+        value, status = (f"{f.value:.3f}" if f.value is not None else "-"), f.status
+    elif kind is PromptKind.BOX:
+        b = probe.box_result
+        value = "(" + ", ".join(f"{v:.0f}" for v in b.box) + ")" if b.box is not None else "-"
+        status = b.status
+    else:
+        m = probe.mcq_result
+        value, status = (m.label.value if m.label is not None else "-"), m.status
+    return f"{value} [{status.value}]"
+
+
+def _answer_error(probe: FrameProbe, kind: PromptKind) -> str:
+    if kind is PromptKind.FLOAT:
+        f = probe.float_result
+        return f"|x err| {abs(f.value - probe.truth.x):.3f}" if f.ok and f.value is not None else "n/a"
+    if kind is PromptKind.BOX:
+        b = probe.box_result
+        if not b.ok or b.box is None:
+            return "n/a"
+        return (f"IoU {metrics.iou(b.box, probe.truth.box_px):.2f}, "
+                f"centre off {metrics.centre_error_px(b.box, probe.truth.box_px):.0f} px")
+    m = probe.mcq_result
+    if not m.ok:
+        return "n/a"
+    return "correct" if m.label == probe.truth.zone else f"wrong (true {probe.truth.zone.value})"
+
+
+def _truth(kind: PromptKind, a: FrameProbe, b: FrameProbe) -> str:
+    if kind is PromptKind.FLOAT:
+        return f"x = {a.truth.x:.2f} → {b.truth.x:.2f}"
+    if kind is PromptKind.BOX:
+        (ca, ra), (cb, rb) = metrics.box_centre(a.truth.box_px), metrics.box_centre(b.truth.box_px)
+        return f"True box centre (col, row): ({ca:.0f}px, {ra:.0f}px) → ({cb:.0f}px, {rb:.0f}px) [our 600x400 frame]"
+    return f"True zone: {a.truth.zone.value} → {b.truth.zone.value} (velocity-free)"
+
+
+def _raw(probe: FrameProbe, kind: PromptKind) -> str:
+    text = probe.answers.get(kind)
+    return "(no answer recorded)" if text is None else " ".join(text.split())
+
+
+def taxonomy_frame(a: FrameProbe, b: FrameProbe) -> pd.DataFrame:
+    """Table 1's rows for the pair (a) -> (b): one row per error taxonomy, cells as strings."""
+    label_a = f"VLM raw output (a) {a.caption or ''} ({a.frame_id})".replace("  ", " ")
+    label_b = f"VLM raw output (b) {b.caption or ''} ({b.frame_id})".replace("  ", " ")
+    rows = []
+    for kind, name in TAXONOMY_ROWS:
+        rows.append({
+            "Error taxonomy": name,
+            label_a: _raw(a, kind),
+            label_b: _raw(b, kind),
+            "Parsed (a) → (b)": f"{_parsed(a, kind)} → {_parsed(b, kind)}",
+            "Answer error (a); (b)": f"{_answer_error(a, kind)}; {_answer_error(b, kind)}",
+            "Kinematic truth / grounding": _truth(kind, a, b),
+            "Consequence on PBRS ΔΦ (computed, Φ(b) − Φ(a))": pair_consequence(kind, a, b).describe(),
+        })
+    return pd.DataFrame(rows)
+
+
+def _fmt(value: float, digits: int = 3) -> str:
+    return "n/a" if not math.isfinite(value) else f"{value:.{digits}f}"
+
+
+def sweep_frame(sweep: Mapping[str, float]) -> pd.DataFrame:
+    """Sweep statistics per prompt kind (n/a where no sweep was probed), cells as strings."""
+    def get(key: str) -> float:
+        return sweep.get(key, math.nan)
+
+    quality = {
+        PromptKind.FLOAT: f"MAE {_fmt(get('float.mae_x'))} x; Spearman {_fmt(get('float.spearman'))}",
+        PromptKind.BOX: (f"IoU {_fmt(get('box.mean_iou'))} (parsed), {_fmt(get('box.mean_iou_all'))} (all); "
+                         f"centre error {_fmt(get('box.centre_error_px'), 1)} px"),
+        PromptKind.MCQ: f"accuracy {_fmt(get('mcq.accuracy'))}",
+    }
+    rows = []
+    for kind, name in TAXONOMY_ROWS:
+        k = kind.value
+        rows.append({
+            "Error taxonomy": name,
+            "States": _fmt(get("states"), 0) if math.isfinite(get(f"{k}.ok_fraction")) else "n/a",
+            "Parsed OK": _fmt(get(f"{k}.ok_fraction")),
+            "Format failures": _fmt(get(f"{k}.format_failure_rate")),
+            "Answer quality": quality[kind],
+            "ΔΦ dead zone": _fmt(get(f"{k}.dphi.dead_zone")),
+            "ΔΦ dead while truth moves": _fmt(get(f"{k}.dphi.dead_zone_while_truth_moves")),
+            "ΔΦ sign disagrees": _fmt(get(f"{k}.dphi.sign_disagreement")),
+            "mean |ΔΦ − ΔΦ_true|": _fmt(get(f"{k}.dphi.mean_abs_dphi_error"), 4),
+            "Φ unavailable": _fmt(get(f"{k}.dphi.phi_unavailable")),
+        })
+    return pd.DataFrame(rows)
+
+
+def markdown_table(df: pd.DataFrame) -> str:
+    """A GitHub-flavoured Markdown table of string cells (``|`` escaped)."""
+    def cell(value: object) -> str:
+        return " ".join(str(value).split()).replace("|", "\\|")
+
+    header = "| " + " | ".join(cell(c) for c in df.columns) + " |"
+    rule = "|" + "|".join("---" for _ in df.columns) + "|"
+    body = ["| " + " | ".join(cell(v) for v in row) + " |" for row in df.itertuples(index=False)]
+    return "\n".join([header, rule, *body])
+
+
+_LATEX_SPECIAL = {
+    "\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
+    "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}",
+}
+_LATEX_UNICODE = {"Δ": r"$\Delta$", "Φ": r"$\Phi$", "→": r"$\rightarrow$", "−": r"$-$", "|": r"$|$"}
+
+
+def latex_escape(text: str) -> str:
+    """Escape LaTeX specials and spell the few non-ASCII symbols we use as math.
+
+    Example:
+        >>> latex_escape("ΔΦ = 0.0 (LEFT_SLOPE)")
+        '$\\\\Delta$$\\\\Phi$ = 0.0 (LEFT\\\\_SLOPE)'
+    """
+    return "".join(_LATEX_SPECIAL.get(ch, _LATEX_UNICODE.get(ch, ch)) for ch in text)
+
+
+def latex_table(df: pd.DataFrame, caption: str, label: str) -> str:
+    """A ``table`` float with a ``tabular`` of ragged-right paragraph columns."""
+    width = f"{0.95 / max(1, len(df.columns)):.3f}"
+    spec = "".join(f">{{\\raggedright\\arraybackslash}}p{{{width}\\linewidth}}" for _ in df.columns)
+    lines = [
+        r"\begin{table}[t]",
+        r"\centering\scriptsize",
+        f"\\caption{{{latex_escape(caption)}}}",
+        f"\\label{{{label}}}",
+        f"\\begin{{tabular}}{{{spec}}}",
+        r"\hline",
+        " & ".join(latex_escape(str(c)) for c in df.columns) + r" \\",
+        r"\hline",
+    ]
+    lines += [" & ".join(latex_escape(str(v)) for v in row) + r" \\" for row in df.itertuples(index=False)]
+    lines += [r"\hline", r"\end{tabular}", r"\end{table}"]
+    return "\n".join(lines)
+
+
+def captions(label: str, provenance: str, simulated: bool) -> tuple[str, str]:
+    """(Table 1 caption, sweep table caption); ``provenance`` says plainly when the VLM is simulated."""
+    table = (f"Table 1 (recomputed). Taxonomy of pure vision failures on the consecutive micro-states "
+             f"(a) x = -0.50 -> (b) x = -0.69. Backend {label}. {provenance}")
+    flag = " SIMULATED VLM (not a real model)." if simulated else ""
+    sweep = (f"Table 1b. The same statistics over a sweep of positions sorted along the track "
+             f"(consecutive pairs). Backend {label}.{flag}")
+    return table, sweep
+
+
+def write_tables(
+    probes: Sequence[FrameProbe],
+    sweep: Mapping[str, float],
+    folder: Path,
+    *,
+    label: str,
+    provenance: str,
+    simulated: bool,
+) -> list[Path]:
+    """Write table1.md, table1.csv, table1.tex, table1_sweep.csv and probes.csv into ``folder``."""
+    a = next((p for p in probes if p.panel == "a"), None)
+    b = next((p for p in probes if p.panel == "b"), None)
+    if a is None or b is None:
+        raise ValueError("Table 1 needs the paper's frames (a) x=-0.50 and (b) x=-0.69 among the probes.")
+    main, stats = taxonomy_frame(a, b), sweep_frame(sweep)
+    cap_main, cap_sweep = captions(label, provenance, simulated)
+    notes = [PAPER_TRUE_CENTRES_NOTE, MCQ_TRUTH_NOTE,
+             "Φ mappings: MCQ label -> raw potential (shaping.config.DEFAULT_LABEL_POTENTIALS); float: x "
+             "normalised to [0, 1] over the track; box: box centre column / 600. The truth applies the same "
+             "mapping to the ground truth."]
+    md = [f"**{cap_main}**", "", markdown_table(main), "", *(f"- {n}" for n in notes), "",
+          f"**{cap_sweep}**", "", markdown_table(stats), ""]
+    if simulated:
+        md.insert(0, "> **SIMULATED VLM (not a real model)**: these numbers test the pipeline, not a VLM.\n")
+    paths = [folder / "table1.md", folder / "table1.csv", folder / "table1.tex", folder / "table1_sweep.csv",
+             folder / "probes.csv"]
+    paths[0].write_text("\n".join(md), encoding="utf-8")
+    main.to_csv(paths[1], index=False)
+    tex = [f"% {cap_main}", *(f"% {n}" for n in notes), latex_table(main, cap_main, "tab:taxonomy"), "",
+           latex_table(stats, cap_sweep, "tab:taxonomy-sweep"), ""]
+    paths[2].write_text("\n".join(tex), encoding="utf-8")
+    stats.to_csv(paths[3], index=False)
+    probes_frame(probes).to_csv(paths[4], index=False)
+    return paths
+
+
+def probes_frame(probes: Sequence[FrameProbe]) -> pd.DataFrame:
+    """One row per probed frame: truth, raw answers, parse statuses and parsed values."""
+    rows = []
+    for p in sorted(probes, key=lambda q: q.truth.x):
+        rows.append({
+            "frame_id": p.frame_id, "x": p.truth.x, "true_zone": p.truth.zone.value,
+            "true_box": list(p.truth.box_px), "panel": p.panel or "",
+            "float_raw": p.answers.get(PromptKind.FLOAT), "float_status": p.float_result.status.value,
+            "float_value": p.float_result.value,
+            "box_raw": p.answers.get(PromptKind.BOX), "box_status": p.box_result.status.value,
+            "box_value": list(p.box_result.box) if p.box_result.box is not None else None,
+            "mcq_raw": p.answers.get(PromptKind.MCQ), "mcq_status": p.mcq_result.status.value,
+            "mcq_label": p.mcq_result.label.value if p.mcq_result.label is not None else None,
+        })
+    return pd.DataFrame(rows)
