@@ -1,0 +1,155 @@
+"""`vlmrl run` end to end on the `smoke` preset, in a temporary sqlite MLflow store."""
+
+from __future__ import annotations
+
+import socket
+from pathlib import Path
+
+import pytest
+from mlflow.tracking import MlflowClient
+from typer.testing import CliRunner
+
+from vlmrl_cli.cli.app import app
+
+runner = CliRunner()
+
+
+def _uri(root: Path) -> str:
+    return f"sqlite:///{root / 'mlflow.db'}"
+
+
+def _run(root: Path, *args: str):  # type: ignore[no-untyped-def]
+    return runner.invoke(app, ["run", "--preset", "smoke", "--tracking-uri", _uri(root),
+                               "--cache-path", str(root / "cache.sqlite"), *args])
+
+
+def _runs(root: Path, experiment: str = "vlmrl") -> list:  # type: ignore[type-arg]
+    client = MlflowClient(tracking_uri=_uri(root))
+    exp = client.get_experiment_by_name(experiment)
+    return [] if exp is None else list(client.search_runs([exp.experiment_id], max_results=1000))
+
+
+def _children(runs: list) -> list:  # type: ignore[type-arg]
+    return [r for r in runs if r.data.tags.get("vlmrl.kind") == "train"]
+
+
+@pytest.fixture(scope="module")
+def swept(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("sweep")
+    result = _run(root, "--arms", "baseline,hybrid", "--seeds", "2")
+    assert result.exit_code == 0, result.output + result.stderr
+    return root
+
+
+def test_one_parent_and_four_finished_children_with_provenance(swept: Path) -> None:
+    runs = _runs(swept)
+    parents = [r for r in runs if r.data.tags.get("vlmrl.kind") == "sweep"]
+    children = _children(runs)
+    assert len(parents) == 1 and len(children) == 4
+    assert {(r.data.tags["vlmrl.arm"], r.data.tags["vlmrl.seed"]) for r in children} == {
+        ("baseline", "0"), ("baseline", "1"), ("hybrid", "0"), ("hybrid", "1")}
+    client = MlflowClient(tracking_uri=_uri(swept))
+    for run in children:
+        tags, params, metrics = run.data.tags, run.data.params, run.data.metrics
+        assert run.info.status == "FINISHED"
+        assert tags["mlflow.parentRunId"] == parents[0].info.run_id
+        assert len(tags["vlmrl.config_hash"]) == 12
+        assert tags["vlmrl.git_commit"] and tags["vlmrl.version.stable-baselines3"]
+        assert params["timesteps"] == "1024" and params["arm.name"] == tags["vlmrl.arm"]
+        for key in ("eval/success_rate", "eval/mean_length", "eval/mean_return", "perf/steps_per_s"):
+            assert key in metrics, key
+        history = client.get_metric_history(run.info.run_id, "episode/native_return")
+        assert history and all(m.step <= 1024 for m in history)
+        assert len(client.get_metric_history(run.info.run_id, "eval/episode_length")) == 5  # smoke: 5 episodes
+        names = {a.path for a in client.list_artifacts(run.info.run_id)}
+        assert {"model.zip", "vecnormalize.pkl", "config.json"} <= names
+        if tags["vlmrl.arm"] == "hybrid":
+            assert "SIMULATED" in tags["vlmrl.vlm"] and tags["vlmrl.simulated"] == "true"
+            assert metrics["vlm/queries"] > 0 and metrics["vlm/prototypes"] > 0
+            assert "transcript.jsonl" in names
+            assert "episode/shaped_return" in metrics
+        else:
+            assert tags["vlmrl.simulated"] == "false"  # the baseline asks no VLM
+
+
+def test_rerunning_the_same_command_starts_no_new_run(swept: Path) -> None:
+    before = {r.info.run_id for r in _runs(swept)}
+    result = _run(swept, "--arms", "baseline,hybrid", "--seeds", "2")
+    assert result.exit_code == 0, result.output + result.stderr
+    assert "already FINISHED" in result.output
+    assert {r.info.run_id for r in _runs(swept)} == before
+
+
+def test_a_run_left_running_is_marked_failed_and_redone(tmp_path: Path) -> None:
+    assert _run(tmp_path, "--arms", "baseline", "--seed-list", "3", "--workers", "1").exit_code == 0
+    (first,) = _children(_runs(tmp_path))
+    client = MlflowClient(tracking_uri=_uri(tmp_path))
+    client.update_run(first.info.run_id, status="RUNNING")  # as a crash would leave it
+    result = _run(tmp_path, "--arms", "baseline", "--seed-list", "3", "--workers", "1")
+    assert result.exit_code == 0, result.output + result.stderr
+    children = {r.info.run_id: r for r in _children(_runs(tmp_path))}
+    assert children[first.info.run_id].info.status == "FAILED"
+    assert len(children) == 2
+    assert sorted(r.info.status for r in children.values()) == ["FAILED", "FINISHED"]
+
+
+def test_same_config_and_seed_give_identical_native_returns(tmp_path: Path) -> None:
+    for name in ("a", "b"):
+        result = _run(tmp_path, "--arms", "hybrid", "--seed-list", "7", "--workers", "1", "--experiment", name)
+        assert result.exit_code == 0, result.output + result.stderr
+    client = MlflowClient(tracking_uri=_uri(tmp_path))
+    returns = []
+    for name in ("a", "b"):
+        (run,) = _children(_runs(tmp_path, name))
+        history = client.get_metric_history(run.info.run_id, "episode/native_return")
+        returns.append([(m.step, m.value) for m in sorted(history, key=lambda m: (m.step, m.timestamp))])
+    assert returns[0] and returns[0] == returns[1]
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--arms", "baseline,teleport"], "unknown arm"),
+        (["--arms", "baseline", "--preset", "huge"], "unknown preset"),
+        (["--arms", "baseline", "--seeds", "0"], "--seeds"),
+        (["--arms", "baseline", "--timesteps", "0"], "--timesteps"),
+        (["--arms", "hybrid", "--vlm", "nonsense"], "unknown VLM backend"),
+        (["--arms", "hybrid", "--vlm", "openai", "--model", "m", "--timeout", "1", "--retries", "0",
+          "--base-url", "http://127.0.0.1:{port}/v1"], "unreachable"),
+    ],
+)
+def test_bad_input_exits_2_with_one_sentence_before_training(tmp_path: Path, args: list[str], needle: str) -> None:
+    args = [a.replace("{port}", str(_closed_port())) for a in args]
+    result = _run(tmp_path, *args)
+    assert result.exit_code == 2, result.output + result.stderr
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:") and needle in lines[0]
+    assert "Traceback" not in result.stderr + result.output
+    assert _children(_runs(tmp_path)) == []
+
+
+def test_malformed_config_file_and_unreachable_tracking_store_exit_2(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("arms = [\n")
+    result = _run(tmp_path, "--config", str(bad))
+    assert result.exit_code == 2 and "not valid TOML" in result.stderr
+    result = runner.invoke(app, ["run", "--arms", "baseline", "--preset", "smoke",
+                                 "--tracking-uri", f"http://127.0.0.1:{_closed_port()}"])
+    assert result.exit_code == 2 and "cannot be reached" in result.stderr
+
+
+def test_config_file_sets_knobs_and_flags_override_it(tmp_path: Path) -> None:
+    cfg = tmp_path / "run.toml"
+    cfg.write_text('arms = ["baseline"]\nseeds = [5]\npreset = "smoke"\ntimesteps = 512\nworkers = 1\n'
+                   'experiment = "from-file"\n')
+    result = runner.invoke(app, ["run", "--config", str(cfg), "--tracking-uri", _uri(tmp_path),
+                                 "--timesteps", "256"])
+    assert result.exit_code == 0, result.output + result.stderr
+    (run,) = _children(_runs(tmp_path, "from-file"))
+    assert run.data.tags["vlmrl.seed"] == "5" and run.data.params["timesteps"] == "256"

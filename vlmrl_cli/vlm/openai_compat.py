@@ -1,0 +1,254 @@
+"""Any OpenAI-compatible chat-completions server (Ollama, vLLM, llama.cpp server, LM Studio).
+
+The frame travels as a base64 PNG data URL in the OpenAI vision message format; decoding is
+greedy (temperature 0). Transient failures (connection errors, timeouts, HTTP 429 and 5xx)
+are retried with exponential backoff by tenacity; everything else fails at once with one
+sentence that says what to check. The API key is read from the environment at each request
+and is never stored, logged, shown in ``repr`` or put in an error message.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+from typing import Any
+
+import httpx
+from tenacity import Retrying, retry_if_exception_type, stop_after_attempt, wait_exponential
+
+from vlmrl_cli.core.errors import BackendUnavailable, BadInput
+from vlmrl_cli.frames.render import Frame
+from vlmrl_cli.vlm.config import VLMConfig
+from vlmrl_cli.vlm.prompts import Prompt
+
+DEFAULT_BACKOFF_S = 0.5
+MAX_BACKOFF_S = 10.0
+
+
+class _Transient(Exception):
+    """An HTTP answer worth retrying (429 or 5xx)."""
+
+    def __init__(self, status: int) -> None:
+        super().__init__(f"HTTP {status}")
+        self.status = status
+
+
+class _KeptFailing(BackendUnavailable):
+    """The server answered, but only with 429/5xx until the retries ran out."""
+
+
+def _display_url(url: str) -> str:
+    """``url`` without any ``user:password@`` part, safe to print."""
+    parsed = httpx.URL(url)
+    return str(parsed.copy_with(username=None, password=None)) if parsed.userinfo else url
+
+
+def _server_message(response: httpx.Response, limit: int = 160) -> str:
+    """The server's own error text (OpenAI ``{"error": {"message": ...}}`` or plain), one line."""
+    try:
+        body: Any = response.json()
+    except ValueError:
+        body = response.text
+    if isinstance(body, dict):
+        err = body.get("error", body.get("detail", body.get("message", "")))
+        body = err.get("message", "") if isinstance(err, dict) else err
+    text = " ".join(str(body).split())
+    return text[:limit].rstrip(". ")
+
+
+def _content(payload: Any) -> str | None:
+    """``choices[0].message.content`` as text, or None when the payload has no such string."""
+    try:
+        content = payload["choices"][0]["message"]["content"]
+    except (KeyError, IndexError, TypeError):
+        return None
+    if isinstance(content, str):
+        return content
+    if isinstance(content, list):  # some servers answer in content parts
+        texts = [str(p["text"]) for p in content if isinstance(p, dict) and isinstance(p.get("text"), str)]
+        return "".join(texts) if texts else None
+    return None
+
+
+def image_data_url(frame: Frame) -> str:
+    """``frame`` as a ``data:image/png;base64,...`` URL (the OpenAI vision image format)."""
+    return "data:image/png;base64," + base64.b64encode(frame.png_bytes()).decode("ascii")
+
+
+class OpenAIBackend:
+    """A VLM behind an OpenAI-compatible ``/chat/completions`` endpoint.
+
+    ``base_url`` is the API root (e.g. ``http://localhost:11434/v1`` for Ollama); ``api_key_env``
+    names the environment variable holding the key, if the server needs one. ``retries`` is the
+    number of retries after the first attempt, ``backoff_s`` the first wait between them.
+    """
+
+    name = "openai"
+    simulated = False
+
+    def __init__(
+        self,
+        base_url: str,
+        model: str,
+        *,
+        api_key_env: str | None = None,
+        timeout_s: float = 30.0,
+        retries: int = 3,
+        max_tokens: int = 32,
+        backoff_s: float = DEFAULT_BACKOFF_S,
+        transport: httpx.BaseTransport | None = None,
+    ) -> None:
+        if not base_url:
+            raise BadInput("the openai backend needs --base-url, e.g. http://localhost:11434/v1 for Ollama.")
+        if not base_url.startswith(("http://", "https://")):
+            raise BadInput(f"--base-url must be an http(s) URL such as http://localhost:11434/v1, not '{base_url}'.")
+        if not model:
+            raise BadInput("the openai backend needs --model: the model name the server serves (e.g. llava).")
+        if retries < 0 or timeout_s <= 0 or backoff_s < 0:
+            raise BadInput("--retries must be >= 0 and --timeout > 0.")
+        self.base_url = base_url.rstrip("/")
+        self.model = model
+        self.api_key_env = api_key_env
+        self.retries = retries
+        self.max_tokens = max_tokens
+        self.backoff_s = backoff_s
+        self.served_models: tuple[str, ...] = ()
+        self._client = httpx.Client(timeout=timeout_s, transport=transport)
+
+    def __repr__(self) -> str:
+        return f"OpenAIBackend(base_url={_display_url(self.base_url)!r}, model={self.model!r})"
+
+    @classmethod
+    def from_config(cls, cfg: VLMConfig, *, backoff_s: float = DEFAULT_BACKOFF_S) -> OpenAIBackend:
+        """Build the backend of ``cfg`` and check that its server answers.
+
+        Raises ``BadInput`` for a missing base URL or model and ``BackendUnavailable`` when the
+        server cannot be reached or refuses the credentials.
+        """
+        backend = cls(
+            cfg.base_url or "", cfg.model or "", api_key_env=cfg.api_key_env, timeout_s=cfg.timeout_s,
+            retries=cfg.retries, max_tokens=cfg.max_new_tokens, backoff_s=backoff_s,
+        )
+        try:
+            backend.check()
+        except BaseException:
+            backend.close()
+            raise
+        return backend
+
+    # -- HTTP ---------------------------------------------------------------------------------
+
+    @property
+    def _where(self) -> str:
+        return f"the VLM server at {_display_url(self.base_url)}"
+
+    def _api_key(self) -> str | None:
+        return (os.environ.get(self.api_key_env) or None) if self.api_key_env else None
+
+    def _scrub(self, text: str) -> str:
+        """``text`` with the API key (should a server echo it) masked."""
+        key = self._api_key()
+        return text.replace(key, "***") if key else text
+
+    def _send(self, method: str, path: str, payload: dict[str, Any] | None = None) -> httpx.Response:
+        """One request with retries on transient failures; raises ``BackendUnavailable`` when
+        they are exhausted. Returns the response of any non-transient status."""
+        headers = {"Accept": "application/json"}
+        key = self._api_key()
+        if key:
+            headers["Authorization"] = f"Bearer {key}"
+        retrying = Retrying(
+            stop=stop_after_attempt(self.retries + 1),
+            wait=wait_exponential(multiplier=self.backoff_s, max=MAX_BACKOFF_S),
+            retry=retry_if_exception_type((httpx.TransportError, _Transient)),
+            reraise=True,
+        )
+        attempts = self.retries + 1
+        try:
+            for attempt in retrying:
+                with attempt:
+                    response = self._client.request(method, self.base_url + path, json=payload, headers=headers)
+                    if response.status_code == 429 or response.status_code >= 500:
+                        raise _Transient(response.status_code)
+                    return response
+        except httpx.TransportError as exc:
+            # `from None`: the httpx exception holds the request, headers (and key) included
+            raise BackendUnavailable(
+                f"{self._where} is unreachable ({type(exc).__name__}, {attempts} attempt(s)); "
+                "check --base-url or start the server."
+            ) from None
+        except _Transient as exc:
+            raise _KeptFailing(
+                f"{self._where} kept failing (HTTP {exc.status}, {attempts} attempt(s)); "
+                "check the server's logs, or retry later with more --retries."
+            ) from None
+        raise AssertionError("unreachable: tenacity either returns or re-raises")  # pragma: no cover
+
+    def _refused(self, response: httpx.Response) -> BackendUnavailable:
+        """The one-sentence error of a non-transient 4xx answer, with a hint per status."""
+        status = response.status_code
+        said = self._scrub(_server_message(response))
+        said = f": {said}" if said else ""
+        if status in (401, 403):
+            hint = (f"set the API key in the environment variable {self.api_key_env} (see --api-key-env)"
+                    if not self._api_key() else f"check the API key in {self.api_key_env}")
+        elif status == 404:
+            served = f" (it serves: {', '.join(self.served_models[:8])})" if self.served_models else ""
+            hint = f"check --model '{self.model}'{served} and --base-url (usually ending in /v1)"
+        else:
+            hint = f"check --model '{self.model}' and that the server accepts images"
+        return BackendUnavailable(f"{self._where} refused the request (HTTP {status}{said}); {hint}.")
+
+    def check(self) -> None:
+        """A cheap reachability check: ``GET /models``.
+
+        A connection failure or refused credentials (401/403) raise ``BackendUnavailable``;
+        servers that do not implement ``/models`` (404 and the like) pass, since they may still
+        answer chat completions. The listed model names, if any, feed later error hints.
+        """
+        try:
+            response = self._send("GET", "/models")
+        except _KeptFailing:
+            return  # a failing /models route alone: chat completions may still work
+        if response.status_code in (401, 403):
+            raise self._refused(response)
+        if response.is_success:
+            try:
+                data = response.json().get("data", [])
+                self.served_models = tuple(str(m["id"]) for m in data if isinstance(m, dict) and "id" in m)
+            except (ValueError, AttributeError, TypeError):
+                self.served_models = ()
+
+    def answer(self, prompt: Prompt, frame: Frame) -> str:
+        """The server's answer to ``prompt`` about ``frame`` (greedy, at most ``max_tokens``)."""
+        payload = {
+            "model": self.model,
+            "messages": [{
+                "role": "user",
+                "content": [
+                    {"type": "image_url", "image_url": {"url": image_data_url(frame)}},
+                    {"type": "text", "text": prompt.text},
+                ],
+            }],
+            "temperature": 0,
+            "max_tokens": self.max_tokens,
+            "stream": False,
+        }
+        response = self._send("POST", "/chat/completions", payload)
+        if not response.is_success:
+            raise self._refused(response)
+        try:
+            text = _content(response.json())
+        except (ValueError, json.JSONDecodeError):
+            text = None
+        if text is None:
+            raise BackendUnavailable(
+                f"{self._where} returned a malformed response (no JSON choices[0].message.content); "
+                "check that --base-url points at an OpenAI-compatible /v1 endpoint."
+            )
+        return text
+
+    def close(self) -> None:
+        """Close the HTTP connection pool."""
+        self._client.close()
