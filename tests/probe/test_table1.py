@@ -62,3 +62,16 @@ def test_markdown_escapes_pipes() -> None:
 
 def test_latex_escape() -> None:
     assert latex_escape("50% & $x_1$ → ΔΦ") == r"50\% \& \$x\_1\$ $\rightarrow$ $\Delta$$\Phi$"
+
+
+from hypothesis import given  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from vlmrl_cli.probe.table1 import printable  # noqa: E402
+
+
+@given(st.text())
+def test_printable_never_lets_control_characters_through(text: str) -> None:
+    shown = printable(text)
+    assert shown.isprintable()
+    assert "\n" not in shown

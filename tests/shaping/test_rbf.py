@@ -4,11 +4,11 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from vlmrl_cli.shaping.rbf import rbf_potential
+from vlmrl_cli.shaping.rbf import RBFField, rbf_potential
 
 D = 4
 coords = st.floats(-5.0, 5.0)
@@ -74,3 +74,25 @@ def test_midpoint_of_two_prototypes_is_their_mean() -> None:
 def test_bandwidth_must_be_positive(h: float) -> None:
     with pytest.raises(ValueError, match="bandwidth"):
         rbf_potential(np.zeros(1), np.zeros((1, 1)), np.zeros(1), h)
+
+
+@settings(deadline=None, max_examples=60)
+@given(st.lists(st.tuples(st.booleans(), st.integers(0, 7), arrays(np.float64, (D,), elements=coords),
+                          st.floats(0.0, 1.0)), min_size=1, max_size=40),
+       st.floats(0.05, 3.0))
+def test_incremental_field_matches_recomputing_from_scratch(ops, bandwidth: float) -> None:  # type: ignore[no-untyped-def]
+    """Any interleaving of prototype additions and queries gives what ``rbf_potential`` gives
+    over the prototypes present at query time."""
+    field = RBFField(bandwidth, D)
+    frames: dict[int, np.ndarray] = {}
+    protos: list[np.ndarray] = []
+    potentials: list[float] = []
+    for add, key, feature, potential in ops:
+        if add:
+            field.add_prototype(feature, potential)
+            protos.append(feature)
+            potentials.append(potential)
+        else:
+            frames.setdefault(key, feature)
+            expected = rbf_potential(frames[key], np.array(protos).reshape(-1, D), np.array(potentials), bandwidth)
+            assert math.isclose(field.value(str(key), frames[key]), expected, rel_tol=1e-9, abs_tol=1e-9)

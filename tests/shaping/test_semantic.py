@@ -44,12 +44,13 @@ def test_near_frames_reuse_a_prototype_and_far_frames_ask(camera: Camera) -> Non
                               "vlm/label_reuses": 1.0, "vlm/parse_failures": 0.0}
 
 
-def test_without_reuse_the_same_frame_is_asked_again_but_stored_once(camera: Camera) -> None:
-    client, backend = scripted("BOTTOM")
+def test_an_identical_frame_is_asked_once_and_its_own_label_reused(camera: Camera) -> None:
+    client, backend = scripted("BOTTOM", "GOAL")
     oracle = SemanticOracle(client, ShapingConfig(reuse_radius=0.0), MCQ)
-    for _ in range(3):
-        oracle.label(camera.view(-0.5))
-    assert backend.calls == 3 and oracle.prototypes == 1
+    assert [oracle.label(camera.view(-0.5)) for _ in range(3)] == [0.0, 0.0, 0.0]
+    assert backend.calls == 1 and oracle.prototypes == 1 and oracle.stats()["vlm/label_reuses"] == 2.0
+    assert oracle.label(camera.view(-0.49)) == 1.0  # another picture, even one pixel away, is asked
+    assert backend.calls == 2
 
 
 def test_unparsed_answers_are_counted_and_add_no_prototype(camera: Camera) -> None:
@@ -63,28 +64,28 @@ def test_float_answers_map_x_onto_zero_one(camera: Camera) -> None:
     client, _ = scripted("x = -0.3", "far away", "7.5")
     oracle = SemanticOracle(client, ShapingConfig(reuse_radius=0.0), FLOAT, rbf=False)
     assert oracle.label(camera.view(-0.5)) == pytest.approx(0.5)
-    assert oracle.label(camera.view(-0.5)) is None
-    assert oracle.label(camera.view(-0.5)) is None  # out of range is not a parsed answer
+    assert oracle.label(camera.view(-0.49)) is None
+    assert oracle.label(camera.view(-0.48)) is None  # out of range is not a parsed answer
     assert oracle.stats()["vlm/parse_failures"] == 2.0
     assert float_potential(-0.3) == pytest.approx(0.5)
 
 
-def test_phi_rbf_is_memoised_until_a_prototype_is_added(camera: Camera) -> None:
+def test_phi_rbf_follows_new_prototypes(camera: Camera) -> None:
     oracle = SemanticOracle(sim_client(flicker=0.0), ShapingConfig(), MCQ)
     view = camera.view(-1.0)
     assert oracle.phi_rbf(view) == 0.0  # no prototype yet
     oracle.label(camera.view(-1.0))
-    assert oracle.phi_rbf(view) == pytest.approx(0.3)  # memo invalidated by the new prototype
+    assert oracle.phi_rbf(view) == pytest.approx(0.3)  # the new prototype updates the memoised value
 
 
 def test_labels_every_query_every_steps_including_step_zero(camera: Camera) -> None:
     client, backend = scripted("BOTTOM")
     oracle = SemanticOracle(client, ShapingConfig(reuse_radius=0.0, query_every=10), MCQ)
     episode = EpisodePotential(oracle, lock=True)
-    view = camera.view(-0.5)
-    episode.reset(view)
+    views = [camera.view(-0.5 + 0.004 * t) for t in range(26)]  # a new picture every step
+    episode.reset(views[0])
     calls = [backend.calls]
-    for _ in range(25):
+    for view in views[1:]:
         episode.step(view)
         calls.append(backend.calls)
     assert [t for t in range(1, 26) if calls[t] > calls[t - 1]] == [10, 20]
@@ -95,21 +96,21 @@ def test_lock_holds_within_an_episode_and_resets_at_the_start(camera: Camera) ->
     client, _ = scripted("GOAL", "GOAL", "BOTTOM", "LEFT_SLOPE", "BOTTOM")
     cfg = ShapingConfig(reuse_radius=0.0, query_every=1, confirm=2)
     episode = EpisodePotential(SemanticOracle(client, cfg, MCQ, rbf=False), lock=True)
-    view = camera.view(-0.5)
-    phis = [episode.reset(view)] + [episode.step(view) for _ in range(3)]
+    views = [camera.view(-0.5 + 0.004 * t) for t in range(5)]  # distinct pictures: each one is asked
+    phis = [episode.reset(views[0])] + [episode.step(v) for v in views[1:4]]
     assert phis == [1.0, 1.0, 1.0, 1.0]  # held GOAL, then locked at GOAL despite BOTTOM / LEFT_SLOPE
     assert episode.lock_state.level == 1.0
-    assert episode.reset(view) == 0.0 and episode.lock_state.level == 0.0  # new episode: BOTTOM, unlocked
+    assert episode.reset(views[4]) == 0.0 and episode.lock_state.level == 0.0  # new episode: BOTTOM, unlocked
 
 
 def test_hybrid_is_the_max_of_lock_and_rbf_and_no_lock_is_rbf(camera: Camera) -> None:
-    client, _ = scripted("NEAR_GOAL", "NEAR_GOAL", "BOTTOM")
+    client, _ = scripted("NEAR_GOAL", "BOTTOM")
     cfg = ShapingConfig(reuse_radius=0.0, query_every=1, confirm=2)
     oracle = SemanticOracle(client, cfg, MCQ, rbf=True)
     locked, free = EpisodePotential(oracle, lock=True), EpisodePotential(oracle, lock=False)
     near_goal, bottom = camera.view(0.3), camera.view(-0.5)
     locked.reset(near_goal)
-    locked.step(near_goal)  # confirmed NEAR_GOAL: level 0.6
+    locked.step(near_goal)  # the same picture's label reused: NEAR_GOAL confirmed, level 0.6
     free.reset(bottom)  # asks once more: BOTTOM at the valley
     rbf = oracle.phi_rbf(bottom)
     assert rbf < 0.05  # the BOTTOM prototype dominates; NEAR_GOAL is far in feature space
@@ -121,8 +122,8 @@ def test_parse_failure_keeps_the_previous_potential(camera: Camera) -> None:
     client, _ = scripted("x = -0.3", "nothing", "nothing")
     cfg = ShapingConfig(reuse_radius=0.0, query_every=1)
     episode = EpisodePotential(SemanticOracle(client, cfg, FLOAT, rbf=False), lock=False)
-    view = camera.view(-0.5)
-    assert [episode.reset(view), episode.step(view), episode.step(view)] == pytest.approx([0.5, 0.5, 0.5])
+    a, b, c = camera.view(-0.5), camera.view(-0.49), camera.view(-0.48)
+    assert [episode.reset(a), episode.step(b), episode.step(c)] == pytest.approx([0.5, 0.5, 0.5])
 
 
 @pytest.mark.parametrize("change", [{"bandwidth": 0.0}, {"reuse_radius": -1.0}, {"query_every": 0}, {"confirm": 0}])

@@ -136,7 +136,7 @@ def test_the_visual_pipeline_sees_only_frame_views() -> None:
 
     replay = EpisodePotential(SemanticOracle(sim_client(), cfg, ARMS["hybrid"].potential, rbf=True), lock=True)
     with FrameRenderer() as renderer:
-        views = [FrameView.of_frame(renderer.render(round(x, 3))) for x in xs]
+        views = [FrameView.of_frame(renderer.render(camera.rendered_position(x))) for x in xs]
     assert [v.key for v in views] == [k for _, k in camera.calls]
     replayed = [replay.reset(views[0])] + [replay.step(v) for v in views[1:]]
     assert replayed == potentials

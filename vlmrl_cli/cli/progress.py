@@ -35,10 +35,12 @@ class RichSweepReporter:
             TimeRemainingColumn(),
             console=console,
             transient=False,
+            disable=not console.is_terminal,  # logs and CI get one plain line per finished run instead
         )
         self._tasks: dict[str, TaskID] = {}
         self._seen: dict[str, int] = {}
         self._overall: TaskID | None = None
+        self._finished = 0
 
     def __enter__(self) -> RichSweepReporter:
         self._bars.start()
@@ -82,3 +84,6 @@ class RichSweepReporter:
         else:
             status = f"[red]{result.status}[/] {result.error or ''}"[:80]
         self._bars.update(task, status=status)
+        self._finished += 1
+        if not self.console.is_terminal:
+            self.console.print(f"{self._finished}/{len(self._tasks)} {result.job}: {status} ({result.wall_s:.0f} s)")

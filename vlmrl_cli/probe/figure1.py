@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from vlmrl_cli.probe.table1 import printable
 from vlmrl_cli.vlm.prompts import PromptKind
 
 if TYPE_CHECKING:
@@ -22,7 +23,7 @@ VLM_COLOUR = "tab:red"
 def _short(text: str | None, limit: int = 34) -> str:
     if text is None:
         return "(no answer)"
-    flat = " ".join(text.split())
+    flat = printable(text)
     return flat if len(flat) <= limit else flat[: limit - 1] + "…"
 
 

@@ -171,10 +171,22 @@ def sweep_frame(sweep: Mapping[str, float]) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def printable(text: str) -> str:
+    """Raw VLM text made safe to show: whitespace runs folded to one space, control and other
+    unprintable characters (a random model's garbage) spelled as escapes such as ``\\x08``.
+
+    Example:
+        >>> printable("BOTTOM\\n\\x08ok")
+        'BOTTOM \\\\x08ok'
+    """
+    flat = " ".join(text.split())
+    return "".join(ch if ch.isprintable() else ch.encode("unicode_escape").decode("ascii") for ch in flat)
+
+
 def markdown_table(df: pd.DataFrame) -> str:
     """A GitHub-flavoured Markdown table of string cells (``|`` escaped)."""
     def cell(value: object) -> str:
-        return " ".join(str(value).split()).replace("|", "\\|")
+        return printable(str(value)).replace("|", "\\|")
 
     header = "| " + " | ".join(cell(c) for c in df.columns) + " |"
     rule = "|" + "|".join("---" for _ in df.columns) + "|"
@@ -196,7 +208,7 @@ def latex_escape(text: str) -> str:
         >>> latex_escape("ΔΦ = 0.0 (LEFT_SLOPE)")
         '$\\\\Delta$$\\\\Phi$ = 0.0 (LEFT\\\\_SLOPE)'
     """
-    return "".join(_LATEX_SPECIAL.get(ch, _LATEX_UNICODE.get(ch, ch)) for ch in text)
+    return "".join(_LATEX_SPECIAL.get(ch, _LATEX_UNICODE.get(ch, ch)) for ch in printable(text))
 
 
 def latex_table(df: pd.DataFrame, caption: str, label: str) -> str:

@@ -10,6 +10,7 @@ modality separation of paper Section 3.3.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import OrderedDict
 from collections.abc import Callable
@@ -58,7 +59,7 @@ class Camera:
         >>> cam.close()
     """
 
-    def __init__(self, render_quantum: float = 0.001, pixel_cache: int = 256) -> None:
+    def __init__(self, render_quantum: float = 0.003, pixel_cache: int = 256) -> None:
         if not (math.isfinite(render_quantum) and 0 < render_quantum <= MAX_POSITION - MIN_POSITION):
             raise ValueError(
                 f"render_quantum must be in (0, {MAX_POSITION - MIN_POSITION}] x units, got {render_quantum}"
@@ -69,7 +70,7 @@ class Camera:
         self.pixel_cache = int(pixel_cache)
         self.renders = 0
         self._renderer: FrameRenderer | None = None
-        self._cells: dict[int, tuple[str, np.ndarray]] = {}
+        self._views: dict[int, FrameView] = {}
         self._frames: OrderedDict[int, Frame] = OrderedDict()
 
     def _cell(self, x: float) -> int:
@@ -78,12 +79,18 @@ class Camera:
         last = round((MAX_POSITION - MIN_POSITION) / self.render_quantum)
         return min(max(round((x - MIN_POSITION) / self.render_quantum), 0), last)
 
+    def _cell_position(self, cell: int) -> float:
+        return min(max(MIN_POSITION + cell * self.render_quantum, MIN_POSITION), MAX_POSITION)
+
+    def rendered_position(self, x: float) -> float:
+        """The position (x units) whose frame ``view(x)`` shows: ``x`` snapped to the grid."""
+        return self._cell_position(self._cell(float(x)))
+
     def _render(self, cell: int) -> Frame:
         if self._renderer is None:
             self._renderer = FrameRenderer()
-        x = min(max(MIN_POSITION + cell * self.render_quantum, MIN_POSITION), MAX_POSITION)
         self.renders += 1
-        return self._renderer.render(x)
+        return self._renderer.render(self._cell_position(cell))
 
     def _frame(self, cell: int) -> Frame:
         frame = self._frames.get(cell)
@@ -97,21 +104,24 @@ class Camera:
         return frame
 
     def view(self, x: float) -> FrameView:
-        """The view of the car at position ``x`` (x units), rendered at most once per grid cell."""
+        """The view of the car at position ``x`` (x units), rendered at most once per grid cell.
+
+        Called every env step, so a known cell costs one dict lookup (the view is built once).
+        """
         cell = self._cell(float(x))
-        memo = self._cells.get(cell)
-        if memo is None:
+        view = self._views.get(cell)
+        if view is None:
             frame = self._frame(cell)
-            memo = (frame.sha256, frame_features(frame.pixels))
-            memo[1].setflags(write=False)
-            self._cells[cell] = memo
-        key, features = memo
-        return FrameView(key=key, features=features, _load=lambda: self._frame(cell))
+            features = frame_features(frame.pixels)
+            features.setflags(write=False)
+            view = FrameView(key=frame.sha256, features=features, _load=functools.partial(self._frame, cell))
+            self._views[cell] = view
+        return view
 
     @property
     def cells(self) -> int:
         """How many grid cells have been seen (memoised)."""
-        return len(self._cells)
+        return len(self._views)
 
     def close(self) -> None:
         if self._renderer is not None:

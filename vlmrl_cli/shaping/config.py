@@ -33,13 +33,17 @@ class ShapingConfig:
     # Feature distance grows ~0.075 per pixel of car shift and saturates (~1.4) beyond ~40 px
     # (measured, see shaping/features.py): 0.3 keeps far prototypes from pulling Phi to the mean.
     bandwidth: float = field(default=0.3, metadata={"help": "RBF kernel width, feature-distance units"})
+    # 0 = reuse only an identical frame's label: a deterministic VLM answers it identically, so
+    # the cache changes no label; > 0 also reuses the nearest prototype within this distance.
     reuse_radius: float = field(
-        default=0.3, metadata={"help": "reuse a prototype's label within this feature distance (~4 px)"}
+        default=0.0, metadata={"help": "also reuse a prototype's label within this feature distance (~0.075/px)"}
     )
     kin_scale: float = field(default=2.0, metadata={"help": "R_kin = max(0, scale (x + offset))"})
     kin_offset: float = field(default=0.4, metadata={"help": "see kin_scale (Eq. 1)"})
+    # MountainCar's picture depends on x only; one pixel of car motion is 1.8 / 600 = 0.003 in x,
+    # so at most 601 distinct frames exist and the VLM is asked at most 601 times per run.
     render_quantum: float = field(
-        default=0.001, metadata={"help": "render positions on this grid (x units; 1 px = 0.003)"}
+        default=0.003, metadata={"help": "render positions on this grid (x units; 1 px = 0.003)"}
     )
 
     def potential_of(self, label: Zone) -> float:

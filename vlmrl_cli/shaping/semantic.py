@@ -2,10 +2,10 @@
 
 ``SemanticOracle`` is shared by all envs of one run. It holds the Visual Prototype Cache:
 every frame the VLM labelled, with its features, label and raw potential. At a labelling step
-it reuses the nearest prototype's label when that prototype is within ``reuse_radius``
-(feature distance) and asks the VLM otherwise. ``phi_rbf`` smooths the prototypes' raw
-potentials with ``rbf_potential`` and memoises the result per frame key until a prototype is
-added, so the per-step cost is a dict lookup.
+it reuses the label of an identical frame (and, with ``reuse_radius > 0``, of the nearest
+prototype within that feature distance) and asks the VLM otherwise. ``phi_rbf`` smooths the
+prototypes' raw potentials with an ``RBFField`` (``rbf_potential`` kept up to date per frame
+key as prototypes arrive), so the per-step cost is a dict lookup.
 
 ``EpisodePotential`` is the per-env part: when to label (every ``query_every`` steps, step 0
 of an episode included), the hysteresis lock, and the potential of the arm:
@@ -32,8 +32,9 @@ from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION
 from vlmrl_cli.probe.parsers import ParseStatus, parse_float, parse_mcq
 from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.shaping.features import FEATURE_DIM
 from vlmrl_cli.shaping.hysteresis import LockState, lock_step
-from vlmrl_cli.shaping.rbf import rbf_potential
+from vlmrl_cli.shaping.rbf import RBFField
 from vlmrl_cli.training.arms import PotentialSource
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
@@ -82,8 +83,8 @@ class SemanticOracle:
         self._features = np.empty((0, 0), dtype=np.float64)
         self._potentials = np.empty(0, dtype=np.float64)
         self._n = 0
-        self._keys: set[str] = set()
-        self._phi_memo: dict[str, float] = {}
+        self._label_of: dict[str, float] = {}
+        self._field = RBFField(cfg.bandwidth, FEATURE_DIM)
         self._queries = 0
         self._cache_hits = 0
         self._reuses = 0
@@ -104,8 +105,18 @@ class SemanticOracle:
         return self._potentials[: self._n].copy()
 
     def label(self, view: FrameView) -> float | None:
-        """The raw potential of the view's label (reused or asked), or None if unparsed."""
-        if self._n:
+        """The raw potential of the view's label (reused or asked), or None if unparsed.
+
+        A frame already labelled reuses its own label: a deterministic VLM (greedy decoding,
+        the simulated one) answers an identical frame identically, so this changes no label.
+        With ``reuse_radius > 0`` the nearest prototype's label is also reused for frames within
+        that feature distance, which saves queries but can change labels near zone edges.
+        """
+        known = self._label_of.get(view.key)
+        if known is not None:
+            self._reuses += 1
+            return known
+        if self._n and self.cfg.reuse_radius > 0:
             diff = self._features[: self._n] - view.features.astype(np.float64)[None, :]
             sq = np.einsum("nd,nd->n", diff, diff)
             nearest = int(np.argmin(sq))
@@ -134,7 +145,7 @@ class SemanticOracle:
         return float_potential(number.value)
 
     def _add(self, view: FrameView, potential: float) -> None:
-        if view.key in self._keys:  # the same picture asked again (reuse disabled): keep the first
+        if view.key in self._label_of:
             return
         if self._n == self._features.shape[0]:
             grown = np.empty((max(64, 2 * self._n), view.features.shape[0]), dtype=np.float64)
@@ -145,17 +156,12 @@ class SemanticOracle:
         self._features[self._n] = view.features
         self._potentials[self._n] = potential
         self._n += 1
-        self._keys.add(view.key)
-        self._phi_memo.clear()
+        self._label_of[view.key] = potential
+        self._field.add_prototype(view.features, potential)
 
     def phi_rbf(self, view: FrameView) -> float:
         """RBF-smoothed potential of the view over the prototypes (0.0 before the first one)."""
-        phi = self._phi_memo.get(view.key)
-        if phi is None:
-            phi = rbf_potential(view.features, self._features[: self._n], self._potentials[: self._n],
-                                self.cfg.bandwidth)
-            self._phi_memo[view.key] = phi
-        return phi
+        return self._field.value(view.key, view.features)
 
     def stats(self) -> dict[str, float]:
         """Counters since construction, under the keys of ``STAT_KEYS``."""

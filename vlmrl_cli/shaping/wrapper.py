@@ -80,6 +80,7 @@ class HybridReward(gym.Wrapper[np.ndarray, int, np.ndarray, int], gym.utils.Reco
         self.shaping = shaping
         self.gamma = float(gamma)
         self.camera = camera
+        self._sim = cast(MountainCarEnv, env.unwrapped)  # looked up once: this runs every step
         self._episode = EpisodePotential(oracle, arm.lock) if arm.uses_vlm and oracle is not None else None
         self._phi = 0.0
         self._return = 0.0
@@ -97,9 +98,7 @@ class HybridReward(gym.Wrapper[np.ndarray, int, np.ndarray, int], gym.utils.Reco
     def _view(self) -> FrameView:
         assert self.camera is not None
         # The camera images the simulator (as env.render() would), not the agent's observation.
-        sim = cast(MountainCarEnv, self.env.unwrapped)
-        x = float(sim.state[0])
-        return self.camera.view(x)
+        return self.camera.view(float(self._sim.state[0]))
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None

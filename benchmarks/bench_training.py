@@ -1,0 +1,137 @@
+"""Performance figures of the hybrid arm (issue: hybrid reward / `vlmrl run`). Prints measurements.
+
+  1. wall time of `hybrid` (simulated VLM) vs `baseline`, same preset, budget and seed, one
+     thread, in-process (no MLflow): the target is a ratio <= 1.3;
+  2. VLM queries of that hybrid run (target <= 2,000 for 300,000 steps) and whether the
+     prototype cache changed any label: every labelling event's potential is compared with the
+     answer the VLM gives when asked directly about the same frame (as asking at every
+     interval would);
+  3. throughput of the real sweep (`run_sweep`, worker processes, MLflow in a temporary sqlite
+     store) with 1 and with 2 workers on two baseline jobs (target: >= 1.7x).
+
+Usage: python benchmarks/bench_training.py [--timesteps 300000] [--worker-timesteps 100000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from vlmrl_cli.probe.parsers import ParseStatus, parse_mcq
+from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.training.arms import ARMS
+from vlmrl_cli.training.config import RunConfig
+from vlmrl_cli.training.presets import get_preset
+from vlmrl_cli.training.worker import JobResult
+from vlmrl_cli.vlm.config import VLMConfig
+from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
+from vlmrl_cli.vlm.registry import build_client
+
+
+def train(arm: str, timesteps: int, seed: int, cache: Path) -> dict[str, Any]:
+    """Train one arm in-process; return wall time, and for VLM arms the oracle and its label log."""
+    from stable_baselines3 import PPO
+
+    from vlmrl_cli.training.envs import make_train_env
+
+    preset = dataclasses.replace(get_preset("paper"), timesteps=timesteps)
+    spec = ARMS[arm]
+    client = build_client(VLMConfig(cache_path=cache)) if spec.uses_vlm else None
+    start = time.perf_counter()
+    env, oracle = make_train_env(spec, preset, ShapingConfig(), client, seed)
+    events: list[tuple[Any, float | None]] = []
+    if oracle is not None:
+        inner = oracle.label
+
+        def recording(view: Any) -> float | None:
+            potential = inner(view)
+            events.append((view, potential))
+            return potential
+
+        oracle.label = recording  # type: ignore[method-assign]
+    p = preset
+    model = PPO("MlpPolicy", env, n_steps=p.n_steps, batch_size=p.batch_size, gae_lambda=p.gae_lambda, gamma=p.gamma,
+                n_epochs=p.n_epochs, ent_coef=p.ent_coef, learning_rate=p.learning_rate, seed=seed, device="cpu")
+    model.learn(total_timesteps=timesteps)
+    wall = time.perf_counter() - start
+    return {"wall": wall, "oracle": oracle, "events": events, "client": client}
+
+
+def label_agreement(run: dict[str, Any]) -> tuple[int, int, int]:
+    """(events, events whose potential differs from asking the VLM directly, distinct frames)."""
+    oracle = run["oracle"]
+    direct_client = build_client(VLMConfig(use_cache=False))
+    potential_of = dict(ShapingConfig().label_potentials)
+    direct: dict[str, float | None] = {}
+    differ = 0
+    for view, used in run["events"]:
+        if view.key not in direct:
+            mcq = parse_mcq(direct_client.ask(PROMPTS[PromptKind.MCQ], view.frame()).text)
+            ok = mcq.status is ParseStatus.OK and mcq.label is not None
+            direct[view.key] = potential_of[mcq.label] if ok and mcq.label is not None else None
+        differ += int(direct[view.key] != used)
+    direct_client.close()
+    del oracle
+    return len(run["events"]), differ, len(direct)
+
+
+class _Quiet:
+    def planned(self, pending: list[Any], done: list[Any]) -> None: ...
+
+    def progress(self, event: Any) -> None: ...
+
+    def finished(self, result: JobResult) -> None: ...
+
+
+def sweep_throughput(workers: int, timesteps: int, root: Path) -> float:
+    from vlmrl_cli.training.sweep import run_sweep
+
+    cfg = RunConfig(arms=("baseline",), seeds=(0, 1), preset="paper", timesteps=timesteps, workers=workers,
+                    experiment=f"bench-{workers}", tracking_uri=f"sqlite:///{root / f'w{workers}.db'}",
+                    eval_episodes=1)
+    summary = run_sweep(cfg, _Quiet())
+    assert not summary.failed, summary.failed
+    return 2 * timesteps / summary.wall_s
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--timesteps", type=int, default=300_000)
+    parser.add_argument("--worker-timesteps", type=int, default=100_000)
+    parser.add_argument("--seed", type=int, default=0)
+    opts = parser.parse_args()
+    torch.set_num_threads(1)
+
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        print(f"[1] baseline vs hybrid (SIMULATED VLM), preset paper, {opts.timesteps:,} steps, seed {opts.seed}, "
+              "1 thread, no MLflow", flush=True)
+        base = train("baseline", opts.timesteps, opts.seed, root / "c.sqlite")
+        hyb = train("hybrid", opts.timesteps, opts.seed, root / "c.sqlite")
+        print(f"    baseline {base['wall']:.1f} s ({opts.timesteps / base['wall']:,.0f} steps/s)")
+        print(f"    hybrid   {hyb['wall']:.1f} s ({opts.timesteps / hyb['wall']:,.0f} steps/s)")
+        print(f"    hybrid/baseline wall-time ratio: {hyb['wall'] / base['wall']:.2f} (target <= 1.3)")
+        stats = hyb["oracle"].stats()
+        events, differ, frames = label_agreement(hyb)
+        print(f"[2] VLM queries in the {opts.timesteps:,}-step hybrid run: {stats['vlm/queries']:.0f} "
+              f"(target <= 2,000); prototypes {stats['vlm/prototypes']:.0f}; labels reused from the cache "
+              f"{stats['vlm/label_reuses']:.0f}; response-cache hits {stats['vlm/cache_hits']:.0f}")
+        print(f"    labelling events {events:,} over {frames:,} distinct frames; potential differs from asking "
+              f"the VLM directly in {differ:,} events ({differ / max(events, 1):.2%})")
+        hyb["client"].close()
+        print(f"[3] sweep throughput, 2 baseline jobs x {opts.worker_timesteps:,} steps, MLflow sqlite", flush=True)
+        one = sweep_throughput(1, opts.worker_timesteps, root)
+        two = sweep_throughput(2, opts.worker_timesteps, root)
+        print(f"    1 worker  {one:,.0f} steps/s")
+        print(f"    2 workers {two:,.0f} steps/s")
+        print(f"    2-worker speedup: {two / one:.2f}x (target >= 1.7)")
+
+
+if __name__ == "__main__":
+    main()
