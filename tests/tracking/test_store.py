@@ -61,3 +61,15 @@ def test_simulated_runs_are_labelled() -> None:
     assert "SIMULATED" in tags["vlmrl.note"]
     assert "vlmrl.version.torch" in tags
     assert "vlmrl.note" not in store.provenance_tags("hf:model", simulated=False)
+
+
+def test_identical_records_at_the_same_step_are_all_kept(tmp_path: Path) -> None:
+    """Two envs can finish identical episodes at the same global step; both must be stored."""
+    client = store.connect(f"sqlite:///{tmp_path}/mlflow.db")
+    run = client.create_run(store.ensure_experiment(client, "e"))
+    logger = store.BatchLogger(client, run.info.run_id)
+    for _ in range(3):
+        logger.log({"episode/native_return": -200.0, "episode/success": 0.0}, step=400)
+    logger.flush()
+    for key in ("episode/native_return", "episode/success"):
+        assert len(client.get_metric_history(run.info.run_id, key)) == 3

@@ -96,8 +96,9 @@ def load_reported(path: Path | None) -> dict[str, Any]:
 
 def vlm_note(runs: pd.DataFrame) -> str:
     """One line naming the VLM backend(s); says SIMULATED VLM when any run used the simulated one."""
-    labels = sorted({str(v) for v in runs["vlm"].dropna()})
-    text = "VLM backend: " + ("; ".join(labels) if labels else "unknown")
+    per_arm = runs.dropna(subset=["vlm"]).groupby("arm", sort=True)["vlm"].agg(lambda v: " / ".join(sorted(set(v))))
+    labels = [f"{arm}: {label}" for arm, label in per_arm.items()]
+    text = "VLM backend per arm: " + ("; ".join(labels) if labels else "unknown")
     if bool(runs["simulated"].any()) and "SIMULATED VLM" not in text:
         text += " — SIMULATED VLM, not a real model"
     return text

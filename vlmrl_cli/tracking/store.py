@@ -105,18 +105,26 @@ def provenance_tags(vlm_label: str, simulated: bool) -> dict[str, str]:
 
 class BatchLogger:
     """Buffers metrics and flushes them with ``log_batch`` (one sqlite call per point costs
-    ~4 ms; batches of up to 1000 cost about the same as one)."""
+    ~4 ms; batches of up to 1000 cost about the same as one).
+
+    Every ``log`` call gets its own timestamp, strictly increasing (ms): MLflow's stores keep one
+    row per (key, value, step, timestamp), so two envs finishing identical episodes at the same
+    global step would otherwise collapse into one point, and the records of one call share a
+    timestamp so readers can line their metrics up.
+    """
 
     def __init__(self, client: Any, run_id: str, max_buffer: int = 900) -> None:
         self._client = client
         self._run_id = run_id
         self._max = max_buffer
         self._buffer: list[Any] = []
+        self._last_ts = 0
 
     def log(self, metrics: Mapping[str, float], step: int) -> None:
         from mlflow.entities import Metric
 
-        ts = int(time.time() * 1000)
+        ts = max(int(time.time() * 1000), self._last_ts + 1)
+        self._last_ts = ts
         self._buffer.extend(Metric(k, float(v), ts, int(step)) for k, v in metrics.items())
         if len(self._buffer) >= self._max:
             self.flush()
