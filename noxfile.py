@@ -8,7 +8,7 @@ import time
 
 import nox
 
-nox.options.sessions = ["lint", "tests"]
+nox.options.sessions = ["tests"]
 nox.options.reuse_existing_virtualenvs = True
 nox.options.default_venv_backend = "venv"
 
@@ -20,20 +20,25 @@ def _install(session: nox.Session, extras: str = "dev") -> None:
     session.install("-e", f".[{extras}]")
 
 
+def _lint(session: nox.Session) -> None:
+    session.run("ruff", "check", "vlmrl_cli", "tests", "noxfile.py", "benchmarks", "scripts")
+    session.run("mypy", "vlmrl_cli", "benchmarks", "scripts")
+
+
 @nox.session
 def tests(session: nox.Session) -> None:
-    """The test suite (what CI runs)."""
+    """ruff, mypy, then the test suite, in one environment (what CI runs)."""
     _install(session)
+    _lint(session)
     session.run("pytest", "-n", "2", "--dist", "loadfile", *session.posargs,
                 env={"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
 
 
 @nox.session
 def lint(session: nox.Session) -> None:
-    """ruff and mypy."""
+    """ruff and mypy only."""
     _install(session)
-    session.run("ruff", "check", "vlmrl_cli", "tests", "noxfile.py", "benchmarks")
-    session.run("mypy", "vlmrl_cli")
+    _lint(session)
 
 
 @nox.session

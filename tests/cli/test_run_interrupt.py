@@ -1,0 +1,52 @@
+"""Ctrl-C during `vlmrl run`: a clean stop (exit 130, runs KILLED), and the rerun redoes them."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from mlflow.tracking import MlflowClient
+
+from vlmrl_cli.training.config import RunConfig
+from vlmrl_cli.training.sweep import plan
+
+
+def _runs(uri: str) -> list:  # type: ignore[type-arg]
+    client = MlflowClient(tracking_uri=uri)
+    exp = client.get_experiment_by_name("vlmrl")
+    return [] if exp is None else list(client.search_runs([exp.experiment_id]))
+
+
+def test_ctrl_c_stops_cleanly_and_the_rerun_resumes(tmp_path: Path) -> None:
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    args = [sys.executable, "-m", "vlmrl_cli", "run", "--arms", "baseline", "--seed-list", "0", "--preset", "smoke",
+            "--workers", "1", "--tracking-uri", uri]
+    proc = subprocess.Popen([*args, "--timesteps", "2000000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env={**os.environ, "COLUMNS": "120"})
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:  # wait until the worker is training
+            if any(r.data.tags.get("vlmrl.kind") == "train" and r.data.metrics.get("episode/native_return")
+                   for r in _runs(uri)):
+                break
+            time.sleep(0.5)
+        else:
+            raise AssertionError("training never started")
+        proc.send_signal(signal.SIGINT)
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, stderr
+    assert "interrupted" in stderr and "Traceback" not in stderr
+    statuses = {r.data.tags["vlmrl.kind"]: r.info.status for r in _runs(uri)}
+    assert statuses == {"sweep": "KILLED", "train": "KILLED"}
+
+    # the killed job is pending again: rerunning the same command trains it
+    cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="smoke", timesteps=2_000_000, tracking_uri=uri)
+    client = MlflowClient(tracking_uri=uri)
+    pending, done, _ = plan(client, client.get_experiment_by_name("vlmrl").experiment_id, cfg.jobs())
+    assert [j.name for j in pending] == ["baseline-s0"] and done == []
