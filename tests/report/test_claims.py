@@ -21,6 +21,8 @@ from vlmrl_cli.report.claims import INCONCLUSIVE, NOT_REPRODUCED, REPRODUCED, ve
         (Estimate(5.0, 1.0, 9.0, n=5), None, 0.0, "<", NOT_REPRODUCED),
         (Estimate(1.0, 0.44, 1.0, n=3), 1.0, None, ">", REPRODUCED),  # absolute: 3/3 vs 100%
         (Estimate(0.2, 0.05, 0.5, n=5), 1.0, None, ">", NOT_REPRODUCED),
+        (Estimate(1.0, 0.566, 1.0, n=5), 0.6, None, ">", INCONCLUSIVE),  # 5/5 vs a claimed 60%: CI too wide
+        (Estimate(0.62, 0.3, 0.9, n=5), 0.6, None, ">", REPRODUCED),  # estimate close to the claim
     ],
 )
 def test_verdict_rule(est, paper, null, direction, expected):

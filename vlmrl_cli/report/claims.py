@@ -9,8 +9,11 @@ Verdict rule (``VERDICT_RULE`` is printed in the report):
   **not reproduced** if it lies entirely on the other side (null included), or if it excludes the
   paper's value while still containing the null; otherwise (it contains both the null and the
   paper's value) **inconclusive**.
-* absolute claims (a value of one arm: 100% reliability, ~125 steps): **reproduced** if our CI
-  overlaps the paper's value (widened by +-10% when the paper says "~"); else **not reproduced**.
+* absolute claims (a value of one arm: 100% reliability, ~125 steps): **not reproduced** if our CI
+  excludes the paper's value (widened by +-10% when the paper says "~"); **reproduced** if it
+  contains it and our estimate is within 10% of it (or within the "~" tolerance); otherwise
+  (a CI wide enough to hold the paper's value around an estimate far from it, e.g. 5/5 seeds
+  succeeding against a claimed 60%) **inconclusive**.
 """
 
 from __future__ import annotations
@@ -35,8 +38,10 @@ VERDICT_RULE = (
     "absent: not tested. Comparative claims (effect vs a null: speedup vs 1x, reliability gap vs 0, spread "
     "difference vs 0): reproduced if our whole 95% CI lies strictly on the paper's side of the null; not "
     "reproduced if it lies entirely on the other side (null included) or excludes the paper's value while "
-    "containing the null; otherwise inconclusive. Absolute claims (one arm's value): reproduced if our 95% CI "
-    f"overlaps the paper's value (+-{100 * APPROX_TOLERANCE:.0f}% where the paper says '~'); otherwise not reproduced."
+    "containing the null; otherwise inconclusive. Absolute claims (one arm's value): not reproduced if our 95% CI "
+    f"excludes the paper's value (+-{100 * APPROX_TOLERANCE:.0f}% where the paper says '~'); reproduced if it holds "
+    f"it and our estimate is within {100 * APPROX_TOLERANCE:.0f}% of it (or of the '~' tolerance); otherwise "
+    "inconclusive (the CI is too wide to tell)."
 )
 
 
@@ -75,9 +80,13 @@ def verdict(
         if paper is None:
             return INCONCLUSIVE, "the paper gives no value"
         tol = abs(paper) * APPROX_TOLERANCE if approximate else 0.0
-        if lo <= paper + tol and hi >= paper - tol:
-            return REPRODUCED, f"{ci_text} overlaps the paper value {paper:g}" + (f" +-{tol:g}" if tol else "")
-        return NOT_REPRODUCED, f"{ci_text} excludes the paper value {paper:g}" + (f" +-{tol:g}" if tol else "")
+        shown = f"{paper:g}" + (f" +-{tol:g}" if tol else "")
+        if not (lo <= paper + tol and hi >= paper - tol):
+            return NOT_REPRODUCED, f"{ci_text} excludes the paper value {shown}"
+        if abs(estimate.value - paper) <= max(tol, abs(paper) * APPROX_TOLERANCE):
+            return REPRODUCED, f"{ci_text} holds the paper value {shown}; our estimate {estimate.value:.3g} is close"
+        return INCONCLUSIVE, (f"{ci_text} holds the paper value {shown}, but our estimate {estimate.value:.3g} is far "
+                              "from it: too few seeds to tell")
     above = direction == ">"
     on_side = lo > null if above else hi < null
     against = hi <= null if above else lo >= null

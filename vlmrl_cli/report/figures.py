@@ -7,6 +7,7 @@ suptitle. Fonts are >= 8 pt so the figures stay readable at paper size.
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -136,7 +137,8 @@ def plot_mean_curve(grid: np.ndarray, mean: np.ndarray, low: np.ndarray, high: n
 
 
 def _suptitle(fig: Figure, title: str, vlm_note: str) -> None:
-    fig.suptitle(f"{title}\n{vlm_note}", fontsize=SMALL + 1)
+    # wrapped so a long backend label never runs off the figure's edges
+    fig.suptitle(f"{title}\n" + "\n".join(textwrap.wrap(vlm_note, 110)), fontsize=SMALL + 1)
 
 
 def figure2(table: Table2, vlm_note: str) -> Figure:

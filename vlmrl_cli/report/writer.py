@@ -94,6 +94,22 @@ def load_reported(path: Path | None) -> dict[str, Any]:
                        ) from exc
 
 
+def figure_vlm_note(runs: pd.DataFrame) -> str:
+    """The short VLM line of a figure's title: the VLM(s) the shaped arms used, SIMULATED said.
+
+    Example:
+        >>> runs = pd.DataFrame({"arm": ["baseline", "hybrid"], "simulated": [False, True],
+        ...                      "vlm": ["none (this arm queries no VLM)", "sim:pixel-reader-v1/abc (SIMULATED VLM)"]})
+        >>> figure_vlm_note(runs)
+        'VLM of the shaped arms: sim:pixel-reader-v1/abc (SIMULATED VLM)'
+    """
+    used = sorted({str(v) for v in runs["vlm"].dropna() if not str(v).startswith("none")})
+    text = "VLM of the shaped arms: " + ("; ".join(used) if used else "none (no arm queries a VLM)")
+    if bool(runs["simulated"].any()) and "SIMULATED" not in text:
+        text += " (SIMULATED VLM, not a real model)"
+    return text
+
+
 def vlm_note(runs: pd.DataFrame) -> str:
     """One line naming the VLM backend(s); says SIMULATED VLM when any run used the simulated one."""
     per_arm = runs.dropna(subset=["vlm"]).groupby("arm", sort=True)["vlm"].agg(lambda v: " / ".join(sorted(set(v))))
@@ -220,9 +236,10 @@ def write_report(cfg: ReportConfig) -> ReportResult:
     files: list[Path] = []
     files += write_table2(table, out)
     curves = figures.seed_curves(data.episodes, cfg.window, cfg.min_episodes)
-    figs = {"figure2": figures.figure2(table, note),
-            "figure3": figures.figure3(curves, note, thresholds, cfg.window),
-            "figure4": figures.figure4(curves, note, rng, thresholds, cfg.window, cfg.n_boot, cfg.ci)}
+    fig_note = figure_vlm_note(data.runs)
+    figs = {"figure2": figures.figure2(table, fig_note),
+            "figure3": figures.figure3(curves, fig_note, thresholds, cfg.window),
+            "figure4": figures.figure4(curves, fig_note, rng, thresholds, cfg.window, cfg.n_boot, cfg.ci)}
     for stem, fig in figs.items():
         files += figures.save_figure(fig, out, stem)
     files += claims_mod.write_claims(results, out)
