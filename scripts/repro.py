@@ -4,7 +4,8 @@ Stages (each a real `vlmrl` command, resumable through the MLflow store):
   1. vlmrl taxonomy  -> results/taxonomy/
   2. vlmrl run       -> baseline, hybrid, kinematic, semantic x 5 seeds, preset `paper`
   3. vlmrl report    -> results/report/
-and a manifest (results/manifest.json) with versions, commands, commit and wall times.
+and a manifest (results/manifest.json) with versions, commands, commit and wall times of every
+invocation (a rerun resumes: finished training runs are not redone).
 The MLflow database stays in results/_scratch/ (git-ignored), never committed.
 
 Usage: python scripts/repro.py [--seeds N] [--arms a,b] [--timesteps T] [--workers W]
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import subprocess
 import sys
@@ -65,18 +67,27 @@ def main() -> None:
     stage("report", ["report", "--experiment", EXPERIMENT, "--tracking-uri", uri, "--out", "results/report"], log)
     wall = time.perf_counter() - start
 
-    manifest = {
-        "what": "nox -s repro on the embedded default VLM backend: the SIMULATED VLM, not a real model",
+    invocation = {
         "commit": git_commit(ROOT),
         "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-        "machine": {"platform": platform.platform(), "processor": platform.machine(),
-                    "cpus": __import__("os").cpu_count()},
+        "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpus": os.cpu_count()},
         "versions": package_versions(),
         "stages": log,
         "wall_s": round(wall, 1),
-        "mlflow": f"{uri} (not committed), experiment '{EXPERIMENT}'",
     }
-    (RESULTS / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
+    # A rerun resumes from MLflow (finished runs are not retrained), so earlier invocations stay
+    # in the manifest: the one that trained keeps its wall time and commit.
+    path = RESULTS / "manifest.json"
+    previous: list[dict[str, object]] = []
+    if path.exists():
+        old = json.loads(path.read_text())
+        previous = old.get("invocations", [old]) if isinstance(old, dict) else []
+    manifest = {
+        "what": "nox -s repro on the embedded default VLM backend: the SIMULATED VLM, not a real model",
+        "mlflow": f"{uri} (not committed), experiment '{EXPERIMENT}'",
+        "invocations": [*previous, invocation],
+    }
+    path.write_text(json.dumps(manifest, indent=2) + "\n")
     print(f"\nrepro finished in {wall:.0f} s ({wall / 60:.1f} min); manifest: results/manifest.json")
 
 

@@ -139,3 +139,13 @@ def test_out_under_a_file_exits_2_before_reading_mlflow(tmp_path):
 def test_bad_thresholds_exit_2(tmp_path):
     res = runner.invoke(app, ["report", "--thresholds", "a,b", "--out", str(tmp_path)])
     assert res.exit_code == 2 and "--thresholds" in res.stderr
+
+
+def test_every_table_names_the_simulated_vlm(store, tmp_path):
+    uri, _ = store
+    out = tmp_path / "rep"
+    assert _report(uri, "E", out).exit_code == 0
+    for name in ("table2.md", "table2.tex", "claims.md", "report.md"):
+        assert "SIMULATED VLM" in (out / name).read_text(), name
+    for name in ("table2.csv", "claims.csv", "per_seed.csv"):
+        assert pd.read_csv(out / name)["vlm"].astype(str).str.contains("SIMULATED VLM").any(), name

@@ -39,6 +39,13 @@ def test_sim_writes_tables_figure_and_one_simulated_run(tmp_path: Path) -> None:
     assert len(runs) == 1
     assert runs[0].data.tags["vlmrl.simulated"] == "true"
     assert runs[0].info.run_id in result.stdout
+    # every output says SIMULATED: captions in the documents, a vlm column in the data files
+    for name in ("table1.md", "table1.tex"):
+        assert "SIMULATED VLM" in (d / name).read_text(), name
+    import pandas as pd
+
+    for name in ("table1.csv", "table1_sweep.csv", "probes.csv"):
+        assert pd.read_csv(d / name)["vlm"].str.contains("SIMULATED VLM").all(), name
 
 
 def test_replay_reproduces_the_paper_rows(tmp_path: Path, shared_uri: str) -> None:

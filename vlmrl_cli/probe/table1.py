@@ -267,12 +267,14 @@ def write_tables(
     paths = [folder / "table1.md", folder / "table1.csv", folder / "table1.tex", folder / "table1_sweep.csv",
              folder / "probes.csv"]
     paths[0].write_text("\n".join(md), encoding="utf-8")
-    main.to_csv(paths[1], index=False)
+    # CSVs carry no caption: every row names the backend instead, SIMULATED said plainly
+    vlm = f"{label} (SIMULATED VLM, not a real model)" if simulated and "SIMULATED" not in label else label
+    main.assign(vlm=vlm).to_csv(paths[1], index=False)
     tex = [f"% {cap_main}", *(f"% {n}" for n in notes), latex_table(main, cap_main, "tab:taxonomy"), "",
            latex_table(stats, cap_sweep, "tab:taxonomy-sweep"), ""]
     paths[2].write_text("\n".join(tex), encoding="utf-8")
-    stats.to_csv(paths[3], index=False)
-    probes_frame(probes).to_csv(paths[4], index=False)
+    stats.assign(vlm=vlm).to_csv(paths[3], index=False)
+    probes_frame(probes).assign(vlm=vlm).to_csv(paths[4], index=False)
     return paths
 
 

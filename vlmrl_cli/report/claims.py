@@ -231,10 +231,11 @@ def claims_markdown(results: list[ClaimResult]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_claims(results: list[ClaimResult], out: Path) -> list[Path]:
-    """Write ``claims.md`` (with the verdict rule) and ``claims.csv``; returns their paths."""
+def write_claims(results: list[ClaimResult], out: Path, vlm_note: str) -> list[Path]:
+    """Write ``claims.md`` (with the verdict rule and ``vlm_note``, the VLM behind the shaped arms)
+    and ``claims.csv`` (``vlm_note`` as a ``vlm`` column); returns their paths."""
     md, csv = out / "claims.md", out / "claims.csv"
-    md.write_text("# Claims of the paper vs our runs\n\nVerdict rule: " + VERDICT_RULE + "\n\n"
+    md.write_text("# Claims of the paper vs our runs\n\n" + vlm_note + ".\n\nVerdict rule: " + VERDICT_RULE + "\n\n"
                   + claims_markdown(results), encoding="utf-8")
-    claims_frame(results).to_csv(csv, index=False)
+    claims_frame(results).assign(vlm=vlm_note).to_csv(csv, index=False)
     return [md, csv]

@@ -234,17 +234,18 @@ def write_report(cfg: ReportConfig) -> ReportResult:
 
     out = cfg.out
     files: list[Path] = []
-    files += write_table2(table, out)
-    curves = figures.seed_curves(data.episodes, cfg.window, cfg.min_episodes)
     fig_note = figure_vlm_note(data.runs)
+    files += write_table2(table, out, fig_note)
+    curves = figures.seed_curves(data.episodes, cfg.window, cfg.min_episodes)
     figs = {"figure2": figures.figure2(table, fig_note),
             "figure3": figures.figure3(curves, fig_note, thresholds, cfg.window),
             "figure4": figures.figure4(curves, fig_note, rng, thresholds, cfg.window, cfg.n_boot, cfg.ci)}
     for stem, fig in figs.items():
         files += figures.save_figure(fig, out, stem)
-    files += claims_mod.write_claims(results, out)
+    files += claims_mod.write_claims(results, out, fig_note)
     per_seed_path = out / "per_seed.csv"
-    per_seed.to_csv(per_seed_path, index=False)
+    labelled = per_seed.merge(data.runs[["run_id", "vlm", "simulated"]], on="run_id", how="left")
+    labelled.to_csv(per_seed_path, index=False)
     files.append(per_seed_path)
     report_path = out / "report.md"
     report_path.write_text(_report_md(cfg, data, table, results, per_seed, note, warns), encoding="utf-8")
