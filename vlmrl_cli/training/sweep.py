@@ -9,8 +9,12 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import queue as queue_mod
+import signal
+import threading
 import time
+from collections.abc import Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -129,42 +133,68 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter) -> SweepSummary:
     stop: Any = ctx.Event()
     status = "FINISHED"
     try:
-        with ProcessPoolExecutor(max_workers=min(cfg.workers, len(pending)), mp_context=ctx,
-                                 initializer=init_worker, initargs=(events, stop)) as pool:
+        with _stop_on_sigint(stop) as interrupted, ProcessPoolExecutor(
+            max_workers=min(cfg.workers, len(pending)), mp_context=ctx, initializer=init_worker,
+            initargs=(events, stop),
+        ) as pool:
             futures: dict[Future[JobResult], TrainJob] = {
                 pool.submit(train_job, job, tracking_uri, experiment_id, parent.info.run_id, vlm_label,
                             simulated): job
                 for job in pending
             }
-            try:
-                remaining = set(futures)
-                while remaining:
-                    finished, remaining = wait(remaining, timeout=0.2, return_when=FIRST_COMPLETED)
-                    _drain(events, reporter)
-                    for fut in finished:
-                        result = fut.result()
-                        summary.results.append(result)
-                        reporter.finished(result)
-            except KeyboardInterrupt:
-                status = "KILLED"
-                stop.set()
-                for fut in futures:
-                    fut.cancel()
-                raise
-            finally:
-                if status == "KILLED":
-                    for fut in futures:
-                        if fut.done() and not fut.cancelled():
-                            summary.results.append(fut.result())
-        _drain(events, reporter)
+            remaining = set(futures)
+            while remaining:
+                finished, remaining = wait(remaining, timeout=0.2, return_when=FIRST_COMPLETED)
+                _drain(events, reporter)
+                for fut in finished:
+                    if fut.cancelled():
+                        continue
+                    result = fut.result()
+                    summary.results.append(result)
+                    reporter.finished(result)
+                if interrupted.is_set() and status != "KILLED":
+                    # queued jobs never start; running ones see `stop`, end their run KILLED and return
+                    status = "KILLED"
+                    for fut in remaining:
+                        fut.cancel()
+            _drain(events, reporter)
+        if status == "KILLED":
+            raise KeyboardInterrupt
         if summary.failed:
             status = "FAILED"
+    except BaseException:
+        status = status if status == "KILLED" else "FAILED"
+        raise
     finally:
         summary.wall_s = time.perf_counter() - start
         store.log_params(client, parent.info.run_id, {"sweep.pending": ",".join(j.name for j in pending)})
         client.log_metric(parent.info.run_id, "perf/sweep_wall_s", summary.wall_s)
         client.set_terminated(parent.info.run_id, status)
     return summary
+
+
+@contextmanager
+def _stop_on_sigint(stop: Any) -> Iterator[threading.Event]:
+    """While the sweep runs, Ctrl-C sets a flag and the workers' stop event instead of raising
+    KeyboardInterrupt inside ``concurrent.futures``, whose locks an asynchronous exception can
+    leave held (the executor then never shuts down). A second Ctrl-C raises at once. The
+    previous handler is restored on exit; off the main thread nothing is installed."""
+    flag = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield flag
+        return
+
+    def on_sigint(signum: int, frame: object) -> None:
+        if flag.is_set():
+            raise KeyboardInterrupt
+        flag.set()
+        stop.set()
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        yield flag
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _drain(events: Any, reporter: SweepReporter) -> None:
