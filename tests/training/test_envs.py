@@ -12,7 +12,7 @@ from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.semantic import SemanticOracle
 from vlmrl_cli.shaping.wrapper import HybridReward
 from vlmrl_cli.training.arms import ARMS
-from vlmrl_cli.training.envs import make_eval_env, make_train_env
+from vlmrl_cli.training.envs import make_train_env
 from vlmrl_cli.training.presets import PRESETS
 
 SMOKE = PRESETS["smoke"]  # 2 envs, VecNormalize on
@@ -82,17 +82,6 @@ def test_same_seed_same_shaped_rewards() -> None:
 def test_a_vlm_arm_needs_a_client() -> None:
     with pytest.raises(ValueError, match="VLMClient"):
         make_train_env(ARMS["hybrid"], SMOKE, ShapingConfig(), None, seed=0)
-
-
-def test_eval_env_is_native() -> None:
-    venv = make_eval_env(seed=5, n_envs=2)
-    assert isinstance(venv, DummyVecEnv) and venv.num_envs == 2
-    obs = venv.reset()
-    expected, _ = gym.make("MountainCar-v0").reset(seed=6)
-    np.testing.assert_array_equal(obs[1], expected)
-    _, rewards, _, _ = venv.step(np.array([2, 0]))
-    np.testing.assert_array_equal(rewards, [-1.0, -1.0])
-    assert all(env.camera is None and env._episode is None for env in venv.envs)
 
 
 def test_ppo_trains_on_the_hybrid_env() -> None:

@@ -12,7 +12,7 @@ from vlmrl_cli.shaping.camera import Camera
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.semantic import SemanticOracle
 from vlmrl_cli.shaping.wrapper import HybridReward
-from vlmrl_cli.training.arms import ARMS, ArmSpec
+from vlmrl_cli.training.arms import ArmSpec
 from vlmrl_cli.training.presets import PPOPreset
 from vlmrl_cli.vlm.client import VLMClient
 
@@ -54,22 +54,3 @@ def make_train_env(
     if preset.normalize:
         venv = VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=preset.gamma)
     return venv, oracle
-
-
-def make_eval_env(seed: int, n_envs: int = 1) -> VecEnv:
-    """The native env for detached evaluation: no shaping, no camera, no VLM, no normalisation.
-
-    ``gym.make`` -> ``Monitor`` -> the ``baseline`` pass-through (which only adds
-    ``info["is_success"]`` and friends) -> ``DummyVecEnv``; env ``i`` seeded ``seed + i``.
-    Copy the training ``VecNormalize``'s observation statistics into a wrapper around it.
-    """
-    if n_envs < 1:
-        raise ValueError(f"n_envs must be >= 1, got {n_envs}.")
-    baseline = ARMS["baseline"]
-
-    def make_one() -> gym.Env:
-        return HybridReward(Monitor(gym.make(ENV_ID)), baseline, ShapingConfig(), gamma=1.0)
-
-    venv: VecEnv = DummyVecEnv([make_one] * n_envs)
-    venv.seed(seed)
-    return venv

@@ -46,7 +46,9 @@ def describe(backend: Backend) -> str:
     Example:
         >>> class B:
         ...     name, model, simulated = "sim", "pixel-reader", True
-        >>> describe(B())  # doctest: +SKIP
+        ...     def answer(self, prompt, frame): return ""
+        ...     def close(self): pass
+        >>> describe(B())
         'sim:pixel-reader (SIMULATED VLM, not a real model)'
     """
     label = f"{backend.name}:{backend.model}"
