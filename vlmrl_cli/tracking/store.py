@@ -87,11 +87,12 @@ def ensure_experiment(client: Any, name: str) -> str:
 
 def provenance_tags(vlm_label: str, simulated: bool) -> dict[str, str]:
     """Tags every vlmrl run carries: VLM (simulated said plainly), commit, versions."""
+    commit = git_commit()
     tags = {
         f"{TAG_PREFIX}vlm": vlm_label,
         f"{TAG_PREFIX}simulated": "true" if simulated else "false",
-        f"{TAG_PREFIX}git_commit": git_commit(),
-        "mlflow.source.git.commit": git_commit(),
+        f"{TAG_PREFIX}git_commit": commit,
+        "mlflow.source.git.commit": commit,
     }
     for name, version in package_versions().items():
         tags[f"{TAG_PREFIX}version.{name}"] = version

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from vlmrl_cli.core.provenance import config_hash, flatten
+from vlmrl_cli.core.provenance import flatten
 from vlmrl_cli.tracking import store
 from vlmrl_cli.training.callbacks import EpisodeTracker, ProgressEvent
 from vlmrl_cli.training.config import EVAL_SEED, TrainJob
@@ -174,5 +174,5 @@ def _save_artifacts(out: Path, job: TrainJob, model: Any, env: Any) -> None:
     model.save(out / "model.zip")
     if isinstance(env, VecNormalize):
         env.save(str(out / "vecnormalize.pkl"))
-    config = {"config_hash": config_hash(job.identity()), **job.params()}
+    config = {"config_hash": job.config_hash, **job.params()}
     (out / "config.json").write_text(json.dumps(config, indent=2, sort_keys=True))
