@@ -23,7 +23,7 @@ from typing import Any
 
 import torch
 
-from vlmrl_cli.probe.parsers import ParseStatus, parse_mcq
+from vlmrl_cli.probe.parsers import parse_mcq
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.training.arms import ARMS
 from vlmrl_cli.training.config import RunConfig
@@ -73,8 +73,7 @@ def label_agreement(run: dict[str, Any]) -> tuple[int, int, int]:
     for view, used in run["events"]:
         if view.key not in direct:
             mcq = parse_mcq(direct_client.ask(PROMPTS[PromptKind.MCQ], view.frame()).text)
-            ok = mcq.status is ParseStatus.OK and mcq.label is not None
-            direct[view.key] = potential_of[mcq.label] if ok and mcq.label is not None else None
+            direct[view.key] = potential_of[mcq.label] if mcq.ok and mcq.label is not None else None
         differ += int(direct[view.key] != used)
     direct_client.close()
     del oracle

@@ -29,7 +29,7 @@ import math
 import numpy as np
 
 from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION
-from vlmrl_cli.probe.parsers import ParseStatus, parse_float, parse_mcq
+from vlmrl_cli.probe.parsers import parse_float, parse_mcq
 from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.features import FEATURE_DIM
@@ -136,11 +136,11 @@ class SemanticOracle:
         self._cache_hits += int(answer.cached)
         if self.source is PotentialSource.MCQ:
             mcq = parse_mcq(answer.text)
-            if mcq.status is not ParseStatus.OK or mcq.label is None:
+            if not mcq.ok or mcq.label is None:
                 return None
             return float(self._potential_of[mcq.label])
         number = parse_float(answer.text)
-        if number.status is not ParseStatus.OK or number.value is None or not math.isfinite(number.value):
+        if not number.ok or number.value is None or not math.isfinite(number.value):
             return None
         return float_potential(number.value)
 
