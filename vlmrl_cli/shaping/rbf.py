@@ -97,7 +97,8 @@ class RBFField:
         sq = np.einsum("md,md->m", diff, diff)
         closer = sq < self._ref
         # rebase keys whose nearest prototype is the new one, so no weight underflows
-        rescale = np.where(closer, np.exp(-(self._ref - sq) * self._scale), 1.0)
+        # (the others get exp(0) = 1; clipping first keeps exp from overflowing on them)
+        rescale = np.exp(-np.maximum(self._ref - sq, 0.0) * self._scale)
         self._num *= rescale
         self._den *= rescale
         self._ref = np.where(closer, sq, self._ref)
