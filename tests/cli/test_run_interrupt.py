@@ -28,14 +28,18 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_resumes(tmp_path: Path) -> None:
     proc = subprocess.Popen([*args, "--timesteps", "2000000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env={**os.environ, "COLUMNS": "120"})
     try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline:  # wait until the worker is training
+        # wait until the worker is training: its first episodes reach MLflow within seconds
+        # (BatchLogger writes a buffer older than 5 s), however slow the machine
+        deadline = time.monotonic() + 180
+        while time.monotonic() < deadline and proc.poll() is None:
             if any(r.data.tags.get("vlmrl.kind") == "train" and r.data.metrics.get("episode/native_return")
                    for r in _runs(uri)):
                 break
             time.sleep(0.5)
         else:
-            raise AssertionError("training never started")
+            proc.kill()
+            _, stderr = proc.communicate(timeout=30)
+            raise AssertionError(f"training never reached MLflow (exit {proc.returncode}): {stderr[-2000:]}")
         proc.send_signal(signal.SIGINT)
         _, stderr = proc.communicate(timeout=120)
     finally:
@@ -48,5 +52,7 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_resumes(tmp_path: Path) -> None:
     # the killed job is pending again: rerunning the same command trains it
     cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="smoke", timesteps=2_000_000, tracking_uri=uri)
     client = MlflowClient(tracking_uri=uri)
-    pending, done, _ = plan(client, client.get_experiment_by_name("vlmrl").experiment_id, cfg.jobs())
+    exp = client.get_experiment_by_name("vlmrl")
+    assert exp is not None
+    pending, done, _ = plan(client, exp.experiment_id, cfg.jobs())
     assert [j.name for j in pending] == ["baseline-s0"] and done == []

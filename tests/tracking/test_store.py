@@ -55,6 +55,39 @@ def test_batch_logger_flushes_every_point(tmp_path: Path) -> None:
     assert {m.value for m in client.get_metric_history(run.info.run_id, "b")} == {-float(s) for s in range(25)}
 
 
+class _CountingClient:
+    def __init__(self) -> None:
+        self.batches: list[int] = []
+
+    def log_batch(self, run_id: str, metrics: list) -> None:  # type: ignore[type-arg]
+        self.batches.append(len(metrics))
+
+
+def test_batch_logger_writes_a_stale_buffer_without_waiting_for_it_to_fill() -> None:
+    """A slow run must show its curves live: a point older than max_age_s is written on the next log."""
+    now = [0.0]
+    client = _CountingClient()
+    logger = store.BatchLogger(client, "r", max_buffer=900, max_age_s=5.0, clock=lambda: now[0])
+    logger.log({"a": 1.0}, step=1)
+    now[0] = 4.9
+    logger.log({"a": 2.0}, step=2)
+    assert client.batches == []  # young and small: still buffered
+    now[0] = 5.0
+    logger.log({"a": 3.0}, step=3)
+    assert client.batches == [3]
+    now[0] = 9.0
+    logger.log({"a": 4.0}, step=4)
+    assert client.batches == [3]  # the age counts from the last write, not from the start
+    now[0] = 10.0
+    logger.log({"a": 5.0}, step=5)
+    assert client.batches == [3, 2]
+
+
+def test_batch_logger_rejects_a_negative_age() -> None:
+    with pytest.raises(ValueError, match="max_age_s"):
+        store.BatchLogger(_CountingClient(), "r", max_age_s=-1.0)
+
+
 def test_simulated_runs_are_labelled() -> None:
     tags = store.provenance_tags("sim:pixel-reader (SIMULATED VLM, not a real model)", simulated=True)
     assert tags["vlmrl.simulated"] == "true"
