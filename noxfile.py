@@ -22,7 +22,7 @@ def _install(session: nox.Session, extras: str = "dev") -> None:
 
 def _lint(session: nox.Session) -> None:
     session.run("ruff", "check", "vlmrl_cli", "tests", "noxfile.py", "benchmarks", "scripts")
-    session.run("mypy", "vlmrl_cli", "benchmarks", "scripts")
+    session.run("mypy", "vlmrl_cli", "tests", "benchmarks", "scripts")
 
 
 @nox.session

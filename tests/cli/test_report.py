@@ -89,6 +89,7 @@ def test_report_logs_a_report_run(store, tmp_path):
 
     client = MlflowClient(tracking_uri=uri)
     exp = client.get_experiment_by_name("E")
+    assert exp is not None
     runs = client.search_runs([exp.experiment_id], "tags.`vlmrl.kind` = 'report'")
     assert runs and runs[0].info.status == "FINISHED"
     names = {a.path for a in client.list_artifacts(runs[0].info.run_id, "report")}

@@ -42,7 +42,7 @@ STALE = FakeRun("hybrid", 0, 60, -150.0, 0.0, 200.0)
 FAILED = FakeRun("baseline", 0, 10, -100.0, 1.0, 110.0, status="FAILED")
 
 # Steps to -190 / -160 / -130 per seed, by hand from the formula in the module docstring.
-EXPECTED = {
+EXPECTED: dict[str, dict[int, list[int | None]]] = {
     "hybrid": {-190: [22000, 27000, 32000], -160: [28000, 33000, 38000], -130: [34000, 39000, 44000]},
     "baseline": {-190: [32000, 42000, 39000], -160: [38000, 48000, 51000], -130: [44000, 54000, None]},
 }

@@ -82,7 +82,7 @@ def test_episode_end_infos_monitor_is_native_and_success_means_terminated(name: 
         while not done:
             obs, r, term, trunc, info = env.step(policy(obs))
             native += info["native_reward"]
-            shaped += r
+            shaped += float(r)
             done = term or trunc
         assert info["is_success"] is success and term is success
         assert info["shaped_return"] == pytest.approx(shaped)

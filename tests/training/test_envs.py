@@ -5,7 +5,7 @@ import dataclasses
 import gymnasium as gym
 import numpy as np
 import pytest
-from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecNormalize
 
 from tests.shaping import sim_client
 from vlmrl_cli.shaping.config import ShapingConfig
@@ -18,9 +18,12 @@ from vlmrl_cli.training.presets import PRESETS
 SMOKE = PRESETS["smoke"]  # 2 envs, VecNormalize on
 
 
-def wrappers(venv) -> list[HybridReward]:
+def wrappers(venv: VecEnv) -> list[HybridReward]:
     base = venv.venv if isinstance(venv, VecNormalize) else venv
-    return list(base.envs)
+    assert isinstance(base, DummyVecEnv)
+    envs = [env for env in base.envs if isinstance(env, HybridReward)]
+    assert len(envs) == base.num_envs, "every env of the stack is a HybridReward"
+    return envs
 
 
 @pytest.mark.parametrize("name", list(ARMS))
@@ -50,7 +53,7 @@ def test_env_i_is_seeded_seed_plus_i() -> None:
     preset = dataclasses.replace(SMOKE, n_envs=3, normalize=False)
     venv, _ = make_train_env(ARMS["kinematic"], preset, ShapingConfig(), None, seed=40)
     assert isinstance(venv, DummyVecEnv)
-    obs = venv.reset()
+    obs = np.asarray(venv.reset())
     for i in range(3):
         expected, _ = gym.make("MountainCar-v0").reset(seed=40 + i)
         np.testing.assert_array_equal(obs[i], expected)
