@@ -52,6 +52,8 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=None)
     opts = parser.parse_args()
 
+    # Read before any stage writes: the commit that produced these results.
+    commit = git_commit(ROOT)
     SCRATCH.mkdir(parents=True, exist_ok=True)
     uri = f"sqlite:///{SCRATCH / 'mlflow.db'}"
     start = time.perf_counter()
@@ -68,7 +70,7 @@ def main() -> None:
     wall = time.perf_counter() - start
 
     invocation = {
-        "commit": git_commit(ROOT),
+        "commit": commit,
         "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpus": os.cpu_count()},
         "versions": package_versions(),

@@ -61,13 +61,26 @@ def flatten(obj: Any, prefix: str = "") -> dict[str, str]:
     return out
 
 
+_SOURCE = Path(__file__).resolve().parents[1]
+# Outputs, not code: a run that rewrites committed results must not call its own commit dirty.
+_WHOLE_TREE_BUT_OUTPUTS = (":/", ":(top,exclude)results")
+
+
 def git_commit(cwd: Path | None = None) -> str:
-    """The current git commit (with ``-dirty`` if the tree has changes), or ``unknown``."""
+    """The git commit of vlmrl's source (``-dirty`` if tracked code changed), or ``unknown``.
+
+    ``cwd`` defaults to the package's own folder, not the caller's working directory, so a
+    run started from elsewhere still names the code that produced it; an installed (non-git)
+    copy gives ``unknown``. Changes under ``results/`` (the outputs a repro rewrites) do not
+    count as dirty.
+    """
+    where = _SOURCE if cwd is None else cwd
     try:
-        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True,
+        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=where, capture_output=True,
                              text=True, check=True, timeout=5).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=cwd,
-                               capture_output=True, text=True, check=True, timeout=5).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
+                                *_WHOLE_TREE_BUT_OUTPUTS],
+                               cwd=where, capture_output=True, text=True, check=True, timeout=5).stdout.strip()
         return f"{sha}-dirty" if dirty else sha
     except (OSError, subprocess.SubprocessError):
         return "unknown"
