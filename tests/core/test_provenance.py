@@ -73,3 +73,15 @@ def test_config_hash_ignores_key_order_and_sees_every_value(cfg: dict[str, objec
 def test_flatten_gives_dotted_string_params() -> None:
     assert flatten({"ppo": {"gamma": 0.99, "n_envs": 16}, "arms": ["a", "b"], "vlm": None, "cache": True}) == {
         "ppo.gamma": "0.99", "ppo.n_envs": "16", "arms": '["a", "b"]', "vlm": "null", "cache": "true"}
+
+
+def test_a_copy_of_the_package_that_git_does_not_track_names_no_commit(
+        repo: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # e.g. vlmrl installed into an ignored .venv inside someone else's repository
+    fake = repo / ".venv" / "vlmrl_cli" / "core" / "provenance.py"
+    fake.parent.mkdir(parents=True)
+    fake.write_text("")
+    monkeypatch.setattr(provenance, "__file__", str(fake))
+    monkeypatch.setattr(provenance, "_SOURCE", fake.parents[1])
+    assert git_commit() == "unknown"
+    assert git_commit(repo) == _git(repo, "rev-parse", "HEAD")  # an explicit folder is still read

@@ -70,12 +70,16 @@ def git_commit(cwd: Path | None = None) -> str:
     """The git commit of vlmrl's source (``-dirty`` if tracked code changed), or ``unknown``.
 
     ``cwd`` defaults to the package's own folder, not the caller's working directory, so a
-    run started from elsewhere still names the code that produced it; an installed (non-git)
-    copy gives ``unknown``. Changes under ``results/`` (the outputs a repro rewrites) do not
-    count as dirty.
+    run started from elsewhere still names the code that produced it; a copy that git does not
+    track there (outside a checkout, or installed into a venv inside someone's repository)
+    gives ``unknown``. Changes under ``results/`` (the outputs a repro rewrites) do not count
+    as dirty.
     """
     where = _SOURCE if cwd is None else cwd
     try:
+        if cwd is None:  # raises unless this very file is tracked by the repository around it
+            subprocess.run(["git", "ls-files", "--error-unmatch", Path(__file__).name], cwd=Path(__file__).parent,
+                           capture_output=True, check=True, timeout=5)
         sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=where, capture_output=True,
                              text=True, check=True, timeout=5).stdout.strip()
         dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
