@@ -59,7 +59,7 @@ def test_outside_any_repository_the_commit_is_unknown(tmp_path: Path) -> None:
 def test_by_default_the_commit_is_that_of_vlmrls_own_source_not_the_callers_cwd(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(tmp_path)  # not a repository
-    assert git_commit() == git_commit(provenance._SOURCE)
+    assert git_commit() == git_commit(provenance._SOURCE.parent)
 
 
 @given(st.dictionaries(st.text(min_size=1, max_size=5), st.integers() | st.text(max_size=5), max_size=6))
@@ -81,7 +81,6 @@ def test_a_copy_of_the_package_that_git_does_not_track_names_no_commit(
     fake = repo / ".venv" / "vlmrl_cli" / "core" / "provenance.py"
     fake.parent.mkdir(parents=True)
     fake.write_text("")
-    monkeypatch.setattr(provenance, "__file__", str(fake))
-    monkeypatch.setattr(provenance, "_SOURCE", fake.parents[1])
+    monkeypatch.setattr(provenance, "_SOURCE", fake)
     assert git_commit() == "unknown"
     assert git_commit(repo) == _git(repo, "rev-parse", "HEAD")  # an explicit folder is still read

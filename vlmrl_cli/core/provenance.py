@@ -61,7 +61,7 @@ def flatten(obj: Any, prefix: str = "") -> dict[str, str]:
     return out
 
 
-_SOURCE = Path(__file__).resolve().parents[1]
+_SOURCE = Path(__file__).resolve()  # this file: git is asked about the checkout that holds it
 # Outputs, not code: a run that rewrites committed results must not call its own commit dirty.
 _WHOLE_TREE_BUT_OUTPUTS = (":/", ":(top,exclude)results")
 
@@ -75,10 +75,10 @@ def git_commit(cwd: Path | None = None) -> str:
     gives ``unknown``. Changes under ``results/`` (the outputs a repro rewrites) do not count
     as dirty.
     """
-    where = _SOURCE if cwd is None else cwd
+    where = _SOURCE.parent if cwd is None else cwd
     try:
         if cwd is None:  # raises unless this very file is tracked by the repository around it
-            subprocess.run(["git", "ls-files", "--error-unmatch", Path(__file__).name], cwd=Path(__file__).parent,
+            subprocess.run(["git", "ls-files", "--error-unmatch", _SOURCE.name], cwd=where,
                            capture_output=True, check=True, timeout=5)
         sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=where, capture_output=True,
                              text=True, check=True, timeout=5).stdout.strip()
