@@ -9,14 +9,15 @@ import sys
 import time
 from pathlib import Path
 
-from mlflow.tracking import MlflowClient
-
+from vlmrl_cli.tracking import store
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.sweep import plan
 
 
 def _runs(uri: str) -> list:  # type: ignore[type-arg]
-    client = MlflowClient(tracking_uri=uri)
+    # through vlmrl's own connect: it takes the store's init lock, so this poll cannot race the
+    # sweep's first connection to the new database (an unlocked MlflowClient here once broke it)
+    client = store.connect(uri)
     exp = client.get_experiment_by_name("vlmrl")
     return [] if exp is None else list(client.search_runs([exp.experiment_id]))
 
@@ -51,7 +52,7 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_resumes(tmp_path: Path) -> None:
 
     # the killed job is pending again: rerunning the same command trains it
     cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="smoke", timesteps=2_000_000, tracking_uri=uri)
-    client = MlflowClient(tracking_uri=uri)
+    client = store.connect(uri)
     exp = client.get_experiment_by_name("vlmrl")
     assert exp is not None
     pending, done, _ = plan(client, exp.experiment_id, cfg.jobs())

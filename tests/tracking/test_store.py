@@ -1,8 +1,11 @@
 from __future__ import annotations
 
+import multiprocessing
 import socket
+from multiprocessing.synchronize import Barrier
 from pathlib import Path
 
+import filelock
 import pytest
 
 from vlmrl_cli.core.errors import BadInput
@@ -33,6 +36,41 @@ def test_unwritable_sqlite_location_is_bad_input(tmp_path: Path) -> None:
     blocker.write_text("not a folder")
     with pytest.raises(BadInput):
         store.connect(f"sqlite:///{blocker}/sub/mlflow.db")
+
+
+def _connect_at_once(barrier: Barrier, uri: str) -> None:
+    import mlflow  # noqa: F401  (the slow import happens before the barrier, so the connects collide)
+
+    barrier.wait(timeout=120)
+    store.ensure_experiment(store.connect(uri), "vlmrl")
+
+
+def test_processes_creating_one_fresh_sqlite_store_at_once_all_succeed(tmp_path: Path) -> None:
+    # A sweep's workers, a second sweep or `vlmrl report` can open a new mlflow.db together.
+    # MLflow migrates a fresh schema without a lock; without ``init_lock`` most of these
+    # processes failed ("table experiments already exists", "duplicate column name: step").
+    uri = f"sqlite:///{tmp_path}/mlflow.db"
+    ctx = multiprocessing.get_context("spawn")
+    barrier = ctx.Barrier(4)
+    procs = [ctx.Process(target=_connect_at_once, args=(barrier, uri)) for _ in range(4)]
+    for proc in procs:
+        proc.start()
+    for proc in procs:
+        proc.join(timeout=240)
+    assert [proc.exitcode for proc in procs] == [0, 0, 0, 0]
+    client = store.connect(uri)
+    assert {e.name for e in client.search_experiments()} == {"vlmrl", "Default"}
+
+
+def test_the_init_lock_is_per_database_file(tmp_path: Path) -> None:
+    held = store.init_lock(tmp_path / "a.db")
+    with held:
+        # the same file, however it is spelled, waits; another file does not
+        with pytest.raises(filelock.Timeout):
+            store.init_lock(tmp_path / "x" / ".." / "a.db").acquire(timeout=0.1)
+        other = store.init_lock(tmp_path / "b.db")
+        other.acquire(timeout=0.1)
+        other.release()
 
 
 def test_artifacts_live_beside_the_sqlite_database(tmp_path: Path) -> None:

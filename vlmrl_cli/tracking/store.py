@@ -7,17 +7,24 @@ active-run state), so worker processes and tests never share hidden state.
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import os
+import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
+
+import filelock
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.provenance import git_commit, package_versions
 
 DEFAULT_TRACKING_URI = "sqlite:///mlflow.db"
 TAG_PREFIX = "vlmrl."
+#: How long ``connect`` waits for another process to finish setting up the same sqlite store.
+INIT_LOCK_TIMEOUT_S = 120.0
 
 
 def resolve_tracking_uri(uri: str | None) -> str:
@@ -34,6 +41,7 @@ def connect(uri: str | None) -> Any:
     logging.getLogger("alembic").setLevel(logging.WARNING)
     logging.getLogger("mlflow").setLevel(logging.WARNING)
     resolved = resolve_tracking_uri(uri)
+    lock: contextlib.AbstractContextManager[object] = contextlib.nullcontext()
     if resolved.startswith("sqlite:///"):
         db_path = Path(resolved.removeprefix("sqlite:///"))
         parent = db_path.parent if str(db_path.parent) else Path(".")
@@ -42,17 +50,38 @@ def connect(uri: str | None) -> Any:
                 parent.mkdir(parents=True, exist_ok=True)
             except OSError as exc:
                 raise BadInput(f"cannot create the folder of the tracking database {db_path}.") from exc
+        lock = init_lock(db_path)
     if resolved.startswith(("http://", "https://")):
         _check_server(resolved)
     try:
-        client = MlflowClient(tracking_uri=resolved)
-        client.search_experiments(max_results=1)
+        with lock:
+            client = MlflowClient(tracking_uri=resolved)
+            client.search_experiments(max_results=1)
+    except filelock.Timeout as exc:
+        raise BadInput(
+            f"another process has been setting up the MLflow store '{resolved}' for over "
+            f"{INIT_LOCK_TIMEOUT_S:.0f} s; try again when it has finished."
+        ) from exc
     except Exception as exc:  # MLflow raises many types for a bad store
         raise BadInput(
             f"the MLflow tracking store '{resolved}' cannot be reached; pass --tracking-uri "
             "sqlite:///PATH/mlflow.db or start the server."
         ) from exc
     return client
+
+
+def init_lock(db_path: Path) -> filelock.FileLock:
+    """An inter-process lock for the first connection to one sqlite tracking database.
+
+    MLflow creates and migrates a fresh sqlite schema with no lock of its own: two processes
+    opening the same new file at once fail with "table ... already exists" or "duplicate column
+    name: step", and can leave the file half-migrated for good (seen with MLflow 3.17; also
+    reported as daizutabi/hydraflow#245). Every vlmrl process (sweep, workers, taxonomy, report)
+    connects under this lock, keyed by the file's absolute path. The lock file lives in the temp
+    folder, not beside the results; ``flock`` releases it when its holder dies.
+    """
+    key = hashlib.sha256(str(db_path.resolve()).encode()).hexdigest()[:16]
+    return filelock.FileLock(Path(tempfile.gettempdir()) / f"vlmrl-mlflow-{key}.lock", timeout=INIT_LOCK_TIMEOUT_S)
 
 
 def _check_server(uri: str) -> None:
