@@ -51,6 +51,9 @@ def connect(uri: str | None) -> Any:
             except OSError as exc:
                 raise BadInput(f"cannot create the folder of the tracking database {db_path}.") from exc
         lock = init_lock(db_path)
+        # MLflow's sqlite store module takes ~1 s to import; import it before taking the lock,
+        # so that a sweep's workers wait ~0.1 s for each other, not ~1 s
+        import mlflow.store.tracking.sqlalchemy_store  # noqa: F401
     if resolved.startswith(("http://", "https://")):
         _check_server(resolved)
     try:
