@@ -81,6 +81,26 @@ def test_artifacts_live_beside_the_sqlite_database(tmp_path: Path) -> None:
     assert store.ensure_experiment(client, "e") == exp.experiment_id
 
 
+def test_an_experiment_created_by_another_process_in_between_is_reused(tmp_path: Path) -> None:
+    from mlflow.exceptions import MlflowException
+
+    client = store.connect(f"sqlite:///{tmp_path}/mlflow.db")
+    real_id = client.create_experiment("e")
+
+    class LateClient:  # sees no "e", then loses the race to create it
+        tracking_uri = client.tracking_uri
+        lookups = 0
+
+        def get_experiment_by_name(self, name: str) -> object:
+            self.lookups += 1
+            return None if self.lookups == 1 else client.get_experiment_by_name(name)
+
+        def create_experiment(self, name: str, artifact_location: str | None = None) -> str:
+            raise MlflowException(f"Experiment(name={name}) already exists.")
+
+    assert store.ensure_experiment(LateClient(), "e") == real_id
+
+
 def test_batch_logger_flushes_every_point(tmp_path: Path) -> None:
     client = store.connect(f"sqlite:///{tmp_path}/mlflow.db")
     run = client.create_run(store.ensure_experiment(client, "e"))

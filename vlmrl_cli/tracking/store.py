@@ -109,9 +109,17 @@ def artifact_root(tracking_uri: str) -> str | None:
 
 def ensure_experiment(client: Any, name: str) -> str:
     """The id of experiment ``name``, created if missing (and restored if deleted)."""
+    from mlflow.exceptions import MlflowException
+
     exp = client.get_experiment_by_name(name)
     if exp is None:
-        return str(client.create_experiment(name, artifact_location=artifact_root(client.tracking_uri)))
+        try:
+            return str(client.create_experiment(name, artifact_location=artifact_root(client.tracking_uri)))
+        except MlflowException:
+            # another process (a second sweep started at the same moment) created it first
+            exp = client.get_experiment_by_name(name)
+            if exp is None:
+                raise
     if exp.lifecycle_stage == "deleted":
         client.restore_experiment(exp.experiment_id)
     return str(exp.experiment_id)
