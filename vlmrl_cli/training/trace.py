@@ -1,0 +1,45 @@
+"""A training run reduced to its learning curve, in this process and with no tracking.
+
+``native_returns(job)`` trains exactly as a ``vlmrl run`` worker does (same env stack, same PPO
+arguments, same seed) and returns the native return of every completed episode, in order.
+It is the probe for determinism checks: two code paths that give the same list trained the
+same agent. Nothing is written to MLflow and no evaluation is run.
+"""
+
+from __future__ import annotations
+
+from vlmrl_cli.training.callbacks import EpisodeTracker
+from vlmrl_cli.training.config import TrainJob
+
+
+def native_returns(job: TrainJob) -> list[float]:
+    """Native (unshaped) returns of the episodes completed while training ``job``."""
+    from stable_baselines3 import PPO
+
+    from vlmrl_cli.training.envs import make_train_env
+    from vlmrl_cli.vlm.registry import build_client
+
+    client = build_client(job.vlm) if job.arm.uses_vlm else None
+    try:
+        env, _ = make_train_env(job.arm, job.preset, job.shaping, client, job.seed)
+        p = job.preset
+        model = PPO(
+            "MlpPolicy",
+            env,
+            n_steps=p.n_steps,
+            batch_size=p.batch_size,
+            gae_lambda=p.gae_lambda,
+            gamma=p.gamma,
+            n_epochs=p.n_epochs,
+            ent_coef=p.ent_coef,
+            learning_rate=p.learning_rate,
+            seed=job.seed,
+            device="cpu",
+            verbose=0,
+        )
+        tracker = EpisodeTracker(job.name, job.timesteps)
+        model.learn(total_timesteps=job.timesteps, callback=tracker)
+        return [e["episode/native_return"] for e in tracker.episodes]
+    finally:
+        if client is not None:
+            client.close()
