@@ -22,7 +22,7 @@ import sys
 import time
 from pathlib import Path
 
-from vlmrl_cli.core.provenance import git_commit, package_versions
+from vlmrl_cli.core.provenance import cpu_paths, git_commit, package_versions
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results"
@@ -72,7 +72,8 @@ def main() -> None:
     invocation = {
         "commit": commit,
         "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-        "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpus": os.cpu_count()},
+        "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpus": os.cpu_count(),
+                    "cpu_paths": cpu_paths()},
         "versions": package_versions(),
         "stages": log,
         "wall_s": round(wall, 1),

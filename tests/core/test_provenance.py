@@ -84,3 +84,31 @@ def test_a_copy_of_the_package_that_git_does_not_track_names_no_commit(
     monkeypatch.setattr(provenance, "_SOURCE", fake)
     assert git_commit() == "unknown"
     assert git_commit(repo) == _git(repo, "rev-parse", "HEAD")  # an explicit folder is still read
+
+
+def test_cpu_paths_name_numpy_simd_blas_and_torch() -> None:
+    from vlmrl_cli.core.provenance import cpu_paths
+
+    paths = cpu_paths()
+    assert set(paths) == {"numpy_simd", "blas", "torch"}
+    assert all(paths.values())
+
+
+def test_cpu_paths_see_a_forced_blas_kernel() -> None:
+    import os
+    import subprocess
+    import sys
+
+    from vlmrl_cli.core.provenance import cpu_paths
+
+    if not cpu_paths()["blas"].startswith("openblas"):
+        pytest.skip("this numpy does not use OpenBLAS")
+    code = "from vlmrl_cli.core.provenance import cpu_paths; print(cpu_paths()['blas'])"
+
+    def forced(core: str) -> str:
+        out = subprocess.run([sys.executable, "-c", code], env=os.environ | {"OPENBLAS_CORETYPE": core},
+                             capture_output=True, text=True, check=True)
+        return out.stdout.strip()
+
+    assert forced("Haswell") == "openblas Haswell"
+    assert forced("Nehalem") not in ("openblas Haswell", "")

@@ -5,7 +5,7 @@ import pytest
 
 from vlmrl_cli.frames.render import FrameRenderer
 from vlmrl_cli.shaping.camera import Camera, FrameView
-from vlmrl_cli.shaping.features import frame_features
+from vlmrl_cli.shaping.features import darkness_counts
 
 
 @pytest.fixture
@@ -28,7 +28,7 @@ def test_view_matches_gymnasiums_frame_at_the_snapped_position(camera: Camera) -
     with FrameRenderer() as r:
         frame = r.render(-0.523)
     assert view.key == frame.sha256
-    np.testing.assert_array_equal(view.features, frame_features(frame.pixels))
+    np.testing.assert_array_equal(view.features, darkness_counts(frame.pixels))
     assert view.frame().sha256 == view.key
 
 

@@ -8,7 +8,7 @@ from hypothesis.extra.numpy import arrays
 
 from vlmrl_cli.frames.geometry import SCALE
 from vlmrl_cli.frames.render import FrameRenderer
-from vlmrl_cli.shaping.features import BLOCK, FEATURE_DIM, frame_features
+from vlmrl_cli.shaping.features import BLOCK, FEATURE_DIM, FEATURE_UNIT, darkness_counts, frame_features
 
 
 @pytest.fixture(scope="module")
@@ -21,11 +21,23 @@ def renderer():
 @given(arrays(np.uint8, (400, 600, 3), elements=st.integers(0, 255), fill=st.integers(0, 255)))
 def test_features_are_block_means_of_darkness(pixels: np.ndarray) -> None:
     f = frame_features(pixels)
-    assert f.shape == (FEATURE_DIM,) and f.dtype == np.float32
-    assert np.all((f >= -1e-6) & (f <= 1 + 1e-6))
+    assert f.shape == (FEATURE_DIM,) and f.dtype == np.float64
+    assert np.all((f >= 0) & (f <= 1))
     grey = pixels.astype(np.float64) @ np.array([0.299, 0.587, 0.114])
     block = (255.0 - grey[:BLOCK, :BLOCK]) / 255.0
-    assert f[0] == pytest.approx(block.mean(), abs=1e-5)
+    assert f[0] == pytest.approx(block.mean(), abs=1e-12)
+
+
+@settings(max_examples=10, deadline=None)
+@given(arrays(np.uint8, (400, 600, 3), elements=st.integers(0, 255), fill=st.integers(0, 255)), st.data())
+def test_counts_equal_a_scalar_integer_sum(pixels: np.ndarray, data: st.DataObject) -> None:
+    """The vectorised counts are the exact integer sums a plain Python loop gives."""
+    counts = darkness_counts(pixels)
+    b = data.draw(st.integers(0, FEATURE_DIM - 1))
+    r0, c0 = (b // (600 // BLOCK)) * BLOCK, (b % (600 // BLOCK)) * BLOCK
+    block = pixels[r0 : r0 + BLOCK, c0 : c0 + BLOCK].reshape(-1, 3).tolist()
+    assert int(counts[b]) == sum(255_000 - (299 * r + 587 * g + 114 * bl) for r, g, bl in block)
+    assert frame_features(pixels)[b] == int(counts[b]) / FEATURE_UNIT
 
 
 def test_rejects_a_frame_of_the_wrong_shape() -> None:

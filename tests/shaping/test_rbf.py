@@ -8,6 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
+from vlmrl_cli.core.fp import exp_scalar
+from vlmrl_cli.shaping.camera import Camera
+from vlmrl_cli.shaping.features import FEATURE_DIM, FEATURE_UNIT
 from vlmrl_cli.shaping.rbf import RBFField, rbf_potential
 
 D = 4
@@ -24,8 +27,9 @@ def prototype_sets(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray]:
 
 
 @given(arrays(np.float64, (D,), elements=coords), prototype_sets(), bandwidths)
-def test_result_lies_within_the_prototype_potentials(f: np.ndarray, protos: tuple[np.ndarray, np.ndarray],
-                                                      h: float) -> None:
+def test_result_lies_within_the_prototype_potentials(
+    f: np.ndarray, protos: tuple[np.ndarray, np.ndarray], h: float
+) -> None:
     feats, pots = protos
     value = rbf_potential(f, feats, pots, h)
     assert math.isfinite(value)
@@ -51,8 +55,7 @@ def test_permutation_invariant(f: np.ndarray, protos: tuple[np.ndarray, np.ndarr
     feats, pots = protos
     order = list(range(len(pots)))
     rnd.shuffle(order)
-    assert rbf_potential(f, feats[order], pots[order], h) == pytest.approx(rbf_potential(f, feats, pots, h),
-                                                                          abs=1e-12)
+    assert rbf_potential(f, feats[order], pots[order], h) == pytest.approx(rbf_potential(f, feats, pots, h), abs=1e-12)
 
 
 def test_no_prototype_means_zero_potential() -> None:
@@ -77,9 +80,14 @@ def test_bandwidth_must_be_positive(h: float) -> None:
 
 
 @settings(deadline=None, max_examples=60)
-@given(st.lists(st.tuples(st.booleans(), st.integers(0, 7), arrays(np.float64, (D,), elements=coords),
-                          st.floats(0.0, 1.0)), min_size=1, max_size=40),
-       st.floats(0.05, 3.0))
+@given(
+    st.lists(
+        st.tuples(st.booleans(), st.integers(0, 7), arrays(np.float64, (D,), elements=coords), st.floats(0.0, 1.0)),
+        min_size=1,
+        max_size=40,
+    ),
+    st.floats(0.05, 3.0),
+)
 def test_incremental_field_matches_recomputing_from_scratch(ops, bandwidth: float) -> None:  # type: ignore[no-untyped-def]
     """Any interleaving of prototype additions and queries gives what ``rbf_potential`` gives
     over the prototypes present at query time."""
@@ -96,3 +104,71 @@ def test_incremental_field_matches_recomputing_from_scratch(ops, bandwidth: floa
             frames.setdefault(key, feature)
             expected = rbf_potential(frames[key], np.array(protos).reshape(-1, D), np.array(potentials), bandwidth)
             assert math.isclose(field.value(str(key), frames[key]), expected, rel_tol=1e-9, abs_tol=1e-9)
+
+
+class _ScalarField:
+    """``RBFField`` re-done with Python ints and floats, one operation at a time, in the same
+    order: the reference its vectorised path must equal bit for bit."""
+
+    def __init__(self, bandwidth: float, unit: float) -> None:
+        self.scale = 1.0 / (2.0 * bandwidth * bandwidth)
+        self.unit = unit
+        self.protos: list[list[int]] = []
+        self.pots: list[float] = []
+        self.keys: dict[str, list[float]] = {}  # key -> [num, den, ref]
+        self.feats: dict[str, list[int]] = {}
+
+    def sq(self, a: list[int], b: list[int]) -> float:
+        return float(sum((x - y) * (x - y) for x, y in zip(a, b, strict=True))) / (self.unit * self.unit)
+
+    def add(self, feature: list[int], potential: float) -> None:
+        self.protos.append(feature)
+        self.pots.append(potential)
+        for key, state in self.keys.items():
+            num, den, ref = state
+            sq = self.sq(self.feats[key], feature)
+            rescale = exp_scalar(-max(ref - sq, 0.0) * self.scale)
+            num, den = num * rescale, den * rescale
+            ref = sq if sq < ref else ref
+            w = exp_scalar(-(sq - ref) * self.scale)
+            self.keys[key] = [num + w * potential, den + w, ref]
+
+    def value(self, key: str, feature: list[int]) -> float:
+        if not self.protos:
+            return 0.0
+        if key not in self.keys:
+            sqs = [self.sq(p, feature) for p in self.protos]
+            ref = min(sqs)
+            ws = [exp_scalar(-(s - ref) * self.scale) for s in sqs]
+            num = math.fsum(w * p for w, p in zip(ws, self.pots, strict=True))
+            self.keys[key] = [num, math.fsum(ws), ref]
+            self.feats[key] = feature
+        num, den, _ = self.keys[key]
+        return min(max(num / den, min(self.pots)), max(self.pots))
+
+
+def test_field_on_recorded_frames_equals_a_scalar_reference_bit_for_bit() -> None:
+    """300 camera frames along a random walk, a prototype every 7th: the vectorised field, the
+    batch ``rbf_potential`` and the scalar reference agree exactly (not approximately)."""
+    rng = np.random.default_rng(0)
+    xs = np.clip(np.cumsum(rng.normal(0, 0.04, 300)) - 0.5, -1.2, 0.6)
+    camera = Camera(render_quantum=0.003)
+    views = [camera.view(float(x)) for x in xs]
+    camera.close()
+    field = RBFField(0.3, FEATURE_DIM, unit=FEATURE_UNIT)
+    ref = _ScalarField(0.3, FEATURE_UNIT)
+    protos: list[np.ndarray] = []
+    pots: list[float] = []
+    for i, view in enumerate(views):
+        counts = view.features.tolist()
+        if i % 7 == 0:
+            potential = float(rng.choice([0.0, 0.3, 0.5, 0.7, 1.0]))
+            field.add_prototype(view.features, potential)
+            ref.add(counts, potential)
+            protos.append(view.features)
+            pots.append(potential)
+        got = field.value(view.key, view.features)
+        assert got == ref.value(view.key, counts)
+        if view.key not in ref.feats or ref.feats[view.key] is counts:  # first query of this key
+            batch = rbf_potential(view.features, np.array(protos), np.array(pots), 0.3, unit=FEATURE_UNIT)
+            assert batch == got

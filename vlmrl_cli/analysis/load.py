@@ -30,8 +30,9 @@ EVAL_METRICS = {
 }
 EVAL_EPISODE_METRIC = "eval/episode_length"
 
+CPU_COLUMNS = {"numpy_simd": "cpu_numpy_simd", "blas": "cpu_blas", "torch": "cpu_torch"}  # tag suffix -> column
 RUN_COLUMNS = ["run_id", "arm", "seed", "config_hash", "preset", "budget", "vlm", "simulated", "end_time",
-               *EVAL_METRICS.values()]
+               *CPU_COLUMNS.values(), *EVAL_METRICS.values()]
 EPISODE_COLUMNS = ["run_id", "arm", "seed", "timestep", *EPISODE_METRICS.values()]
 EVAL_EPISODE_COLUMNS = ["run_id", "arm", "seed", "episode", "length"]
 
@@ -109,6 +110,7 @@ def _run_row(run: Any) -> dict[str, Any]:
         "vlm": tags.get(f"{TAG_PREFIX}vlm", "unknown"),
         "simulated": tags.get(f"{TAG_PREFIX}simulated", "false").lower() == "true",
         "end_time": pd.Timestamp(run.info.end_time or 0, unit="ms", tz="UTC"),
+        **{col: tags.get(f"{TAG_PREFIX}cpu.{key}", "unrecorded") for key, col in CPU_COLUMNS.items()},
         **{col: float(metrics.get(key, np.nan)) for key, col in EVAL_METRICS.items()},
     }
 

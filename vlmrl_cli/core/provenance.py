@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 _PACKAGES = ("vlmrl", "torch", "gymnasium", "stable-baselines3", "transformers", "mlflow",
-             "numpy", "pandas", "scipy")
+             "numpy", "pandas", "scipy", "pygame-ce", "pygame")  # pygame draws the frames
 
 
 def to_jsonable(obj: Any) -> Any:
@@ -98,3 +98,36 @@ def package_versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             versions[name] = "not installed"
     return versions
+
+
+def cpu_paths() -> dict[str, str]:
+    """The CPU code paths this process computes with: what a result may depend on.
+
+    ``numpy_simd``: numpy's active run-time dispatch targets (``numpy.show_runtime``'s "found",
+    after ``NPY_DISABLE_CPU_FEATURES``), e.g. ``X86_V3,X86_V4,AVX512_ICL``; ``blas``: the BLAS
+    library and the kernel it chose (``OPENBLAS_CORETYPE`` forces another), e.g.
+    ``openblas SkylakeX``; ``torch``: ATen's CPU capability (``ATEN_CPU_CAPABILITY``).
+    The VLM arms' shaping does not depend on the first two (exact integer features, portable
+    ``exp``); the PPO network runs on torch's kernels, the same for every arm.
+    """
+    paths: dict[str, str] = {}
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+
+        paths["numpy_simd"] = ",".join(t for t in __cpu_dispatch__ if __cpu_features__.get(t)) or "baseline"
+    except ImportError:  # another numpy layout: say so rather than guess
+        paths["numpy_simd"] = "unknown"
+    try:
+        from threadpoolctl import threadpool_info
+
+        blas = [i for i in threadpool_info() if i.get("user_api") == "blas"]
+        paths["blas"] = ";".join(f"{i.get('internal_api')} {i.get('architecture', '?')}" for i in blas) or "none loaded"
+    except ImportError:
+        paths["blas"] = "unknown"
+    try:
+        import torch
+
+        paths["torch"] = str(torch.backends.cpu.get_cpu_capability())
+    except ImportError:
+        paths["torch"] = "not installed"
+    return paths

@@ -120,12 +120,31 @@ def vlm_note(runs: pd.DataFrame) -> str:
     return text
 
 
+_CPU_EFFECT = {
+    "cpu_numpy_simd": "numpy's SIMD level (no arm's shaping depends on it since the features are exact integers)",
+    "cpu_blas": "the BLAS kernel (no arm's shaping depends on it since the features are exact integers)",
+    "cpu_torch": "torch's CPU kernels (these can change every arm's training, baseline included)",
+}
+
+
+def _cpu_warnings(data: ExperimentData) -> list[str]:
+    """One warning per CPU code path on which the aggregated runs differ."""
+    out = []
+    for col, effect in _CPU_EFFECT.items():
+        values = sorted(set(data.runs[col].astype(str))) if col in data.runs else []
+        if len(values) > 1:
+            out.append(f"the runs come from different CPU code paths for {effect}: {'; '.join(values)}. "
+                       "Rerun them on one machine to compare like with like.")
+    return out
+
+
 def _warnings(data: ExperimentData, table: Table2) -> list[str]:
     out = []
     for arm, hashes in data.runs.groupby("arm")["config_hash"].unique().items():
         if len(hashes) > 1:
             out.append(f"arm `{arm}` mixes {len(hashes)} configurations ({', '.join(map(str, hashes))}); "
                        "its statistics pool them.")
+    out += _cpu_warnings(data)
     if not table.has_baseline:
         out.append("No `baseline` arm in this experiment: speedups need the baseline arm and are not computed.")
     for arm, n in data.runs.groupby("arm").size().items():

@@ -20,13 +20,14 @@ import numpy as np
 
 from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION
 from vlmrl_cli.frames.render import Frame, FrameRenderer
-from vlmrl_cli.shaping.features import frame_features
+from vlmrl_cli.shaping.features import darkness_counts
 
 
 @dataclass(frozen=True, eq=False)
 class FrameView:
     """What the camera shows: a frame's ``key`` (SHA-256 of its pixels), its ``features``
-    ((D,) float32, see ``frame_features``) and the frame itself, loaded lazily by ``frame()``.
+    ((D,) int64 exact darkness counts, see ``darkness_counts``; divide by ``FEATURE_UNIT`` for
+    the [0, 1] features) and the frame itself, loaded lazily by ``frame()``.
     """
 
     key: str
@@ -40,7 +41,7 @@ class FrameView:
     @classmethod
     def of_frame(cls, frame: Frame) -> FrameView:
         """A view of an already rendered frame (e.g. from ``FrameRenderer``)."""
-        return cls(key=frame.sha256, features=frame_features(frame.pixels), _load=lambda: frame)
+        return cls(key=frame.sha256, features=darkness_counts(frame.pixels), _load=lambda: frame)
 
 
 class Camera:
@@ -112,7 +113,7 @@ class Camera:
         view = self._views.get(cell)
         if view is None:
             frame = self._frame(cell)
-            features = frame_features(frame.pixels)
+            features = darkness_counts(frame.pixels)
             features.setflags(write=False)
             view = FrameView(key=frame.sha256, features=features, _load=functools.partial(self._frame, cell))
             self._views[cell] = view

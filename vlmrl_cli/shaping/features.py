@@ -1,12 +1,18 @@
 """A low-dimensional visual descriptor of a frame, computed from its pixels only.
 
 Darkness ``(255 - grey) / 255`` averaged over ``BLOCK x BLOCK`` pixel blocks: a (400, 600)
-frame becomes a 20 x 30 grid, flattened to ``D = 600`` float32 values in ``[0, 1]``. The
-static parts of the picture (track, flag) are the same in every frame and cancel in a
-difference, so the Euclidean distance between two frames' features measures how far the car
-moved. Block averaging makes that distance grow smoothly (about linearly) with small moves
-instead of jumping pixel by pixel; once the two car positions no longer share a block the
-distance saturates at the car's own "mass" in feature space.
+frame becomes a 20 x 30 grid, flattened to ``D = 600`` values in ``[0, 1]``. The static parts
+of the picture (track, flag) are the same in every frame and cancel in a difference, so the
+Euclidean distance between two frames' features measures how far the car moved. Block
+averaging makes that distance grow smoothly (about linearly) with small moves instead of
+jumping pixel by pixel; once the two car positions no longer share a block the distance
+saturates at the car's own "mass" in feature space.
+
+The features are computed in integers, exactly: grey is ``299 r + 587 g + 114 b`` (ITU-R
+BT.601 luma x 1000) and a block's darkness is the integer sum ``darkness_counts`` over its
+400 pixels, in units of ``1 / FEATURE_UNIT``. A float pipeline (float32 luma through a BLAS
+matrix-vector product) rounded differently on AVX-512 and AVX2 CPUs and made the VLM arms
+train different agents on different machines; integers round nowhere.
 
 Measured with gymnasium's renderer at 40 positions x in [-1.15, 0.25], the car shifted right
 by ``dx`` pixels (1 px = 1.8 / 600 = 0.003 x units); L2 distance, median [min, max]:
@@ -32,23 +38,41 @@ import numpy as np
 BLOCK = 20  # pixels per block side; 400 x 600 frames -> a 20 x 30 grid
 FRAME_SHAPE = (400, 600, 3)
 FEATURE_DIM = (FRAME_SHAPE[0] // BLOCK) * (FRAME_SHAPE[1] // BLOCK)
-# ITU-R BT.601 luma weights: grey level of an RGB pixel.
-_LUMA = np.array([0.299, 0.587, 0.114], dtype=np.float32)
+LUMA_WEIGHTS = (299, 587, 114)  # ITU-R BT.601 luma weights x 1000: grey level of an RGB pixel
+FEATURE_UNIT = 255 * sum(LUMA_WEIGHTS) * BLOCK * BLOCK  # the darkness count of an all-black block
+
+
+def darkness_counts(pixels: np.ndarray) -> np.ndarray:
+    """Exact block darkness of an RGB frame: ``(400, 600, 3)`` uint8 -> ``(600,)`` int64.
+
+    Entry ``b`` is ``sum over the block's pixels of (255 * 1000 - (299 r + 587 g + 114 b))``,
+    in ``[0, FEATURE_UNIT]``; ``frame_features`` is this divided by ``FEATURE_UNIT``. Integer
+    sums are exact, so every CPU gives the same counts.
+
+    Example:
+        >>> black = np.zeros((400, 600, 3), dtype=np.uint8)
+        >>> c = darkness_counts(black)
+        >>> c.dtype, bool((c == FEATURE_UNIT).all())
+        (dtype('int64'), True)
+    """
+    if pixels.shape != FRAME_SHAPE:
+        raise ValueError(f"expected a frame of shape {FRAME_SHAPE}, got {pixels.shape}")
+    px = pixels.astype(np.int32)
+    wr, wg, wb = LUMA_WEIGHTS
+    darkness = 255 * sum(LUMA_WEIGHTS) - (px[..., 0] * wr + px[..., 1] * wg + px[..., 2] * wb)
+    h, w = FRAME_SHAPE[0] // BLOCK, FRAME_SHAPE[1] // BLOCK
+    return darkness.reshape(h, BLOCK, w, BLOCK).sum(axis=(1, 3), dtype=np.int64).reshape(-1)
 
 
 def frame_features(pixels: np.ndarray) -> np.ndarray:
-    """Block-mean darkness of an RGB frame: ``(400, 600, 3)`` uint8 -> ``(600,)`` float32 in [0, 1].
+    """Block-mean darkness of an RGB frame: ``(400, 600, 3)`` uint8 -> ``(600,)`` float64 in [0, 1].
+
+    ``darkness_counts(pixels) / FEATURE_UNIT``: each value is the exact ratio rounded once.
 
     Example:
         >>> white = np.full((400, 600, 3), 255, dtype=np.uint8)
         >>> f = frame_features(white)
         >>> f.shape, f.dtype, float(f.max())
-        ((600,), dtype('float32'), 0.0)
+        ((600,), dtype('float64'), 0.0)
     """
-    if pixels.shape != FRAME_SHAPE:
-        raise ValueError(f"expected a frame of shape {FRAME_SHAPE}, got {pixels.shape}")
-    grey = pixels.astype(np.float32) @ _LUMA
-    darkness = (255.0 - grey) / 255.0
-    h, w = FRAME_SHAPE[0] // BLOCK, FRAME_SHAPE[1] // BLOCK
-    blocks = darkness.reshape(h, BLOCK, w, BLOCK).mean(axis=(1, 3), dtype=np.float32)
-    return np.ascontiguousarray(blocks.reshape(-1), dtype=np.float32)
+    return darkness_counts(pixels) / FEATURE_UNIT

@@ -1,4 +1,10 @@
-"""RBF smoothing of discrete milestone potentials over a visual prototype cache (Section 3.2)."""
+"""RBF smoothing of discrete milestone potentials over a visual prototype cache (Section 3.2).
+
+With integer features (``features.darkness_counts``) every step is CPU-independent: squared
+distances are exact int64 sums, the kernel is ``core.fp.exp`` and the weighted sums are
+``math.fsum`` (exactly rounded, whatever the order). numpy's own ``exp`` and BLAS ``dot`` round
+differently on AVX-512 and AVX2 CPUs; they are not used here.
+"""
 
 from __future__ import annotations
 
@@ -6,18 +12,49 @@ import math
 
 import numpy as np
 
+from vlmrl_cli.core.fp import exp
+
+_INT64_MAX = np.iinfo(np.int64).max
+
+
+def squared_distances(points: np.ndarray, feature: np.ndarray, unit: float = 1.0) -> np.ndarray:
+    """``||points_i - feature||^2 / unit^2`` for each row: ``(N, D)``, ``(D,)`` -> ``(N,)`` float64.
+
+    For integer arrays the sum is exact (int64) and only its conversion to float64 rounds, so
+    the result is the same on every CPU; ``unit`` converts counts to feature units (e.g.
+    ``FEATURE_UNIT``). Float arrays are summed in float64 (the tests' small examples).
+
+    Example:
+        >>> squared_distances(np.array([[0, 0], [3, 4]]), np.array([0, 0]), unit=5.0).tolist()
+        [0.0, 1.0]
+    """
+    if np.issubdtype(points.dtype, np.integer) and np.issubdtype(feature.dtype, np.integer):
+        diff = points.astype(np.int64) - feature.astype(np.int64)[None, :]
+        if diff.size and int(np.abs(diff).max()) ** 2 * diff.shape[1] > _INT64_MAX:
+            raise ValueError("integer features too large for an exact int64 squared distance")
+        return (diff * diff).sum(axis=1).astype(np.float64) / (unit * unit)
+    fdiff = np.asarray(points, dtype=np.float64) - np.asarray(feature, dtype=np.float64)[None, :]
+    return (fdiff * fdiff).sum(axis=1) / (unit * unit)
+
+
+def _weighted_mean(w: np.ndarray, potentials: np.ndarray) -> tuple[float, float]:
+    """(sum w_i phi_i, sum w_i), each exactly rounded."""
+    return math.fsum((w * potentials).tolist()), math.fsum(w.tolist())
+
 
 def rbf_potential(
     feature: np.ndarray,
     proto_features: np.ndarray,
     proto_potentials: np.ndarray,
     bandwidth: float,
+    unit: float = 1.0,
 ) -> float:
     """Kernel-weighted mean of prototype potentials (Nadaraya-Watson with a Gaussian kernel).
 
     ``feature`` has shape ``(D,)``, ``proto_features`` ``(N, D)`` (the same feature units, see
     ``features.frame_features``), ``proto_potentials`` ``(N,)`` (dimensionless potentials) and
-    ``bandwidth`` is in feature-distance units. Weights are
+    ``bandwidth`` is in feature-distance units (integer features are divided by ``unit``, see
+    ``squared_distances``). Weights are
     ``w_i = exp(-||f - f_i||^2 / (2 bandwidth^2))`` and the result is
     ``sum_i w_i phi_i / sum_i w_i``, so it always lies within ``[min phi_i, max phi_i]``.
     With no prototype (``N = 0``) the potential is 0.0. The exponent is shifted by the nearest
@@ -33,7 +70,7 @@ def rbf_potential(
     """
     if bandwidth <= 0:
         raise ValueError(f"bandwidth must be > 0, got {bandwidth}")
-    protos = np.asarray(proto_features, dtype=np.float64)
+    protos = np.asarray(proto_features)
     potentials = np.asarray(proto_potentials, dtype=np.float64)
     if protos.shape[0] == 0:
         return 0.0
@@ -41,11 +78,11 @@ def rbf_potential(
         raise ValueError(
             f"expected proto_features (N, D) and proto_potentials (N,), got {protos.shape} and {potentials.shape}"
         )
-    diff = protos - np.asarray(feature, dtype=np.float64)[None, :]
-    sq = np.einsum("nd,nd->n", diff, diff)
-    logw = -(sq - sq.min()) / (2.0 * bandwidth * bandwidth)
-    w = np.exp(logw)  # the nearest prototype has weight 1, so the sum is >= 1
-    value = float(np.dot(w, potentials) / w.sum())
+    sq = squared_distances(protos, np.asarray(feature), unit)
+    logw = -(sq - sq.min()) * (1.0 / (2.0 * bandwidth * bandwidth))  # as RBFField: same bits
+    w = exp(logw)  # the nearest prototype has weight 1, so the sum is >= 1
+    num, den = _weighted_mean(w, potentials)
+    value = num / den
     # Rounding can put the mean an ulp outside the hull; clip keeps the documented bound exact.
     return float(np.clip(value, potentials.min(), potentials.max()))
 
@@ -57,6 +94,8 @@ class RBFField:
     to its nearest prototype so far; a new prototype updates every stored key in one
     vectorised step (cost (keys, D)) instead of invalidating them. ``value`` returns what
     ``rbf_potential`` would over the current prototypes, up to floating-point rounding.
+    Features keep the dtype of the first one added (integer features: exact distances, see
+    ``squared_distances``; ``unit`` converts them to feature units).
 
     Example:
         >>> field = RBFField(bandwidth=0.1, dim=1)
@@ -67,15 +106,19 @@ class RBFField:
         0.5
     """
 
-    def __init__(self, bandwidth: float, dim: int) -> None:
+    def __init__(self, bandwidth: float, dim: int, unit: float = 1.0) -> None:
         if bandwidth <= 0:
             raise ValueError(f"bandwidth must be > 0, got {bandwidth}")
+        if not (math.isfinite(unit) and unit > 0):
+            raise ValueError(f"unit must be > 0, got {unit}")
         self.bandwidth = float(bandwidth)
+        self.unit = float(unit)
         self._scale = 1.0 / (2.0 * self.bandwidth * self.bandwidth)
-        self._protos = np.empty((0, dim), dtype=np.float64)
+        self._dim = dim
+        self._protos: np.ndarray | None = None  # (N, D), the dtype of the first feature
         self._potentials = np.empty(0, dtype=np.float64)
         self._index: dict[str, int] = {}
-        self._feats = np.empty((0, dim), dtype=np.float64)
+        self._feats: np.ndarray | None = None  # (keys, D)
         self._num = np.empty(0, dtype=np.float64)
         self._den = np.empty(0, dtype=np.float64)
         self._ref = np.empty(0, dtype=np.float64)  # squared distance the weights are relative to
@@ -85,42 +128,49 @@ class RBFField:
     def prototypes(self) -> int:
         return int(self._potentials.shape[0])
 
+    def _row(self, feature: np.ndarray) -> np.ndarray:
+        f = np.asarray(feature)
+        if f.shape != (self._dim,):
+            raise ValueError(f"expected a feature of shape ({self._dim},), got {f.shape}")
+        integer = bool(np.issubdtype(f.dtype, np.integer))
+        if self._protos is not None and integer != bool(np.issubdtype(self._protos.dtype, np.integer)):
+            raise ValueError("features must all be integers (exact distances) or all floats, not a mix")
+        return f.astype(np.int64 if integer else np.float64)[None, :]
+
     def add_prototype(self, feature: np.ndarray, potential: float) -> None:
-        f = np.asarray(feature, dtype=np.float64)
-        self._protos = np.vstack([self._protos, f[None, :]])
+        row = self._row(feature)
+        self._protos = row if self._protos is None else np.vstack([self._protos, row])
         self._potentials = np.append(self._potentials, float(potential))
         self._low = min(self._low, float(potential))
         self._high = max(self._high, float(potential))
-        if not self._index:
+        if self._feats is None:
             return
-        diff = self._feats - f[None, :]
-        sq = np.einsum("md,md->m", diff, diff)
+        sq = squared_distances(self._feats, row[0], self.unit)
         closer = sq < self._ref
         # rebase keys whose nearest prototype is the new one, so no weight underflows
         # (the others get exp(0) = 1; clipping first keeps exp from overflowing on them)
-        rescale = np.exp(-np.maximum(self._ref - sq, 0.0) * self._scale)
+        rescale = exp(-np.maximum(self._ref - sq, 0.0) * self._scale)
         self._num *= rescale
         self._den *= rescale
         self._ref = np.where(closer, sq, self._ref)
-        w = np.exp(-(sq - self._ref) * self._scale)
+        w = exp(-(sq - self._ref) * self._scale)
         self._num += w * float(potential)
         self._den += w
 
     def value(self, key: str, feature: np.ndarray) -> float:
-        if not self.prototypes:
+        if self._protos is None:
             return 0.0
         row = self._index.get(key)
         if row is None:
-            f = np.asarray(feature, dtype=np.float64)
-            diff = self._protos - f[None, :]
-            sq = np.einsum("nd,nd->n", diff, diff)
+            f = self._row(feature)
+            sq = squared_distances(self._protos, f[0], self.unit)
             ref = float(sq.min())
-            w = np.exp(-(sq - ref) * self._scale)
+            num, den = _weighted_mean(exp(-(sq - ref) * self._scale), self._potentials)
             row = self._num.shape[0]
             self._index[key] = row
-            self._feats = np.vstack([self._feats, f[None, :]])
-            self._num = np.append(self._num, float(np.dot(w, self._potentials)))
-            self._den = np.append(self._den, float(w.sum()))
+            self._feats = f if self._feats is None else np.vstack([self._feats, f])
+            self._num = np.append(self._num, num)
+            self._den = np.append(self._den, den)
             self._ref = np.append(self._ref, ref)
         # called every env step: plain floats, and the documented bound kept exact
         value = float(self._num[row]) / float(self._den[row])

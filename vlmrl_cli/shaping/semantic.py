@@ -32,15 +32,19 @@ from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION
 from vlmrl_cli.probe.parsers import parse_float, parse_mcq
 from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
-from vlmrl_cli.shaping.features import FEATURE_DIM
+from vlmrl_cli.shaping.features import FEATURE_DIM, FEATURE_UNIT
 from vlmrl_cli.shaping.hysteresis import LockState, lock_step
-from vlmrl_cli.shaping.rbf import RBFField
+from vlmrl_cli.shaping.rbf import RBFField, squared_distances
 from vlmrl_cli.training.arms import PotentialSource
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
 
 STAT_KEYS: tuple[str, ...] = (
-    "vlm/queries", "vlm/cache_hits", "vlm/prototypes", "vlm/label_reuses", "vlm/parse_failures",
+    "vlm/queries",
+    "vlm/cache_hits",
+    "vlm/prototypes",
+    "vlm/label_reuses",
+    "vlm/parse_failures",
 )
 
 
@@ -80,11 +84,11 @@ class SemanticOracle:
         self.rbf = rbf
         self._prompt = PROMPTS[PromptKind.MCQ if source is PotentialSource.MCQ else PromptKind.FLOAT]
         self._potential_of = dict(cfg.label_potentials)
-        self._features = np.empty((0, 0), dtype=np.float64)
+        self._features = np.empty((0, 0), dtype=np.int64)
         self._potentials = np.empty(0, dtype=np.float64)
         self._n = 0
         self._label_of: dict[str, float] = {}
-        self._field = RBFField(cfg.bandwidth, FEATURE_DIM)
+        self._field = RBFField(cfg.bandwidth, FEATURE_DIM, unit=FEATURE_UNIT)
         self._queries = 0
         self._cache_hits = 0
         self._reuses = 0
@@ -117,8 +121,7 @@ class SemanticOracle:
             self._reuses += 1
             return known
         if self._n and self.cfg.reuse_radius > 0:
-            diff = self._features[: self._n] - view.features.astype(np.float64)[None, :]
-            sq = np.einsum("nd,nd->n", diff, diff)
+            sq = squared_distances(self._features[: self._n], view.features, unit=FEATURE_UNIT)
             nearest = int(np.argmin(sq))
             if math.sqrt(float(sq[nearest])) < self.cfg.reuse_radius:
                 self._reuses += 1
@@ -148,7 +151,7 @@ class SemanticOracle:
         if view.key in self._label_of:
             return
         if self._n == self._features.shape[0]:
-            grown = np.empty((max(64, 2 * self._n), view.features.shape[0]), dtype=np.float64)
+            grown = np.empty((max(64, 2 * self._n), view.features.shape[0]), dtype=np.int64)
             if self._n:
                 grown[: self._n] = self._features[: self._n]
             self._features = grown

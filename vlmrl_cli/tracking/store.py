@@ -19,7 +19,7 @@ from typing import Any
 import filelock
 
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.core.provenance import git_commit, package_versions
+from vlmrl_cli.core.provenance import cpu_paths, git_commit, package_versions
 
 DEFAULT_TRACKING_URI = "sqlite:///mlflow.db"
 TAG_PREFIX = "vlmrl."
@@ -126,7 +126,7 @@ def ensure_experiment(client: Any, name: str) -> str:
 
 
 def provenance_tags(vlm_label: str, simulated: bool) -> dict[str, str]:
-    """Tags every vlmrl run carries: VLM (simulated said plainly), commit, versions."""
+    """Tags every vlmrl run carries: VLM (simulated said plainly), commit, versions, CPU paths."""
     commit = git_commit()
     tags = {
         f"{TAG_PREFIX}vlm": vlm_label,
@@ -136,6 +136,8 @@ def provenance_tags(vlm_label: str, simulated: bool) -> dict[str, str]:
     }
     for name, version in package_versions().items():
         tags[f"{TAG_PREFIX}version.{name}"] = version
+    for name, path in cpu_paths().items():
+        tags[f"{TAG_PREFIX}cpu.{name}"] = path
     if simulated:
         tags[f"{TAG_PREFIX}note"] = (
             "Produced with the SIMULATED VLM (a pixel-reading stand-in), not a real "
