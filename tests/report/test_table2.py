@@ -1,14 +1,14 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from vlmrl_cli import paper
 from vlmrl_cli.report.table2 import NEEDS_BASELINE, build_table2, format_cell, to_latex, to_long, to_markdown
 
-REPORTED = json.loads((Path(__file__).resolve().parents[2] / "paper" / "reported.json").read_text())
+REPORTED = json.loads(paper.REPORTED.read_text())
 THRESHOLDS = (-190.0, -160.0, -130.0)
 
 

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from vlmrl_cli import paper
 from vlmrl_cli.analysis import stats
 from vlmrl_cli.analysis.load import ExperimentData, load_experiment
 from vlmrl_cli.core.errors import BadInput
@@ -30,7 +31,7 @@ from vlmrl_cli.report.table2 import (
 )
 from vlmrl_cli.tracking import store
 
-DEFAULT_REPORTED = Path(__file__).resolve().parents[2] / "paper" / "reported.json"
+DEFAULT_REPORTED = paper.REPORTED
 
 
 @dataclass(frozen=True)
@@ -46,7 +47,7 @@ class ReportConfig:
     ci: float = 0.95  # confidence level of every interval
     n_boot: int = stats.DEFAULT_N_BOOT  # bootstrap resamples
     seed: int = 0  # seed of the bootstrap generator
-    reported: Path | None = None  # the paper's numbers (default: paper/reported.json)
+    reported: Path | None = None  # the paper's numbers (default: the packaged vlmrl_cli/paper/reported.json)
     log_to_mlflow: bool = True  # log the outputs as artifacts of a vlmrl.kind=report run
 
 
@@ -85,7 +86,7 @@ def ensure_writable(out: Path) -> None:
 
 
 def load_reported(path: Path | None) -> dict[str, Any]:
-    """The paper's numbers (``paper/reported.json``); ``BadInput`` when missing or malformed."""
+    """The paper's numbers (``vlmrl_cli/paper/reported.json``); ``BadInput`` when missing or malformed."""
     p = path or DEFAULT_REPORTED
     try:
         return dict(json.loads(p.read_text(encoding="utf-8")))

@@ -5,9 +5,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from vlmrl_cli import paper
+
 BACKENDS: tuple[str, ...] = ("sim", "hf", "openai", "replay")
 PAPER_MODEL = "llava-hf/llava-1.5-7b-hf"
-PAPER_TRANSCRIPT = Path(__file__).resolve().parents[2] / "paper" / "table1_transcript.jsonl"
+PAPER_TRANSCRIPT = paper.TABLE1_TRANSCRIPT
 DEFAULT_CACHE = Path(".vlmrl-cache") / "responses.sqlite"
 
 
