@@ -23,13 +23,13 @@ from typing import Any
 
 import torch
 
-from vlmrl_cli.probe.parsers import parse_mcq
+from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.shaping.config import ShapingConfig
-from vlmrl_cli.training.arms import ARMS
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.presets import get_preset
 from vlmrl_cli.training.worker import JobResult
 from vlmrl_cli.vlm.config import VLMConfig
+from vlmrl_cli.vlm.parsers import parse_mcq
 from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
 from vlmrl_cli.vlm.registry import build_client
 

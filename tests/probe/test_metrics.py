@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from vlmrl_cli.frames.geometry import Zone, zone_of
 from vlmrl_cli.probe import metrics
-from vlmrl_cli.probe.parsers import ParseStatus
+from vlmrl_cli.vlm.parsers import ParseStatus
 
 _coord = st.floats(-50, 700, allow_nan=False)
 _box = st.tuples(_coord, _coord, _coord, _coord)

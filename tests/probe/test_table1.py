@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from vlmrl_cli.frames.render import FrameRenderer
+from vlmrl_cli.probe.scoring import PAPER_FRAMES, FrameProbe, _Planned, empty_sweep_statistics, probe_frame
 from vlmrl_cli.probe.table1 import latex_escape, markdown_table, pair_consequence, taxonomy_frame, write_tables
-from vlmrl_cli.probe.taxonomy import PAPER_FRAMES, FrameProbe, _Planned, empty_sweep_statistics, probe_frame
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.config import VLMConfig
 from vlmrl_cli.vlm.prompts import PromptKind

@@ -9,16 +9,10 @@ from pathlib import Path
 import pytest
 
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.probe.parsers import ParseStatus
-from vlmrl_cli.probe.taxonomy import (
-    TaxonomyConfig,
-    frame_id_of,
-    plan_frames,
-    run_taxonomy,
-    sweep_statistics,
-    x_of_frame_id,
-)
+from vlmrl_cli.probe.scoring import frame_id_of, plan_frames, sweep_statistics, x_of_frame_id
+from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
 from vlmrl_cli.vlm.config import SimKnobs, VLMConfig
+from vlmrl_cli.vlm.parsers import ParseStatus
 from vlmrl_cli.vlm.replay import ReplayBackend
 from vlmrl_cli.vlm.sim import SimulatedVLM
 

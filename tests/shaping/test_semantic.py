@@ -6,10 +6,10 @@ import pytest
 
 from tests.shaping import ScriptedBackend, sim_client
 from vlmrl_cli.frames.geometry import Zone
+from vlmrl_cli.shaping.arms import PotentialSource
 from vlmrl_cli.shaping.camera import Camera
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.semantic import STAT_KEYS, EpisodePotential, SemanticOracle, float_potential
-from vlmrl_cli.training.arms import PotentialSource
 from vlmrl_cli.vlm.client import VLMClient
 
 MCQ, FLOAT = PotentialSource.MCQ, PotentialSource.FLOAT
@@ -142,9 +142,9 @@ def test_deep_copies_of_an_env_share_the_oracle_and_its_cached_client(tmp_path) 
     response cache) must be shared, not cloned."""
     import copy
 
+    from vlmrl_cli.shaping.arms import PotentialSource
     from vlmrl_cli.shaping.config import ShapingConfig
     from vlmrl_cli.shaping.semantic import SemanticOracle
-    from vlmrl_cli.training.arms import PotentialSource
     from vlmrl_cli.vlm.config import VLMConfig
     from vlmrl_cli.vlm.registry import build_client
 

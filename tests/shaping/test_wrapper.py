@@ -8,12 +8,12 @@ from stable_baselines3.common.monitor import Monitor
 
 from tests.shaping import ScriptedBackend, sim_client
 from vlmrl_cli.frames.render import FrameRenderer
+from vlmrl_cli.shaping.arms import ARMS, ArmSpec
 from vlmrl_cli.shaping.camera import Camera, FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.kinematic import kinematic_reward
 from vlmrl_cli.shaping.semantic import EpisodePotential, SemanticOracle
 from vlmrl_cli.shaping.wrapper import HybridReward
-from vlmrl_cli.training.arms import ARMS, ArmSpec
 from vlmrl_cli.vlm.client import VLMClient
 
 GAMMA = 0.99

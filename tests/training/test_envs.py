@@ -8,10 +8,10 @@ import pytest
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecNormalize
 
 from tests.shaping import sim_client
+from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.semantic import SemanticOracle
 from vlmrl_cli.shaping.wrapper import HybridReward
-from vlmrl_cli.training.arms import ARMS
 from vlmrl_cli.training.envs import make_train_env
 from vlmrl_cli.training.presets import PRESETS
 

@@ -14,10 +14,10 @@ import torch
 from tests.vlm.tiny_llava import folder_size_bytes
 from vlmrl_cli.core.errors import BackendUnavailable, BadInput
 from vlmrl_cli.frames.render import Frame
-from vlmrl_cli.probe.parsers import ParseStatus, parse_box, parse_float, parse_mcq
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.config import VLMConfig
 from vlmrl_cli.vlm.hf import HFBackend, _looks_like_path, resolve_dtype
+from vlmrl_cli.vlm.parsers import ParseStatus, parse_box, parse_float, parse_mcq
 from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
 from vlmrl_cli.vlm.registry import build_backend
 

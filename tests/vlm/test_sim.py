@@ -9,9 +9,9 @@ import pytest
 
 from vlmrl_cli.frames import geometry
 from vlmrl_cli.frames.render import Frame, FrameRenderer
-from vlmrl_cli.probe.parsers import ParseStatus, parse_box, parse_float, parse_mcq
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.config import SimKnobs
+from vlmrl_cli.vlm.parsers import ParseStatus, parse_box, parse_float, parse_mcq
 from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
 from vlmrl_cli.vlm.sim import REFUSAL, SimulatedVLM, wheel_column
 

@@ -30,7 +30,8 @@ def taxonomy(
     experiment: Experiment = "vlmrl-taxonomy",
 ) -> None:
     """Probe a VLM with float, box and MCQ prompts (paper Section 2); write Table 1 and Figure 1."""
-    from vlmrl_cli.probe.taxonomy import DEFAULT_STATES, TaxonomyConfig, run_taxonomy
+    from vlmrl_cli.probe.scoring import DEFAULT_STATES
+    from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
 
     console = Console(stderr=True)
     with exit_codes():

@@ -8,13 +8,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from vlmrl_cli.probe.scoring import FrameProbe
 from vlmrl_cli.probe.table1 import printable
 from vlmrl_cli.vlm.prompts import PromptKind
-
-if TYPE_CHECKING:
-    from vlmrl_cli.probe.taxonomy import FrameProbe
 
 TRUE_COLOUR = "tab:green"
 VLM_COLOUR = "tab:red"

@@ -15,8 +15,8 @@ import pandas as pd
 from scipy import stats
 
 from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION, SCREEN_WIDTH, Zone
-from vlmrl_cli.probe.parsers import Box, ParseStatus
 from vlmrl_cli.shaping.config import DEFAULT_LABEL_POTENTIALS
+from vlmrl_cli.vlm.parsers import Box, ParseStatus
 
 UNPARSED = "UNPARSED"
 # Statuses where the model's text itself failed (NO_ANSWER is the transcript's gap, not the model's).

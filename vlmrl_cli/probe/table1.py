@@ -13,15 +13,12 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import pandas as pd
 
 from vlmrl_cli.probe import metrics
+from vlmrl_cli.probe.scoring import FrameProbe, phi_series
 from vlmrl_cli.vlm.prompts import PromptKind
-
-if TYPE_CHECKING:
-    from vlmrl_cli.probe.taxonomy import FrameProbe
 
 TAXONOMY_ROWS: tuple[tuple[PromptKind, str], ...] = (
     (PromptKind.FLOAT, "I. Float Regression"),
@@ -70,7 +67,6 @@ class PairConsequence:
 
 def pair_consequence(kind: PromptKind, a: FrameProbe, b: FrameProbe) -> PairConsequence:
     """The dPhi that the answers of ``kind`` for frames a and b give, against the truth."""
-    from vlmrl_cli.probe.taxonomy import phi_series
 
     vlm, true = phi_series([a, b], kind)
     return PairConsequence(kind, float(vlm[0]), float(vlm[1]), float(true[1] - true[0]))

@@ -20,7 +20,7 @@ import pandas as pd
 from vlmrl_cli.analysis import stats
 from vlmrl_cli.analysis.load import ExperimentData
 from vlmrl_cli.analysis.thresholds import steps_to_threshold
-from vlmrl_cli.training.arms import ARMS
+from vlmrl_cli.shaping.arms import ARMS
 
 BASELINE = "baseline"
 NEEDS_BASELINE = "needs baseline arm"

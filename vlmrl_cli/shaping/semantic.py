@@ -29,14 +29,14 @@ import math
 import numpy as np
 
 from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION
-from vlmrl_cli.probe.parsers import parse_float, parse_mcq
+from vlmrl_cli.shaping.arms import PotentialSource
 from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.features import FEATURE_DIM, FEATURE_UNIT
 from vlmrl_cli.shaping.hysteresis import LockState, lock_step
 from vlmrl_cli.shaping.rbf import RBFField, squared_distances
-from vlmrl_cli.training.arms import PotentialSource
 from vlmrl_cli.vlm.client import VLMClient
+from vlmrl_cli.vlm.parsers import parse_float, parse_mcq
 from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
 
 STAT_KEYS: tuple[str, ...] = (

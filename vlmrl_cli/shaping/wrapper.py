@@ -9,12 +9,12 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.envs.classic_control.mountain_car import MountainCarEnv
 
+from vlmrl_cli.shaping.arms import ArmSpec
 from vlmrl_cli.shaping.camera import Camera, FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.kinematic import kinematic_reward
 from vlmrl_cli.shaping.pbrs import pbrs_term
 from vlmrl_cli.shaping.semantic import EpisodePotential, SemanticOracle
-from vlmrl_cli.training.arms import ArmSpec
 
 
 class HybridReward(gym.Wrapper[np.ndarray, int, np.ndarray, int], gym.utils.RecordConstructorArgs):
@@ -37,7 +37,7 @@ class HybridReward(gym.Wrapper[np.ndarray, int, np.ndarray, int], gym.utils.Reco
 
     Example:
         >>> import gymnasium as gym
-        >>> from vlmrl_cli.training.arms import ARMS
+        >>> from vlmrl_cli.shaping.arms import ARMS
         >>> env = HybridReward(gym.make("MountainCar-v0"), ARMS["kinematic"], ShapingConfig(), gamma=0.99)
         >>> obs, _ = env.reset(seed=0)
         >>> obs, reward, terminated, truncated, info = env.step(2)

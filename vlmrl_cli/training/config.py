@@ -36,8 +36,8 @@ from typing import Any
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.provenance import config_hash, to_jsonable
 from vlmrl_cli.frames.geometry import Zone
+from vlmrl_cli.shaping.arms import ARMS, ArmSpec, parse_arms
 from vlmrl_cli.shaping.config import ShapingConfig
-from vlmrl_cli.training.arms import ARMS, ArmSpec, parse_arms
 from vlmrl_cli.training.presets import PPOPreset, get_preset
 from vlmrl_cli.vlm.config import BACKENDS, SimKnobs, VLMConfig
 

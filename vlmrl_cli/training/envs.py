@@ -8,11 +8,11 @@ import gymnasium as gym
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecNormalize
 
+from vlmrl_cli.shaping.arms import ArmSpec
 from vlmrl_cli.shaping.camera import Camera
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.semantic import SemanticOracle
 from vlmrl_cli.shaping.wrapper import HybridReward
-from vlmrl_cli.training.arms import ArmSpec
 from vlmrl_cli.training.presets import PPOPreset
 from vlmrl_cli.vlm.client import VLMClient
 

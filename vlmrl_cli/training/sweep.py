@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from vlmrl_cli.core.provenance import config_hash, flatten
+from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.tracking import store
-from vlmrl_cli.training.arms import ARMS
 from vlmrl_cli.training.callbacks import ProgressEvent
 from vlmrl_cli.training.config import RunConfig, TrainJob
 from vlmrl_cli.training.worker import JobResult, init_worker, train_job

@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from vlmrl_cli.frames.geometry import Zone
-from vlmrl_cli.probe.parsers import ParseStatus, parse_box, parse_float, parse_mcq
+from vlmrl_cli.vlm.parsers import ParseStatus, parse_box, parse_float, parse_mcq
 
 PARSERS = (parse_float, parse_box, parse_mcq)
 
