@@ -4,7 +4,10 @@ Confidence intervals are percentile bootstrap intervals from ``scipy.stats.boots
 (percentile rather than BCa: with 3-10 seeds BCa is often undefined), resampling the seeds of
 each arm independently; randomness comes in as an explicit ``numpy.random.Generator``.
 Where an interval cannot be computed (fewer than 2 values, an arm that never reached the
-threshold) the bounds are NaN and ``Estimate.note`` says why.
+threshold) the bounds are NaN and ``Estimate.note`` says why. Proportions of seeds do not use the
+bootstrap (it collapses to [1, 1] when every seed succeeds): ``wilson_ci`` here and the Newcombe
+interval in ``analysis.proportions``. ``Streams`` gives each report section and metric its own
+random stream.
 """
 
 from __future__ import annotations
