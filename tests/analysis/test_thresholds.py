@@ -5,7 +5,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vlmrl_cli.analysis.thresholds import censored_steps_to_threshold, rolling_mean_return, steps_to_threshold
+from vlmrl_cli.analysis.thresholds import (
+    censored_steps_to_threshold,
+    full_window_steps_to_threshold,
+    rolling_mean_return,
+    steps_to_threshold,
+)
 
 
 def test_reached_exactly_counts():
@@ -91,3 +96,14 @@ def test_result_is_an_episode_end_and_censoring_bounds(run, threshold, window):
         assert c == budget
     else:
         assert s in set(ts.tolist()) and c == s
+
+
+def test_full_window_ignores_a_lucky_start():
+    # window 3: the partial window of the first episode alone (-100) meets -150 at step 10; the first
+    # complete window (-100, -200, -150) has mean -150 at step 30, the next (-200, -150, -40) -130 at 40
+    ts, ret = [10, 20, 30, 40], [-100, -200, -150, -40]
+    assert steps_to_threshold(ts, ret, -150, window=3) == 10
+    assert full_window_steps_to_threshold(ts, ret, -150, window=3) == 30
+    assert steps_to_threshold(ts, ret, -140, window=3) == 10
+    assert full_window_steps_to_threshold(ts, ret, -140, window=3) == 40
+    assert full_window_steps_to_threshold(ts[:2], ret[:2], -100, window=3) is None  # never a complete window

@@ -31,6 +31,7 @@ class FakeRun:
     eval_length: float
     status: str = "FINISHED"
     per_episode_eval: bool = False
+    hover: float | None = None  # eval/hover_fraction, logged by runs since the hovering diagnostic
 
 
 HYBRID = [FakeRun("hybrid", s, k, -100.0, 1.0, length, per_episode_eval=True)
@@ -70,6 +71,9 @@ def _log(client: MlflowClient, exp_id: str, parent: str, run: FakeRun) -> str:
     metrics += [Metric("eval/success_rate", run.eval_success, 0, BUDGET),
                 Metric("eval/mean_length", run.eval_length, 0, BUDGET),
                 Metric("eval/mean_return", -run.eval_length, 0, BUDGET)]
+    if run.hover is not None:
+        metrics += [Metric("eval/hover_fraction", run.hover, 0, BUDGET),
+                    Metric("eval/dwell_right_steps", 200 * run.hover, 0, BUDGET)]
     if run.per_episode_eval:
         lengths = run.eval_length + np.array([-2.0, -1.0, 0.0, 1.0, 2.0])
         metrics += [Metric("eval/episode_length", float(v), 0, e) for e, v in enumerate(lengths)]
@@ -81,16 +85,26 @@ def _log(client: MlflowClient, exp_id: str, parent: str, run: FakeRun) -> str:
     return rid
 
 
-def build_fake_experiment(uri: str, name: str, arms: tuple[str, ...] = ("hybrid", "baseline")) -> dict[str, str]:
-    """Create experiment ``name`` at ``uri``; returns {"arm-seed": run_id} of the runs a report must use."""
+# Every seed of every arm succeeds (5/5 vs 5/5); the kinematic arm hovers in detached evaluation.
+ALL_SUCCEED = [FakeRun(arm, s, 20 + 2 * s + shift, -100.0, 1.0, 120.0 + s, per_episode_eval=True, hover=hover)
+               for arm, shift, hover in [("hybrid", 0, 0.0), ("baseline", 20, 0.0), ("kinematic", 10, 0.4)]
+               for s in range(5)]
+
+
+def build_fake_experiment(uri: str, name: str, arms: tuple[str, ...] = ("hybrid", "baseline"),
+                          runs: list[FakeRun] | None = None) -> dict[str, str]:
+    """Create experiment ``name`` at ``uri`` from ``runs`` (default: ``HYBRID`` and ``BASELINE`` with a stale
+    duplicate and a failed run); returns {"arm-seed": run_id} of the runs a report must use."""
     client = MlflowClient(tracking_uri=uri)
     exp_id = client.create_experiment(name)
     parent = client.create_run(exp_id, tags={"vlmrl.kind": "sweep"}).info.run_id
-    _log(client, exp_id, parent, STALE)  # older duplicate of hybrid seed 0
+    if runs is None:
+        _log(client, exp_id, parent, STALE)  # older duplicate of hybrid seed 0
     kept: dict[str, str] = {}
-    for run in [*HYBRID, *BASELINE]:
+    for run in runs if runs is not None else [*HYBRID, *BASELINE]:
         if run.arm in arms:
             kept[f"{run.arm}-{run.seed}"] = _log(client, exp_id, parent, run)
-    _log(client, exp_id, parent, FAILED)
+    if runs is None:
+        _log(client, exp_id, parent, FAILED)
     client.set_terminated(parent)
     return kept

@@ -23,3 +23,22 @@ def test_fixed_evaluation_seeds_repeat_exactly() -> None:
     b = evaluate_detached(_energy_pumping, episodes=4, seed=123)
     assert np.array_equal(a.lengths, b.lengths)
     assert a.lengths.shape == (4,)
+
+
+class _Recorder:
+    def __init__(self) -> None:
+        self.logged: dict[str, list[tuple[int, float]]] = {}
+
+    def log(self, values: dict[str, float], step: int) -> None:
+        for k, v in values.items():
+            self.logged.setdefault(k, []).append((step, v))
+
+
+def test_detached_evaluation_logs_the_hovering_diagnostic() -> None:
+    from vlmrl_cli.training.worker import _log_eval
+
+    rec = _Recorder()
+    _log_eval(rec, evaluate_detached(_energy_pumping, episodes=2, seed=0))  # type: ignore[arg-type]
+    assert rec.logged["eval/hover_fraction"] == [(0, 0.0)]
+    assert 0 < rec.logged["eval/dwell_right_steps"][0][1] <= 10
+    assert len(rec.logged["eval/episode_length"]) == 2

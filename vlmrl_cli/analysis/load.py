@@ -27,6 +27,8 @@ EVAL_METRICS = {
     "eval/success_rate": "eval_success_rate",
     "eval/mean_length": "eval_mean_length",
     "eval/mean_return": "eval_mean_return",
+    "eval/hover_fraction": "eval_hover_fraction",  # NaN for runs older than the hovering diagnostic
+    "eval/dwell_right_steps": "eval_dwell_right_steps",
 }
 EVAL_EPISODE_METRIC = "eval/episode_length"
 

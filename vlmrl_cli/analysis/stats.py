@@ -4,11 +4,15 @@ Confidence intervals are percentile bootstrap intervals from ``scipy.stats.boots
 (percentile rather than BCa: with 3-10 seeds BCa is often undefined), resampling the seeds of
 each arm independently; randomness comes in as an explicit ``numpy.random.Generator``.
 Where an interval cannot be computed (fewer than 2 values, an arm that never reached the
-threshold) the bounds are NaN and ``Estimate.note`` says why.
+threshold) the bounds are NaN and ``Estimate.note`` says why. Proportions of seeds do not use the
+bootstrap (it collapses to [1, 1] when every seed succeeds): ``wilson_ci`` here and the Newcombe
+interval in ``analysis.proportions``. ``Streams`` gives each report section and metric its own
+random stream.
 """
 
 from __future__ import annotations
 
+import hashlib
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -18,6 +22,31 @@ import numpy.typing as npt
 from scipy import stats as sps
 
 DEFAULT_N_BOOT = 2000
+
+
+@dataclass(frozen=True)
+class Streams:
+    """Independent random streams keyed by name, all from one seed.
+
+    ``Streams(seed)("table2/reliability/hybrid")`` is a generator that depends only on the seed
+    and the key, so adding a metric (a new key) changes no other metric's interval.
+
+    Example:
+        >>> s = Streams(0)
+        >>> bool(s("a").random() == s("a").random()), bool(s("a").random() == s("b").random())
+        (True, False)
+    """
+
+    seed: int
+
+    def __call__(self, key: str) -> np.random.Generator:
+        words = np.frombuffer(hashlib.sha256(key.encode("utf-8")).digest()[:16], dtype=np.uint32)
+        return np.random.default_rng(np.random.SeedSequence([int(self.seed), *map(int, words)]))
+
+
+def stream(rng: np.random.Generator | Streams, key: str) -> np.random.Generator:
+    """The generator for ``key``: the keyed stream of ``Streams``, or ``rng`` itself when one generator is shared."""
+    return rng(key) if isinstance(rng, Streams) else rng
 
 
 @dataclass(frozen=True)

@@ -97,6 +97,24 @@ def steps_to_threshold(
     return int(steps[hit[0]]) if hit.size else None
 
 
+def full_window_steps_to_threshold(
+    timesteps: npt.ArrayLike, returns: npt.ArrayLike, threshold: float, window: int = 100
+) -> int | None:
+    """First global timestep at which the mean of the last ``window`` *complete* episodes reaches ``threshold``.
+
+    No partial window: nothing counts before ``window`` episodes have ended, so a lucky first
+    episode cannot meet the target on its own (``steps_to_threshold`` with ``min_episodes=window``).
+    Shapes and units as in ``steps_to_threshold``; ``None`` for a run that never reaches it.
+
+    Example:
+        >>> full_window_steps_to_threshold([100, 200, 300], [-100, -200, -50], -140, window=2)
+        300
+        >>> steps_to_threshold([100, 200, 300], [-100, -200, -50], -140, window=2)
+        100
+    """
+    return steps_to_threshold(timesteps, returns, threshold, window, min_episodes=window)
+
+
 def censored_steps_to_threshold(
     timesteps: npt.ArrayLike,
     returns: npt.ArrayLike,

@@ -9,11 +9,17 @@ Verdict rule (``VERDICT_RULE`` is printed in the report):
   **not reproduced** if it lies entirely on the other side (null included), or if it excludes the
   paper's value while still containing the null; otherwise (it contains both the null and the
   paper's value) **inconclusive**.
+* a comparative claim that also carries a test p-value (exact test for proportions, censored rank
+  test for steps) is reproduced only if that p-value is also below ``1 - ci``; otherwise inconclusive.
 * absolute claims (a value of one arm: 100% reliability, ~125 steps): **not reproduced** if our CI
   excludes the paper's value (widened by +-10% when the paper says "~"); **reproduced** if it
   contains it and our estimate is within 10% of it (or within the "~" tolerance); otherwise
   (a CI wide enough to hold the paper's value around an estimate far from it, e.g. 5/5 seeds
   succeeding against a claimed 60%) **inconclusive**.
+* proportions over seeds use score intervals (Wilson for one arm, Newcombe for a difference), so
+  5/5 vs 5/5 is a difference of 0 with CI about [-0.43, 0.43]: inconclusive, never [0, 0].
+* a claim that credits the VLM (``"vs": "kinematic"`` in ``reported.json``) is judged on hybrid vs
+  kinematic, the two arms that differ only by the VLM potential.
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from vlmrl_cli.analysis import stats
+from vlmrl_cli.report.attribution import compare_arms, lookup
 from vlmrl_cli.report.table2 import BASELINE, Table2, threshold_key
 
 MIN_SEEDS = 3
@@ -41,7 +48,12 @@ VERDICT_RULE = (
     "containing the null; otherwise inconclusive. Absolute claims (one arm's value): not reproduced if our 95% CI "
     f"excludes the paper's value (+-{100 * APPROX_TOLERANCE:.0f}% where the paper says '~'); reproduced if it holds "
     f"it and our estimate is within {100 * APPROX_TOLERANCE:.0f}% of it (or of the '~' tolerance); otherwise "
-    "inconclusive (the CI is too wide to tell)."
+    "inconclusive (the CI is too wide to tell). A comparative claim with a test p-value (Fisher exact for "
+    "proportions of seeds, Mann-Whitney U with DNF censored for steps) is reproduced only if that p-value is also "
+    "below 1 - the CI level; otherwise inconclusive. Proportions of seeds get score intervals (Wilson for one arm, "
+    "Newcombe's hybrid score interval for a difference), never a bootstrap that collapses to a point. A claim that "
+    "credits the VLM itself is judged on hybrid vs kinematic (same dense term, with and without the VLM); "
+    "without the kinematic arm it is not tested."
 )
 
 
@@ -52,6 +64,8 @@ def verdict(
     direction: str = ">",
     approximate: bool = False,
     n_seeds: int | None = None,
+    p_value: float | None = None,
+    alpha: float = 0.05,
 ) -> tuple[str, str]:
     """The verdict and its reason for one claim (see ``VERDICT_RULE``).
 
@@ -62,11 +76,15 @@ def verdict(
         direction: ``">"`` if the paper's effect is above the null, ``"<"`` if below.
         approximate: the paper's value is "~" (widen it by ``APPROX_TOLERANCE``).
         n_seeds: the fewest seeds behind the estimate in any arm (default ``estimate.n``).
+        p_value: a comparative claim's test p-value (NaN or ``None``: no test); at or above ``alpha``
+            a CI on the paper's side is not enough and the verdict is inconclusive.
 
     Example:
         >>> verdict(stats.Estimate(1.5, 1.2, 1.9, n=5), 1.4, null=1.0)
         ('reproduced', 'CI [1.2, 1.9] lies above 1; the paper value 1.4 is inside it')
         >>> verdict(stats.Estimate(1.5, 1.2, 1.9, n=2), 1.4, null=1.0)[0]
+        'inconclusive'
+        >>> verdict(stats.Estimate(1.5, 1.2, 1.9, n=5), 1.4, null=1.0, p_value=0.2)[0]
         'inconclusive'
     """
     n = estimate.n if n_seeds is None else n_seeds
@@ -92,15 +110,20 @@ def verdict(
     against = hi <= null if above else lo >= null
     side = "above" if above else "below"
     inside = paper is not None and lo <= paper <= hi
+    tested = p_value is not None and math.isfinite(p_value)
+    p_text = f"; test p={p_value:.2g}" if tested else ""
     if on_side:
         tail = "" if paper is None else (f"; the paper value {paper:g} is inside it" if inside
                                          else f"; the paper value {paper:g} is outside it (magnitude differs)")
-        return REPRODUCED, f"{ci_text} lies {side} {null:g}{tail}"
+        if tested and p_value is not None and p_value >= alpha:
+            return INCONCLUSIVE, f"{ci_text} lies {side} {null:g}{tail}, but the test p={p_value:.2g} >= {alpha:g}"
+        return REPRODUCED, f"{ci_text} lies {side} {null:g}{tail}{p_text}"
     if against:
-        return NOT_REPRODUCED, f"{ci_text} is not {side} {null:g}: no effect in the paper's direction"
+        return NOT_REPRODUCED, f"{ci_text} is not {side} {null:g}: no effect in the paper's direction{p_text}"
     if paper is not None and not inside:
-        return NOT_REPRODUCED, f"{ci_text} contains {null:g} and excludes the paper value {paper:g}"
-    return INCONCLUSIVE, f"{ci_text} contains the null {null:g}" + ("" if paper is None else f" and {paper:g}")
+        return NOT_REPRODUCED, f"{ci_text} contains {null:g} and excludes the paper value {paper:g}{p_text}"
+    return INCONCLUSIVE, (f"{ci_text} contains the null {null:g}" + ("" if paper is None else f" and {paper:g}")
+                          + p_text)
 
 
 @dataclass(frozen=True)
@@ -113,6 +136,8 @@ class ClaimResult:
     unit: str
     verdict: str
     reason: str
+    p_value: float = float("nan")
+    arms: str = ""  # the comparison judged, e.g. "hybrid vs kinematic"
 
 
 def _est_from_cell(cell: dict[str, Any] | None) -> stats.Estimate:
@@ -122,13 +147,25 @@ def _est_from_cell(cell: dict[str, Any] | None) -> stats.Estimate:
                           str(cell["note"] or ""))
 
 
+_NULLS = {"x": 1.0, "%": 0.0}
+
+
+def _comparison_unit(metric: str) -> str:
+    return "x" if metric.startswith("speedup_") else "%"
+
+
 def evaluate_claims(
-    table: Table2, per_seed: pd.DataFrame, reported: dict[str, Any], rng: np.random.Generator,
-    n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95,
+    table: Table2, per_seed: pd.DataFrame, reported: dict[str, Any], rng: np.random.Generator | stats.Streams,
+    n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, comparisons: pd.DataFrame | None = None,
 ) -> list[ClaimResult]:
-    """Every claim in ``reported["claims"]`` measured on our runs, with its verdict."""
+    """Every claim in ``reported["claims"]`` measured on our runs, with its verdict.
+
+    ``comparisons``: the attribution table (``attribution.compare_arms``), computed here when not
+    given. A claim with ``"vs": ARM`` and ``"metric": M`` is judged on hybrid vs ARM's comparison M.
+    """
+    if comparisons is None:
+        comparisons = compare_arms(per_seed, table.thresholds, rng, n_boot, ci)
     arms = set(table.arms)
-    top = max(table.thresholds)
     results = []
     for spec in reported.get("claims", []):
         cid, paper = spec["id"], spec.get("value")
@@ -136,29 +173,33 @@ def evaluate_claims(
         need: set[str] = set()
         est = stats.Estimate(float("nan"))
         null: float | None = None
-        direction, unit, n_seeds = ">", "", None
-        if cid.startswith("speedup_"):
-            t = float(cid.removeprefix("speedup_"))
-            need, unit, null = {"hybrid", BASELINE}, "x", 1.0
-            if t not in table.thresholds:
+        direction, unit, n_seeds, p_value, pair = ">", "", None, float("nan"), ""
+        comparison: tuple[str, str, str] | None = None  # (a, b, metric) of a comparative claim
+        if "vs" in spec:
+            comparison = ("hybrid", str(spec["vs"]), str(spec["metric"]))
+        elif cid.startswith("speedup_"):
+            comparison = ("hybrid", BASELINE, cid)
+        elif cid == "reliability_gap":
+            comparison = ("hybrid", BASELINE, "reliability_diff")
+        if comparison is not None:
+            a, b, metric = comparison
+            need, unit, pair = {a, b}, _comparison_unit(metric), f"{a} vs {b}"
+            null = _NULLS[unit]
+            if metric.startswith("speedup_") and float(metric.removeprefix("speedup_")) not in table.thresholds:
                 results.append(ClaimResult(cid, spec["section"], spec["text"], paper_f, est, unit, NOT_TESTED,
-                                           f"threshold {t:g} not in this report's thresholds"))
+                                           f"threshold {metric.removeprefix('speedup_')} not in this report's "
+                                           "thresholds", arms=pair))
                 continue
-            if need <= arms:
-                s = table.speedup(t, "hybrid")
-                est = _est_from_cell(s)
-                n_seeds = min(_n_reached(table, t, "hybrid"), _n_reached(table, t, BASELINE))
+            found = lookup(comparisons, a, b, metric) if need <= arms else None
+            if found is not None:
+                est, p_value = found
+            if metric.startswith("speedup_") and need <= arms:
+                t = float(metric.removeprefix("speedup_"))
+                n_seeds = min(_n_reached(table, t, a), _n_reached(table, t, b))
         elif cid in ("reliability_hybrid", "reliability_baseline"):
             arm = cid.removeprefix("reliability_")
             need, unit = {arm}, "%"
             est = _est_from_cell(table.cell("reliability", arm))
-        elif cid == "reliability_gap":
-            need, unit, null = {"hybrid", BASELINE}, "%", 0.0
-            if need <= arms:
-                key = threshold_key(top)
-                a = np.isfinite(per_seed.loc[per_seed["arm"] == "hybrid", key].to_numpy(dtype=float))
-                b = np.isfinite(per_seed.loc[per_seed["arm"] == BASELINE, key].to_numpy(dtype=float))
-                est = stats.difference_of_means(a.astype(float), b.astype(float), rng, n_boot, ci)
         elif cid.startswith("detached_success_"):
             arm = cid.removeprefix("detached_success_")
             need, unit = {arm}, "%"
@@ -170,9 +211,9 @@ def evaluate_claims(
         elif cid == "narrower_variance":
             need, null, direction, unit = {"hybrid", BASELINE}, 0.0, "<", ""
             if need <= arms:
-                a = per_seed.loc[per_seed["arm"] == "hybrid", "final_return"].to_numpy(dtype=float)
-                b = per_seed.loc[per_seed["arm"] == BASELINE, "final_return"].to_numpy(dtype=float)
-                est = stats.std_difference(a, b, rng, n_boot, ci)
+                a_ret = per_seed.loc[per_seed["arm"] == "hybrid", "final_return"].to_numpy(dtype=float)
+                b_ret = per_seed.loc[per_seed["arm"] == BASELINE, "final_return"].to_numpy(dtype=float)
+                est = stats.std_difference(a_ret, b_ret, stats.stream(rng, "claims/narrower_variance"), n_boot, ci)
         elif cid == "zero_convergence":
             need, unit = {"vision-float"}, "%"
             est = _est_from_cell(table.cell("reliability", "vision-float"))
@@ -181,14 +222,18 @@ def evaluate_claims(
             reason = f"arm {', '.join(sorted(missing))} not in this experiment"
             if cid == "zero_convergence":
                 reason += "; see `vlmrl taxonomy` for the pure-vision failure modes"
-            results.append(ClaimResult(cid, spec["section"], spec["text"], paper_f, est, unit, NOT_TESTED, reason))
+            results.append(ClaimResult(cid, spec["section"], spec["text"], paper_f, est, unit, NOT_TESTED, reason,
+                                       arms=pair))
             continue
         if n_seeds is None:
             n_seeds = min(int((per_seed["arm"] == a).sum()) for a in need)
-        v, reason = verdict(est, paper_f, null, direction, bool(spec.get("approximate")), n_seeds)
+        v, reason = verdict(est, paper_f, null, direction, bool(spec.get("approximate")), n_seeds, p_value,
+                            1.0 - ci)
         if cid == "narrower_variance":
             reason = "measure: std across seeds of the final return, hybrid minus baseline; " + reason
-        results.append(ClaimResult(cid, spec["section"], spec["text"], paper_f, est, unit, v, reason))
+        if pair:
+            reason = f"judged on {pair}; " + reason
+        results.append(ClaimResult(cid, spec["section"], spec["text"], paper_f, est, unit, v, reason, p_value, pair))
     return results
 
 
@@ -211,22 +256,26 @@ def claims_frame(results: list[ClaimResult]) -> pd.DataFrame:
     """Numeric table (CSV): one row per claim."""
     return pd.DataFrame([{
         "id": r.id, "section": r.section, "claim": r.claim, "paper": r.paper, "ours": r.estimate.value,
-        "ci_low": r.estimate.low, "ci_high": r.estimate.high, "n": r.estimate.n, "verdict": r.verdict,
-        "reason": r.reason, "note": r.estimate.note,
+        "ci_low": r.estimate.low, "ci_high": r.estimate.high, "n": r.estimate.n, "p_value": r.p_value,
+        "arms": r.arms, "verdict": r.verdict, "reason": r.reason, "note": r.estimate.note,
     } for r in results])
 
 
 def claims_markdown(results: list[ClaimResult]) -> str:
-    """Markdown table: claim, section, paper, ours [CI], verdict, reason."""
-    lines = ["| Claim | Section | Paper | Ours [95% CI] | Verdict | Why |", "| --- | --- | --- | --- | --- | --- |"]
+    """Markdown table: claim, section, arms compared, paper, ours [CI], p-value, verdict, reason."""
+    lines = ["| Claim | Section | Arms | Paper | Ours [95% CI] | p | Verdict | Why |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in results:
         ours = _fmt(r.estimate.value, r.unit)
         if r.estimate.has_ci:
             ours += f" [{_fmt(r.estimate.low, r.unit)}, {_fmt(r.estimate.high, r.unit)}]"
         paper = "narrower" if r.id == "narrower_variance" else _fmt(r.paper, r.unit)
+        if r.paper is None and r.unit in _NULLS and r.arms:  # a directional comparison: an effect beyond the null
+            paper = f"> {_fmt(_NULLS[r.unit], r.unit)}"
         if r.id == "detached_length_hybrid" and r.paper is not None:
             paper = "~" + paper
-        cells = [r.claim, r.section, paper, ours, f"**{r.verdict}**", r.reason]
+        p = f"{r.p_value:.2g}" if math.isfinite(r.p_value) else "—"
+        cells = [r.claim, r.section, r.arms or "—", paper, ours, p, f"**{r.verdict}**", r.reason]
         lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
     return "\n".join(lines) + "\n"
 

@@ -1,4 +1,5 @@
-"""Figures 2-4 of the paper, drawn with matplotlib's object API (no pyplot state, no global style).
+"""Figures 2-4 of the paper, the performance profile and the reward-hacking figure, drawn with
+matplotlib's object API (no pyplot state, no global style).
 
 Each ``plot_*`` function draws on ``ax`` (a new figure's axes when ``None``) and returns the axes;
 each ``figure*`` function builds a whole ~7-inch-wide figure with the VLM backend named in its
@@ -18,6 +19,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from vlmrl_cli.analysis import stats
+from vlmrl_cli.analysis.ranks import performance_profile
 from vlmrl_cli.analysis.thresholds import rolling_mean_return
 from vlmrl_cli.report.table2 import Table2, order_arms, threshold_key
 
@@ -207,3 +209,87 @@ def save_figure(fig: Figure, out: Path, stem: str, dpi: int = 200) -> list[Path]
     fig.savefig(paths[0], dpi=dpi)
     fig.savefig(paths[1])
     return paths
+
+
+def plot_performance_profile(final_returns: Mapping[str, np.ndarray], ax: Axes | None = None, ci: float = 0.95,
+                             n_points: int = 200) -> Axes:
+    """Performance profile of the final return: per arm, the fraction of seeds whose final return is
+    at least ``tau`` (a step function of ``tau``) with a pointwise Wilson band over seeds.
+
+    ``final_returns``: arm -> shape ``(n_seeds,)`` final native returns (NaN dropped).
+    """
+    ax = ax if ax is not None else _new_ax()
+    arms = list(final_returns)
+    finite = {a: v[np.isfinite(v)] for a, v in ((a, np.asarray(v, dtype=float)) for a, v in final_returns.items())}
+    every = np.concatenate([v for v in finite.values()] or [np.zeros(0)])
+    if every.size == 0:
+        return ax
+    pad = max(1.0, 0.05 * float(every.max() - every.min()))
+    taus = np.linspace(float(every.min()) - pad, float(every.max()) + pad, n_points)
+    for arm, values in finite.items():
+        if values.size == 0:
+            continue
+        frac = performance_profile(values, taus)
+        bands = [stats.wilson_ci(round(float(f) * values.size), int(values.size), ci) for f in frac]
+        color = arm_color(arm, arms)
+        ax.step(taus, frac, where="post", color=color, linewidth=1.5, label=f"{arm} (n={values.size})")
+        ax.fill_between(taus, [b.low for b in bands], [b.high for b in bands], step="post", color=color, alpha=0.15,
+                        linewidth=0)
+    ax.set_xlabel("final return threshold tau (mean native return, last window)", fontsize=SMALL + 1)
+    ax.set_ylabel("fraction of seeds >= tau", fontsize=SMALL + 1)
+    ax.set_ylim(-0.02, 1.02)
+    ax.legend(fontsize=SMALL, loc="lower left")
+    _style(ax)
+    return ax
+
+
+def figure_performance_profile(final_returns: Mapping[str, np.ndarray], vlm_note: str, ci: float = 0.95) -> Figure:
+    """The performance profile of the final return, one curve per arm."""
+    fig = Figure(figsize=(WIDTH_IN, 3.2), layout="constrained")
+    plot_performance_profile(final_returns, fig.subplots(), ci)
+    _suptitle(fig, f"Performance profile of the final return ({100 * ci:g}% Wilson band over seeds)", vlm_note)
+    return fig
+
+
+def plot_per_arm(values: Mapping[str, np.ndarray], ax: Axes | None = None, ylabel: str = "", box: bool = False
+                 ) -> Axes:
+    """One column per arm: every value as a dot (spread evenly, no randomness), with a box plot if ``box``.
+
+    ``values``: arm -> shape ``(n,)`` values (NaN dropped).
+    """
+    ax = ax if ax is not None else _new_ax()
+    arms = list(values)
+    for i, arm in enumerate(arms):
+        v = np.asarray(values[arm], dtype=float)
+        v = v[np.isfinite(v)]
+        if v.size == 0:
+            ax.annotate("not logged", (i, 0.5), xycoords=("data", "axes fraction"), ha="center", fontsize=SMALL)
+            continue
+        if box:
+            ax.boxplot(v, positions=[i], widths=0.5, showfliers=False, medianprops={"color": "black"})
+        offsets = np.linspace(-0.18, 0.18, v.size) if v.size > 1 else np.zeros(1)
+        ax.plot(i + offsets, v, "o", color=arm_color(arm, arms), markersize=3, alpha=0.6)
+    ax.set_xticks(range(len(arms)), arms)
+    ax.set_xlim(-0.6, len(arms) - 0.4)
+    ax.set_ylabel(ylabel, fontsize=SMALL + 1)
+    _style(ax)
+    return ax
+
+
+def figure_hacking(eval_lengths: Mapping[str, np.ndarray], hover: Mapping[str, np.ndarray],
+                   gap: Mapping[str, np.ndarray], vlm_note: str, hover_flag: float) -> Figure:
+    """Reward-hacking diagnostic: detached episode lengths, hover fraction per seed, shaped minus native return."""
+    fig = Figure(figsize=(WIDTH_IN, 3.0), layout="constrained")
+    ax_len, ax_hover, ax_gap = fig.subplots(1, 3)
+    plot_per_arm(eval_lengths, ax_len, "detached episode length (steps)", box=True)
+    ax_len.axhline(200, color="gray", linestyle="--", linewidth=0.7)
+    ax_len.set_title("detached episodes (200 = timeout)", fontsize=SMALL + 1)
+    plot_per_arm(hover, ax_hover, "hover fraction of detached steps")
+    ax_hover.axhline(hover_flag, color="tab:red", linestyle="--", linewidth=0.7)
+    ax_hover.set_title("per seed (dashed: flag)", fontsize=SMALL + 1)
+    plot_per_arm(gap, ax_gap, "shaped - native return (last window)")
+    ax_gap.set_title("per seed, training", fontsize=SMALL + 1)
+    for ax in (ax_len, ax_hover, ax_gap):
+        ax.tick_params(axis="x", labelrotation=30)
+    _suptitle(fig, "Reward-hacking diagnostic: does the policy hover short of the flag?", vlm_note)
+    return fig

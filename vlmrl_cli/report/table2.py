@@ -1,9 +1,10 @@
 """Table 2 of the paper (steps to reward thresholds, final reliability), ours beside the paper's.
 
 ``per_seed_table`` turns loaded runs into one row per (arm, seed); ``build_table2`` summarises
-it per arm (mean over seeds that reached each threshold with a bootstrap CI, DNF counts,
-speedup over ``baseline``, reliability with a Wilson CI, detached evaluation, final-return IQM
-and spread); ``to_markdown`` / ``to_latex`` / ``to_csv`` render it.
+it per arm (mean over seeds that reached each threshold with a bootstrap CI, DNF counts, the
+same with a full 100-episode window, speedup over ``baseline`` with a censored rank test,
+reliability and per-seed detached success with Wilson CIs, detached evaluation, final-return
+IQM and spread); ``to_markdown`` / ``to_latex`` / ``to_csv`` render it.
 """
 
 from __future__ import annotations
@@ -19,7 +20,9 @@ import pandas as pd
 
 from vlmrl_cli.analysis import stats
 from vlmrl_cli.analysis.load import ExperimentData
-from vlmrl_cli.analysis.thresholds import steps_to_threshold
+from vlmrl_cli.analysis.proportions import DETACHED_SUCCESS_CUT, detached_successes
+from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM, RankTest, censored_rank_test
+from vlmrl_cli.analysis.thresholds import full_window_steps_to_threshold, steps_to_threshold
 from vlmrl_cli.shaping.arms import ARMS
 
 BASELINE = "baseline"
@@ -43,10 +46,22 @@ def threshold_key(threshold: float) -> str:
     return f"steps_{threshold:g}"
 
 
+def full_window_key(threshold: float) -> str:
+    """Column/metric name of a threshold reached by a full window of episodes, e.g. ``full_steps_-130``."""
+    return f"full_{threshold_key(threshold)}"
+
+
+def is_steps(metric: str) -> bool:
+    """Whether ``metric`` is a steps-to-threshold row (partial or full window)."""
+    return metric.startswith(("steps_", "full_steps_"))
+
+
 def per_seed_table(data: ExperimentData, thresholds: Sequence[float], window: int = 100,
-                   min_episodes: int = 1) -> pd.DataFrame:
+                   min_episodes: int = 1, detached_cut: float = DETACHED_SUCCESS_CUT) -> pd.DataFrame:
     """One row per run: arm, seed, run_id, config_hash, budget, steps to each threshold (NaN = DNF),
-    final return (mean of the last ``window`` episodes), number of episodes and the eval metrics."""
+    the same with a full window (``full_steps_*``), final return (mean of the last ``window``
+    episodes), shaped minus native return over those episodes, number of episodes, the eval
+    metrics and ``detached_success`` (1 when the eval success rate is at least ``detached_cut``)."""
     rows = []
     by_run = dict(tuple(data.episodes.groupby("run_id", sort=False)))
     for run in data.runs.itertuples(index=False):
@@ -57,11 +72,18 @@ def per_seed_table(data: ExperimentData, thresholds: Sequence[float], window: in
         for t in thresholds:
             s = steps_to_threshold(ts, ret, t, window, min_episodes)
             row[threshold_key(t)] = float("nan") if s is None else float(s)
+            full = full_window_steps_to_threshold(ts, ret, t, window)
+            row[full_window_key(t)] = float("nan") if full is None else float(full)
         row["final_return"] = stats.final_return(ret, window)
+        shaped = ep["shaped_return"].to_numpy(dtype=float) if "shaped_return" in ep else np.full(len(ep), np.nan)
+        row["shaped_gap"] = stats.final_return(shaped - ret, window)
         row["episodes"] = len(ep)
         row["eval_success_rate"] = run.eval_success_rate
         row["eval_mean_length"] = run.eval_mean_length
         row["eval_mean_return"] = run.eval_mean_return
+        row["detached_success"] = float(detached_successes([run.eval_success_rate], detached_cut)[0])
+        row["hover_fraction"] = getattr(run, "eval_hover_fraction", float("nan"))
+        row["dwell_right_steps"] = getattr(run, "eval_dwell_right_steps", float("nan"))
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -123,60 +145,75 @@ def build_table2(
     eval_episodes: pd.DataFrame,
     reported: dict[str, Any],
     thresholds: Sequence[float],
-    rng: np.random.Generator,
+    rng: np.random.Generator | stats.Streams,
     window: int = 100,
     ci: float = 0.95,
     n_boot: int = stats.DEFAULT_N_BOOT,
+    detached_cut: float = DETACHED_SUCCESS_CUT,
+    n_perm: int = DEFAULT_N_PERM,
 ) -> Table2:
     """Table 2 from ``per_seed`` (see ``per_seed_table``) and per-episode eval lengths (may be empty).
 
-    Reliability is the fraction of seeds that reached the highest threshold (the paper: -130).
-    Detached eval mean length uses the per-episode lengths when logged (pooled over seeds),
-    else one value per seed.
+    Reliability is the fraction of seeds that reached the highest threshold (the paper: -130);
+    detached success the fraction of seeds whose detached success rate is at least
+    ``detached_cut``; both with Wilson intervals over seeds. Detached eval mean length uses the
+    per-episode lengths when logged (pooled over seeds), else one value per seed. ``rng``: one
+    shared generator, or ``Streams`` for one stream per (metric, arm) so that no cell's interval
+    depends on which other cells exist.
     """
     arms = tuple(order_arms(per_seed["arm"].unique().tolist()))
     top = max(thresholds)
     labels = {threshold_key(t): f"Steps to reach {t:g}" for t in thresholds}
+    labels |= {full_window_key(t): f"Steps to reach {t:g}, full {window}-episode window" for t in thresholds}
     labels |= {
         "reliability": f"Final reliability (seeds reaching {top:g})",
-        "eval_success": "Detached eval success rate",
+        "eval_success": f"Detached eval: seeds succeeding (success rate >= {100 * detached_cut:g}%)",
+        "eval_success_mean": "Detached eval success rate (mean over seeds, no CI)",
         "eval_length": "Detached eval mean episode length",
         "final_iqm": f"Final return IQM (last {window} episodes)",
         "final_std": "Final return std across seeds",
     }
     cells: list[dict[str, Any]] = []
-    steps_by_arm: dict[str, dict[float, np.ndarray]] = {}
     for arm in arms:
         d = per_seed[per_seed["arm"] == arm]
         n = len(d)
         budget = d["budget"].to_numpy(dtype=float)
-        steps_by_arm[arm] = {}
         for t in thresholds:
-            key = threshold_key(t)
-            s = d[key].to_numpy(dtype=float)
-            steps_by_arm[arm][t] = s
-            summ = stats.summarize_steps(s, budget, rng, n_boot, ci)
-            c = _cell(key, arm, summ.mean, _paper_values(reported, key, thresholds).get(arm), n, summ.n_reached)
-            c |= {"median": summ.median, "censored_mean": summ.censored_mean, "std": summ.std, "iqr": summ.iqr}
-            cells.append(c)
+            for key in (threshold_key(t), full_window_key(t)):
+                if key not in d:
+                    continue
+                s = d[key].to_numpy(dtype=float)
+                summ = stats.summarize_steps(s, budget, stats.stream(rng, f"table2/{key}/{arm}"), n_boot, ci)
+                c = _cell(key, arm, summ.mean, _paper_values(reported, key, thresholds).get(arm), n, summ.n_reached)
+                c |= {"median": summ.median, "censored_mean": summ.censored_mean, "std": summ.std, "iqr": summ.iqr}
+                cells.append(c)
         reached = np.isfinite(d[threshold_key(top)].to_numpy(dtype=float))
         rel = stats.reliability(reached, ci)
         cells.append(_cell("reliability", arm, rel, _paper_values(reported, "reliability", thresholds).get(arm), n,
                            int(reached.sum())))
-        succ = stats.mean_ci(d["eval_success_rate"].to_numpy(dtype=float), rng, n_boot, ci)
+        rates = d["eval_success_rate"].to_numpy(dtype=float)
+        per_seed_ok = detached_successes(rates, detached_cut)
+        per_seed_ok = per_seed_ok[np.isfinite(per_seed_ok)]
+        succ = stats.reliability(per_seed_ok > 0.5, ci)
         cells.append(_cell("eval_success", arm, succ, _paper_values(reported, "eval_success", thresholds).get(arm),
-                           succ.n))
+                           succ.n, int(per_seed_ok.sum())))
+        finite_rates = rates[np.isfinite(rates)]
+        mean_rate = stats.Estimate(float(finite_rates.mean()) if finite_rates.size else float("nan"),
+                                   n=int(finite_rates.size), note="per-episode rates averaged over seeds")
+        cells.append(_cell("eval_success_mean", arm, mean_rate, None, mean_rate.n))
         ev = eval_episodes[eval_episodes["arm"] == arm] if len(eval_episodes) else eval_episodes
+        length_rng = stats.stream(rng, f"table2/eval_length/{arm}")
         if len(ev):
-            length = stats.mean_ci(ev["length"].to_numpy(dtype=float), rng, n_boot, ci)
+            length = stats.mean_ci(ev["length"].to_numpy(dtype=float), length_rng, n_boot, ci)
             length = stats.Estimate(length.value, length.low, length.high, length.n,
                                     f"{len(ev)} episodes pooled over {ev['seed'].nunique()} seeds")
         else:
-            length = stats.mean_ci(d["eval_mean_length"].to_numpy(dtype=float), rng, n_boot, ci)
+            length = stats.mean_ci(d["eval_mean_length"].to_numpy(dtype=float), length_rng, n_boot, ci)
         cells.append(_cell("eval_length", arm, length, _paper_values(reported, "eval_length", thresholds).get(arm),
                            length.n))
         final = d["final_return"].to_numpy(dtype=float)
-        cells.append(_cell("final_iqm", arm, stats.iqm_ci(final, rng, n_boot, ci), None, n))
+        cells.append(_cell("final_iqm", arm, stats.iqm_ci(final, stats.stream(rng, f"table2/final_iqm/{arm}"), n_boot,
+                                                          ci), None, n))
         fin = final[np.isfinite(final)]
         std = float(fin.std(ddof=1)) if fin.size >= 2 else float("nan")
         cells.append(_cell("final_std", arm, stats.Estimate(std, n=int(fin.size)), None, n))
@@ -187,18 +224,46 @@ def build_table2(
         for arm in arms:
             if arm == BASELINE:
                 continue
-            if BASELINE in steps_by_arm:
-                est = stats.speedup(steps_by_arm[BASELINE][t], steps_by_arm[arm][t], rng, n_boot, ci)
+            if BASELINE in arms:
+                est, test = compare_steps(per_seed, arm, BASELINE, t, rng, n_boot, ci, n_perm)
             else:
-                est = stats.Estimate(float("nan"), note=NEEDS_BASELINE)
+                est, test = stats.Estimate(float("nan"), note=NEEDS_BASELINE), None
             speed_rows.append({"metric": threshold_key(t), "arm": arm, "value": est.value, "ci_low": est.low,
                                "ci_high": est.high, "n": est.n,
                                "paper": float(paper) if paper is not None and arm == "hybrid" else float("nan"),
-                               "note": est.note})
-    speed_cols = ["metric", "arm", "value", "ci_low", "ci_high", "n", "paper", "note"]
+                               "note": est.note, "p_value": test.p_value if test else float("nan"),
+                               "p_faster": test.p_faster if test else float("nan")})
+    speed_cols = ["metric", "arm", "value", "ci_low", "ci_high", "n", "paper", "note", "p_value", "p_faster"]
     paper_values = {m: _paper_values(reported, m, thresholds) for m in labels}
     return Table2(arms, tuple(thresholds), pd.DataFrame(cells), pd.DataFrame(speed_rows, columns=speed_cols),
                   labels, ci, paper_values)
+
+
+def speedup_key(threshold: float, arm: str, ref: str) -> str:
+    """The random stream of one speedup (shared by Table 2 and the attribution table, so both show one CI)."""
+    return f"speedup_{threshold:g}/{arm}-vs-{ref}"
+
+
+def arm_budget(per_seed: pd.DataFrame, arm: str) -> float | None:
+    """The arm's budget (timesteps) when all its seeds share one, else None."""
+    values = set(per_seed.loc[per_seed["arm"] == arm, "budget"].dropna().astype(float))
+    return values.pop() if len(values) == 1 else None
+
+
+def compare_steps(
+    per_seed: pd.DataFrame, arm: str, ref: str, threshold: float, rng: np.random.Generator | stats.Streams,
+    n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, n_perm: int = DEFAULT_N_PERM,
+) -> tuple[stats.Estimate, RankTest]:
+    """Speedup of ``arm`` over ``ref`` to ``threshold`` (mean steps over finishing seeds, bootstrap CI)
+    and the censored rank test of ``arm`` vs ``ref`` (DNF seeds kept, tied above every finish)."""
+    key = threshold_key(threshold)
+    a = per_seed.loc[per_seed["arm"] == arm, key].to_numpy(dtype=float)
+    r = per_seed.loc[per_seed["arm"] == ref, key].to_numpy(dtype=float)
+    skey = speedup_key(threshold, arm, ref)
+    est = stats.speedup(r, a, stats.stream(rng, skey), n_boot, ci)
+    test = censored_rank_test(a, r, stats.stream(rng, skey + "/rank"), n_perm, arm_budget(per_seed, arm),
+                              arm_budget(per_seed, ref))
+    return est, test
 
 
 # ---- formatting -----------------------------------------------------------------------------
@@ -212,9 +277,9 @@ def _fmt(metric: str, x: Any) -> str:
     if _isnan(x):
         return "—"
     x = float(x)
-    if metric.startswith("steps_"):
+    if is_steps(metric):
         return f"{x:,.0f}"
-    if metric in ("reliability", "eval_success"):
+    if metric in ("reliability", "eval_success", "eval_success_mean"):
         return f"{100 * x:.0f}%"
     return f"{x:,.1f}"
 
@@ -225,14 +290,14 @@ def format_cell(c: dict[str, Any] | None) -> str:
         return "—"
     metric = c["metric"]
     c = {**c, "n": int(c["n"] or 0), "n_reached": None if _isnan(c["n_reached"]) else int(c["n_reached"])}
-    if metric.startswith("steps_") and c["n_reached"] == 0:
+    if is_steps(metric) and c["n_reached"] == 0:
         return f"DNF {c['n']}/{c['n']}"
     text = _fmt(metric, c["value"])
     if not (_isnan(c["ci_low"]) or _isnan(c["ci_high"])):
         text += f" [{_fmt(metric, c['ci_low'])}, {_fmt(metric, c['ci_high'])}]"
-    if metric.startswith("steps_") and c["n_reached"] < c["n"]:
+    if is_steps(metric) and c["n_reached"] < c["n"]:
         text += f" (DNF {c['n'] - c['n_reached']}/{c['n']})"
-    if metric == "reliability":
+    if metric in ("reliability", "eval_success"):
         text += f" ({c['n_reached']}/{c['n']})"
     if metric == "final_std" or (c["n"] == 1 and metric != "reliability"):
         text += f" (n={c['n']})"
@@ -249,6 +314,8 @@ def format_speedup(s: dict[str, Any] | None) -> str:
     text = f"{s['value']:.2f}x"
     if not (_isnan(s["ci_low"]) or _isnan(s["ci_high"])):
         text += f" [{s['ci_low']:.2f}, {s['ci_high']:.2f}]"
+    if not _isnan(s.get("p_value")):
+        text += f" (rank p={s['p_value']:.2g})"
     return text
 
 
@@ -270,13 +337,13 @@ def display_frame(table: Table2) -> pd.DataFrame:
             rec[f"{arm} (ours, mean [{ci_pct}])"] = format_cell(table.cell(metric, arm))
         for arm in ("hybrid", BASELINE):
             rec[f"{arm} (paper)"] = _paper_cell(metric, table.paper.get(metric, {}).get(arm))
-        is_steps = metric.startswith("steps_")
+        partial = metric.startswith("steps_")  # speedups are shown beside the paper's (partial) window
         for arm in speed_arms:
             col = f"speedup {arm} (ours)"
             if not table.has_baseline:
-                rec[col] = NEEDS_BASELINE if is_steps else ""
+                rec[col] = NEEDS_BASELINE if partial else ""
             else:
-                rec[col] = format_speedup(table.speedup(float(metric.removeprefix("steps_")), arm)) if is_steps else ""
+                rec[col] = format_speedup(table.speedup(float(metric.removeprefix("steps_")), arm)) if partial else ""
         paper_speed = table.paper.get(metric, {}).get("speedup")
         rec["speedup (paper)"] = f"{float(paper_speed):.1f}x" if paper_speed is not None else ""
         records.append(rec)

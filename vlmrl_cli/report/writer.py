@@ -1,5 +1,6 @@
 """`vlmrl report`: read finished runs from MLflow (never retrain) and write Table 2, Figures 2-4,
-the claims table and ``report.md``, then log them as artifacts of a ``vlmrl.kind=report`` run."""
+the claims table, the attribution table, the performance profile, the reward-hacking diagnostic
+and ``report.md``, then log them as artifacts of a ``vlmrl.kind=report`` run."""
 
 from __future__ import annotations
 
@@ -16,10 +17,12 @@ import pandas as pd
 from vlmrl_cli import paper
 from vlmrl_cli.analysis import stats
 from vlmrl_cli.analysis.load import ExperimentData, load_experiment
+from vlmrl_cli.analysis.proportions import DETACHED_SUCCESS_CUT
+from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.provenance import flatten
+from vlmrl_cli.report import attribution, figures, hacking
 from vlmrl_cli.report import claims as claims_mod
-from vlmrl_cli.report import figures
 from vlmrl_cli.report.table2 import (
     BASELINE,
     Table2,
@@ -29,6 +32,7 @@ from vlmrl_cli.report.table2 import (
     to_markdown,
     write_table2,
 )
+from vlmrl_cli.shaping.hacking import HOVER_FLAG
 from vlmrl_cli.tracking import store
 
 DEFAULT_REPORTED = paper.REPORTED
@@ -46,7 +50,9 @@ class ReportConfig:
     min_episodes: int = 1  # fewest completed episodes before a rolling mean counts
     ci: float = 0.95  # confidence level of every interval
     n_boot: int = stats.DEFAULT_N_BOOT  # bootstrap resamples
-    seed: int = 0  # seed of the bootstrap generator
+    n_perm: int = DEFAULT_N_PERM  # rank-test permutations (fewer splits of the seeds are enumerated exactly)
+    seed: int = 0  # seed of the random streams (one per report section and metric)
+    detached_cut: float = DETACHED_SUCCESS_CUT  # a seed succeeds detached when this share of its episodes do
     reported: Path | None = None  # the paper's numbers (default: the packaged vlmrl_cli/paper/reported.json)
     log_to_mlflow: bool = True  # log the outputs as artifacts of a vlmrl.kind=report run
 
@@ -72,6 +78,10 @@ def _validate(cfg: ReportConfig) -> None:
         raise BadInput(f"the confidence level must be between 0 and 1, got {cfg.ci}.")
     if cfg.n_boot < 10:
         raise BadInput(f"use at least 10 bootstrap resamples, got {cfg.n_boot}.")
+    if cfg.n_perm < 10:
+        raise BadInput(f"use at least 10 rank-test permutations, got {cfg.n_perm}.")
+    if not 0.0 < cfg.detached_cut <= 1.0:
+        raise BadInput(f"the detached success cut must be in (0, 1], got {cfg.detached_cut}.")
 
 
 def ensure_writable(out: Path) -> None:
@@ -178,8 +188,33 @@ def _disagreements(table: Table2, results: Sequence[claims_mod.ClaimResult]) -> 
     return lines
 
 
+def _statistics_md(cfg: ReportConfig) -> list[str]:
+    ci = f"{100 * cfg.ci:g}%"
+    return [
+        "## How the numbers are computed", "",
+        "- Unit: every claim is per seed unless it says 'episodes'. A seed counts as a detached success when at "
+        f"least {100 * cfg.detached_cut:g}% of its detached evaluation episodes reach the flag (trained policies are "
+        "close to all-or-nothing, so the cut rarely matters); the paper's '40% failure' is read as 2 of 5 seeds.",
+        f"- Proportions of seeds (reliability, detached success): {ci} Wilson score interval for one arm; for a "
+        "difference of two arms Newcombe's hybrid score interval (method 10, Newcombe 1998) and a two-sided Fisher "
+        "exact p-value. These never collapse to a point: 5/5 vs 5/5 is 0 [-0.43, 0.43].",
+        f"- Steps to a threshold: mean over the seeds that reached it with a {ci} percentile bootstrap over seeds "
+        f"({cfg.n_boot} resamples); a speedup is the ratio of those means. Beside it, a Mann-Whitney U test on all "
+        "seeds with each DNF censored at the budget (tied with the other DNFs, slower than every finish), p-value "
+        f"from the exact permutation distribution (or {cfg.n_perm} random permutations when there are more splits).",
+        f"- Full window: the 'full {cfg.window}-episode window' rows count a threshold only once {cfg.window} "
+        "episodes have completed (no partial window at the start); the plain rows follow SB3's ep_rew_mean "
+        f"(partial windows count once {cfg.min_episodes} episode(s) completed), the paper's reading.",
+        "- Aggregates: probability of improvement P(final return of a seed of A > one of B), ties half, with a "
+        f"{ci} bootstrap over seeds (descriptive: it may collapse when the arms separate completely; the rank test "
+        "is the seed-level test); the performance profile plots the share of seeds with final return >= tau.",
+        f"- Randomness: each section and metric draws from its own stream of seed {cfg.seed} (keyed by name), so "
+        "adding a metric changes no other interval.", ""]
+
+
 def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: Sequence[claims_mod.ClaimResult],
-               per_seed: pd.DataFrame, note: str, warns: Sequence[str]) -> str:
+               per_seed: pd.DataFrame, note: str, warns: Sequence[str], comparisons: pd.DataFrame,
+               hack: pd.DataFrame) -> str:
     simulated = bool(data.runs["simulated"].any())
     parts = [f"# Reproduction report: experiment `{data.experiment_name}`", ""]
     if simulated:
@@ -192,7 +227,7 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
               "episode(s) completed); means are over seeds that reached it, DNF = did not reach it within the "
               "budget.",
               f"- Intervals: {100 * cfg.ci:g}% percentile bootstrap over seeds ({cfg.n_boot} resamples, seed "
-              f"{cfg.seed}); reliability uses a Wilson interval.", ""]
+              f"{cfg.seed}) for means and ratios; score intervals for proportions of seeds (see below).", ""]
     if warns:
         parts += ["## Warnings", "", *[f"- {w}" for w in warns], ""]
     parts += ["## Table 2: ours vs the paper", "", to_markdown(table)]
@@ -204,6 +239,26 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
     parts += (dis or ["- No claim is contradicted by our intervals (see the verdicts below)."]) + [""]
     parts += ["## Claims", "", "Verdict rule: " + claims_mod.VERDICT_RULE, "",
               claims_mod.claims_markdown(list(results)),
+              "The paper credits its speedup and its detached success to the VLM; rows judged on hybrid vs kinematic "
+              "test that credit (the two arms share the dense kinematic term and differ only by the VLM potential).",
+              "", *_statistics_md(cfg), "## Attribution: what the VLM and the dense term each add", ""]
+    if len(comparisons):
+        parts += [attribution.attribution_markdown(comparisons, cfg.ci),
+                  "Files: [attribution.md](attribution.md), [attribution.csv](attribution.csv).", ""]
+    else:
+        parts += ["No pair of arms to compare (needs two of hybrid, kinematic, semantic, baseline).", ""]
+    if "hybrid" in table.arms and "kinematic" not in table.arms:
+        parts += ["Without the `kinematic` arm nothing here separates the VLM from the dense term: claims that "
+                  "credit the VLM are not tested.", ""]
+    parts += ["## Aggregates", "", "![Performance profile](performance_profile.png)", "",
+              "Performance profile: share of seeds whose final return (last window) is at least tau, per arm, with a "
+              "pointwise Wilson band; probabilities of improvement are the `P(final return higher)` rows above.", "",
+              "## Reward hacking: hovering short of the flag", "",
+              "R_kin = max(0, 2(x + 0.4)) pays up to +1.8 per step just left of the flag, more than the -1 step "
+              "cost, so parking near x = 0.45 can pay more than finishing. " + hacking.DEFINITION, "",
+              hacking.hacking_markdown(hack, cfg.ci), "![Reward hacking](hacking.png)", "",
+              "Reward hacking: detached episode lengths per arm, hover fraction per seed, shaped minus native "
+              "return per seed.", "",
               "## Figures", "",
               "![Figure 2](figure2.png)", "", "Figure 2: mean steps to each threshold (hollow diamonds: the paper).",
               "", "![Figure 3](figure3.png)", "", "Figure 3: per-seed training curves.", "",
@@ -232,6 +287,14 @@ def _log_report_run(client: Any, data: ExperimentData, cfg: ReportConfig, files:
     return rid
 
 
+def _write_frame(frame: pd.DataFrame, stem: Path, vlm: str, markdown: str) -> list[Path]:
+    """``stem.md`` (``markdown``) and ``stem.csv`` (``frame`` with a ``vlm`` column); returns both paths."""
+    md, csv = stem.with_suffix(".md"), stem.with_suffix(".csv")
+    md.write_text(markdown, encoding="utf-8")
+    frame.assign(vlm=vlm).to_csv(csv, index=False)
+    return [md, csv]
+
+
 def write_report(cfg: ReportConfig) -> ReportResult:
     """Read the experiment's finished runs and write every report file under ``cfg.out``.
 
@@ -243,12 +306,15 @@ def write_report(cfg: ReportConfig) -> ReportResult:
     reported = load_reported(cfg.reported)
     client = store.connect(cfg.tracking_uri)
     data = load_experiment(client, cfg.experiment)
-    rng = np.random.default_rng(cfg.seed)
+    streams = stats.Streams(cfg.seed)
     thresholds = tuple(float(t) for t in cfg.thresholds)
 
-    per_seed = per_seed_table(data, thresholds, cfg.window, cfg.min_episodes)
-    table = build_table2(per_seed, data.eval_episodes, reported, thresholds, rng, cfg.window, cfg.ci, cfg.n_boot)
-    results = claims_mod.evaluate_claims(table, per_seed, reported, rng, cfg.n_boot, cfg.ci)
+    per_seed = per_seed_table(data, thresholds, cfg.window, cfg.min_episodes, cfg.detached_cut)
+    table = build_table2(per_seed, data.eval_episodes, reported, thresholds, streams, cfg.window, cfg.ci, cfg.n_boot,
+                         cfg.detached_cut, cfg.n_perm)
+    comparisons = attribution.compare_arms(per_seed, thresholds, streams, cfg.n_boot, cfg.ci, cfg.n_perm)
+    results = claims_mod.evaluate_claims(table, per_seed, reported, streams, cfg.n_boot, cfg.ci, comparisons)
+    hack = hacking.hacking_frame(per_seed, data.eval_episodes, cfg.ci)
     note = vlm_note(data.runs)
     warns = _warnings(data, table)
 
@@ -257,18 +323,33 @@ def write_report(cfg: ReportConfig) -> ReportResult:
     fig_note = figure_vlm_note(data.runs)
     files += write_table2(table, out, fig_note)
     curves = figures.seed_curves(data.episodes, cfg.window, cfg.min_episodes)
+    arms = list(table.arms)
     figs = {"figure2": figures.figure2(table, fig_note),
             "figure3": figures.figure3(curves, fig_note, thresholds, cfg.window),
-            "figure4": figures.figure4(curves, fig_note, rng, thresholds, cfg.window, cfg.n_boot, cfg.ci)}
+            "figure4": figures.figure4(curves, fig_note, streams("figure4"), thresholds, cfg.window, cfg.n_boot,
+                                       cfg.ci),
+            "performance_profile": figures.figure_performance_profile(
+                hacking.per_arm(per_seed, "final_return", arms), fig_note, cfg.ci),
+            "hacking": figures.figure_hacking(hacking.per_arm(data.eval_episodes, "length", arms),
+                                              hacking.per_arm(per_seed, "hover_fraction", arms),
+                                              hacking.per_arm(per_seed, "shaped_gap", arms), fig_note,
+                                              HOVER_FLAG)}
     for stem, fig in figs.items():
         files += figures.save_figure(fig, out, stem)
     files += claims_mod.write_claims(results, out, fig_note)
+    files += _write_frame(comparisons, out / "attribution", fig_note,
+                          "# Attribution: pairwise comparisons of arms\n\n" + fig_note + ".\n\n"
+                          + attribution.attribution_markdown(comparisons, cfg.ci))
+    files += _write_frame(hack, out / "hacking", fig_note,
+                          "# Reward-hacking diagnostic\n\n" + fig_note + ".\n\n" + hacking.DEFINITION + "\n\n"
+                          + hacking.hacking_markdown(hack, cfg.ci))
     per_seed_path = out / "per_seed.csv"
     labelled = per_seed.merge(data.runs[["run_id", "vlm", "simulated"]], on="run_id", how="left")
     labelled.to_csv(per_seed_path, index=False)
     files.append(per_seed_path)
     report_path = out / "report.md"
-    report_path.write_text(_report_md(cfg, data, table, results, per_seed, note, warns), encoding="utf-8")
+    report_path.write_text(_report_md(cfg, data, table, results, per_seed, note, warns, comparisons, hack),
+                           encoding="utf-8")
     files.append(report_path)
 
     run_id = None

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import gymnasium as gym
 import numpy as np
 
+from vlmrl_cli.shaping.hacking import HoverSummary, summarize_hovering
 from vlmrl_cli.training.callbacks import SUCCESS_LENGTH
 
 Policy = Callable[[np.ndarray], int]
@@ -15,11 +16,16 @@ Policy = Callable[[np.ndarray], int]
 
 @dataclass(frozen=True)
 class EvalResult:
-    """Per-episode figures of a detached evaluation, each shape (episodes,)."""
+    """Per-episode figures of a detached evaluation, each shape (episodes,).
+
+    ``positions``: one array of shape ``(length_i,)`` per episode, the car's x after each step
+    (for the hovering diagnostic; empty when not recorded).
+    """
 
     returns: np.ndarray
     lengths: np.ndarray
     successes: np.ndarray
+    positions: tuple[np.ndarray, ...] = field(default=())
 
     @property
     def success_rate(self) -> float:
@@ -32,6 +38,12 @@ class EvalResult:
     @property
     def mean_return(self) -> float:
         return float(self.returns.mean())
+
+    @property
+    def hovering(self) -> HoverSummary:
+        """Hover fraction and dwell right of x = 0.3 (see ``shaping.hacking``); NaN without positions."""
+        return summarize_hovering(self.positions, self.successes > 0.5) if self.positions else HoverSummary(
+            float("nan"), float("nan"), 0)
 
 
 def evaluate_detached(policy: Policy, episodes: int, seed: int) -> EvalResult:
@@ -46,19 +58,22 @@ def evaluate_detached(policy: Policy, episodes: int, seed: int) -> EvalResult:
         (1.0, True)
     """
     env = gym.make("MountainCar-v0")
-    returns, lengths, successes = [], [], []
+    returns, lengths, successes, positions = [], [], [], []
     try:
         for i in range(episodes):
             obs, _ = env.reset(seed=seed + i)
             total, length, done, terminated = 0.0, 0, False, False
+            xs: list[float] = []
             while not done:
                 obs, reward, terminated, truncated, _ = env.step(policy(obs))
                 total += float(reward)
                 length += 1
+                xs.append(float(obs[0]))
                 done = terminated or truncated
             returns.append(total)
             lengths.append(length)
             successes.append(bool(terminated) and length <= SUCCESS_LENGTH)
+            positions.append(np.asarray(xs))
     finally:
         env.close()
-    return EvalResult(np.asarray(returns), np.asarray(lengths), np.asarray(successes, dtype=float))
+    return EvalResult(np.asarray(returns), np.asarray(lengths), np.asarray(successes, dtype=float), tuple(positions))

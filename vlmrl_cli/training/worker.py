@@ -163,6 +163,10 @@ def train_job(
 def _log_eval(metrics: store.BatchLogger, result: EvalResult) -> None:
     metrics.log({"eval/success_rate": result.success_rate, "eval/mean_length": result.mean_length,
                  "eval/mean_return": result.mean_return}, step=0)
+    if result.positions:  # the hovering diagnostic (issue 9): R_kin can pay more for parking than finishing
+        hover = result.hovering
+        metrics.log({"eval/hover_fraction": hover.hover_fraction, "eval/dwell_right_steps": hover.dwell_right_steps},
+                    step=0)
     for i, (ret, length, ok) in enumerate(zip(result.returns, result.lengths, result.successes, strict=True)):
         metrics.log({"eval/episode_return": float(ret), "eval/episode_length": float(length),
                      "eval/episode_success": float(ok)}, step=i)

@@ -1,0 +1,75 @@
+from __future__ import annotations
+
+import math
+from itertools import combinations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from vlmrl_cli.analysis.ranks import censored_rank_test, performance_profile, probability_of_improvement
+
+
+def _rng() -> np.random.Generator:
+    return np.random.default_rng(0)
+
+
+def test_dnf_is_kept_as_the_slowest_not_dropped() -> None:
+    # a: 3 finished seeds; b: 1 finished (faster than all of a) and 2 DNF. Dropping the DNF would
+    # make b look faster; censored, b's DNF seeds are slower than every seed of a.
+    a = [200.0, 210.0, 220.0]
+    b = [100.0, np.nan, np.nan]
+    t = censored_rank_test(a, b, _rng(), budget_a=1000, budget_b=1000)
+    # U counts pairs with a_i > b_j (a slower) plus half the ties: every a is slower than b's 100 only: U = 3
+    assert t.u == 3.0 and t.p_faster == pytest.approx(1 - 3 / 9)
+    assert (t.n_dnf_a, t.n_dnf_b) == (0, 2) and t.note == ""
+    # exact permutation p: of the C(6,3) = 20 splits, those with U <= 3 or U >= 6 (|U - 4.5| >= 1.5)
+    values = np.array([200, 210, 220, 100, np.inf, np.inf])
+    us = []
+    for idx in combinations(range(6), 3):
+        x = values[list(idx)]
+        y = np.delete(values, list(idx))
+        us.append(float(np.sum((x[:, None] > y[None, :]) + 0.5 * (x[:, None] == y[None, :]))))
+    expected = np.mean(np.abs(np.array(us) - 4.5) >= 1.5 - 1e-12)
+    assert t.p_value == pytest.approx(expected)
+
+
+def test_all_dnf_on_both_sides_is_no_evidence() -> None:
+    t = censored_rank_test([np.nan] * 5, [np.nan] * 5, _rng())
+    assert t.p_value == 1.0 and t.p_faster == 0.5
+
+
+def test_complete_separation_of_five_vs_five_is_exact() -> None:
+    t = censored_rank_test([1.0, 2, 3, 4, 5], [6.0, 7, 8, 9, np.nan], _rng())
+    assert t.p_faster == 1.0 and t.p_value == pytest.approx(2 / math.comb(10, 5))
+
+
+def test_different_budgets_and_single_seeds_are_noted() -> None:
+    t = censored_rank_test([1.0], [np.nan, 3.0], _rng(), budget_a=10, budget_b=20)
+    assert "budgets differ" in t.note and "no test" in t.note and np.isnan(t.p_value) and t.p_faster == 1.0
+
+
+def test_probability_of_improvement_by_hand_and_its_interval() -> None:
+    # pairs (x > y): 3>1 yes, 3=3 half, 4>1, 4>3 -> (1 + 0.5 + 1 + 1) / 4
+    e = probability_of_improvement([3.0, 4.0, 4.0], [1.0, 3.0, 3.0], _rng(), n_boot=200)
+    assert e.value == pytest.approx((1 + 0.5 + 0.5 + 1 + 1 + 1 + 1 + 1 + 1) / 9)
+    assert e.low <= e.value <= e.high
+    sep = probability_of_improvement([5.0, 6.0], [1.0, 2.0], _rng(), n_boot=100)
+    assert sep.value == 1.0 and "degenerate" in sep.note
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(-200, -80), min_size=1, max_size=8), st.lists(st.floats(-200, -80), min_size=1,
+                                                                         max_size=8))
+def test_probability_of_improvement_is_complementary(x: list[float], y: list[float]) -> None:
+    a = probability_of_improvement(x, y, _rng(), n_boot=20).value
+    b = probability_of_improvement(y, x, _rng(), n_boot=20).value
+    assert a + b == pytest.approx(1.0)
+
+
+@given(st.lists(st.floats(-200, -80), min_size=1, max_size=10))
+def test_performance_profile_falls_from_one_to_zero(values: list[float]) -> None:
+    taus = np.linspace(-201, -79, 30)
+    p = performance_profile(values, taus)
+    assert p[0] == 1.0 and p[-1] == 0.0 and np.all(np.diff(p) <= 0)

@@ -1,0 +1,105 @@
+"""Proportions over seeds: score intervals and exact tests, never a bootstrap.
+
+A proportion over a handful of seeds (5/5 succeeded) has a percentile-bootstrap interval that
+collapses to the point [1, 1]; score intervals do not. One arm gets a Wilson interval
+(``stats.wilson_ci``); a difference of two independent arms gets Newcombe's hybrid score interval
+(method 10 of Newcombe 1998, built from the two Wilson intervals) and a two-sided Fisher exact
+test. The unit of every count here is the seed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy import stats as sps
+
+from vlmrl_cli.analysis.stats import Estimate, wilson_ci
+
+#: A seed counts as a detached success when at least this fraction of its detached evaluation
+#: episodes reached the flag. Trained MountainCar policies are bimodal (about 0% or 100% of
+#: episodes), so the claim "the baseline fails 40%" is read per seed and the cut rarely matters.
+DETACHED_SUCCESS_CUT = 0.9
+
+
+@dataclass(frozen=True)
+class ProportionComparison:
+    """``k_a/n_a - k_b/n_b`` over seeds: the difference with its Newcombe interval and an exact p-value."""
+
+    k_a: int
+    n_a: int
+    k_b: int
+    n_b: int
+    difference: Estimate
+    p_value: float
+    test: str = "Fisher exact, two-sided"
+
+
+def newcombe_difference(k_a: int, n_a: int, k_b: int, n_b: int, ci: float = 0.95) -> Estimate:
+    """``k_a/n_a - k_b/n_b`` (a difference of proportions in [-1, 1]) with Newcombe's hybrid score interval.
+
+    Method 10 of Newcombe (1998): with Wilson limits ``(l_a, u_a)``, ``(l_b, u_b)`` and
+    ``d = p_a - p_b``, the interval is ``[d - sqrt((p_a - l_a)^2 + (u_b - p_b)^2),
+    d + sqrt((u_a - p_a)^2 + (p_b - l_b)^2)]``. It never collapses to a point: 5/5 vs 5/5
+    gives about [-0.43, 0.43].
+
+    Example:
+        >>> e = newcombe_difference(5, 5, 5, 5)
+        >>> e.value, round(e.low, 3), round(e.high, 3)
+        (0.0, -0.434, 0.434)
+    """
+    if n_a <= 0 or n_b <= 0:
+        return Estimate(float("nan"), n=int(min(n_a, n_b, 0)), note="an arm has no seeds")
+    a, b = wilson_ci(k_a, n_a, ci), wilson_ci(k_b, n_b, ci)
+    d = a.value - b.value
+    low = d - math.hypot(a.value - a.low, b.high - b.value)
+    high = d + math.hypot(a.high - a.value, b.value - b.low)
+    return Estimate(float(d), float(max(-1.0, low)), float(min(1.0, high)), n=int(min(n_a, n_b)),
+                    note=f"{k_a}/{n_a} vs {k_b}/{n_b} seeds; Newcombe hybrid score interval")
+
+
+def exact_test(k_a: int, n_a: int, k_b: int, n_b: int) -> float:
+    """Two-sided Fisher exact p-value for ``k_a/n_a`` vs ``k_b/n_b`` (1.0 when both arms agree entirely).
+
+    Example:
+        >>> round(exact_test(5, 5, 0, 5), 4), exact_test(5, 5, 5, 5)
+        (0.0079, 1.0)
+    """
+    if n_a <= 0 or n_b <= 0:
+        return float("nan")
+    table = [[int(k_a), int(n_a - k_a)], [int(k_b), int(n_b - k_b)]]
+    return float(sps.fisher_exact(table, alternative="two-sided").pvalue)
+
+
+def compare_proportions(a: npt.ArrayLike, b: npt.ArrayLike, ci: float = 0.95) -> ProportionComparison:
+    """Compare two arms' per-seed successes (bool arrays of shape ``(n_a,)``, ``(n_b,)``; NaN dropped).
+
+    Example:
+        >>> c = compare_proportions([1, 1, 1, 1, 1], [1, 1, 1, 0, 0])
+        >>> round(c.difference.value, 2), round(c.p_value, 3)
+        (0.4, 0.444)
+    """
+    xa, xb = _bools(a), _bools(b)
+    ka, na, kb, nb = int(xa.sum()), int(xa.size), int(xb.sum()), int(xb.size)
+    return ProportionComparison(ka, na, kb, nb, newcombe_difference(ka, na, kb, nb, ci), exact_test(ka, na, kb, nb))
+
+
+def _bools(values: npt.ArrayLike) -> np.ndarray:
+    x = np.asarray(values, dtype=float).reshape(-1)
+    return x[np.isfinite(x)] > 0.5
+
+
+def detached_successes(success_rates: npt.ArrayLike, cut: float = DETACHED_SUCCESS_CUT) -> np.ndarray:
+    """Per seed: did its detached evaluation succeed? Shape ``(n_seeds,)`` of floats 1/0, NaN kept.
+
+    ``success_rates`` (shape ``(n_seeds,)``) is each seed's fraction of detached episodes that
+    reached the flag; a seed succeeds when that is at least ``cut``.
+
+    Example:
+        >>> detached_successes([1.0, 0.95, 0.2, float("nan")])
+        array([ 1.,  1.,  0., nan])
+    """
+    r = np.asarray(success_rates, dtype=float).reshape(-1)
+    return np.where(np.isfinite(r), (r >= cut).astype(float), np.nan)

@@ -1,0 +1,149 @@
+"""Rank-based comparisons of two arms over seeds: censored rank test, probability of improvement,
+performance profile.
+
+Steps to a threshold are right-censored: a seed that did not finish (DNF) is only known to need
+more than its budget. Dropping it flatters the arm that fails most; the rank test here keeps it,
+as a value tied with every other DNF and above every finished seed.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy import stats as sps
+
+from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, bootstrap_ci
+
+#: Permutations of the rank test; small experiments (<= this many splits) are enumerated exactly.
+DEFAULT_N_PERM = 9999
+
+
+@dataclass(frozen=True)
+class RankTest:
+    """A two-sided Mann-Whitney U test of arm ``a`` vs arm ``b`` on censored steps.
+
+    ``p_faster`` = P(a seed of ``a`` needs fewer steps than one of ``b``) + half the ties
+    (``1 - U/(n_a n_b)``): 0.5 is no difference, above 0.5 favours ``a``.
+    """
+
+    u: float
+    p_value: float
+    p_faster: float
+    n_a: int
+    n_b: int
+    n_dnf_a: int
+    n_dnf_b: int
+    note: str = ""
+
+
+def censor(steps: npt.ArrayLike) -> np.ndarray:
+    """Steps to a threshold (shape ``(n,)``, NaN = DNF) with each DNF as ``+inf``: tied with every
+    other DNF and ranked above every finished seed.
+
+    Example:
+        >>> censor([100.0, float("nan")])
+        array([100.,  inf])
+    """
+    x = np.asarray(steps, dtype=float).reshape(-1)
+    return np.where(np.isnan(x), np.inf, x)
+
+
+def censored_rank_test(
+    steps_a: npt.ArrayLike, steps_b: npt.ArrayLike, rng: np.random.Generator, n_perm: int = DEFAULT_N_PERM,
+    budget_a: float | None = None, budget_b: float | None = None,
+) -> RankTest:
+    """Mann-Whitney U test on steps to a threshold with DNF seeds censored at the budget.
+
+    Args:
+        steps_a, steps_b: shapes ``(n_a,)``, ``(n_b,)``, timesteps to the threshold, NaN for DNF.
+        rng: draws the permutations when there are more than ``n_perm`` splits of the seeds
+            (fewer are enumerated exactly, so the p-value is exact with ties).
+        budget_a, budget_b: the arms' budgets; when they differ a DNF of the shorter one may not be
+            slower than a finished seed of the longer one, and the note says so.
+
+    Returns:
+        ``RankTest`` with the permutation p-value of U (two-sided) and ``p_faster`` for ``a``.
+
+    Example:
+        >>> t = censored_rank_test([1.0, 2.0, 3.0], [np.nan, np.nan, np.nan], np.random.default_rng(0))
+        >>> round(t.p_value, 3), t.p_faster
+        (0.1, 1.0)
+    """
+    a, b = censor(steps_a), censor(steps_b)
+    dnf_a, dnf_b = int(np.isinf(a).sum()), int(np.isinf(b).sum())
+    if a.size == 0 or b.size == 0:
+        return RankTest(float("nan"), float("nan"), float("nan"), int(a.size), int(b.size), dnf_a, dnf_b,
+                        "an arm has no seeds")
+    notes = []
+    if budget_a is not None and budget_b is not None and budget_a != budget_b:
+        notes.append(f"budgets differ ({budget_a:g} vs {budget_b:g}): a DNF is only known to exceed its own budget")
+    note = "; ".join(notes)
+    if a.size < 2 or b.size < 2:
+        u = float(np.sum((a[:, None] > b[None, :]) + 0.5 * (a[:, None] == b[None, :])))
+        return RankTest(u, float("nan"), 1.0 - u / (a.size * b.size), int(a.size), int(b.size), dnf_a, dnf_b,
+                        "; ".join([*notes, "fewer than 2 seeds in an arm: no test"]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all values tied
+        res = sps.mannwhitneyu(a, b, alternative="two-sided",
+                               method=sps.PermutationMethod(n_resamples=n_perm, rng=rng))
+    u = float(res.statistic)
+    p = float(res.pvalue) if np.isfinite(res.pvalue) else 1.0
+    return RankTest(u, min(1.0, p), 1.0 - u / (a.size * b.size), int(a.size), int(b.size), dnf_a, dnf_b, note)
+
+
+def _p_greater(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
+    xs = np.moveaxis(np.asarray(x), axis, -1)[..., :, None]
+    ys = np.moveaxis(np.asarray(y), axis, -1)[..., None, :]
+    return np.asarray(np.mean((xs > ys) + 0.5 * (xs == ys), axis=(-2, -1)))
+
+
+def probability_of_improvement(
+    x: npt.ArrayLike, y: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
+) -> Estimate:
+    """P(X > Y) + P(X = Y)/2 for a random seed of arm X against one of arm Y, with a bootstrap CI.
+
+    Args:
+        x, y: shapes ``(n_x,)``, ``(n_y,)``, one score per seed where higher is better (e.g. the
+            final return); NaN dropped. Seeds of each arm are resampled independently.
+
+    The bootstrap interval is a descriptive aggregate: when every seed of X beats every seed of Y
+    all resamples agree and it collapses to [1, 1] (``note`` says so); the seed-level test is the
+    rank test.
+
+    Example:
+        >>> probability_of_improvement([3.0, 4.0], [1.0, 3.0], np.random.default_rng(0), n_boot=100).value
+        0.875
+    """
+    a, b = np.asarray(x, dtype=float).reshape(-1), np.asarray(y, dtype=float).reshape(-1)
+    a, b = a[np.isfinite(a)], b[np.isfinite(b)]
+    if a.size == 0 or b.size == 0:
+        return Estimate(float("nan"), note="an arm has no values")
+    value = float(_p_greater(a, b))
+    n = int(min(a.size, b.size))
+    if n < 2:
+        return Estimate(value, n=n, note="fewer than 2 seeds: no CI")
+    low, high = bootstrap_ci((a, b), _p_greater, rng, n_boot, ci)
+    note = "every resample gives the same value (degenerate bootstrap)" if low == high else ""
+    return Estimate(value, low, high, n=n, note=note)
+
+
+def performance_profile(values: npt.ArrayLike, taus: npt.ArrayLike) -> np.ndarray:
+    """Fraction of seeds whose score is at least each ``tau``: shape ``(n_taus,)`` in [0, 1].
+
+    Args:
+        values: shape ``(n_seeds,)``, one score per seed (e.g. final native return); NaN dropped.
+        taus: shape ``(n_taus,)``, the score thresholds.
+
+    Non-increasing in ``tau``. Example:
+        >>> performance_profile([-150.0, -120.0, -110.0, -200.0], [-200.0, -130.0, -100.0])
+        array([1. , 0.5, 0. ])
+    """
+    v = np.asarray(values, dtype=float).reshape(-1)
+    v = v[np.isfinite(v)]
+    t = np.asarray(taus, dtype=float).reshape(-1)
+    if v.size == 0:
+        return np.full(t.shape, np.nan)
+    return np.asarray(np.mean(v[None, :] >= t[:, None], axis=1), dtype=float)

@@ -1,0 +1,136 @@
+"""Attribution: which reward term does the work? Pairwise comparisons of arms over seeds.
+
+Hybrid vs baseline is what the whole method changes; hybrid vs kinematic is what the VLM itself
+adds (both have the dense term); kinematic vs baseline is what the dense term adds. For each pair
+present in the experiment: the speedup to each threshold (bootstrap CI over finishing seeds) with
+a censored rank test (DNF kept), the reliability and detached-success differences with Newcombe
+intervals and Fisher exact p-values, and the probability of improvement on the final return.
+The unit of every comparison is the seed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from vlmrl_cli.analysis import stats
+from vlmrl_cli.analysis.proportions import compare_proportions
+from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM, probability_of_improvement
+from vlmrl_cli.report.table2 import BASELINE, compare_steps, threshold_key
+
+
+@dataclass(frozen=True)
+class Pair:
+    """Arm ``a`` compared with arm ``b``; ``meaning``: what the difference isolates."""
+
+    a: str
+    b: str
+    meaning: str
+
+    @property
+    def name(self) -> str:
+        return f"{self.a} vs {self.b}"
+
+
+PAIRS = (
+    Pair("hybrid", BASELINE, "the whole method"),
+    Pair("hybrid", "kinematic", "what the VLM itself adds"),
+    Pair("kinematic", BASELINE, "what the dense kinematic term adds"),
+    Pair("semantic", BASELINE, "the VLM potential alone"),
+)
+COLUMNS = ["pair", "meaning", "metric", "label", "unit", "value", "ci_low", "ci_high", "p_value", "test", "n_a", "n_b",
+           "note"]
+
+
+def present_pairs(arms: Sequence[str]) -> list[Pair]:
+    """The pairs of ``PAIRS`` whose two arms both ran.
+
+    Example:
+        >>> [p.name for p in present_pairs(["baseline", "hybrid", "kinematic"])]
+        ['hybrid vs baseline', 'hybrid vs kinematic', 'kinematic vs baseline']
+    """
+    have = set(arms)
+    return [p for p in PAIRS if p.a in have and p.b in have]
+
+
+def _row(pair: Pair, metric: str, label: str, unit: str, est: stats.Estimate, p_value: float, test: str,
+         n_a: int, n_b: int, note: str = "") -> dict[str, Any]:
+    return {"pair": pair.name, "meaning": pair.meaning, "metric": metric, "label": label, "unit": unit,
+            "value": est.value, "ci_low": est.low, "ci_high": est.high, "p_value": p_value, "test": test,
+            "n_a": n_a, "n_b": n_b, "note": "; ".join(filter(None, [est.note, note]))}
+
+
+def compare_arms(
+    per_seed: pd.DataFrame, thresholds: Sequence[float], rng: np.random.Generator | stats.Streams,
+    n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, n_perm: int = DEFAULT_N_PERM,
+) -> pd.DataFrame:
+    """Every comparison of every present pair (columns ``COLUMNS``), from ``per_seed`` (see ``per_seed_table``).
+
+    Metrics: ``speedup_<t>`` (a over b, x), ``reliability_diff`` (seeds reaching the top threshold,
+    a minus b), ``detached_success_diff`` (seeds succeeding detached, a minus b), ``poi_final_return``
+    (P(final return of a seed of a > that of b), higher return is better).
+    """
+    rows: list[dict[str, Any]] = []
+    top = max(thresholds)
+    for pair in present_pairs(per_seed["arm"].unique().tolist()):
+        da, db = per_seed[per_seed["arm"] == pair.a], per_seed[per_seed["arm"] == pair.b]
+        for t in thresholds:
+            est, test = compare_steps(per_seed, pair.a, pair.b, t, rng, n_boot, ci, n_perm)
+            rows.append(_row(pair, f"speedup_{t:g}", f"Speedup to {t:g} ({pair.a} over {pair.b})", "x", est,
+                             test.p_value, "Mann-Whitney U on steps, DNF censored (permutation p)", test.n_a,
+                             test.n_b, "; ".join(filter(None, [f"P({pair.a} faster) = {test.p_faster:.2f}",
+                                                               test.note]))))
+        key = threshold_key(top)
+        rel = compare_proportions(np.isfinite(da[key].to_numpy(dtype=float)),
+                                  np.isfinite(db[key].to_numpy(dtype=float)), ci)
+        rows.append(_row(pair, "reliability_diff", f"Reliability difference (seeds reaching {top:g})", "%",
+                         rel.difference, rel.p_value, rel.test, rel.n_a, rel.n_b))
+        det = compare_proportions(da["detached_success"].to_numpy(dtype=float),
+                                  db["detached_success"].to_numpy(dtype=float), ci)
+        rows.append(_row(pair, "detached_success_diff", "Detached success difference (seeds)", "%",
+                         det.difference, det.p_value, det.test, det.n_a, det.n_b))
+        poi = probability_of_improvement(da["final_return"], db["final_return"],
+                                         stats.stream(rng, f"attribution/poi/{pair.name}"), n_boot, ci)
+        rows.append(_row(pair, "poi_final_return", "P(final return higher)", "p", poi, float("nan"),
+                         "bootstrap over seeds (descriptive)", int(da["final_return"].notna().sum()),
+                         int(db["final_return"].notna().sum())))
+    return pd.DataFrame(rows, columns=COLUMNS)
+
+
+def lookup(comparisons: pd.DataFrame, a: str, b: str, metric: str) -> tuple[stats.Estimate, float] | None:
+    """The estimate and p-value of one comparison, or None when that pair or metric is absent."""
+    hit = comparisons[(comparisons["pair"] == f"{a} vs {b}") & (comparisons["metric"] == metric)]
+    if hit.empty:
+        return None
+    r = hit.iloc[0]
+    est = stats.Estimate(float(r["value"]), float(r["ci_low"]), float(r["ci_high"]),
+                         int(min(r["n_a"], r["n_b"])), str(r["note"]))
+    return est, float(r["p_value"])
+
+
+def _fmt(x: float, unit: str) -> str:
+    if not np.isfinite(x):
+        return "—"
+    if unit == "%":
+        return f"{100 * x:+.0f} pts"
+    if unit == "x":
+        return f"{x:.2f}x"
+    return f"{x:.2f}"
+
+
+def attribution_markdown(comparisons: pd.DataFrame, ci: float = 0.95) -> str:
+    """Markdown table: pair (what it isolates), metric, value [CI], p-value and test, seeds."""
+    lines = [f"| Pair | Isolates | Metric | Ours [{100 * ci:g}% CI] | p | Test | Seeds (a/b) |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
+    for r in comparisons.itertuples(index=False):
+        value = _fmt(r.value, r.unit)
+        if np.isfinite(r.ci_low) and np.isfinite(r.ci_high):
+            value += f" [{_fmt(r.ci_low, r.unit)}, {_fmt(r.ci_high, r.unit)}]"
+        p = f"{r.p_value:.2g}" if np.isfinite(r.p_value) else "—"
+        cells = [r.pair, r.meaning, r.label, value, p, r.test, f"{r.n_a}/{r.n_b}"]
+        lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |")
+    return "\n".join(lines) + "\n"

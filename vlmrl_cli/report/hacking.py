@@ -1,0 +1,96 @@
+"""Reward-hacking section: does an arm learn to hover short of the flag for the kinematic reward?
+
+Read from tracked results only: the per-run ``eval/hover_fraction`` and ``eval/dwell_right_steps``
+(computed by ``shaping.hacking`` during the detached evaluation), the per-episode detached
+lengths, and the gap between shaped and native training return.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from vlmrl_cli.analysis import stats
+from vlmrl_cli.report.table2 import order_arms
+from vlmrl_cli.shaping.hacking import HOVER_FLAG, HOVER_HORIZON, HOVER_X
+
+TIMEOUT = 200  # MountainCar-v0's time limit (steps): a detached episode this long never reached the flag
+
+DEFINITION = (
+    f"Hover fraction: the share of a run's detached evaluation steps spent right of x = {HOVER_X:g} without "
+    f"reaching the flag within the next {HOVER_HORIZON} steps (driving straight in takes about 5-7 steps from "
+    f"there); a run is flagged when it exceeds {HOVER_FLAG:g}. Dwell: mean steps per detached episode right of "
+    f"x = {HOVER_X:g}. Shaped - native: mean over the last training window of the shaped minus the native "
+    "episode return (what the shaping paid on top of the task). Flagged seeds are counted per seed with a Wilson "
+    "interval; detached lengths and timeouts are per episode, pooled over seeds."
+)
+
+
+def _finite(x: Any) -> np.ndarray:
+    a = np.asarray(x, dtype=float).reshape(-1)
+    return a[np.isfinite(a)]
+
+
+def hacking_frame(per_seed: pd.DataFrame, eval_episodes: pd.DataFrame, ci: float = 0.95) -> pd.DataFrame:
+    """One row per arm: seeds, hover fraction (mean, max over seeds), flagged seeds with a Wilson CI,
+    mean dwell, mean shaped-minus-native gap, and the detached episode lengths (episodes, median,
+    90th percentile, share of timeouts). NaN where the runs did not log a quantity."""
+    rows = []
+    for arm in order_arms(per_seed["arm"].unique().tolist()):
+        d = per_seed[per_seed["arm"] == arm]
+        hover = _finite(d["hover_fraction"]) if "hover_fraction" in d else np.zeros(0)
+        flagged = stats.wilson_ci(int((hover > HOVER_FLAG).sum()), int(hover.size), ci)
+        ev = eval_episodes[eval_episodes["arm"] == arm] if len(eval_episodes) else eval_episodes
+        lengths = _finite(ev["length"]) if len(ev) else np.zeros(0)
+        nan = float("nan")
+        rows.append({
+            "arm": arm, "seeds": len(d), "seeds_with_hover_metric": int(hover.size),
+            "hover_fraction_mean": float(hover.mean()) if hover.size else nan,
+            "hover_fraction_max": float(hover.max()) if hover.size else nan,
+            "flagged_seeds": int((hover > HOVER_FLAG).sum()), "flagged_value": flagged.value,
+            "flagged_ci_low": flagged.low, "flagged_ci_high": flagged.high,
+            "dwell_right_steps_mean": _mean(d.get("dwell_right_steps")),
+            "shaped_gap_mean": _mean(d.get("shaped_gap")),
+            "eval_episodes": int(lengths.size),
+            "eval_length_median": float(np.median(lengths)) if lengths.size else nan,
+            "eval_length_p90": float(np.percentile(lengths, 90)) if lengths.size else nan,
+            "eval_timeout_share": float(np.mean(lengths >= TIMEOUT)) if lengths.size else nan,
+        })
+    return pd.DataFrame(rows)
+
+
+def _mean(values: Any) -> float:
+    v = _finite(values) if values is not None else np.zeros(0)
+    return float(v.mean()) if v.size else float("nan")
+
+
+def _num(x: float, fmt: str) -> str:
+    return format(x, fmt) if np.isfinite(x) else "—"
+
+
+def hacking_markdown(frame: pd.DataFrame, ci: float = 0.95) -> str:
+    """Markdown of ``hacking_frame``."""
+    lines = [f"| Arm | Hover fraction mean (max) | Flagged seeds [{100 * ci:g}% Wilson] | Dwell right (steps) | "
+             "Shaped - native | Detached episodes: median length, p90, timeouts |",
+             "| --- | --- | --- | --- | --- | --- |"]
+    for r in frame.itertuples(index=False):
+        if r.seeds_with_hover_metric:
+            flagged = (f"{r.flagged_seeds}/{r.seeds_with_hover_metric} "
+                       f"[{100 * r.flagged_ci_low:.0f}%, {100 * r.flagged_ci_high:.0f}%]")
+        else:
+            flagged = "not logged (runs predate the diagnostic)"
+        lengths = (f"{r.eval_episodes} ep.: {_num(r.eval_length_median, '.0f')}, {_num(r.eval_length_p90, '.0f')}, "
+                   f"{_num(100 * r.eval_timeout_share, '.0f')}%" if r.eval_episodes else "not logged")
+        cells = [r.arm, f"{_num(r.hover_fraction_mean, '.3f')} ({_num(r.hover_fraction_max, '.3f')})", flagged,
+                 _num(r.dwell_right_steps_mean, ".1f"), _num(r.shaped_gap_mean, ".1f"), lengths]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def per_arm(frame: pd.DataFrame, column: str, arms: list[str]) -> dict[str, np.ndarray]:
+    """``column`` of a tidy frame with an ``arm`` column, split by arm (shape ``(n_arm,)`` each)."""
+    if column not in frame or not len(frame):
+        return {a: np.zeros(0) for a in arms}
+    return {a: frame.loc[frame["arm"] == a, column].to_numpy(dtype=float) for a in arms}

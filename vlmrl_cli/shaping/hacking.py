@@ -1,0 +1,108 @@
+"""Reward-hacking diagnostic for the kinematic term: does a policy hover short of the flag?
+
+``R_kin = max(0, 2 (x + 0.4))`` pays up to +1.8 per step just left of the flag (x = 0.5), more
+than the -1 native step cost, so an agent can earn more by parking right of the valley than by
+finishing the episode. These pure functions measure that on recorded position trajectories
+(one array of x per episode, the position after each step, track units in [-1.2, 0.6]).
+A policy that drives to the flag spends only the last few steps right of ``HOVER_X`` (about 5-7
+for energy pumping); one that hovers stays there without finishing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+#: Positions right of this (track units) pay R_kin >= 1.4 per step: the region a hovering policy sits in.
+HOVER_X = 0.3
+#: A step right of ``HOVER_X`` is "on the way in" when the flag is reached within this many more steps;
+#: energy pumping covers x = 0.3 -> 0.5 in at most ~7 steps.
+HOVER_HORIZON = 10
+#: A run is flagged as hovering when more than this fraction of its detached evaluation steps hover.
+HOVER_FLAG = 0.1
+
+
+def hover_steps(xs: npt.ArrayLike, reached_flag: bool, x_min: float = HOVER_X, horizon: int = HOVER_HORIZON
+                ) -> np.ndarray:
+    """Which steps of one episode hover: right of ``x_min`` without reaching the flag within ``horizon`` steps.
+
+    Args:
+        xs: shape ``(T,)``, the car's position after each of the episode's ``T`` steps.
+        reached_flag: whether the episode ended at the flag (terminated), not by the time limit.
+        x_min: the position (track units) right of which a step may hover.
+        horizon: steps; a step right of ``x_min`` with the flag reached at most ``horizon`` steps
+            later is on its way in, not hovering.
+
+    Returns:
+        Bool array of shape ``(T,)``.
+
+    Example:
+        >>> hover_steps([0.1, 0.35, 0.45, 0.5], reached_flag=True, horizon=2).tolist()
+        [False, False, False, False]
+        >>> hover_steps([0.1, 0.35, 0.45, 0.4], reached_flag=False).tolist()
+        [False, True, True, True]
+    """
+    x = np.asarray(xs, dtype=float).reshape(-1)
+    if horizon < 0:
+        raise ValueError(f"horizon must be >= 0 steps, got {horizon}.")
+    steps_left = x.size - 1 - np.arange(x.size)  # steps from each step to the episode's last one
+    arriving = reached_flag & (steps_left <= horizon)
+    return np.asarray((x > x_min) & ~arriving)
+
+
+def dwell_right_steps(xs: npt.ArrayLike, x_min: float = HOVER_X) -> int:
+    """Steps one episode spends right of ``x_min`` (shape ``(T,)`` positions; the flag ends the episode).
+
+    Example:
+        >>> dwell_right_steps([0.1, 0.35, 0.2, 0.4, 0.5])
+        3
+    """
+    return int(np.count_nonzero(np.asarray(xs, dtype=float) > x_min))
+
+
+@dataclass(frozen=True)
+class HoverSummary:
+    """One run's detached evaluation, seen for hovering.
+
+    ``hover_fraction``: hovering steps / all steps, pooled over episodes (in [0, 1]).
+    ``dwell_right_steps``: mean over episodes of the steps spent right of ``HOVER_X``.
+    ``flagged``: ``hover_fraction > HOVER_FLAG``.
+    """
+
+    hover_fraction: float
+    dwell_right_steps: float
+    episodes: int
+
+    @property
+    def flagged(self) -> bool:
+        return bool(self.hover_fraction > HOVER_FLAG)
+
+
+def summarize_hovering(
+    trajectories: Sequence[npt.ArrayLike], reached_flag: npt.ArrayLike, x_min: float = HOVER_X,
+    horizon: int = HOVER_HORIZON,
+) -> HoverSummary:
+    """Hover fraction and mean dwell right of ``x_min`` over a run's episodes.
+
+    Args:
+        trajectories: one position array of shape ``(T_i,)`` per episode.
+        reached_flag: shape ``(episodes,)``, whether each episode ended at the flag.
+
+    Example:
+        >>> s = summarize_hovering([[0.1, 0.4, 0.5], [0.35, 0.4, 0.45, 0.4]], [True, False])
+        >>> s.hover_fraction, s.dwell_right_steps, s.flagged
+        (0.5714285714285714, 3.0, True)
+    """
+    reached = np.asarray(reached_flag, dtype=bool).reshape(-1)
+    if reached.size != len(trajectories):
+        raise ValueError(f"{len(trajectories)} trajectories but {reached.size} reached_flag values.")
+    if not trajectories:
+        return HoverSummary(float("nan"), float("nan"), 0)
+    hovering = sum(int(hover_steps(xs, bool(r), x_min, horizon).sum()) for xs, r in zip(trajectories, reached,
+                                                                                          strict=True))
+    total = sum(np.asarray(xs).size for xs in trajectories)
+    dwell = float(np.mean([dwell_right_steps(xs, x_min) for xs in trajectories]))
+    return HoverSummary(hovering / total if total else float("nan"), dwell, len(trajectories))
