@@ -58,6 +58,12 @@ def test_dnf_seeds_count_at_the_budget_not_dropped() -> None:
     assert distance(steps, reached[:, -1], target) == pytest.approx(expected)
 
 
+def test_a_seed_without_a_completed_episode_is_a_dnf_not_dropped() -> None:
+    steps, reached = seed_steps(_table((100, 200, 300)), THRESHOLDS, budget=1000, window=1, seeds=[0, 1])
+    np.testing.assert_array_equal(steps, [[100, 200, 300], [1000, 1000, 1000]])
+    assert not reached[1].any()
+
+
 def test_a_crossing_after_the_budget_is_a_dnf() -> None:
     steps, reached = seed_steps(_table((100, 200, 1500)), THRESHOLDS, budget=1000, window=1)
     assert steps[0, -1] == 1000 and not reached[0, -1]

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -76,7 +77,11 @@ def paper_baseline(path: Path = PAPER_REPORTED) -> TargetProfile:
 
 
 def seed_steps(
-    episodes: pd.DataFrame, thresholds: tuple[float, ...], budget: int, window: int = 100
+    episodes: pd.DataFrame,
+    thresholds: tuple[float, ...],
+    budget: int,
+    window: int = 100,
+    seeds: Sequence[int] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per seed, censored steps to each threshold and whether it reached each within the budget.
 
@@ -84,13 +89,16 @@ def seed_steps(
         episodes: episode table (``seed``, ``timestep``, ``native_return``) of one regime.
         thresholds: shape ``(K,)``.
         budget: training steps per run; a seed that never reaches a threshold counts at it.
+        seeds: the regime's seeds (default: those in ``episodes``); a seed without a single
+            completed episode is a DNF at every threshold, never dropped.
 
     Returns:
         ``(steps, reached)``, both shape ``(n_seeds, K)`` (seeds in ascending order): float steps
         (DNF = ``budget``) and bool.
     """
     steps, reached = [], []
-    for _, ep in episodes.groupby("seed", sort=True):
+    for seed in sorted(set(episodes["seed"]) if seeds is None else seeds):
+        ep = episodes[episodes["seed"] == seed]
         ts, ret = ep["timestep"].to_numpy(), ep["native_return"].to_numpy()
         steps.append([censored_steps_to_threshold(ts, ret, t, budget, window) for t in thresholds])
         hits = [steps_to_threshold(ts, ret, t, window) for t in thresholds]
@@ -173,9 +181,11 @@ def regime_profile(
     window: int = 100,
     n_boot: int = DEFAULT_N_BOOT,
     ci: float = 0.95,
+    seeds: Sequence[int] | None = None,
 ) -> RegimeProfile:
-    """The profile of one regime's episode table against ``target`` (see the module docstring)."""
-    steps, reached = seed_steps(episodes, target.thresholds, budget, window)
+    """The profile of one regime's episode table against ``target`` (see the module docstring);
+    ``seeds`` as in ``seed_steps``."""
+    steps, reached = seed_steps(episodes, target.thresholds, budget, window, seeds)
     return RegimeProfile(
         n_seeds=int(reached.shape[0]),
         budget=int(budget),
