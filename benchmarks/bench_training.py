@@ -36,9 +36,8 @@ from vlmrl_cli.vlm.registry import build_client
 
 def train(arm: str, timesteps: int, seed: int, cache: Path) -> dict[str, Any]:
     """Train one arm in-process; return wall time, and for VLM arms the oracle and its label log."""
-    from stable_baselines3 import PPO
-
     from vlmrl_cli.training.envs import make_train_env
+    from vlmrl_cli.training.model import make_model
 
     preset = dataclasses.replace(get_preset("paper"), timesteps=timesteps)
     spec = ARMS[arm]
@@ -55,9 +54,7 @@ def train(arm: str, timesteps: int, seed: int, cache: Path) -> dict[str, Any]:
             return potential
 
         oracle.label = recording  # type: ignore[method-assign]
-    p = preset
-    model = PPO("MlpPolicy", env, n_steps=p.n_steps, batch_size=p.batch_size, gae_lambda=p.gae_lambda, gamma=p.gamma,
-                n_epochs=p.n_epochs, ent_coef=p.ent_coef, learning_rate=p.learning_rate, seed=seed, device="cpu")
+    model = make_model(preset, env, seed)
     model.learn(total_timesteps=timesteps)
     wall = time.perf_counter() - start
     return {"wall": wall, "oracle": oracle, "events": events, "client": client}
@@ -91,9 +88,9 @@ class _Quiet:
 def sweep_throughput(workers: int, timesteps: int, root: Path) -> float:
     from vlmrl_cli.training.sweep import run_sweep
 
-    cfg = RunConfig(arms=("baseline",), seeds=(0, 1), preset="paper", timesteps=timesteps, workers=workers,
-                    experiment=f"bench-{workers}", tracking_uri=f"sqlite:///{root / f'w{workers}.db'}",
-                    eval_episodes=1)
+    ppo = dataclasses.replace(get_preset("paper"), timesteps=timesteps, eval_episodes=1)
+    cfg = RunConfig(arms=("baseline",), seeds=(0, 1), preset="paper", ppo=ppo, workers=workers,
+                    experiment=f"bench-{workers}", tracking_uri=f"sqlite:///{root / f'w{workers}.db'}")
     summary = run_sweep(cfg, _Quiet())
     assert not summary.failed, summary.failed
     return 2 * timesteps / summary.wall_s

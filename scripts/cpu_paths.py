@@ -88,10 +88,14 @@ def main() -> int:
     if "matmul" in args.perturb:  # the @ operator does not go through np.matmul's attribute
         print("note: --perturb matmul covers np.matmul calls only, not the @ operator", file=sys.stderr)
 
+    import dataclasses
+
     from vlmrl_cli.training.config import RunConfig
+    from vlmrl_cli.training.presets import get_preset
     from vlmrl_cli.training.trace import native_returns
 
-    cfg = RunConfig(arms=(args.arm,), seeds=(args.seed,), preset=args.preset, timesteps=args.timesteps, workers=1)
+    ppo = dataclasses.replace(get_preset(args.preset), timesteps=args.timesteps)
+    cfg = RunConfig(arms=(args.arm,), seeds=(args.seed,), preset=args.preset, ppo=ppo, workers=1)
     history = native_returns(cfg.jobs()[0])
     digest = hashlib.sha256(json.dumps(history).encode()).hexdigest()[:12]
     print(

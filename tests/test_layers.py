@@ -16,7 +16,8 @@ LAYERS = {
     "shaping": 2,
     "probe": 3, "training": 3, "analysis": 3,
     "report": 4,
-    "cli": 5,
+    "calibration": 5,
+    "cli": 6,
 }
 
 

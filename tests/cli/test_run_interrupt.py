@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import subprocess
@@ -11,6 +12,7 @@ from pathlib import Path
 
 from vlmrl_cli.tracking import store
 from vlmrl_cli.training.config import RunConfig
+from vlmrl_cli.training.presets import get_preset
 from vlmrl_cli.training.sweep import plan
 
 
@@ -51,7 +53,8 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_resumes(tmp_path: Path) -> None:
     assert statuses == {"sweep": "KILLED", "train": "KILLED"}
 
     # the killed job is pending again: rerunning the same command trains it
-    cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="smoke", timesteps=2_000_000, tracking_uri=uri)
+    ppo = dataclasses.replace(get_preset("smoke"), timesteps=2_000_000)
+    cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="smoke", ppo=ppo, tracking_uri=uri)
     client = store.connect(uri)
     exp = client.get_experiment_by_name("vlmrl")
     assert exp is not None

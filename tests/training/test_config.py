@@ -8,6 +8,8 @@ import pytest
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.frames.geometry import Zone
 from vlmrl_cli.training.config import RunConfig, load_config_file
+from vlmrl_cli.training.overrides import resolve
+from vlmrl_cli.training.presets import get_preset
 from vlmrl_cli.vlm.config import SimKnobs, VLMConfig
 
 
@@ -40,7 +42,7 @@ query_every = 4
 [shaping.label_potentials]
 LEFT_PEAK = 0.4
 """)
-    cfg = RunConfig(**load_config_file(path))
+    cfg = resolve([load_config_file(path)])
     cfg.validate()
     assert cfg.arms == ("baseline", "semantic") and cfg.seeds == (3, 7)
     assert cfg.budget == 512 and cfg.workers == 1 and cfg.experiment == "exp"
@@ -53,16 +55,27 @@ LEFT_PEAK = 0.4
 @pytest.mark.parametrize(
     ("text", "match"),
     [
-        ("arms = [", "not valid TOML"),
         ("colour = 'red'", "unknown key 'colour'"),
-        ("[shaping]\nbandwith = 1.0", "unknown key 'bandwith'"),
+        ("[shaping]\nbandwith = 1.0", r"unknown key 'shaping.bandwith' \(did you mean 'shaping.bandwidth'\?\)"),
         ("[shaping.label_potentials]\nSKY = 1.0", "unknown label 'SKY'"),
-        ("[vlm.sim]\nflick = 0.1", "unknown key 'flick'"),
+        ("[vlm.sim]\nflick = 0.1", "unknown key 'vlm.sim.flick'"),
+        ("[shaping]\nalpha = 'big'", "invalid shaping.alpha"),
+        ("timesteps = 5\n[ppo]\ntimesteps = 6", "set ppo.timesteps once"),
     ],
 )
 def test_malformed_config_files_are_bad_input(tmp_path: Path, text: str, match: str) -> None:
     with pytest.raises(BadInput, match=match):
-        load_config_file(_write(tmp_path, text))
+        resolve([load_config_file(_write(tmp_path, text))])
+
+
+def test_invalid_toml_is_bad_input(tmp_path: Path) -> None:
+    with pytest.raises(BadInput, match="not valid TOML"):
+        load_config_file(_write(tmp_path, "arms = ["))
+
+
+def test_top_level_timesteps_of_older_files_land_in_ppo(tmp_path: Path) -> None:
+    cfg = resolve([load_config_file(_write(tmp_path, 'preset = "smoke"\ntimesteps = 512\neval_episodes = 3'))])
+    assert cfg.budget == 512 and cfg.ppo_config.eval_episodes == 3 and cfg.ppo_config.n_envs == 2
 
 
 def test_missing_config_file_is_bad_input(tmp_path: Path) -> None:
@@ -77,8 +90,8 @@ def test_missing_config_file_is_bad_input(tmp_path: Path) -> None:
         ({"preset": "huge"}, "unknown preset 'huge'"),
         ({"seeds": ()}, "no seed"),
         ({"seeds": (1, 1)}, "twice"),
-        ({"timesteps": 0}, "at least 1"),
-        ({"workers": 0}, "at least 1"),
+        ({"ppo": dataclasses.replace(get_preset("smoke"), timesteps=0)}, "ppo.timesteps"),
+        ({"workers": 0}, "invalid workers"),
         ({"vlm": VLMConfig(backend="gpt9")}, "unknown VLM backend"),
     ],
 )
@@ -105,5 +118,16 @@ def test_config_hash_ignores_the_seed_and_knobs_an_arm_does_not_use() -> None:
     assert oh0.config_hash != h0.config_hash  # the hybrid does
     no_cache = dataclasses.replace(base, vlm=VLMConfig(use_cache=False))
     assert no_cache.jobs()[2].config_hash == h0.config_hash  # the cache changes speed, not answers
-    longer = dataclasses.replace(base, timesteps=2_048)
+    longer = dataclasses.replace(base, ppo=dataclasses.replace(get_preset("smoke"), timesteps=2_048))
     assert longer.jobs()[0].config_hash != b0.config_hash
+
+
+def test_the_preset_name_is_a_label_the_resolved_values_are_the_identity() -> None:
+    paper = RunConfig(arms=("baseline",), seeds=(0,), preset="paper")
+    zoo_cut = dataclasses.replace(paper, preset="zoo", ppo=get_preset("paper"))
+    assert paper.jobs()[0].config_hash == zoo_cut.jobs()[0].config_hash
+    assert zoo_cut.jobs()[0].overrides() == {"ppo.timesteps": "300000"}
+    assert paper.jobs()[0].overrides() == {}
+    one_env = dataclasses.replace(paper, ppo=dataclasses.replace(get_preset("paper"), n_envs=1, n_steps=256))
+    assert one_env.jobs()[0].config_hash != paper.jobs()[0].config_hash
+    assert one_env.jobs()[0].overrides() == {"ppo.n_envs": "1", "ppo.n_steps": "256"}

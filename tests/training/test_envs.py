@@ -50,7 +50,7 @@ def test_every_arm_builds_steps_and_reports_native_episode_stats(name: str) -> N
 
 
 def test_env_i_is_seeded_seed_plus_i() -> None:
-    preset = dataclasses.replace(SMOKE, n_envs=3, normalize=False)
+    preset = dataclasses.replace(SMOKE, n_envs=3, normalize_obs=False, normalize_reward=False)
     venv, _ = make_train_env(ARMS["kinematic"], preset, ShapingConfig(), None, seed=40)
     assert isinstance(venv, DummyVecEnv)
     obs = np.asarray(venv.reset())
@@ -72,7 +72,7 @@ def test_camera_and_oracle_are_shared_and_gamma_defaults_to_the_learner() -> Non
 
 
 def test_same_seed_same_shaped_rewards() -> None:
-    preset = dataclasses.replace(SMOKE, normalize=False)
+    preset = dataclasses.replace(SMOKE, normalize_obs=False, normalize_reward=False)
     actions = np.random.default_rng(2).integers(0, 3, size=(300, preset.n_envs))
     runs = []
     for _ in range(2):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import inspect
 import typing
@@ -12,6 +11,9 @@ from typing import Annotated, Any
 
 import typer
 
+from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.training.config import load_config_file
+from vlmrl_cli.training.overrides import nest, parse_assignment, parse_value
 from vlmrl_cli.vlm.config import SimKnobs, VLMConfig
 
 TrackingUri = Annotated[
@@ -135,20 +137,68 @@ _VLM_FIELDS = {
 }
 
 
-def vlm_overrides(base: VLMConfig, flags: VLMConfig, explicit: set[str] | None) -> VLMConfig:
-    """``flags`` when no config file is in play (``explicit`` is None); else ``base`` (from the
-    file) with only the explicitly given VLM flags laid over it."""
-    if explicit is None:
-        return flags
-    top: dict[str, Any] = {}
-    sim: dict[str, Any] = {}
+def given(ctx: typer.Context, name: str) -> bool:
+    """Whether parameter ``name`` was typed on the command line (or came from the environment)."""
+    source = ctx.get_parameter_source(name)
+    return source is not None and source.name in ("COMMANDLINE", "ENVIRONMENT", "PROMPT")
+
+
+def vlm_flags(ctx: typer.Context, flags: VLMConfig) -> dict[str, Any]:
+    """The VLM options typed on the command line, as dotted config keys (``{"vlm.sim.flicker": 0.3}``)."""
+    out: dict[str, Any] = {}
     for param, target in _VLM_FIELDS.items():
-        if param not in explicit:
-            continue
-        if target.startswith("sim."):
-            sim[target[4:]] = getattr(flags.sim, target[4:])
-        else:
-            top[target] = getattr(flags, target)
-    if sim:
-        top["sim"] = dataclasses.replace(base.sim, **sim)
-    return dataclasses.replace(base, **top)
+        if given(ctx, param):
+            obj: Any = flags.sim if target.startswith("sim.") else flags
+            out[f"vlm.{target}"] = getattr(obj, target.removeprefix("sim."))
+    return out
+
+
+# --- the options of commands that train (`run`, `calibrate`) and how they layer -----------
+
+Arms = Annotated[str, typer.Option("--arms", help="Comma-separated arms (see README): baseline, hybrid, ...")]
+Seeds = Annotated[int, typer.Option("--seeds", help="Number of seeds: 0..N-1.")]
+SeedList = Annotated[str | None, typer.Option("--seed-list", help="Explicit seeds, e.g. 3,7,11.")]
+Timesteps = Annotated[int | None, typer.Option("--timesteps", help="Budget per run (= --set ppo.timesteps=N).")]
+Preset = Annotated[str, typer.Option("--preset", help="PPO preset: paper, zoo, sb3-default, smoke.")]
+Workers = Annotated[int | None, typer.Option("--workers", help="Worker processes (default: cores).")]
+EvalEpisodes = Annotated[
+    int | None, typer.Option("--eval-episodes", help="Detached evaluation episodes (= --set ppo.eval_episodes=N).")
+]
+ConfigFile = Annotated[Path | None, typer.Option("--config", help="TOML file with any of these knobs.")]
+Sets = Annotated[
+    list[str] | None,
+    typer.Option("--set", help="Override one config key, repeatable: --set ppo.n_envs=1 --set shaping.alpha=3 "
+                               "(dotted TOML key = TOML value; beats --config, loses to explicit flags)."),
+]
+
+# CLI parameter -> dotted config key (seeds come from --seeds or --seed-list)
+_RUN_KEYS = {"arms": "arms", "preset": "preset", "timesteps": "ppo.timesteps", "eval_episodes": "ppo.eval_episodes",
+             "workers": "workers", "experiment": "experiment", "tracking_uri": "tracking_uri"}
+
+
+def seeds_of(n: int, seed_list: str | None) -> tuple[int, ...]:
+    """``--seed-list 3,7`` -> (3, 7); else ``--seeds N`` -> (0, ..., N-1)."""
+    if seed_list is not None:
+        try:
+            return tuple(int(s) for s in seed_list.split(",") if s.strip())
+        except ValueError:
+            raise BadInput(f"--seed-list must be comma-separated integers, got '{seed_list}'.") from None
+    if n < 1:
+        raise BadInput(f"--seeds must be at least 1, got {n}.")
+    return tuple(range(n))
+
+
+def config_layers(ctx: typer.Context, config: Path | None, sets: list[str] | None, vlm_cfg: VLMConfig
+                  ) -> list[dict[str, Any]]:
+    """The layers of a training command's configuration above the preset, lowest first: the
+    config file, ``--set`` assignments, then the flags typed on the command line."""
+    file_layer = load_config_file(config) if config is not None else {}
+    set_layer = nest((key, parse_value(value)) for key, value in map(parse_assignment, sets or []))
+    p = ctx.params
+    flags: dict[str, Any] = {key: p[param] for param, key in _RUN_KEYS.items() if given(ctx, param)}
+    if "arms" in flags:
+        flags["arms"] = [a.strip() for a in str(flags["arms"]).split(",") if a.strip()]
+    if given(ctx, "seeds") or given(ctx, "seed_list"):
+        flags["seeds"] = list(seeds_of(p["seeds"], p.get("seed_list")))
+    flags |= vlm_flags(ctx, vlm_cfg)
+    return [file_layer, set_layer, nest(flags.items())]

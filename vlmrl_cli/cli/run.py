@@ -2,81 +2,72 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import typer
 from rich.console import Console
 
 from vlmrl_cli.cli.errors import exit_codes
-from vlmrl_cli.cli.options import Experiment, TrackingUri, vlm_overrides, with_vlm_options
+from vlmrl_cli.cli.options import (
+    Arms,
+    ConfigFile,
+    EvalEpisodes,
+    Experiment,
+    Preset,
+    SeedList,
+    Seeds,
+    Sets,
+    Timesteps,
+    TrackingUri,
+    Workers,
+    config_layers,
+    with_vlm_options,
+)
 from vlmrl_cli.cli.progress import RichSweepReporter
-from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.training.config import DEFAULT_EXPERIMENT, RunConfig, load_config_file
+from vlmrl_cli.training.config import DEFAULT_EXPERIMENT, RunConfig
+from vlmrl_cli.training.overrides import resolve, to_toml
 from vlmrl_cli.vlm.config import VLMConfig
 
-
-def _given(ctx: typer.Context, name: str) -> bool:
-    source = ctx.get_parameter_source(name)
-    return source is not None and source.name in ("COMMANDLINE", "ENVIRONMENT", "PROMPT")
-
-
-def _seeds(n: int, seed_list: str | None) -> tuple[int, ...]:
-    if seed_list is not None:
-        try:
-            return tuple(int(s) for s in seed_list.split(",") if s.strip())
-        except ValueError:
-            raise BadInput(f"--seed-list must be comma-separated integers, got '{seed_list}'.") from None
-    if n < 1:
-        raise BadInput(f"--seeds must be at least 1, got {n}.")
-    return tuple(range(n))
+DryRun = Annotated[
+    bool, typer.Option("--dry-run", help="Print the resolved config (TOML) and the job list; train nothing.")
+]
 
 
 @with_vlm_options
 def run(
     ctx: typer.Context,
     vlm_cfg: VLMConfig,
-    arms: Annotated[str, typer.Option("--arms", help="Comma-separated arms (see README): baseline, hybrid, ...")] = (
-        "baseline,hybrid"
-    ),
-    seeds: Annotated[int, typer.Option("--seeds", help="Number of seeds: 0..N-1.")] = 5,
-    seed_list: Annotated[str | None, typer.Option("--seed-list", help="Explicit seeds, e.g. 3,7,11.")] = None,
-    timesteps: Annotated[int | None, typer.Option("--timesteps", help="Budget per run (default: preset's).")] = None,
-    preset: Annotated[str, typer.Option("--preset", help="PPO preset: paper, zoo, sb3-default, smoke.")] = "paper",
-    workers: Annotated[int | None, typer.Option("--workers", help="Worker processes (default: cores).")] = None,
-    eval_episodes: Annotated[
-        int | None, typer.Option("--eval-episodes", help="Detached evaluation episodes (default: the preset's).")
-    ] = None,
-    config: Annotated[Path | None, typer.Option("--config", help="TOML file with any of these knobs.")] = None,
+    arms: Arms = "baseline,hybrid",
+    seeds: Seeds = 5,
+    seed_list: SeedList = None,
+    timesteps: Timesteps = None,
+    preset: Preset = "paper",
+    workers: Workers = None,
+    eval_episodes: EvalEpisodes = None,
+    config: ConfigFile = None,
+    sets: Sets = None,
+    dry_run: DryRun = False,
     experiment: Experiment = DEFAULT_EXPERIMENT,
     tracking_uri: TrackingUri = None,
 ) -> None:
-    """Train PPO on every (arm, seed); rerunning the same command trains only what is missing."""
+    """Train PPO on every (arm, seed); rerunning the same command trains only what is missing.
+
+    Settings resolve in layers: the --preset < --config FILE < --set KEY=VALUE < other flags.
+    """
     from vlmrl_cli.training.sweep import run_sweep
 
     console = Console(stderr=False)
     with exit_codes():
-        # Flags typed on the command line (or from the environment) override the config file.
-        explicit = {name for name in ctx.params if _given(ctx, name)}
-        kwargs: dict[str, Any] = load_config_file(config) if config is not None else {}
-        flags: dict[str, Any] = {
-            "arms": tuple(a.strip() for a in arms.split(",") if a.strip()),
-            "seeds": _seeds(seeds, seed_list),
-            "timesteps": timesteps, "preset": preset, "eval_episodes": eval_episodes,
-            "experiment": experiment, "tracking_uri": tracking_uri,
-        }
-        if workers is not None:
-            flags["workers"] = workers
-        flag_source = {"seeds": {"seeds", "seed_list"}}
-        for key, value in flags.items():
-            if config is None or explicit & flag_source.get(key, {key}):
-                kwargs[key] = value
-        kwargs["vlm"] = vlm_overrides(kwargs.get("vlm", VLMConfig()), vlm_cfg, explicit if config else None)
-        cfg = RunConfig(**kwargs)
-        cfg.validate()
+        cfg = resolve(config_layers(ctx, config, sets, vlm_cfg))
+        if dry_run:
+            typer.echo(dry_run_text(cfg), nl=False)
+            return
         console.print(f"[bold]vlmrl run[/]: arms {', '.join(cfg.arms)} x seeds {list(cfg.seeds)}, preset "
                       f"{cfg.preset}, {cfg.budget:,} steps each, {cfg.workers} worker(s), experiment "
                       f"'{cfg.experiment}'")
+        overrides = cfg.jobs()[0].overrides()
+        if overrides:
+            console.print("overrides: " + " ".join(f"{k}={v}" for k, v in overrides.items()), markup=False)
         if cfg.vlm.backend == "sim":
             console.print("[yellow]VLM: the SIMULATED VLM (a pixel-reading stand-in), not a real model.[/]")
         with RichSweepReporter(console) as reporter:
@@ -93,3 +84,16 @@ def run(
             raise typer.Exit(1)
 
 
+def dry_run_text(cfg: RunConfig) -> str:
+    """The resolved config as TOML, then the job list as TOML comments, so the whole text is a
+    config file that ``--config`` reads back."""
+    from vlmrl_cli.training.sweep import dry_plan
+
+    plan = dry_plan(cfg)
+    done = {(j.arm.name, j.seed) for j in plan.done}
+    lines = [f"# {plan.note}", "# arm        seed  config_hash   status"]
+    for job in cfg.jobs():
+        status = "FINISHED" if (job.arm.name, job.seed) in done else "pending"
+        lines.append(f"# {job.arm.name:<10} {job.seed:>4}  {job.config_hash}  {status}")
+    lines.append(f"# {len(plan.done)} FINISHED, {len(plan.pending)} pending; nothing was trained.")
+    return "# vlmrl run --dry-run: the resolved configuration\n" + to_toml(cfg) + "\n" + "\n".join(lines) + "\n"

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Iterable
+
 
 class BadInput(Exception):
     """A problem the user can fix: bad option, unreachable server, unreadable file.
@@ -17,3 +20,16 @@ class BackendUnavailable(BadInput):
 
 class MissingAnswer(LookupError):
     """A replay transcript holds no answer for this (prompt, frame)."""
+
+
+def did_you_mean(word: str, choices: Iterable[str]) -> str:
+    """`` (did you mean 'x'?)`` for the closest of ``choices``, or ``""`` when none is close.
+
+    Example:
+        >>> did_you_mean("nenvs", ["n_envs", "n_steps"])
+        " (did you mean 'n_envs'?)"
+        >>> did_you_mean("colour", ["arms", "seeds"])
+        ''
+    """
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return f" (did you mean '{close[0]}'?)" if close else ""

@@ -1,14 +1,19 @@
-"""The configuration of `vlmrl run`: one frozen object, loadable from one TOML file.
+"""The configuration of `vlmrl run`: one frozen object, checked whole by ``training/schema.py``.
 
-A TOML file may set every knob; a flag given on the command line overrides the file.
-Example file (every key optional)::
+It is resolved in layers, each overriding the one before (``training/overrides.py``): the PPO
+preset < a TOML config file < ``--set KEY=VALUE`` < flags typed on the command line. Example
+file (every key optional; ``vlmrl run --dry-run`` prints a complete one)::
 
     arms = ["baseline", "hybrid"]
     seeds = [0, 1, 2]
     preset = "paper"
-    timesteps = 300000
     workers = 2
     experiment = "vlmrl"
+
+    [ppo]
+    n_envs = 1
+    normalize_reward = false
+    timesteps = 300000
 
     [vlm]
     backend = "sim"
@@ -34,12 +39,11 @@ from pathlib import Path
 from typing import Any
 
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.core.provenance import config_hash, to_jsonable
-from vlmrl_cli.frames.geometry import Zone
-from vlmrl_cli.shaping.arms import ARMS, ArmSpec, parse_arms
+from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
+from vlmrl_cli.shaping.arms import ARMS, ArmSpec
 from vlmrl_cli.shaping.config import ShapingConfig
-from vlmrl_cli.training.presets import PPOPreset, get_preset
-from vlmrl_cli.vlm.config import BACKENDS, SimKnobs, VLMConfig
+from vlmrl_cli.training.presets import PPOConfig, get_preset
+from vlmrl_cli.vlm.config import VLMConfig
 
 DEFAULT_EXPERIMENT = "vlmrl"
 EVAL_SEED = 1_000_000  # detached evaluation episode i resets with seed EVAL_SEED + i
@@ -51,61 +55,36 @@ class RunConfig:
 
     arms: tuple[str, ...] = ("baseline", "hybrid")
     seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
-    preset: str = "paper"
-    timesteps: int | None = field(default=None, metadata={"help": "None = the preset's budget"})
-    eval_episodes: int | None = field(default=None, metadata={"help": "None = the preset's (100)"})
+    preset: str = field(default="paper", metadata={"help": "named PPO preset: the bottom layer of [ppo]"})
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)
     experiment: str = DEFAULT_EXPERIMENT
     tracking_uri: str | None = None
+    ppo: PPOConfig | None = field(default=None, metadata={"help": "None = the preset's values"})
     vlm: VLMConfig = field(default_factory=VLMConfig)
     shaping: ShapingConfig = field(default_factory=ShapingConfig)
+    regime: str | None = field(default=None, metadata={"help": "calibration regime label (a tag, not hashed)"})
 
     def validate(self) -> None:
         """Raise ``BadInput`` for anything that would fail later; nothing is trained before."""
-        parse_arms(",".join(self.arms))
-        get_preset(self.preset)
-        if not self.seeds:
-            raise BadInput("no seed given; pass --seeds N (N >= 1) or --seed-list 0,1,2.")
-        if len(set(self.seeds)) != len(self.seeds):
-            raise BadInput("a seed is listed twice; list each seed once.")
-        if any(s < 0 for s in self.seeds):
-            raise BadInput("seeds must be non-negative integers.")
-        if self.timesteps is not None and self.timesteps < 1:
-            raise BadInput(f"--timesteps must be at least 1, got {self.timesteps}.")
-        if self.eval_episodes is not None and self.eval_episodes < 1:
-            raise BadInput(f"eval_episodes must be at least 1, got {self.eval_episodes}.")
-        if self.workers < 1:
-            raise BadInput(f"--workers must be at least 1, got {self.workers}.")
-        if self.vlm.backend not in BACKENDS:
-            raise BadInput(f"unknown VLM backend '{self.vlm.backend}'; choose one of {', '.join(BACKENDS)}.")
-        s = self.shaping
-        if s.query_every < 1 or s.confirm < 1:
-            raise BadInput("shaping.query_every and shaping.confirm must be at least 1.")
-        if s.bandwidth <= 0 or s.reuse_radius < 0 or s.render_quantum <= 0:
-            raise BadInput("shaping.bandwidth and render_quantum must be > 0 and reuse_radius >= 0.")
-        if s.gamma is not None and not 0 < s.gamma <= 1:
-            raise BadInput(f"shaping.gamma must be in (0, 1], got {s.gamma}.")
-        missing = set(Zone) - {z for z, _ in s.label_potentials}
-        if missing:
-            raise BadInput(f"shaping.label_potentials lacks {sorted(missing)[0]}; give a potential for every label.")
+        from vlmrl_cli.training.schema import validate_as
+
+        validate_as(RunConfig, to_jsonable(self))
 
     @property
-    def preset_spec(self) -> PPOPreset:
-        return get_preset(self.preset)
+    def ppo_config(self) -> PPOConfig:
+        """The PPO knobs of every job: ``ppo``, or the preset's when that is None."""
+        return self.ppo if self.ppo is not None else get_preset(self.preset)
 
     @property
     def budget(self) -> int:
-        return self.timesteps if self.timesteps is not None else self.preset_spec.timesteps
+        return self.ppo_config.timesteps
 
     def jobs(self) -> list[TrainJob]:
         """One job per (arm, seed), arms in the given order, seeds inner."""
-        preset = self.preset_spec
+        ppo = self.ppo_config
         return [
-            TrainJob(
-                arm=ARMS[arm], seed=seed, preset=preset, timesteps=self.budget,
-                eval_episodes=self.eval_episodes or preset.eval_episodes,
-                vlm=self.vlm, shaping=self.shaping,
-            )
+            TrainJob(arm=ARMS[arm], seed=seed, preset=self.preset, ppo=ppo, vlm=self.vlm, shaping=self.shaping,
+                     regime=self.regime)
             for arm in self.arms
             for seed in self.seeds
         ]
@@ -117,25 +96,32 @@ class TrainJob:
 
     arm: ArmSpec
     seed: int
-    preset: PPOPreset
-    timesteps: int
-    eval_episodes: int
+    preset: str
+    ppo: PPOConfig
     vlm: VLMConfig
     shaping: ShapingConfig
+    regime: str | None = None
 
     @property
     def name(self) -> str:
         return f"{self.arm.name}-s{self.seed}"
 
+    @property
+    def timesteps(self) -> int:
+        return self.ppo.timesteps
+
+    @property
+    def eval_episodes(self) -> int:
+        return self.ppo.eval_episodes
+
     def identity(self) -> dict[str, Any]:
-        """What makes two runs the same experiment cell, seed excluded. The VLM and the shaping
-        knobs count only for arms that use them, so tuning the VLM does not redo the baseline.
-        Cache settings never count: they change speed, not answers."""
+        """What makes two runs the same experiment cell, seed excluded: the resolved values, not
+        the preset's name, so two routes to the same knobs share runs and any changed knob is a
+        new cell. The VLM and the shaping knobs count only for arms that use them, so tuning the
+        VLM does not redo the baseline. Cache settings never count: they change speed, not answers."""
         ident: dict[str, Any] = {
             "arm": to_jsonable(self.arm),
-            "preset": to_jsonable(self.preset),
-            "timesteps": self.timesteps,
-            "eval_episodes": self.eval_episodes,
+            "ppo": to_jsonable(self.ppo),
             "eval_seed": EVAL_SEED,
         }
         if self.arm.kinematic or self.arm.uses_vlm:
@@ -155,64 +141,24 @@ class TrainJob:
 
     def params(self) -> dict[str, Any]:
         """The whole job config, for MLflow params."""
-        return {"seed": self.seed, **self.identity()}
+        return {"seed": self.seed, "preset": self.preset, **self.identity()}
+
+    def overrides(self) -> dict[str, str]:
+        """The knobs of this job that differ from its preset and the shaping/VLM defaults, as
+        dotted keys (``{"ppo.n_envs": "1"}``); only knobs the job's identity depends on count."""
+        reference = dataclasses.replace(self, ppo=get_preset(self.preset), vlm=VLMConfig(), shaping=ShapingConfig())
+        ref = flatten(reference.identity())
+        return {k: v for k, v in flatten(self.identity()).items() if ref.get(k) != v}
 
 
 # --- loading from TOML -----------------------------------------------------------------
 
-def _build(cls: type[Any], data: dict[str, Any], where: str) -> Any:
-    known = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - set(known))
-    if unknown:
-        raise BadInput(f"unknown key '{unknown[0]}' in [{where}] of the config file; known: {', '.join(known)}.")
-    return data
-
-
-def _shaping_from(data: dict[str, Any]) -> ShapingConfig:
-    data = dict(_build(ShapingConfig, data, "shaping"))
-    if "label_potentials" in data:
-        raw = data["label_potentials"]
-        if not isinstance(raw, dict):
-            raise BadInput("[shaping.label_potentials] must map labels to numbers.")
-        base = dict(ShapingConfig().label_potentials)
-        for label, value in raw.items():
-            if label not in Zone.__members__:
-                raise BadInput(f"unknown label '{label}' in [shaping.label_potentials]; known: {', '.join(Zone)}.")
-            base[Zone(label)] = float(value)
-        data["label_potentials"] = tuple(base.items())
-    try:
-        return ShapingConfig(**data)
-    except TypeError as exc:
-        raise BadInput(f"bad [shaping] section in the config file: {exc}.") from exc
-
-
-def _vlm_from(data: dict[str, Any]) -> VLMConfig:
-    data = dict(_build(VLMConfig, data, "vlm"))
-    if "sim" in data:
-        data["sim"] = SimKnobs(**_build(SimKnobs, dict(data["sim"]), "vlm.sim"))
-    for key in ("transcript_in", "cache_path"):
-        if data.get(key) is not None:
-            data[key] = Path(data[key])
-    return VLMConfig(**data)
-
 
 def load_config_file(path: Path) -> dict[str, Any]:
-    """Parse a TOML config file into ``RunConfig`` keyword arguments (validated later)."""
+    """Parse a TOML config file into a raw nested dict (checked later, with every other layer)."""
     try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+        return tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
         raise BadInput(f"cannot read the config file {path}: {exc.strerror}.") from exc
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise BadInput(f"the config file {path} is not valid TOML ({exc}).") from exc
-    kwargs = dict(_build(RunConfig, raw, "top level"))
-    try:
-        for key in ("arms", "seeds"):
-            if key in kwargs:
-                kwargs[key] = tuple(kwargs[key])
-        if "vlm" in kwargs:
-            kwargs["vlm"] = _vlm_from(dict(kwargs["vlm"]))
-        if "shaping" in kwargs:
-            kwargs["shaping"] = _shaping_from(dict(kwargs["shaping"]))
-    except (TypeError, ValueError) as exc:
-        raise BadInput(f"the config file {path} has a value of the wrong type ({exc}).") from exc
-    return kwargs

@@ -13,7 +13,7 @@ from vlmrl_cli.shaping.camera import Camera
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.semantic import SemanticOracle
 from vlmrl_cli.shaping.wrapper import HybridReward
-from vlmrl_cli.training.presets import PPOPreset
+from vlmrl_cli.training.presets import PPOConfig
 from vlmrl_cli.vlm.client import VLMClient
 
 ENV_ID = "MountainCar-v0"
@@ -21,7 +21,7 @@ ENV_ID = "MountainCar-v0"
 
 def make_train_env(
     arm: ArmSpec,
-    preset: PPOPreset,
+    ppo: PPOConfig,
     shaping: ShapingConfig,
     client: VLMClient | None,
     seed: int,
@@ -31,15 +31,16 @@ def make_train_env(
     Per env: ``gym.make(MountainCar-v0)`` -> ``Monitor`` (SB3's episode stats are the NATIVE
     return and length) -> ``HybridReward`` (the arm's reward; a pass-through adding the info
     keys for ``baseline``). Then ``DummyVecEnv`` of ``preset.n_envs`` (one process, so the
-    camera and oracle are shared by all envs) -> ``VecNormalize`` (obs and reward, with the
-    learner's gamma) when ``preset.normalize``. Env ``i`` is seeded ``seed + i``. The PBRS
-    discount is ``shaping.gamma``, or ``preset.gamma`` when that is None.
+    camera and oracle are shared by all envs) -> ``VecNormalize`` (observations if
+    ``ppo.normalize_obs``, rewards if ``ppo.normalize_reward``, with the learner's gamma; no
+    wrapper when both are off). Env ``i`` is seeded ``seed + i``. The PBRS discount is
+    ``shaping.gamma``, or ``ppo.gamma`` when that is None.
     """
     if arm.uses_vlm and client is None:
         raise ValueError(f"arm '{arm.name}' queries a VLM; pass a VLMClient (e.g. the simulated one).")
-    if preset.n_envs < 1:
-        raise ValueError(f"preset '{preset.name}' has n_envs={preset.n_envs}; it needs at least one env.")
-    gamma = shaping.gamma if shaping.gamma is not None else preset.gamma
+    if ppo.n_envs < 1:
+        raise ValueError(f"n_envs={ppo.n_envs}; a run needs at least one env.")
+    gamma = shaping.gamma if shaping.gamma is not None else ppo.gamma
     camera = Camera(shaping.render_quantum) if arm.uses_vlm else None
     oracle = SemanticOracle(client, shaping, arm.potential, rbf=arm.rbf) if arm.uses_vlm and client else None
 
@@ -48,9 +49,9 @@ def make_train_env(
         env = Monitor(env)
         return HybridReward(env, arm, shaping, gamma=gamma, camera=camera, oracle=oracle)
 
-    fns: list[Callable[[], gym.Env]] = [make_one] * preset.n_envs
+    fns: list[Callable[[], gym.Env]] = [make_one] * ppo.n_envs
     venv: VecEnv = DummyVecEnv(fns)
     venv.seed(seed)
-    if preset.normalize:
-        venv = VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=preset.gamma)
+    if ppo.vec_normalize:
+        venv = VecNormalize(venv, norm_obs=ppo.normalize_obs, norm_reward=ppo.normalize_reward, gamma=ppo.gamma)
     return venv, oracle

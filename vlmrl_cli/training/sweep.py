@@ -7,6 +7,7 @@ and the job is trained again. One parent run records each invocation that trains
 
 from __future__ import annotations
 
+import dataclasses
 import multiprocessing as mp
 import queue as queue_mod
 import signal
@@ -16,6 +17,7 @@ from collections.abc import Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Protocol
 
 from vlmrl_cli.core.provenance import config_hash, flatten
@@ -100,6 +102,30 @@ def plan(client: Any, experiment_id: str, jobs: list[TrainJob]) -> tuple[list[Tr
     return pending, done, stale
 
 
+@dataclass(frozen=True)
+class DryPlan:
+    """What a sweep would do, read without writing: ``done`` jobs already have a FINISHED run."""
+
+    pending: list[TrainJob]
+    done: list[TrainJob]
+    note: str  # where the answer came from (or why every job is pending)
+
+
+def dry_plan(cfg: RunConfig) -> DryPlan:
+    """Plan ``cfg``'s jobs against the store, read-only: a sqlite store that does not exist is
+    not created, a missing experiment is not created, stale runs are not touched."""
+    uri = store.resolve_tracking_uri(cfg.tracking_uri)
+    jobs = cfg.jobs()
+    if uri.startswith("sqlite:///") and not Path(uri.removeprefix("sqlite:///")).exists():
+        return DryPlan(jobs, [], f"the tracking store {uri} does not exist (not created): every job is pending")
+    client = store.connect(uri)
+    exp = client.get_experiment_by_name(cfg.experiment)
+    if exp is None or exp.lifecycle_stage == "deleted":
+        return DryPlan(jobs, [], f"experiment '{cfg.experiment}' does not exist in {uri}: every job is pending")
+    pending, done, _ = plan(client, str(exp.experiment_id), jobs)
+    return DryPlan(pending, done, f"checked against experiment '{cfg.experiment}' in {uri}")
+
+
 def run_sweep(cfg: RunConfig, reporter: SweepReporter) -> SweepSummary:
     """Validate, plan, train the pending jobs in ``cfg.workers`` processes, record the sweep."""
     start = time.perf_counter()
@@ -124,9 +150,10 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter) -> SweepSummary:
         "mlflow.runName": f"sweep-{time.strftime('%Y%m%d-%H%M%S')}",
         f"{store.TAG_PREFIX}kind": "sweep",
         f"{store.TAG_PREFIX}config_hash": config_hash(cfg),
+        **({f"{store.TAG_PREFIX}regime": cfg.regime} if cfg.regime is not None else {}),
     })
     summary.parent_run_id = parent.info.run_id
-    store.log_params(client, parent.info.run_id, flatten(cfg))
+    store.log_params(client, parent.info.run_id, flatten(dataclasses.replace(cfg, ppo=cfg.ppo_config)))
 
     ctx = mp.get_context("spawn")
     events: Any = ctx.Queue()

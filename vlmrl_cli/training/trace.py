@@ -14,29 +14,14 @@ from vlmrl_cli.training.config import TrainJob
 
 def native_returns(job: TrainJob) -> list[float]:
     """Native (unshaped) returns of the episodes completed while training ``job``."""
-    from stable_baselines3 import PPO
-
     from vlmrl_cli.training.envs import make_train_env
+    from vlmrl_cli.training.model import make_model
     from vlmrl_cli.vlm.registry import build_client
 
     client = build_client(job.vlm) if job.arm.uses_vlm else None
     try:
-        env, _ = make_train_env(job.arm, job.preset, job.shaping, client, job.seed)
-        p = job.preset
-        model = PPO(
-            "MlpPolicy",
-            env,
-            n_steps=p.n_steps,
-            batch_size=p.batch_size,
-            gae_lambda=p.gae_lambda,
-            gamma=p.gamma,
-            n_epochs=p.n_epochs,
-            ent_coef=p.ent_coef,
-            learning_rate=p.learning_rate,
-            seed=job.seed,
-            device="cpu",
-            verbose=0,
-        )
+        env, _ = make_train_env(job.arm, job.ppo, job.shaping, client, job.seed)
+        model = make_model(job.ppo, env, job.seed)
         tracker = EpisodeTracker(job.name, job.timesteps)
         model.learn(total_timesteps=job.timesteps, callback=tracker)
         return [e["episode/native_return"] for e in tracker.episodes]

@@ -65,8 +65,11 @@ def run_tags(job: TrainJob, parent_run_id: str | None, vlm_label: str, simulated
         f"{store.TAG_PREFIX}arm": job.arm.name,
         f"{store.TAG_PREFIX}seed": str(job.seed),
         f"{store.TAG_PREFIX}config_hash": job.config_hash,
-        f"{store.TAG_PREFIX}preset": job.preset.name,
+        f"{store.TAG_PREFIX}preset": job.preset,
+        f"{store.TAG_PREFIX}overrides": " ".join(f"{k}={v}" for k, v in job.overrides().items()) or "none",
     }
+    if job.regime is not None:
+        tags[f"{store.TAG_PREFIX}regime"] = job.regime
     if parent_run_id is not None:
         tags["mlflow.parentRunId"] = parent_run_id
     return tags
@@ -95,9 +98,8 @@ def train_job(
     simulated: bool,
 ) -> JobResult:
     """Train, evaluate and record one job. Never raises: failures end as a FAILED run."""
-    from stable_baselines3 import PPO
-
     from vlmrl_cli.training.envs import make_train_env
+    from vlmrl_cli.training.model import make_model
     from vlmrl_cli.vlm.registry import build_client
 
     start = time.perf_counter()
@@ -118,13 +120,8 @@ def train_job(
             store.log_params(client, run_id, {"timesteps": str(job.timesteps), **flatten(job.params())})
             if job.arm.uses_vlm:
                 vlm_client = build_client(job.vlm, transcript=out / "transcript.jsonl")
-            env, oracle = make_train_env(job.arm, job.preset, job.shaping, vlm_client, job.seed)
-            p = job.preset
-            model = PPO(
-                "MlpPolicy", env, n_steps=p.n_steps, batch_size=p.batch_size, gae_lambda=p.gae_lambda,
-                gamma=p.gamma, n_epochs=p.n_epochs, ent_coef=p.ent_coef, learning_rate=p.learning_rate,
-                seed=job.seed, device="cpu", verbose=0,
-            )
+            env, oracle = make_train_env(job.arm, job.ppo, job.shaping, vlm_client, job.seed)
+            model = make_model(job.ppo, env, job.seed)
             metrics = store.BatchLogger(client, run_id)
             tracker = EpisodeTracker(
                 job.name, job.timesteps, metrics=metrics, progress=send,

@@ -1,0 +1,196 @@
+"""How far one PPO regime's baseline learning profile is from a target profile (the paper's baseline).
+
+A *learning profile* is the steps to each reward threshold and the reliability (the fraction of
+seeds reaching the last threshold within the budget). For a regime trained on ``n`` seeds with
+budget ``B``, thresholds ``r_1..r_K`` and target steps ``T_1..T_K`` and reliability ``rho*``:
+
+    c[s, k] = steps of seed s to threshold r_k, a DNF counted at B (censored, never dropped)
+    S_k     = mean over seeds of c[s, k]
+    rho     = fraction of seeds whose rolling mean reached r_K within B
+    D       = (1/K) sum_k |ln(S_k / T_k)|  +  |rho - rho*|
+
+The first term is a mean absolute log ratio (0.1 ~ 10% too fast or too slow; symmetric in
+"twice as fast" and "twice as slow"), the second a difference of fractions; ``D = 0`` is a perfect
+match. A regime whose budget is below ``T_k`` cannot get the log term to 0. ``D``'s confidence
+interval is a percentile bootstrap over seeds (``scipy.stats.bootstrap``, paired: a resampled seed
+keeps all its thresholds and its reliability together).
+
+The inputs are *episode tables*: one row per training episode with columns ``seed``,
+``timestep`` (global step at the episode's end) and ``native_return``.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+from scipy import stats as sps
+
+from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, mean_ci, reliability
+from vlmrl_cli.analysis.thresholds import censored_steps_to_threshold, steps_to_threshold
+from vlmrl_cli.core.errors import BadInput
+
+PAPER_REPORTED = Path(__file__).resolve().parents[2] / "paper" / "reported.json"
+
+
+@dataclass(frozen=True)
+class TargetProfile:
+    """A learning profile to match: steps to each threshold, and the reliability at the last."""
+
+    thresholds: tuple[float, ...]  # native return targets, ascending difficulty, e.g. (-190, -160, -130)
+    steps: tuple[float, ...]  # target steps to each threshold, shape (K,)
+    reliability: float  # fraction of seeds reaching thresholds[-1] within the budget
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.thresholds or len(self.thresholds) != len(self.steps):
+            raise ValueError("a target profile needs one step count per threshold, and at least one threshold.")
+        if any(s <= 0 for s in self.steps) or not 0 <= self.reliability <= 1:
+            raise ValueError("target steps must be > 0 and the target reliability in [0, 1].")
+
+
+def paper_baseline(path: Path = PAPER_REPORTED) -> TargetProfile:
+    """The paper's baseline (Table 2): steps to -190/-160/-130 and its final reliability.
+
+    Example:
+        >>> t = paper_baseline()
+        >>> t.thresholds, t.steps, t.reliability
+        ((-190.0, -160.0, -130.0), (196717.0, 219679.0, 272448.0), 0.6)
+    """
+    try:
+        table2 = json.loads(path.read_text(encoding="utf-8"))["table2"]
+        rows = sorted(table2["steps_to_threshold"], key=lambda r: float(r["threshold"]))
+        return TargetProfile(
+            thresholds=tuple(float(r["threshold"]) for r in rows),
+            steps=tuple(float(r["baseline"]) for r in rows),
+            reliability=float(table2["final_reliability"]["baseline"]),
+            source=f"the paper's baseline ({path.name}, Table 2)",
+        )
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise BadInput(f"cannot read the paper's baseline profile from {path}; check the file ({exc}).") from exc
+
+
+def seed_steps(
+    episodes: pd.DataFrame,
+    thresholds: tuple[float, ...],
+    budget: int,
+    window: int = 100,
+    seeds: Sequence[int] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per seed, censored steps to each threshold and whether it reached each within the budget.
+
+    Args:
+        episodes: episode table (``seed``, ``timestep``, ``native_return``) of one regime.
+        thresholds: shape ``(K,)``.
+        budget: training steps per run; a seed that never reaches a threshold counts at it.
+        seeds: the regime's seeds (default: those in ``episodes``); a seed without a single
+            completed episode is a DNF at every threshold, never dropped.
+
+    Returns:
+        ``(steps, reached)``, both shape ``(n_seeds, K)`` (seeds in ascending order): float steps
+        (DNF = ``budget``) and bool.
+    """
+    steps, reached = [], []
+    for seed in sorted(set(episodes["seed"]) if seeds is None else seeds):
+        ep = episodes[episodes["seed"] == seed]
+        ts, ret = ep["timestep"].to_numpy(), ep["native_return"].to_numpy()
+        steps.append([censored_steps_to_threshold(ts, ret, t, budget, window) for t in thresholds])
+        hits = [steps_to_threshold(ts, ret, t, window) for t in thresholds]
+        reached.append([h is not None and h <= budget for h in hits])
+    k = len(thresholds)
+    return np.asarray(steps, dtype=float).reshape(-1, k), np.asarray(reached, dtype=bool).reshape(-1, k)
+
+
+def distance(steps: npt.ArrayLike, reached: npt.ArrayLike, target: TargetProfile) -> float:
+    """``D`` of the module docstring for censored ``steps`` (``(n_seeds, K)``) and ``reached`` (``(n_seeds,)``).
+
+    Example:
+        >>> t = TargetProfile((-130.0,), (100.0,), 0.5)
+        >>> round(distance([[200.0], [200.0]], [True, False], t), 4)  # twice as slow, reliability right
+        0.6931
+    """
+    s = np.asarray(steps, dtype=float)
+    r = np.asarray(reached, dtype=float)
+    return float(_distance_stat(*s.T, r, target=target))
+
+
+def _distance_stat(*columns: np.ndarray, target: TargetProfile, axis: int = -1) -> np.ndarray:
+    """Vectorised ``D``: ``columns`` are K censored-step arrays and one reached array, seeds on ``axis``."""
+    *step_cols, reached = columns
+    log_term = np.mean(
+        [np.abs(np.log(np.mean(c, axis=axis) / t)) for c, t in zip(step_cols, target.steps, strict=True)], axis=0
+    )
+    return np.asarray(log_term + np.abs(np.mean(reached, axis=axis) - target.reliability))
+
+
+def distance_ci(
+    steps: npt.ArrayLike,
+    reached: npt.ArrayLike,
+    target: TargetProfile,
+    rng: np.random.Generator,
+    n_boot: int = DEFAULT_N_BOOT,
+    ci: float = 0.95,
+) -> Estimate:
+    """``D`` with a paired percentile bootstrap CI over seeds (NaN bounds and a note below 2 seeds)."""
+    s = np.asarray(steps, dtype=float)
+    r = np.asarray(reached, dtype=float).reshape(-1)
+    value = distance(s, r, target)
+    if r.size < 2:
+        return Estimate(value, n=int(r.size), note="fewer than 2 seeds: no CI")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # degenerate resamples (all seeds alike) warn but are fine
+        res = sps.bootstrap(
+            (*s.T, r),
+            lambda *cols, axis=-1: _distance_stat(*cols, target=target, axis=axis),
+            paired=True,
+            vectorized=True,
+            n_resamples=n_boot,
+            confidence_level=ci,
+            method="percentile",
+            rng=rng,
+        )
+    low, high = float(res.confidence_interval.low), float(res.confidence_interval.high)
+    if not (np.isfinite(low) and np.isfinite(high)):  # every resample equal: the interval is the point
+        low = high = value
+    return Estimate(value, low, high, n=int(r.size))
+
+
+@dataclass(frozen=True)
+class RegimeProfile:
+    """One regime's measured profile next to the target: what ``calibration.csv`` holds per row."""
+
+    n_seeds: int
+    budget: int
+    reliability: Estimate  # fraction reaching the last threshold, Wilson CI
+    steps: tuple[Estimate, ...]  # censored mean steps to each threshold, bootstrap CI
+    n_reached: tuple[int, ...]  # seeds that reached each threshold within the budget
+    distance: Estimate
+
+
+def regime_profile(
+    episodes: pd.DataFrame,
+    target: TargetProfile,
+    budget: int,
+    rng: np.random.Generator,
+    window: int = 100,
+    n_boot: int = DEFAULT_N_BOOT,
+    ci: float = 0.95,
+    seeds: Sequence[int] | None = None,
+) -> RegimeProfile:
+    """The profile of one regime's episode table against ``target`` (see the module docstring);
+    ``seeds`` as in ``seed_steps``."""
+    steps, reached = seed_steps(episodes, target.thresholds, budget, window, seeds)
+    return RegimeProfile(
+        n_seeds=int(reached.shape[0]),
+        budget=int(budget),
+        reliability=reliability(reached[:, -1], ci),
+        steps=tuple(mean_ci(steps[:, k], rng, n_boot, ci) for k in range(steps.shape[1])),
+        n_reached=tuple(int(n) for n in reached.sum(axis=0)),
+        distance=distance_ci(steps, reached[:, -1], target, rng, n_boot, ci),
+    )

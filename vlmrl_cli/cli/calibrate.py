@@ -1,0 +1,79 @@
+"""`vlmrl calibrate`: find the PPO regime whose baseline learns most like the paper's baseline."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from vlmrl_cli.cli import options as opt
+from vlmrl_cli.cli.errors import exit_codes
+from vlmrl_cli.cli.progress import RichSweepReporter
+from vlmrl_cli.vlm.config import VLMConfig
+
+Grid = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--grid",
+        help="Values of one key, repeatable: --grid ppo.n_envs=1,4,16 --grid "
+        "ppo.ent_coef=0,0.01; the regimes are their product (replaces the default grid).",
+    ),
+]
+Out = Annotated[Path, typer.Option("--out", help="Output folder of calibration.md/csv/png and manifest.json.")]
+
+
+def calibrate(
+    ctx: typer.Context,
+    seeds: opt.Seeds = 10,
+    seed_list: opt.SeedList = None,
+    timesteps: opt.Timesteps = None,
+    preset: opt.Preset = "paper",
+    workers: opt.Workers = None,
+    eval_episodes: opt.EvalEpisodes = None,
+    config: opt.ConfigFile = None,
+    sets: opt.Sets = None,
+    grid: Grid = None,
+    out: Out = Path("results/calibration"),
+    experiment: opt.Experiment = "vlmrl-calibrate",
+    tracking_uri: opt.TrackingUri = None,
+) -> None:
+    """Train the baseline arm under each PPO regime of a grid (resumable MLflow runs tagged vlmrl.regime)
+    and rank the regimes by their distance to the paper's baseline learning profile."""
+    from vlmrl_cli.calibration.pipeline import calibrate as run_calibration
+    from vlmrl_cli.calibration.regimes import CalibrateConfig, Regime, build_regimes, calibrate_section, grid_flags
+
+    console = Console()
+    with exit_codes():
+        file_layer, *upper = opt.config_layers(ctx, config, sets, VLMConfig())
+        file_grid = calibrate_section(file_layer.pop("calibrate", {}))
+        cfg = CalibrateConfig(build_regimes([file_layer, *upper], file_grid | grid_flags(grid or [])), out=out)
+        base = cfg.base
+        console.print(
+            f"[bold]vlmrl calibrate[/]: {len(cfg.regimes)} regime(s) x seeds {list(base.seeds)} of the "
+            f"baseline, preset {base.preset}, {base.budget:,} steps each, experiment '{base.experiment}'"
+        )
+
+        def reporter_for(regime: Regime) -> RichSweepReporter:
+            console.print(f"[bold]{regime.id}[/]: {regime.label}")
+            return RichSweepReporter(console)
+
+        result = run_calibration(cfg, reporter_for, command=" ".join(["vlmrl", *sys.argv[1:]]))
+        if result.failed:
+            for r in result.failed:
+                console.print(f"[red]{r.job}: {r.status} {r.error or ''}[/]")
+            console.print("Some runs failed; nothing was scored. Rerun the same command to retry them.")
+            raise typer.Exit(1)
+        best = result.table.iloc[0]
+        console.print(
+            f"closest regime: {best['id']} ({best['regime']}), distance {best['distance']:.3f} "
+            f"[{best['distance_low']:.3f}, {best['distance_high']:.3f}]",
+            markup=False,
+        )
+        console.print(
+            f"cost: {result.wall_s:,.0f} s wall time now ({result.trained} run(s) trained); the runs' own "
+            f"wall times sum to {result.train_wall_s:,.0f} s"
+        )
+        console.print(f"wrote {', '.join(p.name for p in result.files)} to {out}; MLflow run {result.run_id}")

@@ -1,0 +1,53 @@
+"""The PPO learner of one run, built in one place so that every knob of ``PPOConfig`` reaches
+both the worker (``training/worker.py``) and the determinism probe (``training/trace.py``)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from vlmrl_cli.training.presets import PPOConfig
+
+
+def learning_rate(ppo: PPOConfig) -> float | Callable[[float], float]:
+    """SB3's ``learning_rate`` argument: a constant, or a schedule of the remaining progress
+    (1 at the start, 0 at the budget) for ``lr_schedule = "linear"``.
+
+    Example:
+        >>> from vlmrl_cli.training.presets import PPOConfig
+        >>> lr = learning_rate(PPOConfig(learning_rate=1e-3, lr_schedule="linear"))
+        >>> lr(1.0), lr(0.25)
+        (0.001, 0.00025)
+    """
+    if ppo.lr_schedule == "linear":
+        initial = ppo.learning_rate
+
+        def linear(progress_remaining: float) -> float:
+            return progress_remaining * initial
+
+        return linear
+    return ppo.learning_rate
+
+
+def make_model(ppo: PPOConfig, env: Any, seed: int) -> Any:
+    """A ``PPO("MlpPolicy", env)`` with every knob of ``ppo``, on the CPU, seeded ``seed``."""
+    from stable_baselines3 import PPO
+
+    return PPO(
+        "MlpPolicy",
+        env,
+        n_steps=ppo.n_steps,
+        batch_size=ppo.batch_size,
+        n_epochs=ppo.n_epochs,
+        learning_rate=learning_rate(ppo),
+        gamma=ppo.gamma,
+        gae_lambda=ppo.gae_lambda,
+        clip_range=ppo.clip_range,
+        ent_coef=ppo.ent_coef,
+        vf_coef=ppo.vf_coef,
+        max_grad_norm=ppo.max_grad_norm,
+        policy_kwargs={"net_arch": {"pi": list(ppo.net_arch_pi), "vf": list(ppo.net_arch_vf)}},
+        seed=seed,
+        device="cpu",
+        verbose=0,
+    )

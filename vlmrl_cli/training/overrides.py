@@ -1,0 +1,160 @@
+"""Resolve a run's configuration from its layers: preset < config file < ``--set`` < flags.
+
+Every layer is a nested dict of plain values keyed like the TOML file (``{"ppo": {"n_envs": 1}}``).
+The preset named by the highest layer that names one fills ``[ppo]``; each layer then overrides
+the keys it sets; the merged dict is checked whole by ``training/schema.py`` and becomes the
+frozen ``RunConfig``. Nothing is read or written elsewhere: a bad value fails here, before any
+store, folder or run exists.
+
+``--set KEY=VALUE`` takes a dotted key and a TOML value (``3``, ``0.3``, ``false``,
+``[64, 64]``, ``"hf"``); a value that is not TOML is a string, and one with commas a list
+(``--set ppo.net_arch_pi=32,32``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import tomli_w
+
+from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.core.provenance import to_jsonable
+from vlmrl_cli.training.config import RunConfig
+from vlmrl_cli.training.presets import get_preset
+from vlmrl_cli.training.schema import validate_as
+
+#: Top-level keys of older config files that now live in ``[ppo]``.
+MOVED_TO_PPO = ("timesteps", "eval_episodes")
+DEFAULT_PRESET = RunConfig.preset
+
+
+def parse_value(text: str) -> Any:
+    """A ``--set`` value: a TOML value if it parses as one, else a list if it has commas, else a string.
+
+    Example:
+        >>> parse_value("3"), parse_value("0.3"), parse_value("false"), parse_value("[64, 64]")
+        (3, 0.3, False, [64, 64])
+        >>> parse_value("hf"), parse_value("32,32"), parse_value("big")
+        ('hf', [32, 32], 'big')
+    """
+    text = text.strip()
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        pass
+    if "," in text:
+        return [parse_value(part) for part in text.split(",")]
+    return text
+
+
+def parse_values(text: str) -> list[Any]:
+    """A ``--grid`` value list: comma-separated TOML values (``1,4,16``; ``true,false``;
+    ``[64,64],[256,256]``), bare words as strings.
+
+    Example:
+        >>> parse_values("1,4,16"), parse_values("[64,64],[8]"), parse_values("hf,sim")
+        ([1, 4, 16], [[64, 64], [8]], ['hf', 'sim'])
+    """
+    try:
+        values = tomllib.loads(f"v = [{text}]")["v"]
+        return list(values)
+    except tomllib.TOMLDecodeError:
+        return [parse_value(part) for part in text.split(",")]
+
+
+def parse_assignment(text: str, flag: str = "--set") -> tuple[str, str]:
+    """``"ppo.n_envs=4"`` -> ``("ppo.n_envs", "4")``; ``BadInput`` when there is no ``=`` or key."""
+    key, sep, value = text.partition("=")
+    key = key.strip()
+    if not sep or not key or any(not part for part in key.split(".")):
+        raise BadInput(f"{flag} takes KEY=VALUE with a dotted key (e.g. {flag} ppo.n_envs=4), got '{text}'.")
+    return key, value
+
+
+def nest(assignments: Iterable[tuple[str, Any]]) -> dict[str, Any]:
+    """Dotted keys -> a nested dict; later assignments win.
+
+    Example:
+        >>> nest([("ppo.n_envs", 1), ("shaping.alpha", 3), ("ppo.n_envs", 4)])
+        {'ppo': {'n_envs': 4}, 'shaping': {'alpha': 3}}
+    """
+    tree: dict[str, Any] = {}
+    for key, value in assignments:
+        *path, leaf = key.split(".")
+        node = tree
+        for i, part in enumerate(path):
+            child = node.setdefault(part, {})
+            if not isinstance(child, dict):
+                raise BadInput(f"'{'.'.join(path[: i + 1])}' is a value, not a table; it has no key '{leaf}'.")
+            node = child
+        if isinstance(node.get(leaf), dict):
+            raise BadInput(f"'{key}' is a table, set its keys one by one (e.g. {key}.KEY=VALUE).")
+        node[leaf] = value
+    return tree
+
+
+def merge(base: Mapping[str, Any], top: Mapping[str, Any]) -> dict[str, Any]:
+    """``top`` laid over ``base``: tables merge key by key, any other value replaces.
+
+    Example:
+        >>> merge({"ppo": {"n_envs": 16, "gamma": 0.99}, "seeds": [0]}, {"ppo": {"n_envs": 1}})
+        {'ppo': {'n_envs': 1, 'gamma': 0.99}, 'seeds': [0]}
+    """
+    out = dict(base)
+    for key, value in top.items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
+            out[key] = merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def _lift_moved(layer: Mapping[str, Any]) -> dict[str, Any]:
+    """Top-level ``timesteps``/``eval_episodes`` (older files, ``--set timesteps=N``) -> ``[ppo]``."""
+    out = dict(layer)
+    for key in MOVED_TO_PPO:
+        if key in out:
+            ppo = out.get("ppo", {})
+            if not isinstance(ppo, Mapping):
+                break  # the schema reports the malformed [ppo]
+            if key in ppo:
+                raise BadInput(f"'{key}' is set both at the top level and in [ppo]; set ppo.{key} once.")
+            out["ppo"] = {**ppo, key: out.pop(key)}
+    return out
+
+
+def resolve_raw(layers: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
+    """The merged raw configuration of ``layers`` (lowest first) over the named preset's ``[ppo]``."""
+    lifted = [_lift_moved(layer) for layer in layers]
+    preset = DEFAULT_PRESET
+    for layer in lifted:
+        preset = layer.get("preset", preset)
+    raw: dict[str, Any] = {"preset": preset}
+    if isinstance(preset, str):  # else the schema says what is wrong with it
+        raw["ppo"] = to_jsonable(get_preset(preset))
+    for layer in lifted:
+        raw = merge(raw, layer)
+    return raw
+
+
+def resolve(layers: Iterable[Mapping[str, Any]]) -> RunConfig:
+    """The validated ``RunConfig`` of ``layers`` (lowest first: config file, ``--set``, flags)."""
+    cfg: RunConfig = validate_as(RunConfig, resolve_raw(layers))
+    return cfg
+
+
+def to_toml(cfg: RunConfig) -> str:
+    """``cfg`` as a complete TOML config file that ``--config`` reads back to the same ``cfg``.
+
+    Keys whose value is None are left out (TOML has no null; every such key defaults to None).
+    """
+    raw = to_jsonable(dataclasses.replace(cfg, ppo=cfg.ppo_config))
+    raw["shaping"]["label_potentials"] = dict(raw["shaping"]["label_potentials"])
+    return tomli_w.dumps(_drop_none(raw))
+
+
+def _drop_none(tree: dict[str, Any]) -> dict[str, Any]:
+    return {k: _drop_none(v) if isinstance(v, dict) else v for k, v in tree.items() if v is not None}
