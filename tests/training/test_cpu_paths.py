@@ -19,14 +19,15 @@ import pytest
 STEPS = 50_000
 
 _PROBE = """
-import json, sys, torch
+import dataclasses, json, sys, torch
 torch.set_num_threads(1)
 from vlmrl_cli.core.provenance import cpu_paths
 from vlmrl_cli.training.config import RunConfig
+from vlmrl_cli.training.presets import get_preset
 from vlmrl_cli.training.trace import native_returns
 from vlmrl_cli.vlm.config import VLMConfig
-cfg = RunConfig(arms=(sys.argv[1],), seeds=(0,), preset="paper", timesteps=int(sys.argv[2]), workers=1,
-                vlm=VLMConfig(use_cache=False))
+ppo = dataclasses.replace(get_preset("paper"), timesteps=int(sys.argv[2]))
+cfg = RunConfig(arms=(sys.argv[1],), seeds=(0,), preset="paper", ppo=ppo, workers=1, vlm=VLMConfig(use_cache=False))
 print(json.dumps({"paths": cpu_paths(), "returns": native_returns(cfg.jobs()[0])}))
 """
 

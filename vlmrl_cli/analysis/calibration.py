@@ -32,11 +32,12 @@ import numpy.typing as npt
 import pandas as pd
 from scipy import stats as sps
 
+from vlmrl_cli import paper
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, mean_ci, reliability
 from vlmrl_cli.analysis.thresholds import censored_steps_to_threshold, steps_to_threshold
 from vlmrl_cli.core.errors import BadInput
 
-PAPER_REPORTED = Path(__file__).resolve().parents[2] / "paper" / "reported.json"
+PAPER_REPORTED = paper.REPORTED
 
 
 @dataclass(frozen=True)
