@@ -96,8 +96,10 @@ def train_job(
 ) -> JobResult:
     """Train, evaluate and record one job. Never raises: failures end as a FAILED run."""
     from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import Logger
 
     from vlmrl_cli.training.envs import make_train_env
+    from vlmrl_cli.training.logger import MetricsOutputFormat
     from vlmrl_cli.vlm.registry import build_client
 
     start = time.perf_counter()
@@ -126,12 +128,14 @@ def train_job(
                 seed=job.seed, device="cpu", verbose=0,
             )
             metrics = store.BatchLogger(client, run_id)
+            model.set_logger(Logger(folder=None, output_formats=[MetricsOutputFormat(metrics)]))
             tracker = EpisodeTracker(
                 job.name, job.timesteps, metrics=metrics, progress=send,
                 should_stop=(lambda: bool(stop.is_set())) if stop is not None else None,
                 vlm_stats=oracle.stats if oracle is not None else None,
             )
             model.learn(total_timesteps=job.timesteps, callback=tracker)
+            model.logger.dump(step=model.num_timesteps)  # the last update's train/ figures
             if tracker.stopped:
                 client.set_terminated(run_id, "KILLED")
                 return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start)
