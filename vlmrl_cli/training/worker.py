@@ -23,6 +23,7 @@ from vlmrl_cli.tracking import store
 from vlmrl_cli.training.callbacks import EpisodeTracker, ProgressEvent
 from vlmrl_cli.training.config import EVAL_SEED, TrainJob
 from vlmrl_cli.training.evaluation import EvalResult, evaluate_detached
+from vlmrl_cli.training.trained import deterministic_policy as _policy
 
 
 @dataclass(frozen=True)
@@ -70,20 +71,6 @@ def run_tags(job: TrainJob, parent_run_id: str | None, vlm_label: str, simulated
     if parent_run_id is not None:
         tags["mlflow.parentRunId"] = parent_run_id
     return tags
-
-
-def _policy(model: Any, env: Any) -> Any:
-    """The trained policy on raw observations, applying the training obs normalisation."""
-    from stable_baselines3.common.vec_env import VecNormalize
-
-    def act(obs: np.ndarray) -> int:
-        x = np.asarray(obs, dtype=np.float32)[None, :]
-        if isinstance(env, VecNormalize):
-            x = np.asarray(env.normalize_obs(x), dtype=np.float32)
-        action, _ = model.predict(x, deterministic=True)
-        return int(np.asarray(action).reshape(-1)[0])
-
-    return act
 
 
 def train_job(
