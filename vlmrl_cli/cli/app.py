@@ -14,11 +14,12 @@ app = typer.Typer(
 
 
 def _register() -> None:
-    from vlmrl_cli.cli import report, run, taxonomy
+    from vlmrl_cli.cli import evaluate, report, run, taxonomy
 
     app.command("taxonomy")(taxonomy.taxonomy)
     app.command("run")(run.run)
     app.command("report")(report.report)
+    app.command("evaluate")(evaluate.evaluate)
 
 
 _register()
