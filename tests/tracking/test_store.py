@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import multiprocessing
+import os
 import socket
 from multiprocessing.synchronize import Barrier
 from pathlib import Path
@@ -164,3 +165,24 @@ def test_identical_records_at_the_same_step_are_all_kept(tmp_path: Path) -> None
     logger.flush()
     for key in ("episode/native_return", "episode/success"):
         assert len(client.get_metric_history(run.info.run_id, key)) == 3
+
+
+def test_connect_existing_refuses_a_missing_database_and_creates_nothing(tmp_path: Path) -> None:
+    with pytest.raises(BadInput, match="no tracking database"):
+        store.connect_existing(f"sqlite:///{tmp_path}/missing/mlflow.db")
+    assert list(tmp_path.iterdir()) == []
+    store.connect(f"sqlite:///{tmp_path}/db/mlflow.db")
+    assert store.connect_existing(f"sqlite:///{tmp_path}/db/mlflow.db") is not None
+
+
+def test_download_artifacts_restores_the_progress_bar_setting(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "true")
+    client = store.connect(f"sqlite:///{tmp_path}/mlflow.db")
+    run = client.create_run(store.ensure_experiment(client, "e"))
+    (tmp_path / "a.txt").write_text("hello")
+    store.log_artifacts(client, run.info.run_id, [tmp_path / "a.txt"])
+    dst = tmp_path / "dst"
+    dst.mkdir()
+    store.download_artifacts(client, run.info.run_id, ["a.txt"], dst)
+    assert (dst / "a.txt").read_text() == "hello"
+    assert os.environ["MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR"] == "true"

@@ -33,3 +33,28 @@ def test_success_falls_back_to_episode_length_and_stop_is_honoured() -> None:
     assert tracker.episodes[0]["episode/shaped_return"] == -120.0
     stop["now"] = True
     assert _step(tracker, 2, [{}]) is False and tracker.stopped
+
+
+class _Sink:
+    def __init__(self) -> None:
+        self.calls: list[tuple[dict[str, float], int]] = []
+
+    def log(self, metrics: dict[str, float], step: int) -> None:
+        self.calls.append((dict(metrics), step))
+
+    def flush(self) -> None:
+        pass
+
+
+def test_rollout_end_logs_the_mean_native_return_of_the_last_100_episodes() -> None:
+    sink = _Sink()
+    tracker = EpisodeTracker("baseline-s0", total=10_000, metrics=sink)  # type: ignore[arg-type]
+    tracker.num_timesteps = 64
+    tracker._on_rollout_end()
+    assert "rollout/return_100" not in sink.calls[-1][0]  # no episode yet: nothing to average
+    for i in range(150):
+        _step(tracker, 100 + i, [{"episode": {"r": float(-200 + i), "l": 200}}])
+    tracker._on_rollout_end()
+    figures, step = sink.calls[-1]
+    assert step == 249
+    assert figures["rollout/return_100"] == sum(range(-150, -50)) / 100  # episodes 50..149 only

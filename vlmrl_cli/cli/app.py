@@ -14,12 +14,13 @@ app = typer.Typer(
 
 
 def _register() -> None:
-    from vlmrl_cli.cli import calibrate, report, run, taxonomy
+    from vlmrl_cli.cli import calibrate, evaluate, report, run, taxonomy
 
     app.command("taxonomy")(taxonomy.taxonomy)
     app.command("run")(run.run)
     app.command("report")(report.report)
     app.command("calibrate")(calibrate.calibrate)
+    app.command("evaluate")(evaluate.evaluate)
 
 
 _register()

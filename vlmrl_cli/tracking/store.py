@@ -73,6 +73,18 @@ def connect(uri: str | None) -> Any:
     return client
 
 
+def connect_existing(uri: str | None) -> Any:
+    """``connect`` for commands that read runs: a sqlite database that does not exist is
+    ``BadInput`` instead of a new empty store (``connect`` would create it and its folder)."""
+    resolved = resolve_tracking_uri(uri)
+    if resolved.startswith("sqlite:///"):
+        db_path = Path(resolved.removeprefix("sqlite:///"))
+        if not db_path.is_file():
+            raise BadInput(f"there is no tracking database at {db_path}; pass the --tracking-uri the runs were "
+                           "made with.")
+    return connect(resolved)
+
+
 def init_lock(db_path: Path) -> filelock.FileLock:
     """An inter-process lock for the first connection to one sqlite tracking database.
 
@@ -216,3 +228,21 @@ def log_artifacts(client: Any, run_id: str, paths: Iterable[Path], artifact_path
             client.log_artifacts(run_id, str(path), artifact_path)
         elif path.exists():
             client.log_artifact(run_id, str(path), artifact_path)
+
+
+def download_artifacts(client: Any, run_id: str, names: Iterable[str], dst: Path) -> None:
+    """Download the run's artifacts ``names`` into the existing folder ``dst``, without
+    MLflow's progress bars (the variable that turns them off is restored afterwards)."""
+    from mlflow.environment_variables import MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR
+
+    key = MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR.name
+    before = os.environ.get(key)
+    os.environ[key] = "false"
+    try:
+        for name in names:
+            client.download_artifacts(run_id, name, str(dst))
+    finally:
+        if before is None:
+            os.environ.pop(key, None)
+        else:
+            os.environ[key] = before

@@ -30,7 +30,8 @@ class ProgressEvent:
 
 class EpisodeTracker(BaseCallback):
     """Logs every completed episode (native return, length, success, shaped return) stepped by
-    the global timestep, VLM and throughput figures at each rollout end, and sends progress.
+    the global timestep; at each rollout end, the mean native return of the last 100 episodes
+    (``rollout/return_100``), VLM and throughput figures; and sends progress.
 
     ``should_stop`` is polled every step; when it returns True training ends cleanly.
     """
@@ -98,6 +99,8 @@ class EpisodeTracker(BaseCallback):
             return
         elapsed = max(time.perf_counter() - self._start, 1e-9)
         figures = {"perf/steps_per_s": self.num_timesteps / elapsed}
+        if self.recent:  # the rolling mean the reward thresholds are read from
+            figures["rollout/return_100"] = float(np.mean(self.recent))
         if self.vlm_stats is not None:
             figures.update(self.vlm_stats())
         self.metrics.log(figures, step=self.num_timesteps)

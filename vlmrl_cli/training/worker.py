@@ -23,6 +23,7 @@ from vlmrl_cli.tracking import store
 from vlmrl_cli.training.callbacks import EpisodeTracker, ProgressEvent
 from vlmrl_cli.training.config import EVAL_SEED, TrainJob
 from vlmrl_cli.training.evaluation import EvalResult, evaluate_detached
+from vlmrl_cli.training.trained import deterministic_policy as _policy
 
 
 @dataclass(frozen=True)
@@ -75,20 +76,6 @@ def run_tags(job: TrainJob, parent_run_id: str | None, vlm_label: str, simulated
     return tags
 
 
-def _policy(model: Any, env: Any) -> Any:
-    """The trained policy on raw observations, applying the training obs normalisation."""
-    from stable_baselines3.common.vec_env import VecNormalize
-
-    def act(obs: np.ndarray) -> int:
-        x = np.asarray(obs, dtype=np.float32)[None, :]
-        if isinstance(env, VecNormalize):
-            x = np.asarray(env.normalize_obs(x), dtype=np.float32)
-        action, _ = model.predict(x, deterministic=True)
-        return int(np.asarray(action).reshape(-1)[0])
-
-    return act
-
-
 def train_job(
     job: TrainJob,
     tracking_uri: str,
@@ -98,7 +85,10 @@ def train_job(
     simulated: bool,
 ) -> JobResult:
     """Train, evaluate and record one job. Never raises: failures end as a FAILED run."""
+    from stable_baselines3.common.logger import Logger
+
     from vlmrl_cli.training.envs import make_train_env
+    from vlmrl_cli.training.logger import MetricsOutputFormat
     from vlmrl_cli.training.model import make_model
     from vlmrl_cli.vlm.registry import build_client
 
@@ -123,12 +113,14 @@ def train_job(
             env, oracle = make_train_env(job.arm, job.ppo, job.shaping, vlm_client, job.seed)
             model = make_model(job.ppo, env, job.seed)
             metrics = store.BatchLogger(client, run_id)
+            model.set_logger(Logger(folder=None, output_formats=[MetricsOutputFormat(metrics)]))
             tracker = EpisodeTracker(
                 job.name, job.timesteps, metrics=metrics, progress=send,
                 should_stop=(lambda: bool(stop.is_set())) if stop is not None else None,
                 vlm_stats=oracle.stats if oracle is not None else None,
             )
             model.learn(total_timesteps=job.timesteps, callback=tracker)
+            model.logger.dump(step=model.num_timesteps)  # the last update's train/ figures
             if tracker.stopped:
                 client.set_terminated(run_id, "KILLED")
                 return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start)

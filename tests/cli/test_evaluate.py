@@ -1,0 +1,109 @@
+"""`vlmrl evaluate` end to end on a smoke hybrid run, and SB3's diagnostics in that run."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from mlflow.tracking import MlflowClient
+from PIL import Image
+from typer.testing import CliRunner
+
+from vlmrl_cli.cli.app import app
+
+runner = CliRunner()
+
+
+def _uri(root: Path) -> str:
+    return f"sqlite:///{root / 'm.db'}"
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """A store holding one finished smoke hybrid run; returns (folder, run id)."""
+    root = tmp_path_factory.mktemp("evaluate")
+    result = runner.invoke(app, ["run", "--arms", "hybrid", "--seeds", "1", "--preset", "smoke", "--workers", "1",
+                                 "--tracking-uri", _uri(root), "--experiment", "e",
+                                 "--cache-path", str(root / "cache.sqlite")])
+    assert result.exit_code == 0, result.output + result.stderr
+    client = MlflowClient(tracking_uri=_uri(root))
+    exp = client.get_experiment_by_name("e")
+    runs = client.search_runs([exp.experiment_id], filter_string="tags.`vlmrl.kind` = 'train'")
+    assert len(runs) == 1
+    return root, runs[0].info.run_id
+
+
+def _evaluate(root: Path, *args: str):  # type: ignore[no-untyped-def]
+    return runner.invoke(app, ["evaluate", *args, "--tracking-uri", _uri(root),
+                               "--cache-path", str(root / "cache.sqlite")])
+
+
+def test_evaluate_writes_a_captioned_gif_and_logs_it_to_the_run(trained: tuple[Path, str]) -> None:
+    root, run_id = trained
+    out = root / "ev"
+    result = _evaluate(root, run_id, "--episodes", "3", "--out", str(out))
+    assert result.exit_code == 0, result.output + result.stderr
+    assert "SIMULATED VLM" in result.stderr
+    assert "success rate" in result.output and "mean length" in result.output
+    gif = out / "episode-0.gif"
+    with Image.open(gif) as im:
+        assert im.n_frames > 10
+        assert im.size[0] == 300
+    assert gif.stat().st_size < 3 * 1024 * 1024
+    figures = json.loads((out / "evaluation.json").read_text())
+    assert figures["simulated"] is True and "SIMULATED" in figures["note"] and "SIMULATED" in figures["vlm"]
+    assert len(figures["returns"]) == 3 and 0.0 <= figures["success_rate"] <= 1.0
+    # the GIF replays evaluated episode 0 exactly (same seed, deterministic policy)
+    assert figures["gif"]["native_return"] == figures["returns"][0]
+    assert figures["gif"]["length"] == figures["lengths"][0]
+    assert all("vlm_answer" in f and "phi_raw" in f for f in figures["frames"])
+    client = MlflowClient(tracking_uri=_uri(root))
+    logged = {a.path for a in client.list_artifacts(run_id, "evaluate")}
+    assert logged == {"evaluate/episode-0.gif", "evaluate/evaluation.json"}
+
+
+def test_the_smoke_run_has_sb3_training_diagnostics(trained: tuple[Path, str]) -> None:
+    root, run_id = trained
+    client = MlflowClient(tracking_uri=_uri(root))
+    metrics = client.get_run(run_id).data.metrics
+    for key in ("train/approx_kl", "train/clip_fraction", "train/entropy_loss", "train/value_loss",
+                "train/explained_variance", "train/learning_rate", "rollout/return_100"):
+        assert key in metrics, key
+    kl = client.get_metric_history(run_id, "train/approx_kl")
+    assert len(kl) == 8 and max(m.step for m in kl) == 1024  # smoke: 8 PPO updates of 128 steps
+    assert all(-200.0 <= m.value <= 0.0 for m in client.get_metric_history(run_id, "rollout/return_100"))
+
+
+def _failed_run(root: Path) -> str:
+    client = MlflowClient(tracking_uri=_uri(root))
+    run = client.create_run(client.get_experiment_by_name("e").experiment_id)
+    client.set_terminated(run.info.run_id, "FAILED")
+    return str(run.info.run_id)
+
+
+@pytest.mark.parametrize(("case", "words"), [
+    ("unknown", "no run"),
+    ("failed", "no model.zip"),
+    ("bad-uri", "no tracking database"),
+    ("bad-index", "--episode-index"),
+])
+def test_errors_exit_2_with_one_sentence_and_create_no_folder(
+    trained: tuple[Path, str], tmp_path: Path, case: str, words: str
+) -> None:
+    root, run_id = trained
+    out = tmp_path / "ev"
+    args = [run_id, "--out", str(out), "--tracking-uri", _uri(root)]
+    if case == "unknown":
+        args[0] = "0123456789abcdef0123456789abcdef"
+    elif case == "failed":
+        args[0] = _failed_run(root)
+    elif case == "bad-uri":
+        args[-1] = f"sqlite:///{tmp_path / 'missing' / 'm.db'}"
+    else:
+        args += ["--episodes", "2", "--episode-index", "2"]
+    result = runner.invoke(app, ["evaluate", *args])
+    assert result.exit_code == 2, result.output + result.stderr
+    assert result.stderr.startswith("error:") and words in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not out.exists() and not (tmp_path / "missing").exists()

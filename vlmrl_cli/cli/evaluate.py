@@ -1,0 +1,47 @@
+"""`vlmrl evaluate`: a trained run's success rate, and a captioned GIF of one of its episodes."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+
+from vlmrl_cli.cli.errors import exit_codes
+from vlmrl_cli.cli.options import CachePath, NoCache, OutDir, TrackingUri
+from vlmrl_cli.vlm.config import DEFAULT_CACHE
+
+
+def evaluate(
+    run_id: Annotated[str, typer.Argument(help="MLflow run id of a finished training run (`vlmrl run` prints them).")],
+    episodes: Annotated[int, typer.Option("--episodes", min=1, help="Detached evaluation episodes.")] = 10,
+    episode_index: Annotated[
+        int, typer.Option("--episode-index", min=0, help="Which evaluated episode the GIF shows.")
+    ] = 0,
+    out: OutDir = None,
+    tracking_uri: TrackingUri = None,
+    no_cache: NoCache = False,
+    cache_path: CachePath = DEFAULT_CACHE,
+) -> None:
+    """Evaluate a trained policy on native MountainCar-v0 and write a captioned GIF of one episode.
+
+    Outputs go to --out (default results/evaluate/RUN_ID/) and to the run's MLflow artifacts
+    under evaluate/.
+    """
+    from vlmrl_cli.training.watch import EvaluateConfig, evaluate_run
+
+    with exit_codes():
+        cfg = EvaluateConfig(run_id=run_id, tracking_uri=tracking_uri, out=out, episodes=episodes,
+                             episode_index=episode_index, use_cache=not no_cache, cache_path=cache_path)
+        done = evaluate_run(cfg)
+
+    run = done.run
+    if run.arm.uses_vlm and run.simulated:
+        typer.secho("WARNING: SIMULATED VLM (not a real model): the GIF's VLM labels come from a pixel reader "
+                    "with noise.", fg=typer.colors.YELLOW, err=True)
+    typer.echo(f"run:       {run.name} ({run.run_id}, arm {run.arm.name}, {run.status})")
+    typer.echo(f"evaluated: {cfg.episodes} native episodes: success rate {done.result.success_rate:.0%}, "
+               f"mean length {done.result.mean_length:.1f}, mean return {done.result.mean_return:.1f}")
+    typer.echo(f"GIF:       {done.gif} (episode {cfg.episode_index}, {done.frames} frames, "
+               f"{done.gif_bytes / 1024:.0f} KiB)")
+    typer.echo(f"figures:   {done.summary}")
+    typer.echo(f"MLflow:    logged under {run.run_id}/artifacts/evaluate/")

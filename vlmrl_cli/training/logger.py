@@ -1,0 +1,54 @@
+"""SB3's own training diagnostics (``train/approx_kl``, ``train/value_loss``, ...) into MLflow.
+
+Tracking plugs in as an SB3 logger output format, so nothing in the training loop calls
+MLflow: ``model.set_logger(Logger(folder=None, output_formats=[MetricsOutputFormat(metrics)]))``.
+"""
+
+from __future__ import annotations
+
+import numbers
+from collections.abc import Mapping
+from typing import Any, Protocol
+
+from stable_baselines3.common.logger import KVWriter
+
+#: The SB3 key prefixes forwarded by default: the PPO update's diagnostics.
+TRAIN_PREFIXES: tuple[str, ...] = ("train/",)
+
+
+class MetricSink(Protocol):
+    """Where the metrics go: ``tracking.store.BatchLogger`` or a test double."""
+
+    def log(self, metrics: Mapping[str, float], step: int) -> None: ...
+
+
+class MetricsOutputFormat(KVWriter):
+    """An SB3 ``KVWriter`` that forwards the numeric values under ``prefixes`` to ``metrics``,
+    keys unchanged, at ``step`` (SB3 dumps with ``step=num_timesteps``).
+
+    Non-numeric values (strings, videos, figures) and keys excluded for ``"mlflow"`` are skipped.
+
+    Example:
+        >>> class Sink:
+        ...     def log(self, metrics, step): print(step, dict(metrics))
+        >>> MetricsOutputFormat(Sink()).write({"train/approx_kl": 0.01, "time/fps": 900, "train/n": "x"}, {}, step=128)
+        128 {'train/approx_kl': 0.01}
+    """
+
+    def __init__(self, metrics: MetricSink, prefixes: tuple[str, ...] = TRAIN_PREFIXES) -> None:
+        self.metrics = metrics
+        self.prefixes = prefixes
+
+    def write(self, key_values: dict[str, Any], key_excluded: dict[str, tuple[str, ...]], step: int = 0) -> None:
+        figures = {
+            key: float(value)
+            for key, value in key_values.items()
+            if key.startswith(self.prefixes)
+            and isinstance(value, numbers.Real)
+            and "mlflow" not in (key_excluded.get(key) or ())
+        }
+        if figures:
+            self.metrics.log(figures, step=int(step))
+
+    def close(self) -> None:
+        """The sink belongs to the caller, who flushes it."""
