@@ -7,7 +7,9 @@
      answer the VLM gives when asked directly about the same frame (as asking at every
      interval would);
   3. throughput of the real sweep (`run_sweep`, worker processes, MLflow in a temporary sqlite
-     store) with 1 and with 2 workers on two baseline jobs (target: >= 1.7x).
+     store) with 1 and with 2 workers on two baseline jobs (target: >= 1.7x);
+  0. first, the wall time of `vlmrl --help` and `vlmrl report --help` (median of 5 fresh
+     processes; target <= 0.5 s each).
 
 Usage: python benchmarks/bench_training.py [--timesteps 300000] [--worker-timesteps 100000]
 """
@@ -16,6 +18,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -26,8 +30,8 @@ import torch
 from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.training.config import RunConfig
+from vlmrl_cli.training.events import JobResult
 from vlmrl_cli.training.presets import get_preset
-from vlmrl_cli.training.worker import JobResult
 from vlmrl_cli.vlm.config import VLMConfig
 from vlmrl_cli.vlm.parsers import parse_mcq
 from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
@@ -96,6 +100,17 @@ def sweep_throughput(workers: int, timesteps: int, root: Path) -> float:
     return 2 * timesteps / summary.wall_s
 
 
+def help_wall_time(args: list[str], runs: int = 5) -> float:
+    """Median wall time (s) of ``vlmrl ARGS`` in a fresh interpreter, as a user types it."""
+    code = "import sys; from vlmrl_cli.cli.app import main; sys.argv[0] = 'vlmrl'; main()"
+    times = []
+    for _ in range(runs):
+        start = time.perf_counter()
+        subprocess.run([sys.executable, "-c", code, *args], check=True, capture_output=True)
+        times.append(time.perf_counter() - start)
+    return sorted(times)[runs // 2]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--timesteps", type=int, default=300_000)
@@ -103,6 +118,9 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     opts = parser.parse_args()
     torch.set_num_threads(1)
+    for args in (["--help"], ["report", "--help"]):
+        print(f"[0] vlmrl {' '.join(args)}: median {help_wall_time(args):.2f} s over 5 runs (target <= 0.5 s)",
+              flush=True)
 
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)

@@ -2,7 +2,8 @@ from __future__ import annotations
 
 import math
 
-from vlmrl_cli.training.callbacks import EpisodeTracker, ProgressEvent
+from vlmrl_cli.training.callbacks import EpisodeTracker
+from vlmrl_cli.training.events import ProgressEvent
 
 
 def _step(tracker: EpisodeTracker, t: int, infos: list[dict[str, object]]) -> bool:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Annotated
+
 import typer
 
 app = typer.Typer(
@@ -10,7 +12,31 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
 )
+
+
+def _version(value: bool) -> None:
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        from vlmrl_cli.core.provenance import git_commit
+
+        try:
+            number = version("vlmrl")
+        except PackageNotFoundError:  # running from a checkout that was never installed
+            number = "unknown"
+        typer.echo(f"vlmrl {number} (commit {git_commit()})")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")
+    ] = False,
+) -> None:
+    """Reproduce 'Macro Semantics, Micro Kinematics' (VLM milestone shaping for PPO on MountainCar-v0)."""
 
 
 def _register() -> None:

@@ -16,9 +16,8 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
-from vlmrl_cli.training.callbacks import ProgressEvent
 from vlmrl_cli.training.config import TrainJob
-from vlmrl_cli.training.worker import JobResult
+from vlmrl_cli.training.events import JobResult, ProgressEvent
 
 
 class RichSweepReporter:

@@ -5,27 +5,13 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
 from vlmrl_cli.tracking.store import BatchLogger
-
-SUCCESS_LENGTH = 200  # MountainCar-v0's time limit: an episode shorter than this reached the flag
-
-
-@dataclass(frozen=True)
-class ProgressEvent:
-    """What a worker reports about one run, at most every ``interval_s``."""
-
-    job: str
-    timesteps: int
-    total: int
-    episodes: int
-    recent_return: float  # mean native return of the last 100 episodes (nan before the first)
-    phase: str = "train"
+from vlmrl_cli.training.events import SUCCESS_LENGTH, ProgressEvent
 
 
 class EpisodeTracker(BaseCallback):

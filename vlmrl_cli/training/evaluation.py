@@ -9,7 +9,7 @@ import gymnasium as gym
 import numpy as np
 
 from vlmrl_cli.shaping.hacking import HoverSummary, summarize_hovering
-from vlmrl_cli.training.callbacks import SUCCESS_LENGTH
+from vlmrl_cli.training.events import SUCCESS_LENGTH
 
 Policy = Callable[[np.ndarray], int]
 

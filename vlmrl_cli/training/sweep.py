@@ -23,9 +23,9 @@ from typing import Any, Protocol
 from vlmrl_cli.core.provenance import config_hash, flatten
 from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.tracking import store
-from vlmrl_cli.training.callbacks import ProgressEvent
 from vlmrl_cli.training.config import RunConfig, TrainJob
-from vlmrl_cli.training.worker import JobResult, init_worker, train_job
+from vlmrl_cli.training.events import JobResult, ProgressEvent
+from vlmrl_cli.training.worker import init_worker, train_job
 
 
 class SweepReporter(Protocol):

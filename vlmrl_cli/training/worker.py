@@ -20,21 +20,11 @@ import numpy as np
 
 from vlmrl_cli.core.provenance import flatten
 from vlmrl_cli.tracking import store
-from vlmrl_cli.training.callbacks import EpisodeTracker, ProgressEvent
+from vlmrl_cli.training.callbacks import EpisodeTracker
 from vlmrl_cli.training.config import EVAL_SEED, TrainJob
 from vlmrl_cli.training.evaluation import EvalResult, evaluate_detached
+from vlmrl_cli.training.events import JobResult, ProgressEvent
 from vlmrl_cli.training.trained import deterministic_policy as _policy
-
-
-@dataclass(frozen=True)
-class JobResult:
-    job: str
-    run_id: str
-    status: str  # FINISHED, KILLED or FAILED
-    wall_s: float
-    eval_success_rate: float = float("nan")
-    eval_mean_length: float = float("nan")
-    error: str | None = None
 
 
 @dataclass

@@ -1,0 +1,39 @@
+"""CLI conventions: --version, -h, and help that does not import the heavy libraries."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+from typer.testing import CliRunner
+
+from vlmrl_cli.cli.app import app
+
+HEAVY = ("torch", "stable_baselines3", "mlflow", "transformers")
+
+
+def test_version_prints_the_package_version() -> None:
+    result = CliRunner().invoke(app, ["--version"])
+    assert result.exit_code == 0
+    assert result.stdout.startswith("vlmrl 0.") and "commit" in result.stdout
+
+
+def test_short_help_flag_works_on_the_app_and_a_command() -> None:
+    for args in (["-h"], ["run", "-h"], ["report", "-h"]):
+        result = CliRunner().invoke(app, args)
+        assert result.exit_code == 0, args
+        assert "Usage:" in result.stdout
+
+
+def test_help_imports_no_heavy_library() -> None:
+    code = (
+        "import sys\n"
+        "from typer.testing import CliRunner\n"
+        "from vlmrl_cli.cli.app import app\n"
+        "for args in (['--help'], ['run', '--help'], ['report', '--help'], ['calibrate', '--help'],"
+        " ['evaluate', '--help'], ['taxonomy', '--help']):\n"
+        "    assert CliRunner().invoke(app, args).exit_code == 0, args\n"
+        f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
