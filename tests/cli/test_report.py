@@ -82,16 +82,19 @@ def test_report_writes_every_file_with_hand_computed_values(store, tmp_path):
     assert str(out) in res.output.replace("\n", "")
 
 
-def test_report_logs_a_report_run(store, tmp_path):
+def test_report_logs_one_report_run_in_its_own_experiment_however_often_it_runs(store, tmp_path):
     uri, _ = store
+    assert _report(uri, "E", tmp_path / "rep").exit_code == 0
     assert _report(uri, "E", tmp_path / "rep").exit_code == 0
     from mlflow.tracking import MlflowClient
 
     client = MlflowClient(tracking_uri=uri)
-    exp = client.get_experiment_by_name("E")
-    assert exp is not None
-    runs = client.search_runs([exp.experiment_id], "tags.`vlmrl.kind` = 'report'")
-    assert runs and runs[0].info.status == "FINISHED"
+    exp, reports = client.get_experiment_by_name("E"), client.get_experiment_by_name("E-reports")
+    assert exp is not None and reports is not None
+    assert not client.search_runs([exp.experiment_id], "tags.`vlmrl.kind` = 'report'")  # none among training runs
+    runs = [r for r in client.search_runs([reports.experiment_id], "tags.`vlmrl.kind` = 'report'")
+            if r.info.run_name == f"report of E -> {tmp_path / 'rep'}"]  # other tests report elsewhere
+    assert len(runs) == 1 and runs[0].info.status == "FINISHED"
     names = {a.path for a in client.list_artifacts(runs[0].info.run_id, "report")}
     assert "report/table2.md" in names and "report/figure4.pdf" in names
 
@@ -113,6 +116,18 @@ def test_missing_or_empty_experiment_exits_2_with_one_line(store, tmp_path, expe
     assert res.exit_code == 2
     err = res.stderr.strip()
     assert err.startswith("error:") and len(err.splitlines()) == 1 and experiment in err
+
+
+def test_a_missing_tracking_database_exits_2_and_creates_nothing(tmp_path):
+    res = _report("sqlite:///" + str(tmp_path / "none" / "mlflow.db"), "E", tmp_path / "rep")
+    assert res.exit_code == 2 and len(res.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "none").exists() and not (tmp_path / "rep").exists()
+
+
+def test_a_failed_report_leaves_no_output_folder(store, tmp_path):
+    uri, _ = store
+    res = _report(uri, "NOPE", tmp_path / "deep" / "rep")
+    assert res.exit_code == 2 and not (tmp_path / "deep").exists()
 
 
 @pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="needs a non-root POSIX user")

@@ -63,6 +63,7 @@ def calibrate(
     ensure_writable(cfg.out)
     client = store.connect(cfg.base.tracking_uri)
     data = load_experiment(client, cfg.base.experiment)
+    cfg.out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(cfg.seed)
     rows, curves = [], []
     for regime in cfg.regimes:

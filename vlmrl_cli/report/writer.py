@@ -5,7 +5,7 @@ and ``report.md``, then log them as artifacts of a ``vlmrl.kind=report`` run."""
 from __future__ import annotations
 
 import json
-import tempfile
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,7 +20,7 @@ from vlmrl_cli.analysis.load import ExperimentData, load_experiment
 from vlmrl_cli.analysis.proportions import DETACHED_SUCCESS_CUT
 from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.core.provenance import flatten
+from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
 from vlmrl_cli.report import attribution, figures, hacking
 from vlmrl_cli.report import claims as claims_mod
 from vlmrl_cli.report.table2 import (
@@ -85,14 +85,21 @@ def _validate(cfg: ReportConfig) -> None:
 
 
 def ensure_writable(out: Path) -> None:
-    """Create ``out`` and check a file can be written there; else ``BadInput``."""
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=out, prefix=".write-test-"):
-            pass
-    except OSError as exc:
-        raise BadInput(f"cannot write to the output folder {out} ({exc.strerror}); pass --out to a writable folder."
-                       ) from exc
+    """Check that ``out`` exists as a writable folder or could be created; else ``BadInput``.
+
+    Creates nothing: a command that fails later must leave no empty folder behind. Callers
+    create ``out`` when they have something to write.
+    """
+    existing = out.absolute()
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if existing != out.absolute() and not existing.is_dir():
+        raise BadInput(f"cannot write to the output folder {out} ({existing} is a file); pass --out to a folder.")
+    if out.exists() and not out.is_dir():
+        raise BadInput(f"cannot write to the output folder {out} (it is a file); pass --out to a folder.")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise BadInput(f"cannot write to the output folder {out} (no write permission on {existing}); "
+                       "pass --out to a writable folder.")
 
 
 def load_reported(path: Path | None) -> dict[str, Any]:
@@ -271,13 +278,29 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
     return "\n".join(parts)
 
 
+REPORTS_SUFFIX = "-reports"  # report runs live in their own experiment, beside the training runs
+
+
 def _log_report_run(client: Any, data: ExperimentData, cfg: ReportConfig, files: Sequence[Path], note: str,
                     simulated: bool) -> str:
-    run = client.create_run(data.experiment_id, run_name="report",
-                            tags={f"{store.TAG_PREFIX}kind": "report", **store.provenance_tags(note, simulated)})
-    rid = str(run.info.run_id)
+    """One report run per (settings, output folder), in the experiment ``<experiment>-reports`` so
+    that reports never pile up among the training runs; rerunning the same report updates its run."""
+    experiment_id = store.ensure_experiment(client, f"{data.experiment_name}{REPORTS_SUFFIX}")
+    key = config_hash({"cfg": to_jsonable(cfg), "out": str(cfg.out.absolute())})
+    tags = {f"{store.TAG_PREFIX}kind": "report", f"{store.TAG_PREFIX}report.experiment": data.experiment_name,
+            f"{store.TAG_PREFIX}report.key": key, **store.provenance_tags(note, simulated)}
+    same = client.search_runs([experiment_id], filter_string=f"tags.`{store.TAG_PREFIX}report.key` = '{key}'",
+                              max_results=1)
+    if same:
+        rid = str(same[0].info.run_id)
+        client.update_run(rid, status="RUNNING")
+        store.set_tags(client, rid, tags)
+    else:
+        run = client.create_run(experiment_id, run_name=f"report of {data.experiment_name} -> {cfg.out}", tags=tags)
+        rid = str(run.info.run_id)
     try:
-        store.log_params(client, rid, flatten(cfg))
+        if not same:  # params are write-once in MLflow; the same key means the same params
+            store.log_params(client, rid, flatten(cfg))
         store.set_tags(client, rid, {f"{store.TAG_PREFIX}report.runs": ",".join(data.runs["run_id"])[:5000]})
         store.log_artifacts(client, rid, files, "report")
     except Exception:
@@ -304,7 +327,7 @@ def write_report(cfg: ReportConfig) -> ReportResult:
     _validate(cfg)
     ensure_writable(cfg.out)  # before touching MLflow, so a bad --out fails fast
     reported = load_reported(cfg.reported)
-    client = store.connect(cfg.tracking_uri)
+    client = store.connect_existing(cfg.tracking_uri)
     data = load_experiment(client, cfg.experiment)
     streams = stats.Streams(cfg.seed)
     thresholds = tuple(float(t) for t in cfg.thresholds)
@@ -319,6 +342,7 @@ def write_report(cfg: ReportConfig) -> ReportResult:
     warns = _warnings(data, table)
 
     out = cfg.out
+    out.mkdir(parents=True, exist_ok=True)
     files: list[Path] = []
     fig_note = figure_vlm_note(data.runs)
     files += write_table2(table, out, fig_note)
