@@ -10,6 +10,7 @@ app = typer.Typer(
     name="vlmrl",
     help="Reproduce 'Macro Semantics, Micro Kinematics' (VLM milestone shaping for PPO on MountainCar-v0).",
     no_args_is_help=True,
+    rich_markup_mode=None,  # plain click help: flags shown as flags (rich help printed <bool> after them)
     add_completion=False,
     pretty_exceptions_enable=False,
     context_settings={"help_option_names": ["-h", "--help"]},

@@ -5,16 +5,18 @@ from __future__ import annotations
 import functools
 import inspect
 import typing
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.training.config import load_config_file
 from vlmrl_cli.training.overrides import nest, parse_assignment, parse_value
-from vlmrl_cli.vlm.config import SimKnobs, VLMConfig
+from vlmrl_cli.training.presets import PRESETS
+from vlmrl_cli.vlm.config import BACKENDS, SimKnobs, VLMConfig
 
 TrackingUri = Annotated[
     str | None,
@@ -23,7 +25,14 @@ TrackingUri = Annotated[
 OutDir = Annotated[Path | None, typer.Option("--out", help="Output folder (default under results/).")]
 Experiment = Annotated[str, typer.Option("--experiment", help="MLflow experiment name.")]
 
-Vlm = Annotated[str, typer.Option("--vlm", help="VLM backend: sim (simulated, default), hf, openai, replay.")]
+def choices(names: Sequence[str]) -> str:
+    """The metavar listing an option's choices in the help (``[a|b|c]``); the values are checked,
+    with one-sentence errors, where the config is validated, before anything runs."""
+    return "[" + "|".join(names) + "]"
+
+
+Vlm = Annotated[str, typer.Option("--vlm", metavar=choices(BACKENDS),
+                                  help="VLM backend: sim (simulated, default), hf, openai, replay.")]
 VlmModel = Annotated[
     str | None,
     typer.Option("--model", help="hf: hub id or local path; openai: served model name; sim/replay: ignored."),
@@ -155,11 +164,12 @@ def vlm_flags(ctx: typer.Context, flags: VLMConfig) -> dict[str, Any]:
 
 # --- the options of commands that train (`run`, `calibrate`) and how they layer -----------
 
-Arms = Annotated[str, typer.Option("--arms", help="Comma-separated arms (see README): baseline, hybrid, ...")]
+Arms = Annotated[str, typer.Option("--arms", help=f"Comma-separated arms, any of: {', '.join(ARMS)}.")]
 Seeds = Annotated[int, typer.Option("--seeds", help="Number of seeds: 0..N-1.")]
 SeedList = Annotated[str | None, typer.Option("--seed-list", help="Explicit seeds, e.g. 3,7,11.")]
 Timesteps = Annotated[int | None, typer.Option("--timesteps", help="Budget per run (= --set ppo.timesteps=N).")]
-Preset = Annotated[str, typer.Option("--preset", help="PPO preset: paper, zoo, sb3-default, smoke.")]
+Preset = Annotated[str, typer.Option("--preset", metavar=choices(list(PRESETS)),
+                                     help="PPO preset (the bottom layer of [ppo]).")]
 Workers = Annotated[int | None, typer.Option("--workers", help="Worker processes (default: cores).")]
 EvalEpisodes = Annotated[
     int | None, typer.Option("--eval-episodes", help="Detached evaluation episodes (= --set ppo.eval_episodes=N).")
