@@ -12,6 +12,7 @@ from typing import Any
 
 from vlmrl_cli.probe.scoring import FrameProbe
 from vlmrl_cli.probe.table1 import printable
+from vlmrl_cli.vlm.parsers import ParseStatus
 from vlmrl_cli.vlm.prompts import PromptKind
 
 TRUE_COLOUR = "tab:green"
@@ -47,13 +48,44 @@ def draw_panel(ax: Any, probe: FrameProbe) -> Any:
     ax.set_title(title, fontsize=10)
     answers = probe.answers
     ax.set_xlabel(
-        f"float: {_short(answers.get(PromptKind.FLOAT))} [{probe.float_result.status.value}]\n"
-        f"box: {_short(answers.get(PromptKind.BOX))} [{probe.box_result.status.value}]\n"
-        f"MCQ: {_short(answers.get(PromptKind.MCQ))} [{probe.mcq_result.status.value}]"
-        f" (true {probe.truth.zone.value})",
+        f"float: {_short(answers.get(PromptKind.FLOAT))} [{_float_verdict(probe)}]\n"
+        f"box: {_short(answers.get(PromptKind.BOX))} [{_box_verdict(probe)}]\n"
+        f"MCQ: {_short(answers.get(PromptKind.MCQ))} [{_mcq_verdict(probe)}]",
         fontsize=8,
     )
     return ax
+
+
+def _parsed(status: ParseStatus) -> str:
+    return "parsed" if status is ParseStatus.OK else f"not parsed: {status.value}"
+
+
+def _float_verdict(probe: FrameProbe) -> str:
+    """Whether the float answer parsed and, if so, how far it is from the true x."""
+    r = probe.float_result
+    if not r.ok or r.value is None:
+        return _parsed(r.status)
+    return f"parsed; off by {abs(r.value - probe.truth.x):.2f} x units (true x {probe.truth.x:.2f})"
+
+
+def _box_verdict(probe: FrameProbe) -> str:
+    """Whether the box parsed and, if so, whether it holds the car's true centre."""
+    r = probe.box_result
+    if not r.ok or r.box is None:
+        return _parsed(r.status)
+    cx, cy = probe.truth.centre_px
+    x0, y0, x1, y1 = r.box
+    inside = x0 <= cx <= x1 and y0 <= cy <= y1
+    return "parsed; " + ("holds the car's centre" if inside else "misses the car's centre")
+
+
+def _mcq_verdict(probe: FrameProbe) -> str:
+    """Whether the label parsed and, if so, whether it is the true zone."""
+    r = probe.mcq_result
+    if not r.ok or r.label is None:
+        return _parsed(r.status)
+    correct = r.label is probe.truth.zone
+    return f"parsed; {'correct' if correct else 'wrong'} (true {probe.truth.zone.value})"
 
 
 def figure1(probes: Sequence[FrameProbe], *, label: str, simulated: bool, note: str = "") -> Any:

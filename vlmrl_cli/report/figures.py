@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
 from vlmrl_cli.analysis import stats
 from vlmrl_cli.analysis.ranks import performance_profile
@@ -73,13 +74,15 @@ def _style(ax: Axes) -> None:
 
 def plot_steps_to_threshold(table: Table2, ax: Axes | None = None) -> Axes:
     """Figure 2: mean steps to each threshold per arm (seeds that reached it) with CI error bars,
-    ``DNF k/n`` annotated, and the paper's values as hollow markers."""
+    ``DNF k/n`` annotated, and the paper's values as hollow markers. The step axis is
+    logarithmic: the paper's steps can be 20x ours, and on a shared linear axis our intervals
+    shrank to dots."""
     ax = ax if ax is not None else _new_ax()
     thresholds = list(table.thresholds)
     arms = list(table.arms)
     x = np.arange(len(thresholds), dtype=float)
     width = 0.7 / max(len(arms), 1)
-    ymax = 0.0
+    ymax, ymin = 0.0, np.inf
     for i, arm in enumerate(arms):
         color = arm_color(arm, arms)
         offset = (i - (len(arms) - 1) / 2) * width
@@ -93,10 +96,11 @@ def plot_steps_to_threshold(table: Table2, ax: Axes | None = None) -> Axes:
                 ax.errorbar(x[j] + offset, val, yerr=yerr, fmt="o", color=color, capsize=3, markersize=5,
                             label=f"{arm} (ours)" if j == 0 else None)
                 ymax = max(ymax, hi if np.isfinite(hi) else val)
+                ymin = min(ymin, lo if np.isfinite(lo) and lo > 0 else val)
             if c["n_reached"] < c["n"]:
                 y = val if np.isfinite(val) else np.nan
                 dnf = f"DNF {int(c['n']) - int(c['n_reached'])}/{int(c['n'])}"
-                ax.annotate(dnf, (x[j] + offset, y if np.isfinite(y) else 0),
+                ax.annotate(dnf, (x[j] + offset, y if np.isfinite(y) else (ymin if np.isfinite(ymin) else 1.0)),
                             xytext=(0, 8), textcoords="offset points", ha="center", fontsize=SMALL, color=color,
                             annotation_clip=False)
             paper = table.paper.get(threshold_key(t), {}).get(arm)
@@ -104,24 +108,37 @@ def plot_steps_to_threshold(table: Table2, ax: Axes | None = None) -> Axes:
                 ax.plot(x[j] + offset, float(paper), marker="D", markersize=7, markerfacecolor="none",
                         markeredgecolor=color, linestyle="none", label=f"{arm} (paper)" if j == 0 else None)
                 ymax = max(ymax, float(paper))
+                ymin = min(ymin, float(paper))
     ax.set_xticks(x, [f"{t:g}" for t in thresholds])
     ax.set_xlabel("reward threshold (rolling mean native return)", fontsize=SMALL + 1)
-    ax.set_ylabel("timesteps to reach", fontsize=SMALL + 1)
-    ax.set_ylim(0, ymax * 1.2 if ymax > 0 else 1)
-    ax.ticklabel_format(axis="y", style="sci", scilimits=(0, 0))
-    ax.yaxis.get_offset_text().set_fontsize(SMALL)
+    ax.set_ylabel("timesteps to reach (log scale)", fontsize=SMALL + 1)
+    ax.set_yscale("log")
+    if ymax > 0 and np.isfinite(ymin) and ymin > 0:
+        ax.set_ylim(ymin / 1.6, ymax * 1.6)
     ax.legend(fontsize=SMALL, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     _style(ax)
     return ax
 
 
-def plot_seed_curves(curves: Sequence[SeedCurve], ax: Axes | None = None, color: str = "tab:blue",
+def seed_color(seed: int) -> str:
+    """A fixed colour per seed (tab10, cycling), shared by every panel of Figure 3."""
+    from matplotlib import colormaps
+
+    r, g, b, _ = colormaps["tab10"](seed % 10)
+    return f"#{int(r * 255):02x}{int(g * 255):02x}{int(b * 255):02x}"
+
+
+def plot_seed_curves(curves: Sequence[SeedCurve], ax: Axes | None = None, color: str | None = "tab:blue",
                      thresholds: Sequence[float] = ()) -> Axes:
-    """Figure 3 panel: one line per seed (rolling mean return vs timestep), thresholds dashed."""
+    """Figure 3 panel: one line per seed (rolling mean return vs timestep), thresholds dashed.
+
+    ``color=None`` gives each seed its own colour (``seed_color``), the same in every panel, so a
+    seed can be followed across arms; otherwise all lines take ``color`` in shades."""
     ax = ax if ax is not None else _new_ax()
     shades = np.linspace(0.45, 1.0, max(len(curves), 1))
     for curve, alpha in zip(curves, shades, strict=False):
-        ax.plot(curve.steps, curve.mean, color=color, alpha=float(alpha), linewidth=1.0, label=f"seed {curve.seed}")
+        ax.plot(curve.steps, curve.mean, color=color or seed_color(curve.seed),
+                alpha=float(alpha) if color else 0.9, linewidth=1.0, label=f"seed {curve.seed}")
     for t in thresholds:
         ax.axhline(t, color="gray", linestyle="--", linewidth=0.7)
     _style(ax)
@@ -153,18 +170,24 @@ def figure2(table: Table2, vlm_note: str) -> Figure:
 
 def figure3(curves: Sequence[SeedCurve], vlm_note: str, thresholds: Sequence[float] = (), window: int = 100
             ) -> Figure:
-    """Figure 3: per-seed training curves, one panel per arm, shared axes."""
+    """Figure 3: per-seed training curves, one panel per arm, shared axes, one colour per seed
+    (the legend names them)."""
     arms = order_arms(sorted({c.arm for c in curves}))
-    fig = Figure(figsize=(WIDTH_IN, 3.0), layout="constrained")
+    fig = Figure(figsize=(WIDTH_IN, 3.4), layout="constrained")
     axes = np.atleast_1d(fig.subplots(1, max(len(arms), 1), sharex=True, sharey=True, squeeze=False)[0])
     for ax, arm in zip(axes, arms, strict=False):
         mine = [c for c in curves if c.arm == arm]
-        plot_seed_curves(mine, ax, arm_color(arm, arms), thresholds)
+        plot_seed_curves(mine, ax, None, thresholds)
         ax.set_title(f"{arm} ({len(mine)} seeds)", fontsize=SMALL + 1)
         ax.set_xlabel("timestep", fontsize=SMALL + 1)
         ax.xaxis.get_offset_text().set_fontsize(SMALL)
         ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
     axes[0].set_ylabel(f"mean return (last {window} ep.)", fontsize=SMALL + 1)
+    seeds = sorted({c.seed for c in curves})
+    handles = [Line2D([], [], color=seed_color(seed), linewidth=1.5, label=f"seed {seed}") for seed in seeds]
+    if handles:
+        fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 10), fontsize=SMALL,
+                   frameon=False)
     _suptitle(fig, "Individual training trajectories by seed", vlm_note)
     return fig
 
