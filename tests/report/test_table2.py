@@ -51,3 +51,12 @@ def test_all_dnf_cell_and_long_form():
     long = to_long(t).set_index(["metric", "arm"])
     assert long.loc[("speedup_-190", "hybrid"), "value"] == 1.5
     assert np.isnan(long.loc[("speedup_-130", "hybrid"), "value"])
+
+
+def test_markdown_comes_in_narrow_ours_speedup_and_paper_blocks():
+    rows = [[100, 200, 300], [120, 220, 320]]
+    t = _build(_per_seed({"hybrid": rows, "baseline": rows, "kinematic": rows, "semantic": rows}))
+    md = to_markdown(t)
+    assert "*Ours (mean [95% CI])*" in md and "*The paper*" in md and "*Speedup vs baseline" in md
+    widest = max(line.count(" | ") + 1 for line in md.splitlines() if line.startswith("| "))
+    assert widest <= 5  # the old single table had 11 columns

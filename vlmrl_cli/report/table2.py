@@ -350,16 +350,29 @@ def display_frame(table: Table2) -> pd.DataFrame:
     return pd.DataFrame(records)
 
 
-def to_markdown(table: Table2) -> str:
-    """GitHub Markdown of ``display_frame`` (no ``tabulate`` dependency)."""
-    df = display_frame(table)
-
+def _markdown_rows(df: pd.DataFrame) -> list[str]:
     def row(cells: Sequence[str]) -> str:
         return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
 
-    lines = [row(df.columns), row(["---"] * len(df.columns))]
-    lines += [row(r) for r in df.itertuples(index=False)]
-    return "\n".join(lines) + "\n"
+    return [row(df.columns), row(["---"] * len(df.columns)), *(row(r) for r in df.itertuples(index=False))]
+
+
+def to_markdown(table: Table2) -> str:
+    """GitHub Markdown of ``display_frame`` in three narrow blocks (ours, speedups, the paper), each
+    readable in a terminal; rows empty in a block are left out of it (no ``tabulate`` dependency)."""
+    df = display_frame(table)
+    first = df.columns[0]
+    speed = [c for c in df.columns if "speedup" in c]
+    paper = [c for c in df.columns if "(paper)" in c and c not in speed]
+    ours = [c for c in df.columns[1:] if c not in speed and c not in paper]
+    parts = []
+    for title, cols in (("Ours (mean [95% CI])", ours), ("Speedup vs baseline (ours, rank-test p) and the paper's",
+                                                          speed), ("The paper", paper)):
+        block = df[[first, *cols]]
+        block = block[block[cols].astype(str).apply(lambda r: any(v.strip() not in ("", "—") for v in r), axis=1)]
+        if cols and len(block):
+            parts += [f"*{title}*", "", *_markdown_rows(block), ""]
+    return "\n".join(parts)
 
 
 _LATEX_ESCAPES = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
