@@ -1,4 +1,4 @@
-"""nox sessions: tests, lint, bench, repro. Every session installs the CPU build of torch
+"""nox sessions: tests, lint, bench, repro, study. Every session installs the CPU build of torch
 first (a plain `torch` requirement can pull a multi-GB CUDA build)."""
 
 from __future__ import annotations
@@ -56,3 +56,18 @@ def repro(session: nox.Session) -> None:
     start = time.perf_counter()
     session.run("python", "scripts/repro.py", *session.posargs)
     session.log(f"nox -s repro wall time: {time.perf_counter() - start:.0f} s")
+
+
+@nox.session
+def study(session: nox.Session) -> None:
+    """`vlmrl study` with its defaults (regimes paper, paper-calibrated once that preset exists, and hard
+    without normalisation; four arms x 10 seeds; the hybrid under the simulated-VLM profiles and
+    flicker rates) into results/study/; MLflow in results/_scratch/ (git-ignored). Resumable: rerun
+    after an interruption. Extra arguments go to `vlmrl study` (e.g. `nox -s study -- --seeds 3`)."""
+    _install(session)
+    scratch = os.path.join("results", "_scratch")
+    os.makedirs(scratch, exist_ok=True)
+    start = time.perf_counter()
+    session.run("vlmrl", "study", "--out", os.path.join("results", "study"), "--tracking-uri",
+                f"sqlite:///{os.path.abspath(os.path.join(scratch, 'mlflow.db'))}", *session.posargs)
+    session.log(f"nox -s study wall time: {time.perf_counter() - start:.0f} s")

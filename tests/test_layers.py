@@ -17,7 +17,8 @@ LAYERS = {
     "probe": 3, "training": 3, "analysis": 3,
     "report": 4,
     "calibration": 5,
-    "cli": 6,
+    "study": 6,  # builds on calibration's regimes and sweeps
+    "cli": 7,
 }
 
 

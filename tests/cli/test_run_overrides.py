@@ -149,3 +149,15 @@ def test_dry_run_tells_finished_from_pending_after_a_partial_sweep(tmp_path: Pat
     assert rows == {"0": "FINISHED", "1": "pending"}
     assert "1 FINISHED, 1 pending" in result.output
     assert len(_children(tmp_path)) == 1  # the dry run trained nothing
+
+
+def test_sim_profile_flag_and_set_resolve_the_same_knobs(tmp_path: Path) -> None:
+    flag = _run(tmp_path, "--arms", "hybrid", "--sim-profile", "llava-table1", "--sim-flicker", "0.3", "--dry-run")
+    assert flag.exit_code == 0, flag.output
+    assert 'profile = "llava-table1"' in flag.output and "flicker = 0.3" in flag.output
+    assert "float_anchor = 0.38" in flag.output
+    via_set = _run(tmp_path, "--arms", "hybrid", "--set", "vlm.sim.profile=llava-table1", "--set",
+                   "vlm.sim.flicker=0.3", "--dry-run")
+    assert via_set.exit_code == 0 and via_set.output == flag.output
+    bad = _run(tmp_path, "--sim-profile", "lava", "--dry-run")
+    assert bad.exit_code == 2 and "llava-table1" in bad.output + bad.stderr

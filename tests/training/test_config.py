@@ -131,3 +131,19 @@ def test_the_preset_name_is_a_label_the_resolved_values_are_the_identity() -> No
     one_env = dataclasses.replace(paper, ppo=dataclasses.replace(get_preset("paper"), n_envs=1, n_steps=256))
     assert one_env.jobs()[0].config_hash != paper.jobs()[0].config_hash
     assert one_env.jobs()[0].overrides() == {"ppo.n_envs": "1", "ppo.n_steps": "256"}
+
+
+def test_the_sim_profile_enters_the_hash_but_the_default_keeps_the_old_one() -> None:
+    from vlmrl_cli.training.overrides import resolve
+
+    hybrid = {"arms": ["hybrid", "baseline"], "seeds": [0]}
+    default = resolve([hybrid])
+    named = resolve([hybrid, {"vlm": {"sim": {"profile": "default"}}}])
+    llava = resolve([hybrid, {"vlm": {"sim": {"profile": "llava-table1"}}}])
+    assert default.jobs()[0].config_hash == named.jobs()[0].config_hash == "bd68fb4a7e27"  # as before profiles
+    assert llava.jobs()[0].config_hash != default.jobs()[0].config_hash
+    assert llava.jobs()[1].config_hash == default.jobs()[1].config_hash  # the baseline queries no VLM
+    assert "vlm.sim.profile" in llava.jobs()[0].overrides()
+    # an explicit knob, in any layer, beats the profile's value
+    mixed = resolve([{"vlm": {"sim": {"flicker": 0.3}}}, {"vlm": {"sim": {"profile": "ideal"}}}])
+    assert mixed.vlm.sim.flicker == 0.3 and mixed.vlm.sim.patch_px == 1

@@ -108,3 +108,34 @@ def test_is_fast(renderer: FrameRenderer) -> None:
             vlm.answer(PROMPTS[kind], frame)
     per_call = (time.perf_counter() - start) / 150
     assert per_call < 0.01  # budget is 2 ms; loose bound so a loaded CI machine does not flake
+
+
+def test_default_profile_is_todays_knobs_and_keeps_its_digest() -> None:
+    from vlmrl_cli.vlm.config import SIM_PROFILES
+    from vlmrl_cli.vlm.sim import knobs_digest
+
+    assert SimKnobs.of_profile("default") == SimKnobs()
+    assert (SimKnobs().flicker, SimKnobs().float_noise, SimKnobs().box_noise_px, SimKnobs().box_failure,
+            SimKnobs().patch_px) == (0.1, 0.25, 20.0, 0.2, 28)
+    assert knobs_digest(SimKnobs()) == "144d03c0"  # the digest before profiles existed: cached answers stay valid
+    digests = {knobs_digest(SimKnobs.of_profile(name)) for name in SIM_PROFILES}
+    assert len(digests) == len(SIM_PROFILES)
+
+
+def test_explicit_knobs_beat_the_profile_and_unknown_profiles_fail() -> None:
+    knobs = SimKnobs.of_profile("llava-table1", flicker=0.3)
+    assert knobs.flicker == 0.3 and knobs.float_anchor == 0.38 and knobs.profile == "llava-table1"
+    with pytest.raises(ValueError, match="choose from"):
+        SimKnobs.of_profile("lava")
+    with pytest.raises(ValueError, match="choose from"):
+        SimKnobs(profile="lava")
+
+
+def test_widened_bottom_zone_and_anchors(renderer: FrameRenderer) -> None:
+    vlm = SimulatedVLM(SimKnobs.of_profile("llava-table1"))
+    for x in (-0.69, -0.5, -0.3):
+        frame = renderer.render(x)
+        assert parse_mcq(vlm.answer(PROMPTS[PromptKind.MCQ], frame)).label is geometry.Zone.BOTTOM
+        value = parse_float(vlm.answer(PROMPTS[PromptKind.FLOAT], frame)).value
+        assert value is not None and abs(value - 0.38) < 0.03
+    assert parse_mcq(vlm.answer(PROMPTS[PromptKind.MCQ], renderer.render(0.55))).label is geometry.Zone.GOAL

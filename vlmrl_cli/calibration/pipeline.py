@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +29,7 @@ from vlmrl_cli.report import figures
 from vlmrl_cli.report.table2 import threshold_key
 from vlmrl_cli.report.writer import ensure_writable
 from vlmrl_cli.tracking import store
+from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.sweep import JobResult, SweepReporter, run_sweep
 
 KIND = "calibration"
@@ -52,11 +53,7 @@ def calibrate(
     then score and write. Failed runs stop before scoring; a rerun resumes."""
     start = time.perf_counter()
     result = CalibrationResult(pd.DataFrame())
-    for regime in cfg.regimes:
-        with reporter_for(regime) as reporter:
-            summary = run_sweep(regime.run, reporter)
-        result.trained += len(summary.results)
-        result.failed += summary.failed
+    result.trained, result.failed = train_regimes(cfg.regimes, reporter_for)
     if result.failed:
         result.wall_s = time.perf_counter() - start
         return result
@@ -67,14 +64,14 @@ def calibrate(
     rng = np.random.default_rng(cfg.seed)
     rows, curves = [], []
     for regime in cfg.regimes:
-        runs = _runs_of(data.runs, regime)
+        runs = runs_of(data.runs, regime.run)
         episodes = data.episodes[data.episodes["run_id"].isin(runs["run_id"])]
         profile = regime_profile(
             episodes, cfg.target, regime.run.budget, rng, cfg.window, cfg.n_boot, seeds=regime.run.seeds
         )
         rows.append(_row(regime, profile, cfg))
         curves += figures.seed_curves(episodes.assign(arm=regime.id), cfg.window)
-        result.train_wall_s += sum(_wall_s(client, run_id) for run_id in runs["run_id"])
+        result.train_wall_s += sum(wall_s(client, run_id) for run_id in runs["run_id"])
     result.table = pd.DataFrame(rows).sort_values("distance", kind="stable").reset_index(drop=True)
     result.wall_s = time.perf_counter() - start
     result.files = _write(cfg, result, curves, rng, command)
@@ -82,14 +79,28 @@ def calibrate(
     return result
 
 
-def _runs_of(runs: pd.DataFrame, regime: Regime) -> pd.DataFrame:
-    jobs = regime.run.jobs()
-    hashes = {j.config_hash for j in jobs}
-    seeds = {j.seed for j in jobs}
-    return runs[runs["config_hash"].isin(hashes) & runs["seed"].isin(seeds) & (runs["arm"] == jobs[0].arm.name)]
+def train_regimes(
+    regimes: Sequence[Regime], reporter_for: Callable[[Regime], AbstractContextManager[SweepReporter]]
+) -> tuple[int, list[JobResult]]:
+    """Train what is missing of each regime (one resumable sweep each, with a fresh
+    ``reporter_for(regime)``): the number of runs trained now and the failed ones."""
+    trained, failed = 0, []
+    for regime in regimes:
+        with reporter_for(regime) as reporter:
+            summary = run_sweep(regime.run, reporter)
+        trained += len(summary.results)
+        failed += summary.failed
+    return trained, failed
 
 
-def _wall_s(client: Any, run_id: str) -> float:
+def runs_of(runs: pd.DataFrame, run: RunConfig) -> pd.DataFrame:
+    """The rows of ``runs`` (see ``analysis/load.py``) that are jobs of ``run``: same arm, seed and config hash."""
+    keys = {(j.arm.name, j.seed, j.config_hash) for j in run.jobs()}
+    mine = [(a, s, h) in keys for a, s, h in zip(runs["arm"], runs["seed"], runs["config_hash"], strict=True)]
+    return runs[pd.Series(mine, index=runs.index, dtype=bool)]
+
+
+def wall_s(client: Any, run_id: str) -> float:
     return float(client.get_run(run_id).data.metrics.get("perf/wall_s", 0.0))
 
 
@@ -242,10 +253,20 @@ def identity(cfg: CalibrateConfig) -> dict[str, Any]:
 
 def _log_run(client: Any, experiment_id: str, cfg: CalibrateConfig, files: list[Path]) -> str:
     """The calibration's MLflow run (the existing one of the same calibration, else a new one)."""
-    key = config_hash(identity(cfg))
+    params = flatten({"target": cfg.target, "window": cfg.window, "n_boot": cfg.n_boot,
+                      "regimes": [r.label for r in cfg.regimes]})
+    return log_summary_run(client, experiment_id, KIND, config_hash(identity(cfg)), params, files,
+                           ("none (the baseline arm queries no VLM)", False))
+
+
+def log_summary_run(client: Any, experiment_id: str, kind: str, key: str, params: dict[str, str],
+                    files: list[Path], vlm: tuple[str, bool]) -> str:
+    """One MLflow run tagged ``vlmrl.kind=kind`` holding ``files``: the existing run of the same
+    ``key`` (config hash) when there is one, else a new one with ``params``; ``vlm``: its
+    (label, simulated) provenance."""
     found = client.search_runs(
         [experiment_id],
-        filter_string=f"tags.`{store.TAG_PREFIX}kind` = '{KIND}' and tags.`{store.TAG_PREFIX}config_hash` = '{key}'",
+        filter_string=f"tags.`{store.TAG_PREFIX}kind` = '{kind}' and tags.`{store.TAG_PREFIX}config_hash` = '{key}'",
         max_results=1,
     )
     if found:
@@ -254,25 +275,14 @@ def _log_run(client: Any, experiment_id: str, cfg: CalibrateConfig, files: list[
         run = client.create_run(
             experiment_id,
             tags={
-                **store.provenance_tags("none (the baseline arm queries no VLM)", False),
-                "mlflow.runName": f"calibration-{time.strftime('%Y%m%d-%H%M%S')}",
-                f"{store.TAG_PREFIX}kind": KIND,
+                **store.provenance_tags(*vlm),
+                "mlflow.runName": f"{kind}-{time.strftime('%Y%m%d-%H%M%S')}",
+                f"{store.TAG_PREFIX}kind": kind,
                 f"{store.TAG_PREFIX}config_hash": key,
             },
         )
         run_id = str(run.info.run_id)
-        store.log_params(
-            client,
-            run_id,
-            flatten(
-                {
-                    "target": cfg.target,
-                    "window": cfg.window,
-                    "n_boot": cfg.n_boot,
-                    "regimes": [r.label for r in cfg.regimes],
-                }
-            ),
-        )
+        store.log_params(client, run_id, params)
     store.log_artifacts(client, run_id, files)
     client.set_terminated(run_id, "FINISHED")
     return run_id

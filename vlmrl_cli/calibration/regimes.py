@@ -137,16 +137,23 @@ def build_regimes(layers: Sequence[Mapping[str, Any]], grid: Mapping[str, Sequen
         raise BadInput(f"the grid of {empty[0]} lists no value; give at least one (e.g. --grid {empty[0]}=1,4).")
     points = grid_product(grid) if grid else [dict(r) for r in DEFAULT_REGIMES]
     base = {"experiment": DEFAULT_EXPERIMENT, "seeds": list(range(DEFAULT_SEEDS))}
-    regimes = []
-    for i, point in enumerate(points, start=1):
-        rid = f"R{i}"
-        top = nest(point.items()) | {"arms": [CALIBRATED_ARM], "regime": _label(point)}
-        try:
-            run = resolve([base, *layers, top])
-        except BadInput as exc:
-            raise BadInput(f"regime {rid} ({_label(point)}): {exc}") from None
-        regimes.append(Regime(rid, tuple(point.items()), run))
-    return tuple(regimes)
+    return tuple(
+        resolve_regime(f"R{i}", point, [base, *layers], {"arms": [CALIBRATED_ARM], "regime": _label(point)})
+        for i, point in enumerate(points, start=1)
+    )
+
+
+def resolve_regime(
+    rid: str, point: Mapping[str, Any], layers: Sequence[Mapping[str, Any]], top: Mapping[str, Any]
+) -> Regime:
+    """The validated ``Regime`` ``rid``: ``layers`` (lowest first), then the point's overrides (dotted
+    keys), then ``top`` (top-level keys such as ``arms`` and the ``regime`` tag). An invalid regime is
+    ``BadInput`` naming it."""
+    try:
+        run = resolve([*layers, nest(point.items()) | dict(top)])
+    except BadInput as exc:
+        raise BadInput(f"regime {rid} ({_label(point)}): {exc}") from None
+    return Regime(rid, tuple(point.items()), run)
 
 
 def _label(point: Mapping[str, Any]) -> str:

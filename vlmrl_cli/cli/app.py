@@ -41,13 +41,14 @@ def _root(
 
 
 def _register() -> None:
-    from vlmrl_cli.cli import calibrate, evaluate, report, run, taxonomy
+    from vlmrl_cli.cli import calibrate, evaluate, report, run, study, taxonomy
 
     app.command("taxonomy")(taxonomy.taxonomy)
     app.command("run")(run.run)
     app.command("report")(report.report)
     app.command("calibrate")(calibrate.calibrate)
     app.command("evaluate")(evaluate.evaluate)
+    app.command("study")(study.study)
 
 
 _register()

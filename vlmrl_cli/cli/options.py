@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import enum
 import functools
 import inspect
 import typing
@@ -16,7 +17,7 @@ from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.training.config import load_config_file
 from vlmrl_cli.training.overrides import nest, parse_assignment, parse_value
 from vlmrl_cli.training.presets import PRESETS
-from vlmrl_cli.vlm.config import BACKENDS, SimKnobs, VLMConfig
+from vlmrl_cli.vlm.config import BACKENDS, DEFAULT_SIM_PROFILE, SIM_PROFILES, SimKnobs, VLMConfig
 
 TrackingUri = Annotated[
     str | None,
@@ -49,8 +50,22 @@ VlmTranscript = Annotated[
 ]
 NoCache = Annotated[bool, typer.Option("--no-cache", help="Bypass the on-disk VLM response cache.")]
 CachePath = Annotated[Path, typer.Option("--cache-path", help="sqlite file of the VLM response cache.")]
-SimFlicker = Annotated[float, typer.Option("--sim-flicker", min=0.0, max=1.0, help="sim: P(neighbouring MCQ label).")]
-SimFloatNoise = Annotated[float, typer.Option("--sim-float-noise", min=0.0, help="sim: std of float answers, x units.")]
+#: The profiles as a choice typer validates and lists in the help.
+SimProfileName = enum.StrEnum("SimProfileName", [(name, name) for name in SIM_PROFILES])  # type: ignore[misc]
+SimProfile = Annotated[
+    SimProfileName,
+    typer.Option("--sim-profile",
+                 help="sim: named set of knobs: ideal (no noise), default (the results so far), llava-table1 "
+                      "(the paper's Table 1 failures). Explicit --sim-* knobs beat the profile's values."),
+]
+SimFlicker = Annotated[
+    float | None,
+    typer.Option("--sim-flicker", min=0.0, max=1.0, help="sim: P(neighbouring MCQ label) [default: the profile's]."),
+]
+SimFloatNoise = Annotated[
+    float | None,
+    typer.Option("--sim-float-noise", min=0.0, help="sim: std of float answers, x units [default: the profile's]."),
+]
 SimSeed = Annotated[int, typer.Option("--sim-seed", help="sim: seed of the simulated answers.")]
 SimLatency = Annotated[float, typer.Option("--sim-latency", min=0.0, help="sim: fixed seconds per query.")]
 
@@ -71,16 +86,17 @@ def vlm_config(
     transcript: Path | None,
     no_cache: bool,
     cache_path: Path,
-    sim_flicker: float,
-    sim_float_noise: float,
+    sim_profile: str | enum.Enum,
+    sim_flicker: float | None,
+    sim_float_noise: float | None,
     sim_seed: int,
     sim_latency: float,
 ) -> VLMConfig:
-    """The ``VLMConfig`` of the shared VLM options."""
-    sim = SimKnobs(
-        flicker=sim_flicker, float_noise=sim_float_noise, box_noise_px=_SIM.box_noise_px,
-        box_failure=_SIM.box_failure, patch_px=_SIM.patch_px, latency_s=sim_latency, seed=sim_seed,
-    )
+    """The ``VLMConfig`` of the shared VLM options: the profile's knobs, then the knobs given."""
+    given_knobs = {"flicker": sim_flicker, "float_noise": sim_float_noise}
+    profile = str(sim_profile.value if isinstance(sim_profile, enum.Enum) else sim_profile)
+    sim = SimKnobs.of_profile(profile, latency_s=sim_latency, seed=sim_seed,
+                              **{k: v for k, v in given_knobs.items() if v is not None})
     return VLMConfig(
         backend=vlm, model=model, base_url=base_url, api_key_env=api_key_env, device=device,
         dtype=dtype, max_new_tokens=max_new_tokens, timeout_s=timeout, retries=retries,
@@ -101,8 +117,9 @@ _VLM_PARAMS: dict[str, tuple[object, object]] = {
     "transcript": (VlmTranscript, None),
     "no_cache": (NoCache, False),
     "cache_path": (CachePath, _DEFAULT.cache_path),
-    "sim_flicker": (SimFlicker, _SIM.flicker),
-    "sim_float_noise": (SimFloatNoise, _SIM.float_noise),
+    "sim_profile": (SimProfile, SimProfileName(DEFAULT_SIM_PROFILE)),
+    "sim_flicker": (SimFlicker, None),
+    "sim_float_noise": (SimFloatNoise, None),
     "sim_seed": (SimSeed, _SIM.seed),
     "sim_latency": (SimLatency, _SIM.latency_s),
 }
@@ -141,7 +158,8 @@ _VLM_FIELDS = {
     "vlm": "backend", "model": "model", "base_url": "base_url", "api_key_env": "api_key_env", "device": "device",
     "dtype": "dtype", "max_new_tokens": "max_new_tokens", "timeout": "timeout_s", "retries": "retries",
     "transcript": "transcript_in", "no_cache": "use_cache", "cache_path": "cache_path",
-    "sim_flicker": "sim.flicker", "sim_float_noise": "sim.float_noise", "sim_seed": "sim.seed",
+    "sim_profile": "sim.profile", "sim_flicker": "sim.flicker", "sim_float_noise": "sim.float_noise",
+    "sim_seed": "sim.seed",
     "sim_latency": "sim.latency_s",
 }
 

@@ -56,6 +56,10 @@ def taxonomy(
         typer.secho("WARNING: SIMULATED VLM (not a real model): the answers come from a pixel reader with "
                     "noise.", fg=typer.colors.YELLOW, err=True)
     typer.echo(f"backend:   {result.backend_label}")
+    if vlm_cfg.backend == "sim":
+        sim = vlm_cfg.sim
+        typer.echo(f"profile:   {sim.profile} (flicker {sim.flicker:g}, float noise {sim.float_noise:g}, box noise "
+                   f"{sim.box_noise_px:g} px, box failure {sim.box_failure:g}, patch {sim.patch_px} px)")
     typer.echo(f"frames:    {len(result.probes)} probed, {result.queries} queries "
                f"(cache: {result.cache_hits} hits, {result.cache_misses} misses)")
     sweep = result.sweep

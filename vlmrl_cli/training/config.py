@@ -19,7 +19,8 @@ file (every key optional; ``vlmrl run --dry-run`` prints a complete one)::
     backend = "sim"
 
     [vlm.sim]
-    flicker = 0.1
+    profile = "llava-table1"   # a named set of knobs (vlm/config.py SIM_PROFILES) ...
+    flicker = 0.1              # ... under the knobs set explicitly, which win
 
     [shaping]
     alpha = 5.0
@@ -43,7 +44,7 @@ from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.training.presets import PPOConfig, get_preset
-from vlmrl_cli.vlm.config import VLMConfig
+from vlmrl_cli.vlm.config import VLMConfig, sim_identity
 
 DEFAULT_EXPERIMENT = "vlmrl"
 EVAL_SEED = 1_000_000  # detached evaluation episode i resets with seed EVAL_SEED + i
@@ -132,6 +133,8 @@ class TrainJob:
                 vlm.pop(key, None)
             if self.vlm.backend != "sim":
                 vlm.pop("sim", None)
+            else:  # knobs added later count only off their neutral value: older runs keep their hash
+                vlm["sim"] = to_jsonable(sim_identity(self.vlm.sim))
             ident["vlm"] = vlm
         return ident
 

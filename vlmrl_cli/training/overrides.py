@@ -2,9 +2,10 @@
 
 Every layer is a nested dict of plain values keyed like the TOML file (``{"ppo": {"n_envs": 1}}``).
 The preset named by the highest layer that names one fills ``[ppo]``; each layer then overrides
-the keys it sets; the merged dict is checked whole by ``training/schema.py`` and becomes the
-frozen ``RunConfig``. Nothing is read or written elsewhere: a bad value fails here, before any
-store, folder or run exists.
+the keys it sets; the simulated VLM's profile (``vlm.sim.profile``) fills the ``[vlm.sim]`` knobs
+that no layer set (an explicit knob, in any layer, beats the profile's value); the merged dict is
+checked whole by ``training/schema.py`` and becomes the frozen ``RunConfig``. Nothing is read or
+written elsewhere: a bad value fails here, before any store, folder or run exists.
 
 ``--set KEY=VALUE`` takes a dotted key and a TOML value (``3``, ``0.3``, ``false``,
 ``[64, 64]``, ``"hf"``); a value that is not TOML is a string, and one with commas a list
@@ -25,6 +26,7 @@ from vlmrl_cli.core.provenance import to_jsonable
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.presets import get_preset
 from vlmrl_cli.training.schema import validate_as
+from vlmrl_cli.vlm.config import resolve_sim_profile
 
 #: Top-level keys of older config files that now live in ``[ppo]``.
 MOVED_TO_PPO = ("timesteps", "eval_episodes")
@@ -137,6 +139,9 @@ def resolve_raw(layers: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
         raw["ppo"] = to_jsonable(get_preset(preset))
     for layer in lifted:
         raw = merge(raw, layer)
+    vlm = raw.get("vlm")
+    if isinstance(vlm, Mapping) and isinstance(vlm.get("sim"), Mapping):
+        raw["vlm"] = {**vlm, "sim": resolve_sim_profile(vlm["sim"])}
     return raw
 
 

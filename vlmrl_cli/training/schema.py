@@ -30,7 +30,7 @@ from vlmrl_cli.frames.geometry import Zone
 from vlmrl_cli.shaping.arms import parse_arms
 from vlmrl_cli.shaping.config import DEFAULT_LABEL_POTENTIALS
 from vlmrl_cli.training.presets import PRESETS
-from vlmrl_cli.vlm.config import BACKENDS
+from vlmrl_cli.vlm.config import BACKENDS, SIM_PROFILES
 
 
 def _known_arms(arms: tuple[str, ...]) -> tuple[str, ...]:
@@ -121,6 +121,8 @@ RULES: dict[str, tuple[Any, ...]] = {
     "vlm.sim.box_failure": (Interval(ge=0, le=1),),
     "vlm.sim.patch_px": (Ge(1),),
     "vlm.sim.latency_s": (Ge(0),),
+    "vlm.sim.profile": (AfterValidator(_one_of(SIM_PROFILES, "simulated-VLM profile")),),
+    "vlm.sim.mcq_bottom_halfwidth": (Ge(0),),
     "shaping.label_potentials": (BeforeValidator(_label_table), AfterValidator(_all_labels)),
     "shaping.gamma": (Interval(gt=0, le=1),),
     "shaping.query_every": (Ge(1),),

@@ -61,6 +61,8 @@ def run_tags(job: TrainJob, parent_run_id: str | None, vlm_label: str, simulated
     }
     if job.regime is not None:
         tags[f"{store.TAG_PREFIX}regime"] = job.regime
+    if job.arm.uses_vlm and job.vlm.backend == "sim":
+        tags[f"{store.TAG_PREFIX}sim_profile"] = job.vlm.sim.profile
     if parent_run_id is not None:
         tags["mlflow.parentRunId"] = parent_run_id
     return tags

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from vlmrl_cli import paper
 
@@ -13,10 +16,17 @@ PAPER_TRANSCRIPT = paper.TABLE1_TRANSCRIPT
 DEFAULT_CACHE = Path(".vlmrl-cache") / "responses.sqlite"
 
 
+DEFAULT_SIM_PROFILE = "default"
+
+
 @dataclass(frozen=True)
 class SimKnobs:
     """Knobs of the simulated VLM (``sim``). All randomness is a pure function of
-    (seed, prompt, image bytes), so the same frame always gets the same answer."""
+    (seed, prompt, image bytes), so the same frame always gets the same answer.
+
+    ``profile`` names the set of knob values the others were resolved from (``SIM_PROFILES``);
+    build a profile's knobs with ``SimKnobs.of_profile``. The dataclass defaults are the
+    ``default`` profile, today's simulated VLM, whose answers never change."""
 
     flicker: float = field(default=0.1, metadata={"help": "P(answer a neighbouring MCQ label)"})
     float_noise: float = field(default=0.25, metadata={"help": "std of the float answer, in x units"})
@@ -25,6 +35,94 @@ class SimKnobs:
     patch_px: int = field(default=28, metadata={"help": "spatial resolution: car seen on this pixel grid"})
     latency_s: float = field(default=0.0, metadata={"help": "fixed latency per query (benchmarks)"})
     seed: int = field(default=0, metadata={"help": "seed of the simulated answers"})
+    profile: str = field(default=DEFAULT_SIM_PROFILE, metadata={"help": "named profile the knobs come from"})
+    float_anchor: float | None = field(
+        default=None,
+        metadata={"help": "float answers are this value (+ float_noise) whatever the frame; None: read the car"},
+    )
+    mcq_bottom_halfwidth: float | None = field(
+        default=None,
+        metadata={"help": "MCQ answers BOTTOM within this distance (x units) of the valley; None: true zones"},
+    )
+    box_anchor_x: float | None = field(
+        default=None, metadata={"help": "boxes are drawn around the car at this x, not the frame's; None: read it"}
+    )
+
+    def __post_init__(self) -> None:
+        if self.profile not in SIM_PROFILES:
+            raise ValueError(f"unknown simulated-VLM profile '{self.profile}'; choose from {', '.join(SIM_PROFILES)}.")
+
+    @classmethod
+    def of_profile(cls, name: str, **overrides: Any) -> SimKnobs:
+        """The knobs of profile ``name`` with ``overrides`` laid over them: an explicit knob beats
+        the profile's value.
+
+        Example:
+            >>> k = SimKnobs.of_profile("ideal", flicker=0.3)
+            >>> k.profile, k.flicker, k.float_noise
+            ('ideal', 0.3, 0.0)
+            >>> SimKnobs.of_profile("default") == SimKnobs()
+            True
+        """
+        if name not in SIM_PROFILES:
+            raise ValueError(f"unknown simulated-VLM profile '{name}'; choose from {', '.join(SIM_PROFILES)}.")
+        return cls(**{**SIM_PROFILES[name], **overrides, "profile": name})
+
+
+#: Named sets of ``SimKnobs`` values (knobs not named keep their dataclass default).
+#: ``ideal``: no noise and a one-pixel grid. ``default``: today's knobs (the results so far).
+#: ``llava-table1``: the failure pattern of the paper's Table 1 (LLaVA-1.5-7B): the float answer
+#: is nearly constant (0.378, 0.386 for x = -0.50, -0.69), the MCQ answers BOTTOM on both frames
+#: (a dead zone around the valley reaching past x = -0.69), and boxes either collapse to
+#: ``Error [0, 0, 0, 0]`` or sit far from the car (columns 450-480, i.e. x ~ 0.2).
+SIM_PROFILES: dict[str, Mapping[str, Any]] = {
+    "ideal": {"flicker": 0.0, "float_noise": 0.0, "box_noise_px": 0.0, "box_failure": 0.0, "patch_px": 1},
+    DEFAULT_SIM_PROFILE: {},
+    "llava-table1": {
+        "flicker": 0.0,
+        "float_noise": 0.005,
+        "float_anchor": 0.38,
+        "mcq_bottom_halfwidth": 0.45,
+        "box_failure": 0.5,
+        "box_noise_px": 10.0,
+        "box_anchor_x": 0.2,
+        "patch_px": 56,
+    },
+}
+
+#: Knobs added after results were produced with the default ones, and the values that leave the
+#: answers as before: while they hold these values they stay out of every hash and cache key,
+#: so existing runs and cached answers keep theirs.
+NEUTRAL_SIM_KNOBS: dict[str, Any] = {
+    "profile": DEFAULT_SIM_PROFILE, "float_anchor": None, "mcq_bottom_halfwidth": None, "box_anchor_x": None,
+}
+
+
+def sim_identity(knobs: SimKnobs) -> dict[str, Any]:
+    """The knobs as they enter hashes: every field, minus the ``NEUTRAL_SIM_KNOBS`` at their neutral value.
+
+    Example:
+        >>> "profile" in sim_identity(SimKnobs()), sim_identity(SimKnobs.of_profile("ideal"))["profile"]
+        (False, 'ideal')
+    """
+    values = {f.name: getattr(knobs, f.name) for f in dataclasses.fields(knobs)}
+    return {k: v for k, v in values.items() if k not in NEUTRAL_SIM_KNOBS or NEUTRAL_SIM_KNOBS[k] != v}
+
+
+def resolve_sim_profile(sim: Mapping[str, Any]) -> dict[str, Any]:
+    """A raw ``[vlm.sim]`` table (the keys some layer set) with its profile's values beneath the
+    keys set explicitly; unchanged when it names no profile or an unknown one (the schema says so).
+
+    Example:
+        >>> resolve_sim_profile({"profile": "ideal", "flicker": 0.3})["flicker"]
+        0.3
+        >>> resolve_sim_profile({"profile": "ideal"})["patch_px"]
+        1
+    """
+    name = sim.get("profile")
+    if not isinstance(name, str) or name not in SIM_PROFILES:
+        return dict(sim)
+    return {**SIM_PROFILES[name], **sim}
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ import numpy as np
 
 from vlmrl_cli.frames import geometry
 from vlmrl_cli.frames.render import Frame
-from vlmrl_cli.vlm.config import SimKnobs
+from vlmrl_cli.vlm.config import NEUTRAL_SIM_KNOBS, SimKnobs, sim_identity
 from vlmrl_cli.vlm.prompts import Prompt, PromptKind
 
 WHEEL_GREY = 128
@@ -39,13 +39,22 @@ _MCQ_FORMATS: tuple[str, ...] = ("{label}", "Choice = {label}", "{label}.", "The
 
 
 def knobs_digest(knobs: SimKnobs) -> str:
-    """8 hex digits identifying the knobs that change answers (latency does not).
+    """8 hex digits identifying the knobs that change answers (latency does not), and the profile.
+
+    The knobs added with the profiles count only when they leave their neutral value, so the
+    default profile keeps the digest (and the cached answers) it had before they existed.
 
     Example:
         >>> knobs_digest(SimKnobs()) == knobs_digest(SimKnobs(latency_s=1.0)) != knobs_digest(SimKnobs(seed=1))
         True
+        >>> knobs_digest(SimKnobs()) != knobs_digest(SimKnobs.of_profile("llava-table1"))
+        True
     """
-    shaping = (knobs.flicker, knobs.float_noise, knobs.box_noise_px, knobs.box_failure, knobs.patch_px, knobs.seed)
+    shaping: tuple[object, ...] = (knobs.flicker, knobs.float_noise, knobs.box_noise_px, knobs.box_failure,
+                                   knobs.patch_px, knobs.seed)
+    added = sorted((k, v) for k, v in sim_identity(knobs).items() if k in NEUTRAL_SIM_KNOBS)
+    if added:
+        shaping = (*shaping, *added)
     return hashlib.sha256(repr(shaping).encode()).hexdigest()[:8]
 
 
@@ -79,11 +88,13 @@ def snap_to_patch(column: float, patch_px: int) -> float:
 class SimulatedVLM:
     """SIMULATED VLM (not a real model): answers the three probe prompts from the pixels.
 
-    FLOAT: the patch-snapped x estimate plus Gaussian noise (std ``float_noise``, x units),
-    in one of a few chatty formats. BOX: with probability ``box_failure`` a format collapse
-    ``"Error [0, 0, 0, 0]"``, else the car's box at the estimate with corner jitter
-    (std ``box_noise_px``). MCQ: the zone of the estimate, with probability ``flicker`` a
-    neighbouring label. No car in the pixels: a refusal.
+    FLOAT: the patch-snapped x estimate (or ``float_anchor`` when set: a reading stuck on one
+    value) plus Gaussian noise (std ``float_noise``, x units), in one of a few chatty formats.
+    BOX: with probability ``box_failure`` a format collapse ``"Error [0, 0, 0, 0]"``, else the
+    car's box at the estimate (or at ``box_anchor_x``) with corner jitter (std ``box_noise_px``).
+    MCQ: the zone of the estimate (BOTTOM within ``mcq_bottom_halfwidth`` of the valley when
+    set: a widened dead zone), with probability ``flicker`` a neighbouring label. No car in the
+    pixels: a refusal. ``SIM_PROFILES`` (vlm/config.py) names sets of these knobs.
 
     Answers are a pure function of (seed, prompt text, image bytes): the response cache and
     replay transcripts rely on that.
@@ -110,6 +121,8 @@ class SimulatedVLM:
                 raise ValueError(f"SimKnobs.{prob_name}={value} is a probability; pass a value in [0, 1].")
         if knobs.float_noise < 0 or knobs.box_noise_px < 0 or knobs.latency_s < 0:
             raise ValueError("SimKnobs noise and latency must be >= 0.")
+        if knobs.mcq_bottom_halfwidth is not None and knobs.mcq_bottom_halfwidth < 0:
+            raise ValueError(f"SimKnobs.mcq_bottom_halfwidth={knobs.mcq_bottom_halfwidth} must be >= 0 (x units).")
         if knobs.patch_px < 1:
             raise ValueError(f"SimKnobs.patch_px={knobs.patch_px} must be >= 1 pixel.")
         self.knobs = knobs
@@ -143,14 +156,18 @@ class SimulatedVLM:
         return self._mcq(x_est, rng)
 
     def _float(self, x_est: float, rng: np.random.Generator) -> str:
-        value = x_est + rng.normal(0.0, self.knobs.float_noise) if self.knobs.float_noise > 0 else x_est
+        read = x_est if self.knobs.float_anchor is None else self.knobs.float_anchor
+        value = read + rng.normal(0.0, self.knobs.float_noise) if self.knobs.float_noise > 0 else read
         template = _FLOAT_FORMATS[int(rng.integers(len(_FLOAT_FORMATS)))]
+        if self.knobs.float_anchor is not None:
+            template = _FLOAT_FORMATS[0]  # a stuck reading comes as a bare number (Table 1: 0.378, 0.386)
         return template.format(x=value)
 
     def _box(self, x_est: float, rng: np.random.Generator) -> str:
         if rng.random() < self.knobs.box_failure:
             return "Error [0, 0, 0, 0]"
-        box = np.asarray(geometry.car_box_px(x_est))
+        at = x_est if self.knobs.box_anchor_x is None else self.knobs.box_anchor_x
+        box = np.asarray(geometry.car_box_px(at))
         if self.knobs.box_noise_px > 0:
             box = box + rng.normal(0.0, self.knobs.box_noise_px, size=4)
         # a model that answers at all keeps the corner order; jitter may not swap them
@@ -159,7 +176,7 @@ class SimulatedVLM:
         return f"[{x0}, {y0}, {x1}, {y1}]"
 
     def _mcq(self, x_est: float, rng: np.random.Generator) -> str:
-        index = geometry.ZONES.index(geometry.zone_of(x_est))
+        index = geometry.ZONES.index(self.zone(x_est))
         if rng.random() < self.knobs.flicker:
             step = -1 if rng.random() < 0.5 else 1
             if not 0 <= index + step < len(geometry.ZONES):
@@ -167,6 +184,14 @@ class SimulatedVLM:
             index += step
         template = _MCQ_FORMATS[int(rng.integers(len(_MCQ_FORMATS)))]
         return template.format(label=geometry.ZONES[index].value)
+
+    def zone(self, x_est: float) -> geometry.Zone:
+        """The label the simulated classifier gives an estimate before flicker: its true zone, or
+        BOTTOM anywhere within ``mcq_bottom_halfwidth`` of the valley."""
+        width = self.knobs.mcq_bottom_halfwidth
+        if width is not None and abs(x_est - geometry.VALLEY_X) <= width:
+            return geometry.Zone.BOTTOM
+        return geometry.zone_of(x_est)
 
     def close(self) -> None:
         """Nothing to release."""

@@ -1,0 +1,79 @@
+"""`vlmrl study` end to end on a smoke grid: 2 regimes x 2 arms x 2 seeds and one VLM variant."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from mlflow.tracking import MlflowClient
+from typer.testing import CliRunner
+
+from vlmrl_cli.cli.app import app
+
+runner = CliRunner()
+
+
+def _uri(root: Path) -> str:
+    return f"sqlite:///{root / 'store' / 'mlflow.db'}"
+
+
+def _study(root: Path, *args: str):  # type: ignore[no-untyped-def]
+    return runner.invoke(app, [
+        "study", "--regime", "norm=smoke", "--regime", "raw=preset=smoke ppo.normalize_obs=false "
+        "ppo.normalize_reward=false", "--arms", "baseline,hybrid", "--seeds", "2", "--workers", "2",
+        "--set", "ppo.timesteps=512", "--set", "ppo.eval_episodes=1", "--set", f"vlm.cache_path={root / 'c.sqlite'}",
+        "--profiles", "default,llava-table1", "--flickers", "none", "--states", "4",
+        "--tracking-uri", _uri(root), "--out", str(root / "out"), *args,
+    ])
+
+
+def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) -> None:
+    result = _study(tmp_path)
+    assert result.exit_code == 0, result.output + result.stderr
+    assert "cost estimate: 10 run(s) to train (0 already FINISHED)" in result.output
+    out = tmp_path / "out"
+    for name in ("regime_map.md", "regime_map.csv", "vlm_quality.csv", "vlm_quality.png", "hacking.csv",
+                 "report.md", "manifest.json"):
+        assert (out / name).is_file(), name
+    table = pd.read_csv(out / "regime_map.csv")
+    assert list(table["regime"]) == ["norm", "raw"]
+    assert {"hybrid.reliability_low", "baseline.steps_high", "hybrid_vs_baseline.speedup", "hybrid_vs_baseline.p",
+            "hybrid_vs_baseline.verdict"} <= set(table.columns)
+    points = pd.read_csv(out / "vlm_quality.csv")
+    assert list(points["variant"]) == ["profile default", "profile llava-table1"]
+    assert points["mcq_accuracy"].between(0, 1).all()
+    report = (out / "report.md").read_text()
+    assert report.index("## Summary") < report.index("## Regime map") < report.index("## Reward hacking")
+    assert "SIMULATED VLM" in report and "`norm`" in report and "Hover fraction" in report
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert [s["stage"] for s in manifest["stages"]] == ["train", "taxonomy", "analysis"]
+    assert manifest["git_commit"] and manifest["runs_trained_now"] == 10
+
+    client = MlflowClient(tracking_uri=_uri(tmp_path))
+    exp = client.get_experiment_by_name("vlmrl-study")
+    assert exp is not None
+    runs = client.search_runs([exp.experiment_id], max_results=1000)
+    train = [r for r in runs if r.data.tags["vlmrl.kind"] == "train"]
+    assert len(train) == 10
+    assert {r.data.tags.get("vlmrl.sim_profile") for r in train if r.data.tags["vlmrl.arm"] == "hybrid"} == {
+        "default", "llava-table1"}
+    (study,) = [r for r in runs if r.data.tags["vlmrl.kind"] == "study"]
+    assert {"report.md", "regime_map.csv", "vlm_quality.png"} <= {a.path for a in client.list_artifacts(
+        study.info.run_id)}
+
+    again = _study(tmp_path, "--dry-run")
+    assert again.exit_code == 0 and "0 run(s) to train (10 already FINISHED)" in again.output
+
+
+@pytest.mark.parametrize(("args", "needle"), [
+    (["--regime", "x=preset=nope"], "unknown preset 'nope'"),
+    (["--profiles", "lava"], "unknown simulated-VLM profile 'lava'"),
+    (["--vlm-regime", "other"], "not a regime of this study"),
+])
+def test_a_bad_study_exits_2_before_anything_exists(tmp_path: Path, args: list[str], needle: str) -> None:
+    result = _study(tmp_path, *args)
+    assert result.exit_code == 2, result.output + result.stderr
+    assert needle in result.stderr
+    assert not (tmp_path / "store").exists() and not (tmp_path / "out").exists()

@@ -1,0 +1,133 @@
+"""`vlmrl study`: regimes x arms x seeds and the hybrid's VLM-quality variants, one regime map and report."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from vlmrl_cli.cli import options as opt
+from vlmrl_cli.cli.errors import exit_codes
+from vlmrl_cli.cli.progress import RichSweepReporter
+from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.vlm.config import VLMConfig
+
+RegimeFlag = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--regime",
+        help="A regime, repeatable: NAME (the preset of that name), NAME=PRESET, or NAME='KEY=VALUE KEY=VALUE' "
+        "(--set assignments, e.g. hard='preset=paper ppo.normalize_obs=false ppo.normalize_reward=false'). "
+        "Replaces the study.regimes table of --config and the default list (paper, paper-calibrated when that "
+        "preset exists, hard).",
+    ),
+]
+StudyArms = Annotated[str | None, typer.Option("--arms", help="Arms of every regime (default: "
+                                                             "baseline,kinematic,semantic,hybrid).")]
+Profiles = Annotated[
+    str | None,
+    typer.Option("--profiles", help="Simulated-VLM profiles of the hybrid's VLM-quality runs, comma-separated, or "
+                                    "'none' (default: ideal,default,llava-table1)."),
+]
+Flickers = Annotated[
+    str | None,
+    typer.Option("--flickers", help="Flicker rates of the hybrid's VLM-quality runs (default profile), "
+                                    "or 'none' (default: 0,0.1,0.3,0.5)."),
+]
+VlmRegime = Annotated[
+    str | None,
+    typer.Option("--vlm-regime", help="Regime of the VLM-quality runs (default: paper-calibrated, else the first)."),
+]
+States = Annotated[int, typer.Option("--states", min=2, help="Taxonomy sweep positions per VLM variant.")]
+DryRun = Annotated[bool, typer.Option("--dry-run", help="Print the grid and the cost estimate; train nothing.")]
+Out = Annotated[Path, typer.Option("--out", help="Output folder of the regime map, figure, report and manifest.")]
+
+
+def _names(text: str | None) -> list[str] | None:
+    """``"a,b"`` -> ["a", "b"]; ``"none"`` -> []; None (not given) -> None."""
+    if text is None:
+        return None
+    return [] if text.strip().lower() == "none" else [t.strip() for t in text.split(",") if t.strip()]
+
+
+def _numbers(text: str | None) -> list[float] | None:
+    try:
+        names = _names(text)
+        return None if names is None else [float(v) for v in names]
+    except ValueError:
+        raise BadInput(f"--flickers takes numbers like 0,0.1,0.3 or 'none', got '{text}'.") from None
+
+
+def study(
+    ctx: typer.Context,
+    regime: RegimeFlag = None,
+    arms: StudyArms = None,
+    seeds: opt.Seeds = 10,
+    seed_list: opt.SeedList = None,
+    timesteps: opt.Timesteps = None,
+    workers: opt.Workers = None,
+    eval_episodes: opt.EvalEpisodes = None,
+    profiles: Profiles = None,
+    flickers: Flickers = None,
+    vlm_regime: VlmRegime = None,
+    states: States = 25,
+    config: opt.ConfigFile = None,
+    sets: opt.Sets = None,
+    dry_run: DryRun = False,
+    out: Out = Path("results/study"),
+    experiment: opt.Experiment = "vlmrl-study",
+    tracking_uri: opt.TrackingUri = None,
+) -> None:
+    """Run regimes x arms x seeds (and the hybrid under several simulated VLMs) through the resumable
+    MLflow sweep; write the regime map, the VLM-quality figure and a report generated from the numbers."""
+    from vlmrl_cli.calibration.regimes import Regime
+    from vlmrl_cli.study.config import DEFAULT_FLICKERS, DEFAULT_PROFILES, build_study, choose_regimes, study_section
+    from vlmrl_cli.study.pipeline import estimate_cost, run_study
+
+    console = Console()
+    with exit_codes():
+        file_layer, *upper = opt.config_layers(ctx, config, sets, VLMConfig())
+        section = study_section(file_layer.pop("study", {}))
+        chosen, notes = choose_regimes(regime or [], section.get("regimes"))
+        profile_list, flicker_list = _names(profiles), _numbers(flickers)
+        cfg = build_study(
+            [file_layer, *upper], chosen,
+            profiles=profile_list if profile_list is not None else section.get("profiles", DEFAULT_PROFILES),
+            flickers=flicker_list if flicker_list is not None else section.get("flickers", DEFAULT_FLICKERS),
+            vlm_regime=vlm_regime or section.get("vlm_regime"), notes=notes, out=out, states=states,
+        )
+        base = cfg.base
+        console.print(f"[bold]vlmrl study[/]: {len(cfg.regimes)} regime(s) x arms {', '.join(base.arms)} x seeds "
+                      f"{list(base.seeds)}, + {len(cfg.variants)} VLM variant(s) of the hybrid in "
+                      f"'{cfg.vlm_regime}'; experiment '{base.experiment}'")
+        for r in cfg.all_regimes():
+            console.print(f"  {r.id}: {r.label}, {r.run.budget:,} steps per run", markup=False)
+        for note in cfg.notes:
+            console.print(f"[yellow]note:[/] {note}")
+        if base.vlm.backend == "sim":
+            console.print("[yellow]VLM: the SIMULATED VLM (a pixel-reading stand-in), not a real model.[/]")
+        cost = estimate_cost(cfg)
+        console.print(f"cost estimate: {cost.pending} run(s) to train ({cost.done} already FINISHED) x "
+                      f"~{cost.per_run_s:,.0f} s per run / {cost.workers} worker(s) = ~{cost.total_s / 60:,.1f} min; "
+                      f"estimated from {cost.how}", markup=False)
+        if dry_run:
+            return
+
+        def reporter_for(r: Regime) -> RichSweepReporter:
+            console.print(f"[bold]{r.id}[/]: {r.label}", highlight=False)
+            return RichSweepReporter(console)
+
+        result = run_study(cfg, reporter_for, command=" ".join(["vlmrl", *sys.argv[1:]]), cost=cost)
+        if result.failed:
+            for f in result.failed:
+                console.print(f"[red]{f.job}: {f.status} {f.error or ''}[/]")
+            console.print("Some runs failed; nothing was analysed. Rerun the same command to retry them.")
+            raise typer.Exit(1)
+        for line in result.summary:
+            console.print(line, markup=False)
+        stages = ", ".join(f"{s['stage']} {s['wall_s']:.0f} s" for s in result.stages)
+        console.print(f"wall time: {result.wall_s:,.0f} s ({stages}); {result.trained} run(s) trained now")
+        console.print(f"wrote {', '.join(p.name for p in result.files)} to {out}; MLflow run {result.run_id}")

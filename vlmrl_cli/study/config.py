@@ -1,0 +1,222 @@
+"""The configuration of `vlmrl study`: named PPO regimes x arms x seeds, and VLM-quality variants.
+
+A *regime* is a name and a set of overrides (dotted keys, as ``--set`` takes them), often just a
+preset (``{"preset": "paper"}``); each is an ordinary `vlmrl run` configuration of every arm,
+built by ``calibration.regimes.resolve_regime``. A *variant* is the hybrid arm alone in the VLM
+regime with other simulated-VLM knobs: a named profile (``vlm.sim.profile``) or a flicker rate.
+Regimes come from ``--regime`` flags, else ``[study.regimes]`` in TOML, else ``DEFAULT_REGIMES``
+(a default regime whose preset does not exist yet is skipped with a note)::
+
+    [study]
+    profiles = ["ideal", "default", "llava-table1"]
+    flickers = [0.0, 0.1, 0.3, 0.5]
+    vlm_regime = "paper-calibrated"
+
+    [study.regimes]
+    paper = "paper"                                     # a preset name
+    hard = { "ppo.normalize_obs" = false, "ppo.normalize_reward" = false }
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
+from vlmrl_cli.calibration.regimes import Regime, resolve_regime
+from vlmrl_cli.core.errors import BadInput, did_you_mean
+from vlmrl_cli.probe.scoring import DEFAULT_STATES
+from vlmrl_cli.training.config import RunConfig
+from vlmrl_cli.training.overrides import parse_assignment, parse_value
+from vlmrl_cli.training.presets import PRESETS
+from vlmrl_cli.vlm.config import SIM_PROFILES
+
+DEFAULT_EXPERIMENT = "vlmrl-study"
+DEFAULT_SEEDS = 10
+DEFAULT_ARMS = ("baseline", "kinematic", "semantic", "hybrid")
+VARIANT_ARM = "hybrid"
+CALIBRATED = "paper-calibrated"
+NO_NORMALISATION = {"ppo.normalize_obs": False, "ppo.normalize_reward": False}
+#: The default grid: the paper preset, the calibrated one (once `vlmrl calibrate` has produced it),
+#: and a hard regime without VecNormalize (raw observations and rewards).
+DEFAULT_REGIMES: dict[str, Mapping[str, Any]] = {
+    "paper": {"preset": "paper"},
+    CALIBRATED: {"preset": CALIBRATED},
+    "hard": {"preset": "paper", **NO_NORMALISATION},
+}
+DEFAULT_PROFILES: tuple[str, ...] = tuple(SIM_PROFILES)
+DEFAULT_FLICKERS: tuple[float, ...] = (0.0, 0.1, 0.3, 0.5)
+_STUDY_KEYS = ("regimes", "profiles", "flickers", "vlm_regime")
+
+
+@dataclass(frozen=True)
+class StudyConfig:
+    """Everything one `vlmrl study` does, as one value."""
+
+    regimes: tuple[Regime, ...]
+    variants: tuple[Regime, ...] = ()  # the hybrid with other VLM knobs, in ``vlm_regime``
+    vlm_regime: str = ""  # id of the regime whose baseline the variants are compared with
+    notes: tuple[str, ...] = ()  # what was left out of the grid, and why
+    out: Path = Path("results/study")
+    thresholds: tuple[float, ...] = (-190.0, -160.0, -130.0)
+    states: int = DEFAULT_STATES  # taxonomy sweep positions per variant
+    window: int = 100
+    ci: float = 0.95
+    alpha: float = 0.05  # significance level of the verdicts
+    n_boot: int = DEFAULT_N_BOOT
+    seed: int = 0  # seed of the statistics' random streams
+    extra: dict[str, Any] = field(default_factory=dict)  # free-form provenance (the command)
+
+    @property
+    def base(self) -> RunConfig:
+        return self.regimes[0].run
+
+    @property
+    def top(self) -> float:
+        return max(self.thresholds)
+
+    def all_regimes(self) -> tuple[Regime, ...]:
+        """Every sweep to train: the regimes, then the variants."""
+        return (*self.regimes, *self.variants)
+
+
+def parse_regime(text: str) -> tuple[str, dict[str, Any]]:
+    """A ``--regime`` flag: ``NAME`` (a preset of that name), ``NAME=PRESET``, or
+    ``NAME=KEY=VALUE [KEY=VALUE ...]`` (``--set`` assignments separated by spaces or ``;``).
+
+    Example:
+        >>> parse_regime("zoo")
+        ('zoo', {'preset': 'zoo'})
+        >>> parse_regime("hard=preset=paper ppo.normalize_obs=false; ppo.normalize_reward=false")
+        ('hard', {'preset': 'paper', 'ppo.normalize_obs': False, 'ppo.normalize_reward': False})
+    """
+    name, sep, spec = text.partition("=")
+    name = name.strip()
+    if not name:
+        raise BadInput(f"--regime takes NAME, NAME=PRESET or NAME=KEY=VALUE ..., got '{text}'.")
+    if not sep:
+        return name, {"preset": name}
+    parts = [p for p in re.split(r"[;\s]+", spec.strip()) if p]
+    if len(parts) == 1 and "=" not in parts[0]:
+        return name, {"preset": parts[0]}
+    point: dict[str, Any] = {}
+    for part in parts:
+        key, value = parse_assignment(part, "--regime")
+        point[key] = parse_value(value)
+    if not point:
+        raise BadInput(f"--regime {name}= names no preset and no override; e.g. --regime {name}=paper.")
+    return name, point
+
+
+def _dotted(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in table.items():
+        if isinstance(value, Mapping):
+            out.update(_dotted(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def study_section(raw: Any) -> dict[str, Any]:
+    """A config file's ``[study]`` table, checked: regimes as ``{name: point}``, the rest as given."""
+    if not isinstance(raw, Mapping):
+        raise BadInput("[study] must be a table (regimes, profiles, flickers, vlm_regime).")
+    unknown = [k for k in raw if k not in _STUDY_KEYS]
+    if unknown:
+        raise BadInput(f"unknown key 'study.{unknown[0]}'{did_you_mean(unknown[0], _STUDY_KEYS)}; "
+                       f"[study] holds {', '.join(_STUDY_KEYS)}.")
+    out = dict(raw)
+    regimes = raw.get("regimes")
+    if regimes is not None:
+        if not isinstance(regimes, Mapping) or not regimes:
+            raise BadInput("study.regimes must be a table of NAME = \"preset\" or NAME = { key = value, ... }.")
+        out["regimes"] = {
+            str(name): {"preset": spec} if isinstance(spec, str) else _dotted(spec) if isinstance(spec, Mapping)
+            else _bad_regime(str(name))
+            for name, spec in regimes.items()
+        }
+    for key, kind in (("profiles", str), ("flickers", (int, float))):
+        values = raw.get(key)
+        if values is not None and (not isinstance(values, list) or not all(isinstance(v, kind) for v in values)):
+            raise BadInput(f"study.{key} must be a list of {'names' if kind is str else 'numbers'}.")
+    return out
+
+
+def _bad_regime(name: str) -> dict[str, Any]:
+    raise BadInput(f"study.regimes.{name} must be a preset name or a table of overrides.")
+
+
+def choose_regimes(flags: Sequence[str], file_regimes: Mapping[str, Mapping[str, Any]] | None
+                   ) -> tuple[dict[str, dict[str, Any]], list[str]]:
+    """The regimes to run (name -> overrides) and notes on the defaults left out: ``--regime``
+    flags, else the file's, else ``DEFAULT_REGIMES`` without those whose preset does not exist yet."""
+    if flags:
+        chosen = dict(parse_regime(f) for f in flags)
+        if len(chosen) < len(flags):
+            raise BadInput("two --regime flags share a name; give each regime its own name.")
+        return chosen, []
+    if file_regimes:
+        return {k: dict(v) for k, v in file_regimes.items()}, []
+    chosen, notes = {}, []
+    for name, point in DEFAULT_REGIMES.items():
+        preset = point.get("preset")
+        if isinstance(preset, str) and preset not in PRESETS:
+            notes.append(f"regime '{name}' skipped: preset '{preset}' does not exist yet (run `vlmrl calibrate` "
+                         "and add the closest regime to training/presets.py as that preset).")
+            continue
+        chosen[name] = dict(point)
+    return chosen, notes
+
+
+def _label(point: Mapping[str, Any]) -> str:
+    return " ".join(f"{k}={v}" for k, v in point.items())
+
+
+def build_study(
+    layers: Sequence[Mapping[str, Any]],
+    regimes: Mapping[str, Mapping[str, Any]],
+    profiles: Sequence[str] = DEFAULT_PROFILES,
+    flickers: Sequence[float] = DEFAULT_FLICKERS,
+    vlm_regime: str | None = None,
+    notes: Sequence[str] = (),
+    **settings: Any,
+) -> StudyConfig:
+    """One validated ``StudyConfig``: every regime's run of every arm (``layers`` above the study's
+    defaults, the regime's overrides above them) and the hybrid's VLM variants in ``vlm_regime``
+    (default: the calibrated regime, else the first). Anything invalid is ``BadInput`` now."""
+    if not regimes:
+        raise BadInput("the study has no regime; pass --regime NAME[=...] or drop the [study.regimes] table.")
+    unknown = [p for p in profiles if p not in SIM_PROFILES]
+    if unknown:
+        raise BadInput(f"unknown simulated-VLM profile '{unknown[0]}'{did_you_mean(unknown[0], SIM_PROFILES)}; "
+                       f"choose from {', '.join(SIM_PROFILES)}.")
+    base = {"experiment": DEFAULT_EXPERIMENT, "seeds": list(range(DEFAULT_SEEDS)), "arms": list(DEFAULT_ARMS)}
+    built = tuple(resolve_regime(name, point, [base, *layers], {"regime": name}) for name, point in regimes.items())
+    notes = list(notes)
+    target = vlm_regime or (CALIBRATED if CALIBRATED in regimes else next(iter(regimes)))
+    if target not in regimes:
+        raise BadInput(f"--vlm-regime '{target}' is not a regime of this study{did_you_mean(target, regimes)}.")
+    variants: list[Regime] = []
+    reference = next(r for r in built if r.id == target)
+    if reference.run.vlm.backend != "sim":
+        notes.append(f"no VLM-quality variants: the VLM backend is '{reference.run.vlm.backend}', and profiles and "
+                     "flicker are knobs of the simulated VLM.")
+    else:
+        points: list[tuple[str, dict[str, Any]]] = [("profile " + p, {"vlm.sim.profile": p}) for p in profiles]
+        points += [(f"flicker {f:g}", {"vlm.sim.flicker": float(f)}) for f in flickers]
+        seen: dict[str, int] = {}
+        for name, extra in points:
+            variant = resolve_regime(name, {**regimes[target], **extra}, [base, *layers],
+                                     {"regime": f"{target} {_label(extra)}", "arms": [VARIANT_ARM]})
+            key = variant.run.jobs()[0].config_hash
+            if key in seen:  # the same knobs reached twice (profile default = flicker 0.1): one point
+                first = variants[seen[key]]
+                variants[seen[key]] = Regime(f"{first.id} = {name}", first.overrides, first.run)
+                continue
+            seen[key] = len(variants)
+            variants.append(variant)
+    return StudyConfig(regimes=built, variants=tuple(variants), vlm_regime=target, notes=tuple(notes), **settings)
