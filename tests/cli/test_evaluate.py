@@ -29,6 +29,7 @@ def trained(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
     assert result.exit_code == 0, result.output + result.stderr
     client = MlflowClient(tracking_uri=_uri(root))
     exp = client.get_experiment_by_name("e")
+    assert exp is not None
     runs = client.search_runs([exp.experiment_id], filter_string="tags.`vlmrl.kind` = 'train'")
     assert len(runs) == 1
     return root, runs[0].info.run_id
@@ -48,7 +49,7 @@ def test_evaluate_writes_a_captioned_gif_and_logs_it_to_the_run(trained: tuple[P
     assert "success rate" in result.output and "mean length" in result.output
     gif = out / "episode-0.gif"
     with Image.open(gif) as im:
-        assert im.n_frames > 10
+        assert getattr(im, "n_frames", 1) > 10
         assert im.size[0] == 300
     assert gif.stat().st_size < 3 * 1024 * 1024
     figures = json.loads((out / "evaluation.json").read_text())
@@ -77,7 +78,9 @@ def test_the_smoke_run_has_sb3_training_diagnostics(trained: tuple[Path, str]) -
 
 def _failed_run(root: Path) -> str:
     client = MlflowClient(tracking_uri=_uri(root))
-    run = client.create_run(client.get_experiment_by_name("e").experiment_id)
+    exp = client.get_experiment_by_name("e")
+    assert exp is not None
+    run = client.create_run(exp.experiment_id)
     client.set_terminated(run.info.run_id, "FAILED")
     return str(run.info.run_id)
 

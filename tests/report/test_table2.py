@@ -54,7 +54,7 @@ def test_all_dnf_cell_and_long_form():
 
 
 def test_markdown_comes_in_narrow_ours_speedup_and_paper_blocks():
-    rows = [[100, 200, 300], [120, 220, 320]]
+    rows = [[100.0, 200.0, 300.0], [120.0, 220.0, 320.0]]
     t = _build(_per_seed({"hybrid": rows, "baseline": rows, "kinematic": rows, "semantic": rows}))
     md = to_markdown(t)
     assert "*Ours (mean [95% CI])*" in md and "*The paper*" in md and "*Speedup vs baseline" in md
