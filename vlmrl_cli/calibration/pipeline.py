@@ -28,11 +28,11 @@ from vlmrl_cli.core.provenance import config_hash, flatten, git_commit, package_
 from vlmrl_cli.report import figures
 from vlmrl_cli.report.table2 import threshold_key
 from vlmrl_cli.report.writer import ensure_writable
-from vlmrl_cli.tracking import store
+from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.sweep import JobResult, SweepReporter, run_sweep
 
-KIND = "calibration"
+KIND = schema.KIND_CALIBRATION
 
 
 @dataclass
@@ -101,7 +101,7 @@ def runs_of(runs: pd.DataFrame, run: RunConfig) -> pd.DataFrame:
 
 
 def wall_s(client: Any, run_id: str) -> float:
-    return float(client.get_run(run_id).data.metrics.get("perf/wall_s", 0.0))
+    return float(client.get_run(run_id).data.metrics.get(schema.METRIC_WALL_S, 0.0))
 
 
 def knob_columns(regimes: tuple[Regime, ...]) -> list[str]:
@@ -266,7 +266,7 @@ def log_summary_run(client: Any, experiment_id: str, kind: str, key: str, params
     (label, simulated) provenance."""
     found = client.search_runs(
         [experiment_id],
-        filter_string=f"tags.`{store.TAG_PREFIX}kind` = '{kind}' and tags.`{store.TAG_PREFIX}config_hash` = '{key}'",
+        filter_string=schema.runs_filter({schema.TAG_KIND: kind, schema.TAG_CONFIG_HASH: key}),
         max_results=1,
     )
     if found:
@@ -276,9 +276,9 @@ def log_summary_run(client: Any, experiment_id: str, kind: str, key: str, params
             experiment_id,
             tags={
                 **store.provenance_tags(*vlm),
-                "mlflow.runName": f"{kind}-{time.strftime('%Y%m%d-%H%M%S')}",
-                f"{store.TAG_PREFIX}kind": kind,
-                f"{store.TAG_PREFIX}config_hash": key,
+                schema.MLFLOW_RUN_NAME: f"{kind}-{time.strftime('%Y%m%d-%H%M%S')}",
+                schema.TAG_KIND: kind,
+                schema.TAG_CONFIG_HASH: key,
             },
         )
         run_id = str(run.info.run_id)

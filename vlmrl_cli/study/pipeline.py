@@ -34,11 +34,11 @@ from vlmrl_cli.report import hacking
 from vlmrl_cli.report.writer import ensure_writable
 from vlmrl_cli.study import analysis
 from vlmrl_cli.study.config import StudyConfig
-from vlmrl_cli.tracking import store
+from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training.config import TrainJob
 from vlmrl_cli.training.sweep import JobResult, SweepReporter, dry_plan, vlm_identity
 
-KIND = "study"
+KIND = schema.KIND_STUDY
 #: Seconds per environment step of one run on one worker, when the store has no finished run to
 #: measure: `nox -s repro` on 2 cores trained 20 runs of 300,000 steps in 665 s of wall time.
 FALLBACK_S_PER_STEP = 665.0 * 2 / (20 * 300_000)
@@ -89,13 +89,13 @@ def _measured_rates(cfg: StudyConfig) -> dict[str, float]:
     exp = client.get_experiment_by_name(cfg.base.experiment)
     if exp is None or exp.lifecycle_stage == "deleted":
         return {}
-    found = client.search_runs([exp.experiment_id], filter_string=f"tags.`{store.TAG_PREFIX}kind` = 'train' and "
-                               "attributes.status = 'FINISHED'", max_results=1000)
+    found = schema.search_all(client, exp.experiment_id, schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN},
+                                                                          finished=True))
     per_arm: dict[str, list[float]] = {}
     for run in found:
-        wall, steps = run.data.metrics.get("perf/wall_s"), run.data.params.get("timesteps")
+        wall, steps = run.data.metrics.get(schema.METRIC_WALL_S), run.data.params.get(schema.PARAM_TIMESTEPS)
         if wall and steps and float(steps) > 0:
-            per_arm.setdefault(run.data.tags.get(f"{store.TAG_PREFIX}arm", ""), []).append(wall / float(steps))
+            per_arm.setdefault(run.data.tags.get(schema.TAG_ARM, ""), []).append(wall / float(steps))
     return {arm: statistics.median(v) for arm, v in per_arm.items()}
 
 
