@@ -24,6 +24,7 @@ from matplotlib.figure import Figure
 from vlmrl_cli.analysis.calibration import RegimeProfile, regime_profile
 from vlmrl_cli.analysis.load import load_experiment
 from vlmrl_cli.calibration.regimes import CalibrateConfig, Regime
+from vlmrl_cli.core import tables
 from vlmrl_cli.core.provenance import config_hash, flatten, git_commit, package_versions, to_jsonable
 from vlmrl_cli.report import figures
 from vlmrl_cli.report.table2 import threshold_key
@@ -160,9 +161,8 @@ def to_markdown(cfg: CalibrateConfig, result: CalibrationResult) -> str:
         "(censored, not dropped). 0 is a perfect match. Steps are means of those censored values; CIs are 95% "
         "percentile bootstraps over seeds (reliability: Wilson).",
         "",
-        "| " + " | ".join(head) + " |",
-        "| " + " | ".join("---" for _ in head) + " |",
     ]
+    rows = []
     for r in table.to_dict("records"):
         cells = [
             r["id"],
@@ -176,7 +176,8 @@ def to_markdown(cfg: CalibrateConfig, result: CalibrationResult) -> str:
                 f"({r[f'reached_{x:g}']}/{r['seeds']} reached)"
             )
         cells.append(f"{r['distance']:.3f} [{r['distance_low']:.3f}, {r['distance_high']:.3f}]")
-        lines.append("| " + " | ".join(str(c) for c in cells) + " |")
+        rows.append(cells)
+    lines += tables.markdown_rows(head, rows)
     best = table.iloc[0]
     lines += [
         "",

@@ -19,6 +19,7 @@ from vlmrl_cli.analysis import stats
 from vlmrl_cli.analysis.load import ExperimentData, load_experiment
 from vlmrl_cli.analysis.proportions import DETACHED_SUCCESS_CUT
 from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM
+from vlmrl_cli.core import tables
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
 from vlmrl_cli.report import attribution, figures, hacking
@@ -270,10 +271,10 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
               "![Figure 2](figure2.png)", "", "Figure 2: mean steps to each threshold (hollow diamonds: the paper).",
               "", "![Figure 3](figure3.png)", "", "Figure 3: per-seed training curves.", "",
               "![Figure 4](figure4.png)", "", "Figure 4: mean learning curve per arm with a bootstrap band.", "",
-              "## Runs", "", "| arm | seed | run id | config hash | preset | budget |",
-              "| --- | --- | --- | --- | --- | --- |"]
-    parts += [f"| {r.arm} | {r.seed} | `{r.run_id}` | `{r.config_hash}` | {r.preset} | {r.budget} |"
-              for r in per_seed.itertuples(index=False)]
+              "## Runs", ""]
+    parts += tables.markdown_rows(["arm", "seed", "run id", "config hash", "preset", "budget"],
+                                  ([r.arm, r.seed, f"`{r.run_id}`", f"`{r.config_hash}`", r.preset, r.budget]
+                                   for r in per_seed.itertuples(index=False)))
     parts += ["", "Per-seed values: [per_seed.csv](per_seed.csv).", ""]
     return "\n".join(parts)
 

@@ -28,6 +28,7 @@ from vlmrl_cli.analysis import stats
 from vlmrl_cli.analysis.load import load_experiment
 from vlmrl_cli.calibration.pipeline import log_summary_run, train_regimes, wall_s
 from vlmrl_cli.calibration.regimes import Regime
+from vlmrl_cli.core import tables
 from vlmrl_cli.core.provenance import config_hash, git_commit, package_versions
 from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
 from vlmrl_cli.report import hacking
@@ -202,15 +203,15 @@ def identity(cfg: StudyConfig) -> dict[str, Any]:
 
 
 def _vlm_table(points: pd.DataFrame, top: float) -> str:
-    lines = [f"| Variant | MCQ accuracy | Speedup to {top:g}, hybrid / baseline [95% CI] | rank p | Seeds (h/b) |",
-             "| --- | --- | --- | --- | --- |"]
+    rows = []
     for r in points.itertuples(index=False):
         speed = f"{r.speedup:.2f}x" if math.isfinite(r.speedup) else "—"
         if math.isfinite(r.low) and math.isfinite(r.high):
             speed += f" [{r.low:.2f}, {r.high:.2f}]"
         p = f"{r.p:.2g}" if math.isfinite(r.p) else "—"
-        lines.append(f"| {r.variant} | {r.mcq_accuracy:.2f} | {speed} | {p} | {r.hybrid_seeds}/{r.baseline_seeds} |")
-    return "\n".join(lines) + "\n"
+        rows.append([r.variant, f"{r.mcq_accuracy:.2f}", speed, p, f"{r.hybrid_seeds}/{r.baseline_seeds}"])
+    header = ["Variant", "MCQ accuracy", f"Speedup to {top:g}, hybrid / baseline [95% CI]", "rank p", "Seeds (h/b)"]
+    return "\n".join(tables.markdown_rows(header, rows)) + "\n"
 
 
 def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simulated: bool,
