@@ -6,9 +6,11 @@ from pathlib import Path
 
 import pytest
 
+from vlmrl_cli.core.tables import latex_escape
+from vlmrl_cli.core.tables import markdown as markdown_table
 from vlmrl_cli.frames.render import FrameRenderer
 from vlmrl_cli.probe.scoring import PAPER_FRAMES, FrameProbe, _Planned, empty_sweep_statistics, probe_frame
-from vlmrl_cli.probe.table1 import latex_escape, markdown_table, pair_consequence, taxonomy_frame, write_tables
+from vlmrl_cli.probe.table1 import pair_consequence, taxonomy_frame, write_tables
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.config import VLMConfig
 from vlmrl_cli.vlm.prompts import PromptKind
@@ -67,7 +69,7 @@ def test_latex_escape() -> None:
 from hypothesis import given  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
-from vlmrl_cli.probe.table1 import printable  # noqa: E402
+from vlmrl_cli.core.tables import printable  # noqa: E402
 
 
 @given(st.text())

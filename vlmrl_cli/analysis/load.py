@@ -15,22 +15,22 @@ import numpy as np
 import pandas as pd
 
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.tracking.store import TAG_PREFIX
+from vlmrl_cli.tracking import schema
 
 EPISODE_METRICS = {
-    "episode/native_return": "native_return",
-    "episode/length": "length",
-    "episode/success": "success",
-    "episode/shaped_return": "shaped_return",
+    schema.METRIC_NATIVE_RETURN: "native_return",
+    schema.METRIC_LENGTH: "length",
+    schema.METRIC_SUCCESS: "success",
+    schema.METRIC_SHAPED_RETURN: "shaped_return",
 }
 EVAL_METRICS = {
-    "eval/success_rate": "eval_success_rate",
-    "eval/mean_length": "eval_mean_length",
-    "eval/mean_return": "eval_mean_return",
-    "eval/hover_fraction": "eval_hover_fraction",  # NaN for runs older than the hovering diagnostic
-    "eval/dwell_right_steps": "eval_dwell_right_steps",
+    schema.METRIC_EVAL_SUCCESS_RATE: "eval_success_rate",
+    schema.METRIC_EVAL_MEAN_LENGTH: "eval_mean_length",
+    schema.METRIC_EVAL_MEAN_RETURN: "eval_mean_return",
+    schema.METRIC_EVAL_HOVER_FRACTION: "eval_hover_fraction",  # NaN for runs older than the hovering diagnostic
+    schema.METRIC_EVAL_DWELL_RIGHT_STEPS: "eval_dwell_right_steps",
 }
-EVAL_EPISODE_METRIC = "eval/episode_length"
+EVAL_EPISODE_METRIC = schema.METRIC_EVAL_EPISODE_LENGTH
 
 CPU_COLUMNS = {"numpy_simd": "cpu_numpy_simd", "blas": "cpu_blas", "torch": "cpu_torch"}  # tag suffix -> column
 RUN_COLUMNS = ["run_id", "arm", "seed", "config_hash", "preset", "budget", "vlm", "simulated", "end_time",
@@ -54,22 +54,6 @@ class ExperimentData:
     runs: pd.DataFrame
     episodes: pd.DataFrame
     eval_episodes: pd.DataFrame
-
-
-def _search_train_runs(client: Any, experiment_id: str) -> list[Any]:
-    runs: list[Any] = []
-    token: str | None = None
-    while True:
-        page = client.search_runs(
-            [experiment_id],
-            filter_string=f"tags.`{TAG_PREFIX}kind` = 'train' and attributes.status = 'FINISHED'",
-            max_results=1000,
-            page_token=token,
-        )
-        runs.extend(page)
-        token = page.token
-        if not token:
-            return runs
 
 
 def _history(client: Any, run_id: str, key: str) -> pd.DataFrame:
@@ -101,18 +85,18 @@ def _int_or_nan(text: str | None) -> float:
 
 def _run_row(run: Any) -> dict[str, Any]:
     tags, params, metrics = run.data.tags, run.data.params, run.data.metrics
-    seed = _int_or_nan(tags.get(f"{TAG_PREFIX}seed"))
+    seed = _int_or_nan(tags.get(schema.TAG_SEED))
     return {
         "run_id": run.info.run_id,
-        "arm": tags.get(f"{TAG_PREFIX}arm", "unknown"),
+        "arm": tags.get(schema.TAG_ARM, "unknown"),
         "seed": seed,
-        "config_hash": tags.get(f"{TAG_PREFIX}config_hash", ""),
-        "preset": tags.get(f"{TAG_PREFIX}preset", ""),
-        "budget": _int_or_nan(params.get("timesteps")),
-        "vlm": tags.get(f"{TAG_PREFIX}vlm", "unknown"),
-        "simulated": tags.get(f"{TAG_PREFIX}simulated", "false").lower() == "true",
+        "config_hash": tags.get(schema.TAG_CONFIG_HASH, ""),
+        "preset": tags.get(schema.TAG_PRESET, ""),
+        "budget": _int_or_nan(params.get(schema.PARAM_TIMESTEPS)),
+        "vlm": tags.get(schema.TAG_VLM, "unknown"),
+        "simulated": tags.get(schema.TAG_SIMULATED, "false").lower() == "true",
         "end_time": pd.Timestamp(run.info.end_time or 0, unit="ms", tz="UTC"),
-        **{col: tags.get(f"{TAG_PREFIX}cpu.{key}", "unrecorded") for key, col in CPU_COLUMNS.items()},
+        **{col: tags.get(f"{schema.TAG_CPU_PREFIX}{key}", "unrecorded") for key, col in CPU_COLUMNS.items()},
         **{col: float(metrics.get(key, np.nan)) for key, col in EVAL_METRICS.items()},
     }
 
@@ -126,7 +110,8 @@ def load_experiment(client: Any, experiment: str) -> ExperimentData:
     exp = client.get_experiment_by_name(experiment)
     if exp is None or exp.lifecycle_stage == "deleted":
         raise BadInput(f"MLflow experiment '{experiment}' does not exist; pass --experiment NAME of a run sweep.")
-    found = _search_train_runs(client, exp.experiment_id)
+    found = schema.search_all(client, exp.experiment_id, schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN},
+                                                                          finished=True))
     if not found:
         raise BadInput(f"MLflow experiment '{experiment}' has no finished training runs; run `vlmrl run` first.")
     runs = pd.DataFrame([_run_row(r) for r in found], columns=RUN_COLUMNS)

@@ -24,15 +24,16 @@ from matplotlib.figure import Figure
 from vlmrl_cli.analysis.calibration import RegimeProfile, regime_profile
 from vlmrl_cli.analysis.load import load_experiment
 from vlmrl_cli.calibration.regimes import CalibrateConfig, Regime
+from vlmrl_cli.core import tables
 from vlmrl_cli.core.provenance import config_hash, flatten, git_commit, package_versions, to_jsonable
 from vlmrl_cli.report import figures
 from vlmrl_cli.report.table2 import threshold_key
 from vlmrl_cli.report.writer import ensure_writable
-from vlmrl_cli.tracking import store
+from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.sweep import JobResult, SweepReporter, run_sweep
 
-KIND = "calibration"
+KIND = schema.KIND_CALIBRATION
 
 
 @dataclass
@@ -101,7 +102,7 @@ def runs_of(runs: pd.DataFrame, run: RunConfig) -> pd.DataFrame:
 
 
 def wall_s(client: Any, run_id: str) -> float:
-    return float(client.get_run(run_id).data.metrics.get("perf/wall_s", 0.0))
+    return float(client.get_run(run_id).data.metrics.get(schema.METRIC_WALL_S, 0.0))
 
 
 def knob_columns(regimes: tuple[Regime, ...]) -> list[str]:
@@ -160,9 +161,8 @@ def to_markdown(cfg: CalibrateConfig, result: CalibrationResult) -> str:
         "(censored, not dropped). 0 is a perfect match. Steps are means of those censored values; CIs are 95% "
         "percentile bootstraps over seeds (reliability: Wilson).",
         "",
-        "| " + " | ".join(head) + " |",
-        "| " + " | ".join("---" for _ in head) + " |",
     ]
+    rows = []
     for r in table.to_dict("records"):
         cells = [
             r["id"],
@@ -176,7 +176,8 @@ def to_markdown(cfg: CalibrateConfig, result: CalibrationResult) -> str:
                 f"({r[f'reached_{x:g}']}/{r['seeds']} reached)"
             )
         cells.append(f"{r['distance']:.3f} [{r['distance_low']:.3f}, {r['distance_high']:.3f}]")
-        lines.append("| " + " | ".join(str(c) for c in cells) + " |")
+        rows.append(cells)
+    lines += tables.markdown_rows(head, rows)
     best = table.iloc[0]
     lines += [
         "",
@@ -266,7 +267,7 @@ def log_summary_run(client: Any, experiment_id: str, kind: str, key: str, params
     (label, simulated) provenance."""
     found = client.search_runs(
         [experiment_id],
-        filter_string=f"tags.`{store.TAG_PREFIX}kind` = '{kind}' and tags.`{store.TAG_PREFIX}config_hash` = '{key}'",
+        filter_string=schema.runs_filter({schema.TAG_KIND: kind, schema.TAG_CONFIG_HASH: key}),
         max_results=1,
     )
     if found:
@@ -276,9 +277,9 @@ def log_summary_run(client: Any, experiment_id: str, kind: str, key: str, params
             experiment_id,
             tags={
                 **store.provenance_tags(*vlm),
-                "mlflow.runName": f"{kind}-{time.strftime('%Y%m%d-%H%M%S')}",
-                f"{store.TAG_PREFIX}kind": kind,
-                f"{store.TAG_PREFIX}config_hash": key,
+                schema.MLFLOW_RUN_NAME: f"{kind}-{time.strftime('%Y%m%d-%H%M%S')}",
+                schema.TAG_KIND: kind,
+                schema.TAG_CONFIG_HASH: key,
             },
         )
         run_id = str(run.info.run_id)

@@ -10,8 +10,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from vlmrl_cli.core.tables import printable
 from vlmrl_cli.probe.scoring import FrameProbe
-from vlmrl_cli.probe.table1 import printable
 from vlmrl_cli.vlm.parsers import ParseStatus
 from vlmrl_cli.vlm.prompts import PromptKind
 

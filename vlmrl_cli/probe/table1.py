@@ -3,8 +3,7 @@
 One row per error taxonomy (I float regression, II box grounding, III semantic MCQ) for the
 paper's frame pair (a) x=-0.50 -> (b) x=-0.69, with the dPhi each kind of answer would give
 PBRS computed from the parsed answers, and a second table of the same statistics over the
-whole sweep. Written as Markdown (by hand: pandas' ``to_markdown`` needs ``tabulate``), CSV
-and LaTeX (by hand, to control escaping).
+whole sweep. Written as Markdown, CSV and LaTeX (``core.tables``).
 """
 
 from __future__ import annotations
@@ -16,6 +15,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from vlmrl_cli.core import tables
 from vlmrl_cli.probe import metrics
 from vlmrl_cli.probe.scoring import FrameProbe, phi_series
 from vlmrl_cli.vlm.prompts import PromptKind
@@ -167,63 +167,12 @@ def sweep_frame(sweep: Mapping[str, float]) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def printable(text: str) -> str:
-    """Raw VLM text made safe to show: whitespace runs folded to one space, control and other
-    unprintable characters (a random model's garbage) spelled as escapes such as ``\\x08``.
-
-    Example:
-        >>> printable("BOTTOM\\n\\x08ok")
-        'BOTTOM \\\\x08ok'
-    """
-    flat = " ".join(text.split())
-    return "".join(ch if ch.isprintable() else ch.encode("unicode_escape").decode("ascii") for ch in flat)
-
-
-def markdown_table(df: pd.DataFrame) -> str:
-    """A GitHub-flavoured Markdown table of string cells (``|`` escaped)."""
-    def cell(value: object) -> str:
-        return printable(str(value)).replace("|", "\\|")
-
-    header = "| " + " | ".join(cell(c) for c in df.columns) + " |"
-    rule = "|" + "|".join("---" for _ in df.columns) + "|"
-    body = ["| " + " | ".join(cell(v) for v in row) + " |" for row in df.itertuples(index=False)]
-    return "\n".join([header, rule, *body])
-
-
-_LATEX_SPECIAL = {
-    "\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
-    "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}",
-}
-_LATEX_UNICODE = {"Δ": r"$\Delta$", "Φ": r"$\Phi$", "→": r"$\rightarrow$", "−": r"$-$", "|": r"$|$"}
-
-
-def latex_escape(text: str) -> str:
-    """Escape LaTeX specials and spell the few non-ASCII symbols we use as math.
-
-    Example:
-        >>> latex_escape("ΔΦ = 0.0 (LEFT_SLOPE)")
-        '$\\\\Delta$$\\\\Phi$ = 0.0 (LEFT\\\\_SLOPE)'
-    """
-    return "".join(_LATEX_SPECIAL.get(ch, _LATEX_UNICODE.get(ch, ch)) for ch in printable(text))
-
-
 def latex_table(df: pd.DataFrame, caption: str, label: str) -> str:
-    """A ``table`` float with a ``tabular`` of ragged-right paragraph columns."""
+    """A ``table`` float with a ``tabular`` of ragged-right paragraph columns (the cells are long text)."""
     width = f"{0.95 / max(1, len(df.columns)):.3f}"
     spec = "".join(f">{{\\raggedright\\arraybackslash}}p{{{width}\\linewidth}}" for _ in df.columns)
-    lines = [
-        r"\begin{table}[t]",
-        r"\centering\scriptsize",
-        f"\\caption{{{latex_escape(caption)}}}",
-        f"\\label{{{label}}}",
-        f"\\begin{{tabular}}{{{spec}}}",
-        r"\hline",
-        " & ".join(latex_escape(str(c)) for c in df.columns) + r" \\",
-        r"\hline",
-    ]
-    lines += [" & ".join(latex_escape(str(v)) for v in row) + r" \\" for row in df.itertuples(index=False)]
-    lines += [r"\hline", r"\end{tabular}", r"\end{table}"]
-    return "\n".join(lines)
+    return tables.latex(df, caption, label=label, colspec=spec, setup=(r"\centering\scriptsize",),
+                        rules=tables.HLINES)
 
 
 def captions(label: str, provenance: str, simulated: bool) -> tuple[str, str]:
@@ -256,8 +205,8 @@ def write_tables(
              "Φ mappings: MCQ label -> raw potential (shaping.config.DEFAULT_LABEL_POTENTIALS); float: x "
              "normalised to [0, 1] over the track; box: box centre column / 600. The truth applies the same "
              "mapping to the ground truth."]
-    md = [f"**{cap_main}**", "", markdown_table(main), "", *(f"- {n}" for n in notes), "",
-          f"**{cap_sweep}**", "", markdown_table(stats), ""]
+    md = [f"**{cap_main}**", "", tables.markdown(main), "", *(f"- {n}" for n in notes), "",
+          f"**{cap_sweep}**", "", tables.markdown(stats), ""]
     if simulated:
         md.insert(0, "> **SIMULATED VLM (not a real model)**: these numbers test the pipeline, not a VLM.\n")
     paths = [folder / "table1.md", folder / "table1.csv", folder / "table1.tex", folder / "table1_sweep.csv",

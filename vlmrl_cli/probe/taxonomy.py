@@ -35,7 +35,7 @@ from vlmrl_cli.probe.scoring import (
     probe_frame,
     sweep_statistics,
 )
-from vlmrl_cli.tracking import store
+from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.config import VLMConfig
@@ -164,8 +164,8 @@ def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None) -> Tax
         try:
             store.set_tags(tracker, run_id, {
                 **store.provenance_tags(client.label, backend.simulated),
-                f"{store.TAG_PREFIX}command": "taxonomy",
-                f"{store.TAG_PREFIX}config_hash": config_hash(cfg),
+                schema.TAG_COMMAND: schema.COMMAND_TAXONOMY,
+                schema.TAG_CONFIG_HASH: config_hash(cfg),
             })
             store.log_params(tracker, run_id, _params(cfg, backend, len(planned), is_sweep))
             probes = _probe_all(client, planned, progress)

@@ -20,6 +20,7 @@ import pandas as pd
 from vlmrl_cli.analysis import stats
 from vlmrl_cli.analysis.proportions import compare_proportions
 from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM, probability_of_improvement
+from vlmrl_cli.core import tables
 from vlmrl_cli.report.table2 import BASELINE, compare_steps, threshold_key
 
 
@@ -124,13 +125,12 @@ def _fmt(x: float, unit: str) -> str:
 
 def attribution_markdown(comparisons: pd.DataFrame, ci: float = 0.95) -> str:
     """Markdown table: pair (what it isolates), metric, value [CI], p-value and test, seeds."""
-    lines = [f"| Pair | Isolates | Metric | Ours [{100 * ci:g}% CI] | p | Test | Seeds (a/b) |",
-             "| --- | --- | --- | --- | --- | --- | --- |"]
+    rows = []
     for r in comparisons.itertuples(index=False):
         value = _fmt(r.value, r.unit)
         if np.isfinite(r.ci_low) and np.isfinite(r.ci_high):
             value += f" [{_fmt(r.ci_low, r.unit)}, {_fmt(r.ci_high, r.unit)}]"
         p = f"{r.p_value:.2g}" if np.isfinite(r.p_value) else "—"
-        cells = [r.pair, r.meaning, r.label, value, p, r.test, f"{r.n_a}/{r.n_b}"]
-        lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |")
-    return "\n".join(lines) + "\n"
+        rows.append([r.pair, r.meaning, r.label, value, p, r.test, f"{r.n_a}/{r.n_b}"])
+    header = ["Pair", "Isolates", "Metric", f"Ours [{100 * ci:g}% CI]", "p", "Test", "Seeds (a/b)"]
+    return "\n".join(tables.markdown_rows(header, rows)) + "\n"

@@ -33,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from vlmrl_cli.analysis import stats
+from vlmrl_cli.core import tables
 from vlmrl_cli.report.attribution import compare_arms, lookup
 from vlmrl_cli.report.table2 import BASELINE, Table2, threshold_key
 
@@ -263,8 +264,7 @@ def claims_frame(results: list[ClaimResult]) -> pd.DataFrame:
 
 def claims_markdown(results: list[ClaimResult]) -> str:
     """Markdown table: claim, section, arms compared, paper, ours [CI], p-value, verdict, reason."""
-    lines = ["| Claim | Section | Arms | Paper | Ours [95% CI] | p | Verdict | Why |",
-             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    rows = []
     for r in results:
         ours = _fmt(r.estimate.value, r.unit)
         if r.estimate.has_ci:
@@ -275,9 +275,9 @@ def claims_markdown(results: list[ClaimResult]) -> str:
         if r.id == "detached_length_hybrid" and r.paper is not None:
             paper = "~" + paper
         p = f"{r.p_value:.2g}" if math.isfinite(r.p_value) else "—"
-        cells = [r.claim, r.section, r.arms or "—", paper, ours, p, f"**{r.verdict}**", r.reason]
-        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
-    return "\n".join(lines) + "\n"
+        rows.append([r.claim, r.section, r.arms or "—", paper, ours, p, f"**{r.verdict}**", r.reason])
+    header = ["Claim", "Section", "Arms", "Paper", "Ours [95% CI]", "p", "Verdict", "Why"]
+    return "\n".join(tables.markdown_rows(header, rows)) + "\n"
 
 
 def write_claims(results: list[ClaimResult], out: Path, vlm_note: str) -> list[Path]:

@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 
 from vlmrl_cli.analysis import stats
+from vlmrl_cli.core import tables
 from vlmrl_cli.report.table2 import order_arms
 from vlmrl_cli.shaping.hacking import HOVER_FLAG, HOVER_HORIZON, HOVER_X
 
@@ -72,9 +73,7 @@ def _num(x: float, fmt: str) -> str:
 
 def hacking_markdown(frame: pd.DataFrame, ci: float = 0.95) -> str:
     """Markdown of ``hacking_frame``."""
-    lines = [f"| Arm | Hover fraction mean (max) | Flagged seeds [{100 * ci:g}% Wilson] | Dwell right (steps) | "
-             "Shaped - native | Detached episodes: median length, p90, timeouts |",
-             "| --- | --- | --- | --- | --- | --- |"]
+    rows = []
     for r in frame.itertuples(index=False):
         if r.seeds_with_hover_metric:
             flagged = (f"{r.flagged_seeds}/{r.seeds_with_hover_metric} "
@@ -83,10 +82,11 @@ def hacking_markdown(frame: pd.DataFrame, ci: float = 0.95) -> str:
             flagged = "not logged (runs predate the diagnostic)"
         lengths = (f"{r.eval_episodes} ep.: {_num(r.eval_length_median, '.0f')}, {_num(r.eval_length_p90, '.0f')}, "
                    f"{_num(100 * r.eval_timeout_share, '.0f')}%" if r.eval_episodes else "not logged")
-        cells = [r.arm, f"{_num(r.hover_fraction_mean, '.3f')} ({_num(r.hover_fraction_max, '.3f')})", flagged,
-                 _num(r.dwell_right_steps_mean, ".1f"), _num(r.shaped_gap_mean, ".1f"), lengths]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+        rows.append([r.arm, f"{_num(r.hover_fraction_mean, '.3f')} ({_num(r.hover_fraction_max, '.3f')})", flagged,
+                     _num(r.dwell_right_steps_mean, ".1f"), _num(r.shaped_gap_mean, ".1f"), lengths])
+    header = ["Arm", "Hover fraction mean (max)", f"Flagged seeds [{100 * ci:g}% Wilson]", "Dwell right (steps)",
+              "Shaped - native", "Detached episodes: median length, p90, timeouts"]
+    return "\n".join(tables.markdown_rows(header, rows)) + "\n"
 
 
 def per_arm(frame: pd.DataFrame, column: str, arms: list[str]) -> dict[str, np.ndarray]:

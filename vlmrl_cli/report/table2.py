@@ -23,6 +23,7 @@ from vlmrl_cli.analysis.load import ExperimentData
 from vlmrl_cli.analysis.proportions import DETACHED_SUCCESS_CUT, detached_successes
 from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM, RankTest, censored_rank_test
 from vlmrl_cli.analysis.thresholds import full_window_steps_to_threshold, steps_to_threshold
+from vlmrl_cli.core import tables
 from vlmrl_cli.shaping.arms import ARMS
 
 BASELINE = "baseline"
@@ -350,13 +351,6 @@ def display_frame(table: Table2) -> pd.DataFrame:
     return pd.DataFrame(records)
 
 
-def _markdown_rows(df: pd.DataFrame) -> list[str]:
-    def row(cells: Sequence[str]) -> str:
-        return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
-
-    return [row(df.columns), row(["---"] * len(df.columns)), *(row(r) for r in df.itertuples(index=False))]
-
-
 def to_markdown(table: Table2) -> str:
     """GitHub Markdown of ``display_frame`` in three narrow blocks (ours, speedups, the paper), each
     readable in a terminal; rows empty in a block are left out of it (no ``tabulate`` dependency)."""
@@ -371,27 +365,13 @@ def to_markdown(table: Table2) -> str:
         block = df[[first, *cols]]
         block = block[block[cols].astype(str).apply(lambda r: any(v.strip() not in ("", "—") for v in r), axis=1)]
         if cols and len(block):
-            parts += [f"*{title}*", "", *_markdown_rows(block), ""]
+            parts += [f"*{title}*", "", tables.markdown(block), ""]
     return "\n".join(parts)
-
-
-_LATEX_ESCAPES = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
-                  "{": r"\{", "}": r"\}", "~": r"$\sim$", "^": r"\^{}", "—": "--"}
-
-
-def _tex(text: str) -> str:
-    return "".join(_LATEX_ESCAPES.get(ch, ch) for ch in str(text))
 
 
 def to_latex(table: Table2, caption: str = "Steps to reward thresholds and reliability, ours vs the paper.") -> str:
     """A ``booktabs`` LaTeX table of ``display_frame``."""
-    df = display_frame(table)
-    lines = [r"\begin{table}[t]", r"\centering", r"\small", r"\caption{" + _tex(caption) + "}",
-             r"\begin{tabular}{l" + "r" * (len(df.columns) - 1) + "}", r"\toprule",
-             " & ".join(_tex(c) for c in df.columns) + r" \\", r"\midrule"]
-    lines += [" & ".join(_tex(c) for c in r) + r" \\" for r in df.itertuples(index=False)]
-    lines += [r"\bottomrule", r"\end{tabular}", r"\end{table}"]
-    return "\n".join(lines) + "\n"
+    return tables.latex(display_frame(table), caption) + "\n"
 
 
 def to_long(table: Table2) -> pd.DataFrame:

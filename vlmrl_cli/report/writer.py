@@ -19,6 +19,7 @@ from vlmrl_cli.analysis import stats
 from vlmrl_cli.analysis.load import ExperimentData, load_experiment
 from vlmrl_cli.analysis.proportions import DETACHED_SUCCESS_CUT
 from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM
+from vlmrl_cli.core import tables
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
 from vlmrl_cli.report import attribution, figures, hacking
@@ -33,7 +34,7 @@ from vlmrl_cli.report.table2 import (
     write_table2,
 )
 from vlmrl_cli.shaping.hacking import HOVER_FLAG
-from vlmrl_cli.tracking import store
+from vlmrl_cli.tracking import schema, store
 
 DEFAULT_REPORTED = paper.REPORTED
 
@@ -270,10 +271,10 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
               "![Figure 2](figure2.png)", "", "Figure 2: mean steps to each threshold (hollow diamonds: the paper).",
               "", "![Figure 3](figure3.png)", "", "Figure 3: per-seed training curves.", "",
               "![Figure 4](figure4.png)", "", "Figure 4: mean learning curve per arm with a bootstrap band.", "",
-              "## Runs", "", "| arm | seed | run id | config hash | preset | budget |",
-              "| --- | --- | --- | --- | --- | --- |"]
-    parts += [f"| {r.arm} | {r.seed} | `{r.run_id}` | `{r.config_hash}` | {r.preset} | {r.budget} |"
-              for r in per_seed.itertuples(index=False)]
+              "## Runs", ""]
+    parts += tables.markdown_rows(["arm", "seed", "run id", "config hash", "preset", "budget"],
+                                  ([r.arm, r.seed, f"`{r.run_id}`", f"`{r.config_hash}`", r.preset, r.budget]
+                                   for r in per_seed.itertuples(index=False)))
     parts += ["", "Per-seed values: [per_seed.csv](per_seed.csv).", ""]
     return "\n".join(parts)
 
@@ -287,9 +288,9 @@ def _log_report_run(client: Any, data: ExperimentData, cfg: ReportConfig, files:
     that reports never pile up among the training runs; rerunning the same report updates its run."""
     experiment_id = store.ensure_experiment(client, f"{data.experiment_name}{REPORTS_SUFFIX}")
     key = config_hash({"cfg": to_jsonable(cfg), "out": str(cfg.out.absolute())})
-    tags = {f"{store.TAG_PREFIX}kind": "report", f"{store.TAG_PREFIX}report.experiment": data.experiment_name,
-            f"{store.TAG_PREFIX}report.key": key, **store.provenance_tags(note, simulated)}
-    same = client.search_runs([experiment_id], filter_string=f"tags.`{store.TAG_PREFIX}report.key` = '{key}'",
+    tags = {schema.TAG_KIND: schema.KIND_REPORT, schema.TAG_REPORT_EXPERIMENT: data.experiment_name,
+            schema.TAG_REPORT_KEY: key, **store.provenance_tags(note, simulated)}
+    same = client.search_runs([experiment_id], filter_string=schema.runs_filter({schema.TAG_REPORT_KEY: key}),
                               max_results=1)
     if same:
         rid = str(same[0].info.run_id)
@@ -301,7 +302,7 @@ def _log_report_run(client: Any, data: ExperimentData, cfg: ReportConfig, files:
     try:
         if not same:  # params are write-once in MLflow; the same key means the same params
             store.log_params(client, rid, flatten(cfg))
-        store.set_tags(client, rid, {f"{store.TAG_PREFIX}report.runs": ",".join(data.runs["run_id"])[:5000]})
+        store.set_tags(client, rid, {schema.TAG_REPORT_RUNS: ",".join(data.runs["run_id"])[:5000]})
         store.log_artifacts(client, rid, files, "report")
     except Exception:
         client.set_terminated(rid, status="FAILED")

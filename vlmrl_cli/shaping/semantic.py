@@ -35,16 +35,17 @@ from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.features import FEATURE_DIM, FEATURE_UNIT
 from vlmrl_cli.shaping.hysteresis import LockState, lock_step
 from vlmrl_cli.shaping.rbf import RBFField, squared_distances
+from vlmrl_cli.tracking import schema
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.parsers import parse_float, parse_mcq
 from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
 
 STAT_KEYS: tuple[str, ...] = (
-    "vlm/queries",
-    "vlm/cache_hits",
-    "vlm/prototypes",
-    "vlm/label_reuses",
-    "vlm/parse_failures",
+    schema.METRIC_VLM_QUERIES,
+    schema.METRIC_VLM_CACHE_HITS,
+    schema.METRIC_VLM_PROTOTYPES,
+    schema.METRIC_VLM_LABEL_REUSES,
+    schema.METRIC_VLM_PARSE_FAILURES,
 )
 
 
@@ -169,11 +170,11 @@ class SemanticOracle:
     def stats(self) -> dict[str, float]:
         """Counters since construction, under the keys of ``STAT_KEYS``."""
         return {
-            "vlm/queries": float(self._queries),
-            "vlm/cache_hits": float(self._cache_hits),
-            "vlm/prototypes": float(self._n),
-            "vlm/label_reuses": float(self._reuses),
-            "vlm/parse_failures": float(self._parse_failures),
+            schema.METRIC_VLM_QUERIES: float(self._queries),
+            schema.METRIC_VLM_CACHE_HITS: float(self._cache_hits),
+            schema.METRIC_VLM_PROTOTYPES: float(self._n),
+            schema.METRIC_VLM_LABEL_REUSES: float(self._reuses),
+            schema.METRIC_VLM_PARSE_FAILURES: float(self._parse_failures),
         }
 
 

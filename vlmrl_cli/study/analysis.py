@@ -20,6 +20,7 @@ from matplotlib.figure import Figure
 from vlmrl_cli.analysis import stats
 from vlmrl_cli.analysis.load import ExperimentData
 from vlmrl_cli.calibration.pipeline import runs_of
+from vlmrl_cli.core import tables
 from vlmrl_cli.probe.metrics import spearman
 from vlmrl_cli.report import attribution, figures
 from vlmrl_cli.report.table2 import (
@@ -134,13 +135,13 @@ def map_markdown(rows: Sequence[dict[str, Any]], top: float, ci: float = 0.95) -
     pct = f"{100 * ci:g}%"
     head = ["Regime", "Seeds"] + [f"{a}: reliability [{pct} Wilson]; steps to {top:g} [{pct} CI]" for a in arms]
     head += [f"Speedup {a} / {b} to {top:g} [{pct} CI], rank p" for a, b, _ in MAP_PAIRS]
-    lines = ["| " + " | ".join(head) + " |", "| " + " | ".join("---" for _ in head) + " |"]
+    body = []
     for r in rows:
         cells = [f"`{r['regime']}`", str(r["seeds"])]
         cells += [f"{r.get(f'{a}.reliability_text', '—')}; {r.get(f'{a}.steps_text', '—')}" for a in arms]
         cells += [format_speedup(r, f"{a}_vs_{b}") for a, b, _ in MAP_PAIRS]
-        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
-    return "\n".join(lines) + "\n"
+        body.append(cells)
+    return "\n".join(tables.markdown_rows(head, body)) + "\n"
 
 
 def vlm_point(name: str, data: ExperimentData, top: float, accuracy: float, streams: stats.Streams,

@@ -28,17 +28,18 @@ from vlmrl_cli.analysis import stats
 from vlmrl_cli.analysis.load import load_experiment
 from vlmrl_cli.calibration.pipeline import log_summary_run, train_regimes, wall_s
 from vlmrl_cli.calibration.regimes import Regime
+from vlmrl_cli.core import tables
 from vlmrl_cli.core.provenance import config_hash, git_commit, package_versions
 from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
 from vlmrl_cli.report import hacking
 from vlmrl_cli.report.writer import ensure_writable
 from vlmrl_cli.study import analysis
 from vlmrl_cli.study.config import StudyConfig
-from vlmrl_cli.tracking import store
+from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training.config import TrainJob
 from vlmrl_cli.training.sweep import JobResult, SweepReporter, dry_plan, vlm_identity
 
-KIND = "study"
+KIND = schema.KIND_STUDY
 #: Seconds per environment step of one run on one worker, when the store has no finished run to
 #: measure: `nox -s repro` on 2 cores trained 20 runs of 300,000 steps in 665 s of wall time.
 FALLBACK_S_PER_STEP = 665.0 * 2 / (20 * 300_000)
@@ -89,13 +90,13 @@ def _measured_rates(cfg: StudyConfig) -> dict[str, float]:
     exp = client.get_experiment_by_name(cfg.base.experiment)
     if exp is None or exp.lifecycle_stage == "deleted":
         return {}
-    found = client.search_runs([exp.experiment_id], filter_string=f"tags.`{store.TAG_PREFIX}kind` = 'train' and "
-                               "attributes.status = 'FINISHED'", max_results=1000)
+    found = schema.search_all(client, exp.experiment_id, schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN},
+                                                                          finished=True))
     per_arm: dict[str, list[float]] = {}
     for run in found:
-        wall, steps = run.data.metrics.get("perf/wall_s"), run.data.params.get("timesteps")
+        wall, steps = run.data.metrics.get(schema.METRIC_WALL_S), run.data.params.get(schema.PARAM_TIMESTEPS)
         if wall and steps and float(steps) > 0:
-            per_arm.setdefault(run.data.tags.get(f"{store.TAG_PREFIX}arm", ""), []).append(wall / float(steps))
+            per_arm.setdefault(run.data.tags.get(schema.TAG_ARM, ""), []).append(wall / float(steps))
     return {arm: statistics.median(v) for arm, v in per_arm.items()}
 
 
@@ -202,15 +203,15 @@ def identity(cfg: StudyConfig) -> dict[str, Any]:
 
 
 def _vlm_table(points: pd.DataFrame, top: float) -> str:
-    lines = [f"| Variant | MCQ accuracy | Speedup to {top:g}, hybrid / baseline [95% CI] | rank p | Seeds (h/b) |",
-             "| --- | --- | --- | --- | --- |"]
+    rows = []
     for r in points.itertuples(index=False):
         speed = f"{r.speedup:.2f}x" if math.isfinite(r.speedup) else "—"
         if math.isfinite(r.low) and math.isfinite(r.high):
             speed += f" [{r.low:.2f}, {r.high:.2f}]"
         p = f"{r.p:.2g}" if math.isfinite(r.p) else "—"
-        lines.append(f"| {r.variant} | {r.mcq_accuracy:.2f} | {speed} | {p} | {r.hybrid_seeds}/{r.baseline_seeds} |")
-    return "\n".join(lines) + "\n"
+        rows.append([r.variant, f"{r.mcq_accuracy:.2f}", speed, p, f"{r.hybrid_seeds}/{r.baseline_seeds}"])
+    header = ["Variant", "MCQ accuracy", f"Speedup to {top:g}, hybrid / baseline [95% CI]", "rank p", "Seeds (h/b)"]
+    return "\n".join(tables.markdown_rows(header, rows)) + "\n"
 
 
 def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simulated: bool,

@@ -20,9 +20,9 @@ import filelock
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.provenance import cpu_paths, git_commit, package_versions
+from vlmrl_cli.tracking import schema
 
 DEFAULT_TRACKING_URI = "sqlite:///mlflow.db"
-TAG_PREFIX = "vlmrl."
 #: How long ``connect`` waits for another process to finish setting up the same sqlite store.
 INIT_LOCK_TIMEOUT_S = 120.0
 
@@ -141,17 +141,17 @@ def provenance_tags(vlm_label: str, simulated: bool) -> dict[str, str]:
     """Tags every vlmrl run carries: VLM (simulated said plainly), commit, versions, CPU paths."""
     commit = git_commit()
     tags = {
-        f"{TAG_PREFIX}vlm": vlm_label,
-        f"{TAG_PREFIX}simulated": "true" if simulated else "false",
-        f"{TAG_PREFIX}git_commit": commit,
-        "mlflow.source.git.commit": commit,
+        schema.TAG_VLM: vlm_label,
+        schema.TAG_SIMULATED: "true" if simulated else "false",
+        schema.TAG_GIT_COMMIT: commit,
+        schema.MLFLOW_GIT_COMMIT: commit,
     }
     for name, version in package_versions().items():
-        tags[f"{TAG_PREFIX}version.{name}"] = version
+        tags[f"{schema.TAG_VERSION_PREFIX}{name}"] = version
     for name, path in cpu_paths().items():
-        tags[f"{TAG_PREFIX}cpu.{name}"] = path
+        tags[f"{schema.TAG_CPU_PREFIX}{name}"] = path
     if simulated:
-        tags[f"{TAG_PREFIX}note"] = (
+        tags[schema.TAG_NOTE] = (
             "Produced with the SIMULATED VLM (a pixel-reading stand-in), not a real "
             "vision-language model."
         )

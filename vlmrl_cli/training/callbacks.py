@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from vlmrl_cli.tracking import schema
 from vlmrl_cli.tracking.store import BatchLogger
 from vlmrl_cli.training.events import SUCCESS_LENGTH, ProgressEvent
 
@@ -57,13 +58,13 @@ class EpisodeTracker(BaseCallback):
                 continue
             length = int(ep["l"])
             record = {
-                "episode/native_return": float(ep["r"]),
-                "episode/length": float(length),
-                "episode/success": float(info.get("is_success", length < SUCCESS_LENGTH)),
-                "episode/shaped_return": float(info.get("shaped_return", ep["r"])),
+                schema.METRIC_NATIVE_RETURN: float(ep["r"]),
+                schema.METRIC_LENGTH: float(length),
+                schema.METRIC_SUCCESS: float(info.get("is_success", length < SUCCESS_LENGTH)),
+                schema.METRIC_SHAPED_RETURN: float(info.get("shaped_return", ep["r"])),
             }
             self.episodes.append({"timestep": float(self.num_timesteps), **record})
-            self.recent.append(record["episode/native_return"])
+            self.recent.append(record[schema.METRIC_NATIVE_RETURN])
             if self.metrics is not None:
                 self.metrics.log(record, step=self.num_timesteps)
         now = time.perf_counter()
@@ -84,9 +85,9 @@ class EpisodeTracker(BaseCallback):
         if self.metrics is None:
             return
         elapsed = max(time.perf_counter() - self._start, 1e-9)
-        figures = {"perf/steps_per_s": self.num_timesteps / elapsed}
+        figures = {schema.METRIC_STEPS_PER_S: self.num_timesteps / elapsed}
         if self.recent:  # the rolling mean the reward thresholds are read from
-            figures["rollout/return_100"] = float(np.mean(self.recent))
+            figures[schema.METRIC_RETURN_100] = float(np.mean(self.recent))
         if self.vlm_stats is not None:
             figures.update(self.vlm_stats())
         self.metrics.log(figures, step=self.num_timesteps)

@@ -12,8 +12,10 @@ from typing import Any, Protocol
 
 from stable_baselines3.common.logger import KVWriter
 
+from vlmrl_cli.tracking import schema
+
 #: The SB3 key prefixes forwarded by default: the PPO update's diagnostics.
-TRAIN_PREFIXES: tuple[str, ...] = ("train/",)
+TRAIN_PREFIXES: tuple[str, ...] = (schema.TRAIN_METRIC_PREFIX,)
 
 
 class MetricSink(Protocol):

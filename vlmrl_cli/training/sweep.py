@@ -22,7 +22,7 @@ from typing import Any, Protocol
 
 from vlmrl_cli.core.provenance import config_hash, flatten
 from vlmrl_cli.shaping.arms import ARMS
-from vlmrl_cli.tracking import store
+from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training.config import RunConfig, TrainJob
 from vlmrl_cli.training.events import JobResult, ProgressEvent
 from vlmrl_cli.training.worker import init_worker, train_job
@@ -67,27 +67,12 @@ def vlm_identity(cfg: RunConfig) -> tuple[str, bool]:
         backend.close()
 
 
-def _existing_runs(client: Any, experiment_id: str) -> list[Any]:
-    runs: list[Any] = []
-    token = None
-    while True:
-        page = client.search_runs(
-            [experiment_id], filter_string=f"tags.`{store.TAG_PREFIX}kind` = 'train'",
-            max_results=1000, page_token=token,
-        )
-        runs.extend(page)
-        token = page.token
-        if not token:
-            return runs
-
-
 def plan(client: Any, experiment_id: str, jobs: list[TrainJob]) -> tuple[list[TrainJob], list[TrainJob], list[Any]]:
     """Split jobs into (pending, done) and list the stale RUNNING runs of pending jobs."""
     by_key: dict[tuple[str, str, str], list[Any]] = {}
-    for run in _existing_runs(client, experiment_id):
+    for run in schema.search_all(client, experiment_id, schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN})):
         t = run.data.tags
-        key = (t.get(f"{store.TAG_PREFIX}arm", ""), t.get(f"{store.TAG_PREFIX}seed", ""),
-               t.get(f"{store.TAG_PREFIX}config_hash", ""))
+        key = (t.get(schema.TAG_ARM, ""), t.get(schema.TAG_SEED, ""), t.get(schema.TAG_CONFIG_HASH, ""))
         by_key.setdefault(key, []).append(run)
     pending: list[TrainJob] = []
     done: list[TrainJob] = []
@@ -137,7 +122,7 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter) -> SweepSummary:
     pending, done, stale = plan(client, experiment_id, cfg.jobs())
     summary = SweepSummary(None, experiment_id, skipped=[j.name for j in done])
     for run in stale:
-        store.set_tags(client, run.info.run_id, {f"{store.TAG_PREFIX}error": "left RUNNING by an interrupted sweep"})
+        store.set_tags(client, run.info.run_id, {schema.TAG_ERROR: "left RUNNING by an interrupted sweep"})
         client.set_terminated(run.info.run_id, "FAILED")
         summary.marked_failed.append(run.info.run_id)
     reporter.planned(pending, done)
@@ -147,10 +132,10 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter) -> SweepSummary:
 
     parent = client.create_run(experiment_id, tags={
         **store.provenance_tags(vlm_label, simulated),
-        "mlflow.runName": f"sweep-{time.strftime('%Y%m%d-%H%M%S')}",
-        f"{store.TAG_PREFIX}kind": "sweep",
-        f"{store.TAG_PREFIX}config_hash": config_hash(cfg),
-        **({f"{store.TAG_PREFIX}regime": cfg.regime} if cfg.regime is not None else {}),
+        schema.MLFLOW_RUN_NAME: f"sweep-{time.strftime('%Y%m%d-%H%M%S')}",
+        schema.TAG_KIND: schema.KIND_SWEEP,
+        schema.TAG_CONFIG_HASH: config_hash(cfg),
+        **({schema.TAG_REGIME: cfg.regime} if cfg.regime is not None else {}),
     })
     summary.parent_run_id = parent.info.run_id
     store.log_params(client, parent.info.run_id, flatten(dataclasses.replace(cfg, ppo=cfg.ppo_config)))
@@ -195,7 +180,7 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter) -> SweepSummary:
     finally:
         summary.wall_s = time.perf_counter() - start
         store.log_params(client, parent.info.run_id, {"sweep.pending": ",".join(j.name for j in pending)})
-        client.log_metric(parent.info.run_id, "perf/sweep_wall_s", summary.wall_s)
+        client.log_metric(parent.info.run_id, schema.METRIC_SWEEP_WALL_S, summary.wall_s)
         client.set_terminated(parent.info.run_id, status)
     return summary
 

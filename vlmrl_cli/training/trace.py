@@ -8,6 +8,7 @@ same agent. Nothing is written to MLflow and no evaluation is run.
 
 from __future__ import annotations
 
+from vlmrl_cli.tracking import schema
 from vlmrl_cli.training.callbacks import EpisodeTracker
 from vlmrl_cli.training.config import TrainJob
 
@@ -24,7 +25,7 @@ def native_returns(job: TrainJob) -> list[float]:
         model = make_model(job.ppo, env, job.seed)
         tracker = EpisodeTracker(job.name, job.timesteps)
         model.learn(total_timesteps=job.timesteps, callback=tracker)
-        return [e["episode/native_return"] for e in tracker.episodes]
+        return [e[schema.METRIC_NATIVE_RETURN] for e in tracker.episodes]
     finally:
         if client is not None:
             client.close()

@@ -12,7 +12,7 @@ import numpy as np
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec
 from vlmrl_cli.shaping.config import ShapingConfig
-from vlmrl_cli.tracking import store
+from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training.evaluation import Policy
 from vlmrl_cli.training.schema import validate_as
 from vlmrl_cli.vlm.config import VLMConfig
@@ -74,13 +74,13 @@ def load_trained_run(client: Any, run_id: str, workdir: Path) -> TrainedRun:
     tags = run.data.tags
     return TrainedRun(
         run_id=run_id,
-        name=tags.get("mlflow.runName", run_id),
+        name=tags.get(schema.MLFLOW_RUN_NAME, run_id),
         status=run.info.status,
         arm=ARMS[config["arm"]["name"]],
         shaping=_shaping_config(config.get("shaping")),
         vlm=validate_as(VLMConfig, dict(config["vlm"])) if "vlm" in config else VLMConfig(),
-        vlm_label=tags.get(f"{store.TAG_PREFIX}vlm", "unknown"),
-        simulated=tags.get(f"{store.TAG_PREFIX}simulated") == "true",
+        vlm_label=tags.get(schema.TAG_VLM, "unknown"),
+        simulated=tags.get(schema.TAG_SIMULATED) == "true",
         policy=_load_policy(workdir),
     )
 

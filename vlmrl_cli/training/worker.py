@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from vlmrl_cli.core.provenance import flatten
-from vlmrl_cli.tracking import store
+from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training.callbacks import EpisodeTracker
 from vlmrl_cli.training.config import EVAL_SEED, TrainJob
 from vlmrl_cli.training.evaluation import EvalResult, evaluate_detached
@@ -51,20 +51,20 @@ def run_tags(job: TrainJob, parent_run_id: str | None, vlm_label: str, simulated
         vlm_label, simulated = "none (this arm queries no VLM)", False
     tags = {
         **store.provenance_tags(vlm_label, simulated),
-        "mlflow.runName": job.name,
-        f"{store.TAG_PREFIX}kind": "train",
-        f"{store.TAG_PREFIX}arm": job.arm.name,
-        f"{store.TAG_PREFIX}seed": str(job.seed),
-        f"{store.TAG_PREFIX}config_hash": job.config_hash,
-        f"{store.TAG_PREFIX}preset": job.preset,
-        f"{store.TAG_PREFIX}overrides": " ".join(f"{k}={v}" for k, v in job.overrides().items()) or "none",
+        schema.MLFLOW_RUN_NAME: job.name,
+        schema.TAG_KIND: schema.KIND_TRAIN,
+        schema.TAG_ARM: job.arm.name,
+        schema.TAG_SEED: str(job.seed),
+        schema.TAG_CONFIG_HASH: job.config_hash,
+        schema.TAG_PRESET: job.preset,
+        schema.TAG_OVERRIDES: " ".join(f"{k}={v}" for k, v in job.overrides().items()) or "none",
     }
     if job.regime is not None:
-        tags[f"{store.TAG_PREFIX}regime"] = job.regime
+        tags[schema.TAG_REGIME] = job.regime
     if job.arm.uses_vlm and job.vlm.backend == "sim":
-        tags[f"{store.TAG_PREFIX}sim_profile"] = job.vlm.sim.profile
+        tags[schema.TAG_SIM_PROFILE] = job.vlm.sim.profile
     if parent_run_id is not None:
-        tags["mlflow.parentRunId"] = parent_run_id
+        tags[schema.MLFLOW_PARENT_RUN_ID] = parent_run_id
     return tags
 
 
@@ -99,7 +99,7 @@ def train_job(
         out = Path(tmp)
         vlm_client = None
         try:
-            store.log_params(client, run_id, {"timesteps": str(job.timesteps), **flatten(job.params())})
+            store.log_params(client, run_id, {schema.PARAM_TIMESTEPS: str(job.timesteps), **flatten(job.params())})
             if job.arm.uses_vlm:
                 vlm_client = build_client(job.vlm, transcript=out / "transcript.jsonl")
             env, oracle = make_train_env(job.arm, job.ppo, job.shaping, vlm_client, job.seed)
@@ -120,7 +120,7 @@ def train_job(
                                float(np.mean(tracker.recent)) if tracker.recent else float("nan"), "eval"))
             result = evaluate_detached(_policy(model, env), job.eval_episodes, EVAL_SEED)
             _log_eval(metrics, result)
-            metrics.log({"perf/wall_s": time.perf_counter() - start}, step=job.timesteps)
+            metrics.log({schema.METRIC_WALL_S: time.perf_counter() - start}, step=job.timesteps)
             metrics.flush()
             _save_artifacts(out, job, model, env)
             store.log_artifacts(client, run_id, [p for p in out.iterdir()])
@@ -130,8 +130,8 @@ def train_job(
         except BaseException as exc:  # a failed job must not take the sweep down
             message = f"{type(exc).__name__}: {exc}"
             try:
-                store.set_tags(client, run_id, {f"{store.TAG_PREFIX}error": message[:4000],
-                                                f"{store.TAG_PREFIX}traceback": traceback.format_exc()[-4000:]})
+                store.set_tags(client, run_id, {schema.TAG_ERROR: message[:4000],
+                                                schema.TAG_TRACEBACK: traceback.format_exc()[-4000:]})
                 client.set_terminated(run_id, "FAILED")
             except Exception:  # the store itself failed; the parent reports the error
                 pass
@@ -142,15 +142,16 @@ def train_job(
 
 
 def _log_eval(metrics: store.BatchLogger, result: EvalResult) -> None:
-    metrics.log({"eval/success_rate": result.success_rate, "eval/mean_length": result.mean_length,
-                 "eval/mean_return": result.mean_return}, step=0)
+    metrics.log({schema.METRIC_EVAL_SUCCESS_RATE: result.success_rate,
+                 schema.METRIC_EVAL_MEAN_LENGTH: result.mean_length,
+                 schema.METRIC_EVAL_MEAN_RETURN: result.mean_return}, step=0)
     if result.positions:  # the hovering diagnostic (issue 9): R_kin can pay more for parking than finishing
         hover = result.hovering
-        metrics.log({"eval/hover_fraction": hover.hover_fraction, "eval/dwell_right_steps": hover.dwell_right_steps},
-                    step=0)
+        metrics.log({schema.METRIC_EVAL_HOVER_FRACTION: hover.hover_fraction,
+                     schema.METRIC_EVAL_DWELL_RIGHT_STEPS: hover.dwell_right_steps}, step=0)
     for i, (ret, length, ok) in enumerate(zip(result.returns, result.lengths, result.successes, strict=True)):
-        metrics.log({"eval/episode_return": float(ret), "eval/episode_length": float(length),
-                     "eval/episode_success": float(ok)}, step=i)
+        metrics.log({schema.METRIC_EVAL_EPISODE_RETURN: float(ret), schema.METRIC_EVAL_EPISODE_LENGTH: float(length),
+                     schema.METRIC_EVAL_EPISODE_SUCCESS: float(ok)}, step=i)
 
 
 def _save_artifacts(out: Path, job: TrainJob, model: Any, env: Any) -> None:

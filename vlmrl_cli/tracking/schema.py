@@ -1,0 +1,121 @@
+"""The tracking contract: every MLflow tag key, tag value and metric key vlmrl writes or reads.
+
+Writers (the training worker, the sweep, the callbacks, report, calibration, study) and
+readers (analysis, evaluate, study's cost estimate) spell keys only through these names, so
+the contract lives in one place. ``search_all`` is the one paginated ``search_runs``.
+
+Tags: ``vlmrl.*`` (``TAG_*``), MLflow's own ``mlflow.*`` (``MLFLOW_*``); ``TAG_KIND`` takes one of
+the ``KIND_*`` values. Metrics (``METRIC_*``): ``episode/*`` stepped by the global timestep at
+the episode's end, ``eval/*`` of the detached evaluation (``eval/episode_*`` stepped by episode
+index), ``rollout/*``, ``perf/*``, ``vlm/*`` at each rollout end, SB3's ``train/*`` per update.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+TAG_PREFIX = "vlmrl."
+
+# ---- tags every vlmrl run carries (store.provenance_tags) ------------------------------------
+TAG_VLM = f"{TAG_PREFIX}vlm"
+TAG_SIMULATED = f"{TAG_PREFIX}simulated"  # "true" / "false"
+TAG_GIT_COMMIT = f"{TAG_PREFIX}git_commit"
+TAG_VERSION_PREFIX = f"{TAG_PREFIX}version."  # + package name
+TAG_CPU_PREFIX = f"{TAG_PREFIX}cpu."  # + numpy_simd / blas / torch
+TAG_NOTE = f"{TAG_PREFIX}note"  # set only on runs of the simulated VLM
+
+# ---- what a run is -----------------------------------------------------------------------------
+TAG_KIND = f"{TAG_PREFIX}kind"
+KIND_TRAIN = "train"
+KIND_SWEEP = "sweep"
+KIND_REPORT = "report"
+KIND_CALIBRATION = "calibration"
+KIND_STUDY = "study"
+TAG_COMMAND = f"{TAG_PREFIX}command"  # taxonomy runs carry this instead of a kind
+COMMAND_TAXONOMY = "taxonomy"
+
+# ---- training runs (and sweeps) ----------------------------------------------------------------
+TAG_ARM = f"{TAG_PREFIX}arm"
+TAG_SEED = f"{TAG_PREFIX}seed"
+TAG_CONFIG_HASH = f"{TAG_PREFIX}config_hash"
+TAG_PRESET = f"{TAG_PREFIX}preset"
+TAG_OVERRIDES = f"{TAG_PREFIX}overrides"  # "key=value ..." or "none"
+TAG_REGIME = f"{TAG_PREFIX}regime"
+TAG_SIM_PROFILE = f"{TAG_PREFIX}sim_profile"
+TAG_ERROR = f"{TAG_PREFIX}error"
+TAG_TRACEBACK = f"{TAG_PREFIX}traceback"
+
+# ---- report runs -------------------------------------------------------------------------------
+TAG_REPORT_EXPERIMENT = f"{TAG_PREFIX}report.experiment"
+TAG_REPORT_KEY = f"{TAG_PREFIX}report.key"
+TAG_REPORT_RUNS = f"{TAG_PREFIX}report.runs"
+
+# ---- MLflow's own tags -------------------------------------------------------------------------
+MLFLOW_RUN_NAME = "mlflow.runName"
+MLFLOW_PARENT_RUN_ID = "mlflow.parentRunId"
+MLFLOW_GIT_COMMIT = "mlflow.source.git.commit"
+
+# ---- params ------------------------------------------------------------------------------------
+PARAM_TIMESTEPS = "timesteps"
+
+# ---- metrics: training episodes (step = global timestep at the episode's end) -------------------
+METRIC_NATIVE_RETURN = "episode/native_return"
+METRIC_LENGTH = "episode/length"
+METRIC_SUCCESS = "episode/success"
+METRIC_SHAPED_RETURN = "episode/shaped_return"
+
+# ---- metrics: at each rollout end (step = global timestep) --------------------------------------
+METRIC_RETURN_100 = "rollout/return_100"  # mean native return of the last 100 episodes
+METRIC_STEPS_PER_S = "perf/steps_per_s"
+METRIC_VLM_QUERIES = "vlm/queries"
+METRIC_VLM_CACHE_HITS = "vlm/cache_hits"
+METRIC_VLM_PROTOTYPES = "vlm/prototypes"
+METRIC_VLM_LABEL_REUSES = "vlm/label_reuses"
+METRIC_VLM_PARSE_FAILURES = "vlm/parse_failures"
+#: SB3's PPO update diagnostics (``train/approx_kl``, ...), forwarded under this prefix.
+TRAIN_METRIC_PREFIX = "train/"
+
+# ---- metrics: detached evaluation (summary at step 0; per episode stepped by its index) ---------
+METRIC_EVAL_SUCCESS_RATE = "eval/success_rate"
+METRIC_EVAL_MEAN_LENGTH = "eval/mean_length"
+METRIC_EVAL_MEAN_RETURN = "eval/mean_return"
+METRIC_EVAL_HOVER_FRACTION = "eval/hover_fraction"
+METRIC_EVAL_DWELL_RIGHT_STEPS = "eval/dwell_right_steps"
+METRIC_EVAL_EPISODE_RETURN = "eval/episode_return"
+METRIC_EVAL_EPISODE_LENGTH = "eval/episode_length"
+METRIC_EVAL_EPISODE_SUCCESS = "eval/episode_success"
+
+# ---- metrics: wall time ------------------------------------------------------------------------
+METRIC_WALL_S = "perf/wall_s"  # a training run's, at step = its budget
+METRIC_SWEEP_WALL_S = "perf/sweep_wall_s"  # on the sweep's parent run
+
+#: Runs per ``search_runs`` call in ``search_all``.
+PAGE_SIZE = 1000
+
+
+def runs_filter(tags: Mapping[str, str], finished: bool = False) -> str:
+    """An MLflow ``filter_string`` matching every tag of ``tags`` (and status FINISHED if asked).
+
+    Example:
+        >>> runs_filter({TAG_KIND: KIND_TRAIN}, finished=True)
+        "tags.`vlmrl.kind` = 'train' and attributes.status = 'FINISHED'"
+    """
+    terms = [f"tags.`{key}` = '{value}'" for key, value in tags.items()]
+    if finished:
+        terms.append("attributes.status = 'FINISHED'")
+    return " and ".join(terms)
+
+
+def search_all(client: Any, experiment_id: str, filter_string: str, page_size: int = PAGE_SIZE) -> list[Any]:
+    """Every run of ``experiment_id`` that matches ``filter_string``, following MLflow's page tokens
+    (one ``search_runs`` call answers at most one page)."""
+    runs: list[Any] = []
+    token: str | None = None
+    while True:
+        page = client.search_runs([experiment_id], filter_string=filter_string, max_results=page_size,
+                                  page_token=token)
+        runs.extend(page)
+        token = page.token
+        if not token:
+            return runs
