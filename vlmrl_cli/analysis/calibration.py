@@ -159,6 +159,8 @@ def distance_ci(
     low, high = float(res.confidence_interval.low), float(res.confidence_interval.high)
     if not (np.isfinite(low) and np.isfinite(high)):  # every resample equal: the interval is the point
         low = high = value
+    if low > high:  # seeds alike up to rounding: interpolated percentiles can cross by an ulp
+        low, high = high, low
     return Estimate(value, low, high, n=int(r.size))
 
 
