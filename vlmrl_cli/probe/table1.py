@@ -18,6 +18,7 @@ import pandas as pd
 from vlmrl_cli.core import tables
 from vlmrl_cli.probe import metrics
 from vlmrl_cli.probe.scoring import FrameProbe, phi_series
+from vlmrl_cli.vlm.parsers import ParseStatus
 from vlmrl_cli.vlm.prompts import PromptKind
 
 TAXONOMY_ROWS: tuple[tuple[PromptKind, str], ...] = (
@@ -83,7 +84,7 @@ def _parsed(probe: FrameProbe, kind: PromptKind) -> str:
     else:
         m = probe.mcq_result
         value, status = (m.label.value if m.label is not None else "-"), m.status
-    return f"{value} [{status.value}]"
+    return f"{value} [{'parsed' if status is ParseStatus.OK else 'not parsed: ' + status.value}]"
 
 
 def _answer_error(probe: FrameProbe, kind: PromptKind) -> str:
