@@ -8,11 +8,19 @@ from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.study.config import build_study, choose_regimes, study_section
 
 
-def test_default_regimes_skip_a_missing_preset_with_a_note() -> None:
+def test_default_regimes_are_paper_calibrated_and_hard() -> None:
     regimes, notes = choose_regimes([], None)
-    assert list(regimes) == ["paper", "hard"]  # paper-calibrated does not exist yet
-    assert len(notes) == 1 and "paper-calibrated" in notes[0] and "vlmrl calibrate" in notes[0]
+    assert list(regimes) == ["paper", "paper-calibrated", "hard"] and notes == []
     assert regimes["hard"] == {"preset": "paper", "ppo.normalize_obs": False, "ppo.normalize_reward": False}
+
+
+def test_default_regimes_skip_a_missing_preset_with_a_note(monkeypatch: pytest.MonkeyPatch) -> None:
+    from vlmrl_cli.training import presets
+
+    monkeypatch.delitem(presets.PRESETS, "paper-calibrated")
+    regimes, notes = choose_regimes([], None)
+    assert list(regimes) == ["paper", "hard"]
+    assert len(notes) == 1 and "paper-calibrated" in notes[0] and "vlmrl calibrate" in notes[0]
 
 
 def test_file_regimes_and_variants() -> None:
