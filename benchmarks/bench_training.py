@@ -102,11 +102,10 @@ def sweep_throughput(workers: int, timesteps: int, root: Path) -> float:
 
 def help_wall_time(args: list[str], runs: int = 5) -> float:
     """Median wall time (s) of ``vlmrl ARGS`` in a fresh interpreter, as a user types it."""
-    code = "import sys; from vlmrl_cli.cli.app import main; sys.argv[0] = 'vlmrl'; main()"
     times = []
     for _ in range(runs):
         start = time.perf_counter()
-        subprocess.run([sys.executable, "-c", code, *args], check=True, capture_output=True)
+        subprocess.run([sys.executable, "-m", "vlmrl_cli", *args], check=True, capture_output=True)
         times.append(time.perf_counter() - start)
     return sorted(times)[runs // 2]
 

@@ -30,8 +30,7 @@ def test_wheel_installed_elsewhere_finds_its_paper_data(tmp_path: Path) -> None:
     assert Path(where.stdout.strip()).is_relative_to(site)
 
     def vlmrl(*args: str) -> subprocess.CompletedProcess[str]:
-        code = "import sys; from vlmrl_cli.cli.app import main; sys.argv[0] = 'vlmrl'; main()"
-        return subprocess.run([sys.executable, "-c", code, *args], cwd=work, env=env, capture_output=True,
+        return subprocess.run([sys.executable, "-m", "vlmrl_cli", *args], cwd=work, env=env, capture_output=True,
                               text=True, timeout=600)
 
     taxonomy = vlmrl("taxonomy", "--vlm", "replay", "--out", str(work / "tax"),

@@ -16,6 +16,8 @@ import sys
 
 import pytest
 
+from vlmrl_cli.core.provenance import cpu_paths
+
 STEPS = 50_000
 
 _PROBE = """
@@ -32,12 +34,6 @@ print(json.dumps({"paths": cpu_paths(), "returns": native_returns(cfg.jobs()[0])
 """
 
 
-def _dispatch_targets() -> list[str]:
-    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
-
-    return [t for t in __cpu_dispatch__ if __cpu_features__.get(t)]
-
-
 def _trace(arm: str, env: dict[str, str]) -> dict:  # type: ignore[type-arg]
     full = {k: v for k, v in os.environ.items() if k not in ("NPY_DISABLE_CPU_FEATURES", "OPENBLAS_CORETYPE")}
     out = subprocess.run([sys.executable, "-c", _PROBE, arm, str(STEPS)], env=full | env, capture_output=True,
@@ -48,8 +44,9 @@ def _trace(arm: str, env: dict[str, str]) -> dict:  # type: ignore[type-arg]
 @pytest.mark.parametrize("arm", ["hybrid", "semantic"])
 def test_forced_numpy_and_blas_paths_train_the_same_agent(arm: str) -> None:
     forced = {"OPENBLAS_CORETYPE": "Prescott"}
-    if _dispatch_targets():
-        forced["NPY_DISABLE_CPU_FEATURES"] = " ".join(_dispatch_targets())
+    simd = cpu_paths()["numpy_simd"]  # the dispatch targets this CPU runs, comma-separated
+    if simd not in ("baseline", "unknown"):
+        forced["NPY_DISABLE_CPU_FEATURES"] = simd.replace(",", " ")
     default, other = _trace(arm, {}), _trace(arm, forced)
     assert other["paths"] != default["paths"]  # the variables took effect
     assert len(default["returns"]) > 300
