@@ -27,8 +27,8 @@ def _lint(session: nox.Session) -> None:
 
 @nox.session
 def tests(session: nox.Session) -> None:
-    """ruff, mypy, then the test suite, in one environment (what CI runs)."""
-    _install(session)
+    """ruff, mypy, then the test suite, in one environment (what CI runs), with the Ray extra."""
+    _install(session, "dev,ray")
     _lint(session)
     session.run("pytest", "-n", "2", "--dist", "loadfile", *session.posargs,
                 env={"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
@@ -37,7 +37,7 @@ def tests(session: nox.Session) -> None:
 @nox.session
 def lint(session: nox.Session) -> None:
     """ruff and mypy only."""
-    _install(session)
+    _install(session, "dev,ray")
     _lint(session)
 
 

@@ -58,5 +58,5 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_resumes(tmp_path: Path) -> None:
     client = store.connect(uri)
     exp = client.get_experiment_by_name("vlmrl")
     assert exp is not None
-    pending, done, _ = plan(client, exp.experiment_id, cfg.jobs())
-    assert [j.name for j in pending] == ["baseline-s0"] and done == []
+    found = plan(client, exp.experiment_id, cfg.jobs())
+    assert [j.name for j in found.pending] == ["baseline-s0"] and found.done == [] and found.elsewhere == []

@@ -186,3 +186,47 @@ def test_download_artifacts_restores_the_progress_bar_setting(tmp_path: Path, mo
     store.download_artifacts(client, run.info.run_id, ["a.txt"], dst)
     assert (dst / "a.txt").read_text() == "hello"
     assert os.environ["MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR"] == "true"
+
+
+class _FlakyClient:
+    """A store that refuses ``failures`` writes (a tracking server restarting), then takes them."""
+
+    def __init__(self, failures: int) -> None:
+        self.failures = failures
+        self.points: list[float] = []
+
+    def log_batch(self, run_id: str, metrics: list) -> None:  # type: ignore[type-arg]
+        if self.failures > 0:
+            self.failures -= 1
+            raise ConnectionError("tracking server down")
+        self.points.extend(m.value for m in metrics)
+
+
+def test_batch_logger_keeps_points_a_down_store_refused_and_writes_them_later() -> None:
+    now = [0.0]
+    client = _FlakyClient(failures=2)
+    logger = store.BatchLogger(client, "r", max_buffer=2, clock=lambda: now[0], sleep=lambda s: None)
+    for i in range(6):  # the first two writes fail; nothing is dropped
+        logger.log({"a": float(i)}, step=i)
+    assert logger.failed_writes == 2
+    logger.flush()
+    assert client.points == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0]
+
+
+def test_batch_logger_flush_retries_then_gives_up_after_retry_s() -> None:
+    now = [0.0]
+    slept: list[float] = []
+
+    def sleep(s: float) -> None:
+        slept.append(s)
+        now[0] += s
+
+    client = _FlakyClient(failures=10**6)
+    logger = store.BatchLogger(client, "r", clock=lambda: now[0], retry_s=20.0, sleep=sleep)
+    logger.log({"a": 1.0}, step=0)
+    with pytest.raises(ConnectionError):
+        logger.flush()
+    assert slept[:4] == [1.0, 2.0, 4.0, 8.0] and sum(slept) >= 20.0
+    client.failures = 0
+    logger.flush()  # the point survived the failed flush
+    assert client.points == [1.0]

@@ -189,6 +189,13 @@ Timesteps = Annotated[int | None, typer.Option("--timesteps", help="Budget per r
 Preset = Annotated[str, typer.Option("--preset", metavar=choices(list(PRESETS)),
                                      help="PPO preset (the bottom layer of [ppo]).")]
 Workers = Annotated[int | None, typer.Option("--workers", help="Worker processes (default: cores).")]
+ExecutorOpt = Annotated[str | None, typer.Option(
+    "--executor", metavar=choices(["local", "ray"]),
+    help="Where jobs run: local (a process pool, the default) or ray (tasks on a Ray cluster; pip install "
+         "'vlmrl[ray]').")]
+RayAddress = Annotated[str | None, typer.Option(
+    "--ray-address", help="Ray cluster to join with --executor ray (default: a cluster running on this machine, "
+                          "else a new local Ray instance with --workers CPUs).")]
 EvalEpisodes = Annotated[
     int | None, typer.Option("--eval-episodes", help="Detached evaluation episodes (= --set ppo.eval_episodes=N).")
 ]
@@ -201,7 +208,8 @@ Sets = Annotated[
 
 # CLI parameter -> dotted config key (seeds come from --seeds or --seed-list)
 _RUN_KEYS = {"arms": "arms", "preset": "preset", "timesteps": "ppo.timesteps", "eval_episodes": "ppo.eval_episodes",
-             "workers": "workers", "experiment": "experiment", "tracking_uri": "tracking_uri"}
+             "workers": "workers", "experiment": "experiment", "tracking_uri": "tracking_uri",
+             "executor": "executor", "ray_address": "ray_address"}
 
 
 def seeds_of(n: int, seed_list: str | None) -> tuple[int, ...]:

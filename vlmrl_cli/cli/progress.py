@@ -80,6 +80,8 @@ class RichSweepReporter:
         if result.status == "FINISHED":
             status = (f"[green]done[/] eval success {result.eval_success_rate:.0%}, "
                       f"len {result.eval_mean_length:.0f}")
+        elif result.status in ("SKIPPED", "CANCELLED"):
+            status = f"[yellow]{result.status}[/] {result.error or ''}"[:80]
         else:
             status = f"[red]{result.status}[/] {result.error or ''}"[:80]
         self._bars.update(task, status=status)

@@ -12,8 +12,10 @@ from vlmrl_cli.cli.options import (
     Arms,
     ConfigFile,
     EvalEpisodes,
+    ExecutorOpt,
     Experiment,
     Preset,
+    RayAddress,
     SeedList,
     Seeds,
     Sets,
@@ -25,6 +27,7 @@ from vlmrl_cli.cli.options import (
 )
 from vlmrl_cli.cli.progress import RichSweepReporter
 from vlmrl_cli.training.config import DEFAULT_EXPERIMENT, RunConfig
+from vlmrl_cli.training.events import SweepSummary
 from vlmrl_cli.training.overrides import resolve, to_toml
 from vlmrl_cli.vlm.config import VLMConfig
 
@@ -43,6 +46,8 @@ def run(
     timesteps: Timesteps = None,
     preset: Preset = "paper",
     workers: Workers = None,
+    executor: ExecutorOpt = None,
+    ray_address: RayAddress = None,
     eval_episodes: EvalEpisodes = None,
     config: ConfigFile = None,
     sets: Sets = None,
@@ -63,8 +68,8 @@ def run(
             typer.echo(dry_run_text(cfg), nl=False)
             return
         console.print(f"[bold]vlmrl run[/]: arms {', '.join(cfg.arms)} x seeds {list(cfg.seeds)}, preset "
-                      f"{cfg.preset}, {cfg.budget:,} steps each, {cfg.workers} worker(s), experiment "
-                      f"'{cfg.experiment}'")
+                      f"{cfg.preset}, {cfg.budget:,} steps each, {cfg.workers} worker(s) ({cfg.executor}), "
+                      f"experiment '{cfg.experiment}'")
         overrides = cfg.jobs()[0].overrides()
         if overrides:
             console.print("overrides: " + " ".join(f"{k}={v}" for k, v in overrides.items()), markup=False)
@@ -72,16 +77,29 @@ def run(
             console.print("[yellow]VLM: the SIMULATED VLM (a pixel-reading stand-in), not a real model.[/]")
         with RichSweepReporter(console) as reporter:
             summary = run_sweep(cfg, reporter)
+        if summary.elsewhere:
+            console.print(f"[yellow]{len(summary.elsewhere)} job(s) are being trained by another live sweep and "
+                          f"were left to it: {', '.join(summary.elsewhere)}[/]")
         if summary.parent_run_id is None:
-            console.print("Nothing to train: every (arm, seed) run of this configuration is already FINISHED.")
+            if not summary.elsewhere:
+                console.print("Nothing to train: every (arm, seed) run of this configuration is already FINISHED.")
             return
-        console.print(f"parent run {summary.parent_run_id}: {len(summary.results)} run(s) in "
-                      f"{summary.wall_s:.0f} s; skipped {len(summary.skipped)}; stale runs marked failed "
-                      f"{len(summary.marked_failed)}")
+        console.print(sweep_summary_line(summary))
         if summary.failed:
             for r in summary.failed:
                 console.print(f"[red]{r.job}: {r.status} {r.error or ''}[/]")
             raise typer.Exit(1)
+
+
+def sweep_summary_line(summary: SweepSummary) -> str:
+    """One line of what a sweep did: trained, skipped, left to others, retried, failed."""
+    line = (f"parent run {summary.parent_run_id}: {len(summary.finished)} run(s) FINISHED in {summary.wall_s:.0f} s; "
+            f"skipped {len(summary.skipped)} already FINISHED; stale runs marked failed {len(summary.marked_failed)}")
+    if summary.lost_claims:
+        line += f"; {len(summary.lost_claims)} claimed first by another sweep"
+    if summary.retried:
+        line += f"; {len(summary.retried)} attempt(s) lost with their worker and retried"
+    return line
 
 
 def dry_run_text(cfg: RunConfig) -> str:

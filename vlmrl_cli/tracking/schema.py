@@ -45,6 +45,9 @@ TAG_REGIME = f"{TAG_PREFIX}regime"
 TAG_SIM_PROFILE = f"{TAG_PREFIX}sim_profile"
 TAG_ERROR = f"{TAG_PREFIX}error"
 TAG_TRACEBACK = f"{TAG_PREFIX}traceback"
+TAG_OWNER = f"{TAG_PREFIX}owner"  # "host:pid" of the process training the run
+TAG_HEARTBEAT = f"{TAG_PREFIX}heartbeat"  # Unix seconds, refreshed while the run trains
+TAG_EXECUTOR = f"{TAG_PREFIX}executor"  # on sweep runs: local or ray
 
 # ---- report runs -------------------------------------------------------------------------------
 TAG_REPORT_EXPERIMENT = f"{TAG_PREFIX}report.experiment"

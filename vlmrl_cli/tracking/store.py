@@ -32,8 +32,10 @@ def resolve_tracking_uri(uri: str | None) -> str:
     return uri or os.environ.get("MLFLOW_TRACKING_URI") or DEFAULT_TRACKING_URI
 
 
-def connect(uri: str | None) -> Any:
-    """An ``MlflowClient`` for ``uri``, checked to answer; unreachable stores are ``BadInput``."""
+def connect(uri: str | None, wait_s: float = 0.0) -> Any:
+    """An ``MlflowClient`` for ``uri``, checked to answer; unreachable stores are ``BadInput``.
+    A tracking server that does not answer is retried for up to ``wait_s`` seconds first
+    (workers wait out a server restart; commands typed by a user fail fast)."""
     import logging
 
     from mlflow.tracking import MlflowClient
@@ -55,7 +57,7 @@ def connect(uri: str | None) -> Any:
         # so that a sweep's workers wait ~0.1 s for each other, not ~1 s
         import mlflow.store.tracking.sqlalchemy_store  # noqa: F401
     if resolved.startswith(("http://", "https://")):
-        _check_server(resolved)
+        _check_server(resolved, wait_s)
     try:
         with lock:
             client = MlflowClient(tracking_uri=resolved)
@@ -99,15 +101,20 @@ def init_lock(db_path: Path) -> filelock.FileLock:
     return filelock.FileLock(Path(tempfile.gettempdir()) / f"vlmrl-mlflow-{key}.lock", timeout=INIT_LOCK_TIMEOUT_S)
 
 
-def _check_server(uri: str) -> None:
+def _check_server(uri: str, wait_s: float = 0.0) -> None:
     """Fail fast on a tracking server that does not answer (MLflow's own client retries for
-    minutes before giving up)."""
+    minutes before giving up), after retrying for ``wait_s`` seconds."""
     import httpx
 
-    try:
-        httpx.get(uri.rstrip("/") + "/health", timeout=5.0)
-    except httpx.HTTPError as exc:
-        raise BadInput(f"the MLflow tracking server '{uri}' cannot be reached; check --tracking-uri.") from exc
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            httpx.get(uri.rstrip("/") + "/health", timeout=5.0)
+            return
+        except httpx.HTTPError as exc:
+            if time.monotonic() >= deadline:
+                raise BadInput(f"the MLflow tracking server '{uri}' cannot be reached; check --tracking-uri.") from exc
+            time.sleep(1.0)
 
 
 def artifact_root(tracking_uri: str) -> str | None:
@@ -166,6 +173,10 @@ class BatchLogger:
     passed since the last write, whichever comes first, so a long run shows its curves in
     MLflow's UI while it trains instead of only every few tens of thousands of steps.
 
+    A write that fails (a tracking server restarting) keeps the buffer and is tried again at the
+    next write, so no point is lost; ``flush`` itself retries for ``retry_s`` seconds and then
+    raises, and the run fails cleanly (the next sweep redoes it).
+
     Every ``log`` call gets its own timestamp, strictly increasing (ms): MLflow's stores keep one
     row per (key, value, step, timestamp), so two envs finishing identical episodes at the same
     global step would otherwise collapse into one point, and the records of one call share a
@@ -179,6 +190,8 @@ class BatchLogger:
         max_buffer: int = 900,
         max_age_s: float = 5.0,
         clock: Callable[[], float] = time.monotonic,
+        retry_s: float = 300.0,
+        sleep: Callable[[float], None] = time.sleep,
     ) -> None:
         if max_age_s < 0:
             raise ValueError(f"max_age_s must be >= 0, got {max_age_s}")
@@ -190,6 +203,9 @@ class BatchLogger:
         self._buffer: list[Any] = []
         self._last_ts = 0
         self._last_flush = clock()
+        self._retry_s = retry_s
+        self._sleep = sleep
+        self.failed_writes = 0
 
     def log(self, metrics: Mapping[str, float], step: int) -> None:
         from mlflow.entities import Metric
@@ -198,12 +214,31 @@ class BatchLogger:
         self._last_ts = ts
         self._buffer.extend(Metric(k, float(v), ts, int(step)) for k, v in metrics.items())
         if len(self._buffer) >= self._max or self._clock() - self._last_flush >= self._max_age:
-            self.flush()
+            try:
+                self._write()
+            except Exception:  # kept in the buffer; the next write tries again
+                self.failed_writes += 1
+                self._last_flush = self._clock()
 
     def flush(self) -> None:
+        """Write everything buffered, retrying a failing store for ``retry_s`` seconds."""
+        deadline = self._clock() + self._retry_s
+        delay = 1.0
+        while True:
+            try:
+                self._write()
+                return
+            except Exception:
+                self.failed_writes += 1
+                if self._clock() >= deadline:
+                    raise
+                self._sleep(delay)
+                delay = min(delay * 2, 30.0)
+
+    def _write(self) -> None:
         while self._buffer:
-            chunk, self._buffer = self._buffer[:1000], self._buffer[1000:]
-            self._client.log_batch(self._run_id, metrics=chunk)
+            self._client.log_batch(self._run_id, metrics=self._buffer[:1000])
+            del self._buffer[:1000]  # only once the store took them
         self._last_flush = self._clock()
 
 

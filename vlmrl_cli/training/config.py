@@ -64,12 +64,23 @@ class RunConfig:
     vlm: VLMConfig = field(default_factory=VLMConfig)
     shaping: ShapingConfig = field(default_factory=ShapingConfig)
     regime: str | None = field(default=None, metadata={"help": "calibration regime label (a tag, not hashed)"})
+    # where and how the jobs run: none of these changes what a run computes, so none is hashed
+    executor: str = field(default="local", metadata={"help": "local (a process pool) or ray"})
+    ray_address: str | None = field(default=None, metadata={
+        "help": "Ray cluster to join (None: a running local cluster, else a new local instance)"})
+    max_retries: int = field(default=2, metadata={"help": "Ray retries of a job whose worker process died"})
+    heartbeat_s: float = field(default=30.0, metadata={"help": "how often a training run refreshes its heartbeat"})
+    stale_after_s: float = field(default=300.0, metadata={
+        "help": "a RUNNING run whose heartbeat is older is taken as dead and its job redone"})
 
     def validate(self) -> None:
         """Raise ``BadInput`` for anything that would fail later; nothing is trained before."""
         from vlmrl_cli.training.schema import validate_as
 
         validate_as(RunConfig, to_jsonable(self))
+        if self.stale_after_s < 2 * self.heartbeat_s:
+            raise BadInput(f"stale_after_s ({self.stale_after_s:g}) must be at least twice heartbeat_s "
+                           f"({self.heartbeat_s:g}), or live runs would be taken for dead ones.")
 
     @property
     def ppo_config(self) -> PPOConfig:

@@ -1,20 +1,21 @@
-"""Run every (arm, seed) job of a ``RunConfig`` in worker processes, resumably.
+"""Run every (arm, seed) job of a ``RunConfig`` through an executor (a local process pool or Ray),
+resumably and safely beside other sweeps on the same store.
 
 Resume rule: a job whose (arm, seed, config hash) already has a FINISHED run in the experiment
-is skipped; runs of a pending job left RUNNING by a crash or Ctrl-C are marked FAILED first
-and the job is trained again. One parent run records each invocation that trains anything.
+is skipped. A job with a *live* RUNNING run (fresh heartbeat, owner process alive: see
+``claims``) belongs to another sweep and is left to it. RUNNING runs that are stale (a crash,
+a killed worker) are marked FAILED and their job is trained again. Each job is claimed
+atomically when it starts, so two sweeps started together never train the same job twice.
+One parent run records each invocation that trains anything.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import multiprocessing as mp
-import queue as queue_mod
 import signal
 import threading
 import time
 from collections.abc import Iterator
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,9 +24,11 @@ from typing import Any, Protocol
 from vlmrl_cli.core.provenance import config_hash, flatten
 from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.tracking import schema, store
+from vlmrl_cli.training.claims import ACTIVE, Liveness, RunRecord, is_stale, mark_stale
 from vlmrl_cli.training.config import RunConfig, TrainJob
-from vlmrl_cli.training.events import JobResult, ProgressEvent
-from vlmrl_cli.training.worker import init_worker, train_job
+from vlmrl_cli.training.events import JobContext, JobResult, ProgressEvent, SweepSummary
+from vlmrl_cli.training.executors import Executor, JobFn, LocalExecutor, check_executor
+from vlmrl_cli.training.worker import train_job
 
 
 class SweepReporter(Protocol):
@@ -36,20 +39,6 @@ class SweepReporter(Protocol):
     def progress(self, event: ProgressEvent) -> None: ...
 
     def finished(self, result: JobResult) -> None: ...
-
-
-@dataclass
-class SweepSummary:
-    parent_run_id: str | None
-    experiment_id: str
-    skipped: list[str] = field(default_factory=list)
-    marked_failed: list[str] = field(default_factory=list)
-    results: list[JobResult] = field(default_factory=list)
-    wall_s: float = 0.0
-
-    @property
-    def failed(self) -> list[JobResult]:
-        return [r for r in self.results if r.status != "FINISHED"]
 
 
 def vlm_identity(cfg: RunConfig) -> tuple[str, bool]:
@@ -67,24 +56,36 @@ def vlm_identity(cfg: RunConfig) -> tuple[str, bool]:
         backend.close()
 
 
-def plan(client: Any, experiment_id: str, jobs: list[TrainJob]) -> tuple[list[TrainJob], list[TrainJob], list[Any]]:
-    """Split jobs into (pending, done) and list the stale RUNNING runs of pending jobs."""
+@dataclass(frozen=True)
+class Plan:
+    pending: list[TrainJob]  # to train here
+    done: list[TrainJob]  # a FINISHED run exists
+    stale: list[Any]  # RUNNING runs of pending jobs whose process is gone: to mark FAILED
+    elsewhere: list[TrainJob] = field(default_factory=list)  # a live run of another sweep trains it
+
+
+def plan(client: Any, experiment_id: str, jobs: list[TrainJob], stale_after_s: float = 300.0) -> Plan:
+    """Split jobs into pending, done and owned elsewhere, and list the stale runs of pending jobs."""
     by_key: dict[tuple[str, str, str], list[Any]] = {}
     for run in schema.search_all(client, experiment_id, schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN})):
         t = run.data.tags
         key = (t.get(schema.TAG_ARM, ""), t.get(schema.TAG_SEED, ""), t.get(schema.TAG_CONFIG_HASH, ""))
         by_key.setdefault(key, []).append(run)
-    pending: list[TrainJob] = []
-    done: list[TrainJob] = []
-    stale: list[Any] = []
+    result = Plan([], [], [], [])
+    live = Liveness.here(stale_after_s)
     for job in jobs:
         runs = by_key.get((job.arm.name, str(job.seed), job.config_hash), [])
         if any(r.info.status == "FINISHED" for r in runs):
-            done.append(job)
+            result.done.append(job)
+            continue
+        active = [r for r in runs if r.info.status in ACTIVE]
+        stale = [r for r in active if is_stale(RunRecord.of(r), live)]
+        if len(stale) < len(active):
+            result.elsewhere.append(job)
         else:
-            pending.append(job)
-            stale.extend(r for r in runs if r.info.status in ("RUNNING", "SCHEDULED"))
-    return pending, done, stale
+            result.pending.append(job)
+            result.stale.extend(stale)
+    return result
 
 
 @dataclass(frozen=True)
@@ -107,69 +108,69 @@ def dry_plan(cfg: RunConfig) -> DryPlan:
     exp = client.get_experiment_by_name(cfg.experiment)
     if exp is None or exp.lifecycle_stage == "deleted":
         return DryPlan(jobs, [], f"experiment '{cfg.experiment}' does not exist in {uri}: every job is pending")
-    pending, done, _ = plan(client, str(exp.experiment_id), jobs)
-    return DryPlan(pending, done, f"checked against experiment '{cfg.experiment}' in {uri}")
+    found = plan(client, str(exp.experiment_id), jobs, cfg.stale_after_s)
+    return DryPlan(found.pending, found.done, f"checked against experiment '{cfg.experiment}' in {uri}")
 
 
-def run_sweep(cfg: RunConfig, reporter: SweepReporter) -> SweepSummary:
-    """Validate, plan, train the pending jobs in ``cfg.workers`` processes, record the sweep."""
+def make_executor(cfg: RunConfig, n_jobs: int) -> Executor:
+    if cfg.executor == "ray":
+        from vlmrl_cli.training.ray_executor import RayExecutor
+
+        return RayExecutor(cfg.ray_address, cfg.workers, cfg.max_retries, cfg.tracking_uri)
+    return LocalExecutor(min(cfg.workers, n_jobs))
+
+
+def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job) -> SweepSummary:
+    """Validate, plan, train the pending jobs through ``cfg.executor``, record the sweep.
+    ``job_fn`` is what each job runs (a benchmark passes a fake trainer)."""
     start = time.perf_counter()
     cfg.validate()
+    check_executor(cfg)
     client = store.connect(cfg.tracking_uri)
     tracking_uri = store.resolve_tracking_uri(cfg.tracking_uri)
     vlm_label, simulated = vlm_identity(cfg)
     experiment_id = store.ensure_experiment(client, cfg.experiment)
-    pending, done, stale = plan(client, experiment_id, cfg.jobs())
-    summary = SweepSummary(None, experiment_id, skipped=[j.name for j in done])
-    for run in stale:
-        store.set_tags(client, run.info.run_id, {schema.TAG_ERROR: "left RUNNING by an interrupted sweep"})
-        client.set_terminated(run.info.run_id, "FAILED")
+    found = plan(client, experiment_id, cfg.jobs(), cfg.stale_after_s)
+    pending, done = found.pending, found.done
+    summary = SweepSummary(None, experiment_id, skipped=[j.name for j in done],
+                           elsewhere=[j.name for j in found.elsewhere], executor=cfg.executor)
+    for run in found.stale:
+        mark_stale(client, run.info.run_id, "left RUNNING by an interrupted sweep (its process is gone or its "
+                                            "heartbeat stale)")
         summary.marked_failed.append(run.info.run_id)
     reporter.planned(pending, done)
     if not pending:
         summary.wall_s = time.perf_counter() - start
         return summary
+    executor = make_executor(cfg, len(pending))
 
     parent = client.create_run(experiment_id, tags={
         **store.provenance_tags(vlm_label, simulated),
         schema.MLFLOW_RUN_NAME: f"sweep-{time.strftime('%Y%m%d-%H%M%S')}",
         schema.TAG_KIND: schema.KIND_SWEEP,
         schema.TAG_CONFIG_HASH: config_hash(cfg),
+        schema.TAG_EXECUTOR: cfg.executor,
         **({schema.TAG_REGIME: cfg.regime} if cfg.regime is not None else {}),
     })
     summary.parent_run_id = parent.info.run_id
     store.log_params(client, parent.info.run_id, flatten(dataclasses.replace(cfg, ppo=cfg.ppo_config)))
 
-    ctx = mp.get_context("spawn")
-    events: Any = ctx.Queue()
-    stop: Any = ctx.Event()
+    ctx = JobContext(tracking_uri, experiment_id, parent.info.run_id, vlm_label, simulated,
+                     heartbeat_s=cfg.heartbeat_s, stale_after_s=cfg.stale_after_s)
     status = "FINISHED"
     try:
-        with _stop_on_sigint(stop) as interrupted, ProcessPoolExecutor(
-            max_workers=min(cfg.workers, len(pending)), mp_context=ctx, initializer=init_worker,
-            initargs=(events, stop),
-        ) as pool:
-            futures: dict[Future[JobResult], TrainJob] = {
-                pool.submit(train_job, job, tracking_uri, experiment_id, parent.info.run_id, vlm_label,
-                            simulated): job
-                for job in pending
-            }
-            remaining = set(futures)
-            while remaining:
-                finished, remaining = wait(remaining, timeout=0.2, return_when=FIRST_COMPLETED)
-                _drain(events, reporter)
-                for fut in finished:
-                    if fut.cancelled():
-                        continue
-                    result = fut.result()
+        with _stop_on_sigint() as interrupted:
+            executor.submit(pending, job_fn, ctx)
+            while executor.outstanding:
+                polled = executor.poll(0.2)
+                for event in polled.events:
+                    reporter.progress(event)
+                for result in polled.results:
                     summary.results.append(result)
                     reporter.finished(result)
                 if interrupted.is_set() and status != "KILLED":
-                    # queued jobs never start; running ones see `stop`, end their run KILLED and return
                     status = "KILLED"
-                    for fut in remaining:
-                        fut.cancel()
-            _drain(events, reporter)
+                    executor.stop()
         if status == "KILLED":
             raise KeyboardInterrupt
         if summary.failed:
@@ -178,6 +179,7 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter) -> SweepSummary:
         status = status if status == "KILLED" else "FAILED"
         raise
     finally:
+        executor.close()
         summary.wall_s = time.perf_counter() - start
         store.log_params(client, parent.info.run_id, {"sweep.pending": ",".join(j.name for j in pending)})
         client.log_metric(parent.info.run_id, schema.METRIC_SWEEP_WALL_S, summary.wall_s)
@@ -186,11 +188,11 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter) -> SweepSummary:
 
 
 @contextmanager
-def _stop_on_sigint(stop: Any) -> Iterator[threading.Event]:
-    """While the sweep runs, Ctrl-C sets a flag and the workers' stop event instead of raising
-    KeyboardInterrupt inside ``concurrent.futures``, whose locks an asynchronous exception can
-    leave held (the executor then never shuts down). A second Ctrl-C raises at once. The
-    previous handler is restored on exit; off the main thread nothing is installed."""
+def _stop_on_sigint() -> Iterator[threading.Event]:
+    """While the sweep runs, Ctrl-C sets a flag (the loop then asks the executor to stop) instead
+    of raising KeyboardInterrupt inside ``concurrent.futures`` or Ray, whose locks an asynchronous
+    exception can leave held. A second Ctrl-C raises at once. The previous handler is restored
+    on exit; off the main thread nothing is installed."""
     flag = threading.Event()
     if threading.current_thread() is not threading.main_thread():
         yield flag
@@ -200,19 +202,9 @@ def _stop_on_sigint(stop: Any) -> Iterator[threading.Event]:
         if flag.is_set():
             raise KeyboardInterrupt
         flag.set()
-        stop.set()
 
     previous = signal.signal(signal.SIGINT, on_sigint)
     try:
         yield flag
     finally:
         signal.signal(signal.SIGINT, previous)
-
-
-def _drain(events: Any, reporter: SweepReporter) -> None:
-    while True:
-        try:
-            event = events.get_nowait()
-        except (queue_mod.Empty, OSError, EOFError):
-            return
-        reporter.progress(event)

@@ -7,11 +7,14 @@ inheritance), never as module state that the library reads elsewhere.
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import json
 import signal
 import tempfile
 import time
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,28 +23,37 @@ import numpy as np
 
 from vlmrl_cli.core.provenance import flatten
 from vlmrl_cli.tracking import schema, store
+from vlmrl_cli.training import claims
 from vlmrl_cli.training.callbacks import EpisodeTracker
 from vlmrl_cli.training.config import EVAL_SEED, TrainJob
 from vlmrl_cli.training.evaluation import EvalResult, evaluate_detached
-from vlmrl_cli.training.events import JobResult, ProgressEvent
+from vlmrl_cli.training.events import JobContext, JobResult, ProgressEvent
 from vlmrl_cli.training.trained import deterministic_policy as _policy
 
 
 @dataclass
-class _Channels:
-    progress: Any = None  # multiprocessing queue of ProgressEvent
-    stop: Any = None  # multiprocessing event
+class Channels:
+    """How a job reaches its sweep: ``progress.put(event)`` and ``stop.is_set()`` (a multiprocessing
+    queue and event in the local pool; adapters over Ray actors on a cluster), or None."""
+
+    progress: Any = None
+    stop: Any = None
 
 
-_channels = _Channels()
+_channels = Channels()
+
+#: The part of a job between claiming its run and ending it: ``body(job, client, run_id, channels)``.
+Body = Callable[[TrainJob, Any, str, Channels], JobResult]
 
 
-def init_worker(progress: Any, stop: Any) -> None:
-    """Pool initializer: single-threaded torch, Ctrl-C left to the parent, channels kept."""
+def init_worker(progress: Any, stop: Any, ignore_sigint: bool = True) -> None:
+    """Worker set-up: single-threaded torch, Ctrl-C left to the sweep, channels kept (the pool's
+    initializer; Ray tasks call it before each job)."""
     import torch
 
     torch.set_num_threads(1)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if ignore_sigint:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
     _channels.progress = progress
     _channels.stop = stop
 
@@ -68,15 +80,69 @@ def run_tags(job: TrainJob, parent_run_id: str | None, vlm_label: str, simulated
     return tags
 
 
-def train_job(
-    job: TrainJob,
-    tracking_uri: str,
-    experiment_id: str,
-    parent_run_id: str | None,
-    vlm_label: str,
-    simulated: bool,
-) -> JobResult:
-    """Train, evaluate and record one job. Never raises: failures end as a FAILED run."""
+def train_job(job: TrainJob, ctx: JobContext) -> JobResult:
+    """Claim, train, evaluate and record one job (what both executors dispatch)."""
+    return run_claimed(job, ctx, train_body)
+
+
+def run_claimed(job: TrainJob, ctx: JobContext, body: Body) -> JobResult:
+    """Create the job's run, claim the job (``claims.claim``), then run ``body`` under a heartbeat.
+    Never raises: failures end as a FAILED run. A job that starts after a stop request returns
+    CANCELLED without creating a run; a job another live run owns returns SKIPPED."""
+    start = time.perf_counter()
+    channels = _channels
+    if channels.stop is not None and channels.stop.is_set():
+        return JobResult(job.name, "", "CANCELLED", 0.0)
+    try:
+        client = store.connect(ctx.tracking_uri, wait_s=ctx.connect_wait_s)
+        run = client.create_run(ctx.experiment_id, tags={
+            **run_tags(job, ctx.parent_run_id, ctx.vlm_label, ctx.simulated), **claims.heartbeat_tags()})
+        run_id = run.info.run_id
+        decision = claims.claim(client, ctx.experiment_id, run_id, job.arm.name, job.seed, job.config_hash,
+                                ctx.stale_after_s)
+    except BaseException as exc:  # the store failed before the job had a run: the next sweep redoes it
+        return JobResult(job.name, "", "FAILED", time.perf_counter() - start, error=f"{type(exc).__name__}: {exc}")
+    if not decision.won:
+        return JobResult(job.name, run_id, "SKIPPED", time.perf_counter() - start, error=decision.reason)
+    try:
+        with claims.heartbeat(client, run_id, ctx.heartbeat_s):
+            result = body(job, client, run_id, channels)
+        if result.status == "FINISHED":
+            rival = _finished_rival(client, ctx.experiment_id, job, run_id)
+            if rival is not None:  # two claimants raced past each other: keep the first FINISHED run only
+                store.set_tags(client, run_id, {schema.TAG_ERROR: f"duplicate of FINISHED run {rival}"})
+                client.set_terminated(run_id, "KILLED")
+                return dataclasses.replace(result, status="SKIPPED", error=f"duplicate of FINISHED run {rival}",
+                                           superseded=decision.superseded, wall_s=time.perf_counter() - start)
+            client.set_terminated(run_id, "FINISHED")
+        else:
+            client.set_terminated(run_id, result.status)
+        return dataclasses.replace(result, superseded=decision.superseded, wall_s=time.perf_counter() - start)
+    except KeyboardInterrupt:  # a terminal's Ctrl-C reaches Ray's workers too: a stop, not a failure
+        with contextlib.suppress(Exception):
+            client.set_terminated(run_id, "KILLED")
+        return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start, superseded=decision.superseded)
+    except BaseException as exc:  # a failed job must not take the sweep down
+        message = f"{type(exc).__name__}: {exc}"
+        try:
+            store.set_tags(client, run_id, {schema.TAG_ERROR: message[:4000],
+                                            schema.TAG_TRACEBACK: traceback.format_exc()[-4000:]})
+            client.set_terminated(run_id, "FAILED")
+        except Exception:  # the store itself failed; the parent reports the error
+            pass
+        return JobResult(job.name, run_id, "FAILED", time.perf_counter() - start, error=message,
+                         superseded=decision.superseded)
+
+
+def _finished_rival(client: Any, experiment_id: str, job: TrainJob, run_id: str) -> str | None:
+    query = claims.job_filter(job.arm.name, job.seed, job.config_hash) + " and attributes.status = 'FINISHED'"
+    runs = schema.search_all(client, experiment_id, query)
+    return next((r.info.run_id for r in runs if r.info.run_id != run_id), None)
+
+
+def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> JobResult:
+    """Train PPO, evaluate detached, log metrics and artifacts; the run's end status is returned
+    (``run_claimed`` sets it). Raises on failure."""
     from stable_baselines3.common.logger import Logger
 
     from vlmrl_cli.training.envs import make_train_env
@@ -85,11 +151,7 @@ def train_job(
     from vlmrl_cli.vlm.registry import build_client
 
     start = time.perf_counter()
-    client = store.connect(tracking_uri)
-    run = client.create_run(experiment_id, tags=run_tags(job, parent_run_id, vlm_label, simulated))
-    run_id = run.info.run_id
-    progress = _channels.progress
-    stop = _channels.stop
+    progress, stop = channels.progress, channels.stop
 
     def send(event: ProgressEvent) -> None:
         if progress is not None:
@@ -114,7 +176,7 @@ def train_job(
             model.learn(total_timesteps=job.timesteps, callback=tracker)
             model.logger.dump(step=model.num_timesteps)  # the last update's train/ figures
             if tracker.stopped:
-                client.set_terminated(run_id, "KILLED")
+                metrics.flush()
                 return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start)
             send(ProgressEvent(job.name, job.timesteps, job.timesteps, len(tracker.episodes),
                                float(np.mean(tracker.recent)) if tracker.recent else float("nan"), "eval"))
@@ -124,18 +186,8 @@ def train_job(
             metrics.flush()
             _save_artifacts(out, job, model, env)
             store.log_artifacts(client, run_id, [p for p in out.iterdir()])
-            client.set_terminated(run_id, "FINISHED")
             return JobResult(job.name, run_id, "FINISHED", time.perf_counter() - start,
                              result.success_rate, result.mean_length)
-        except BaseException as exc:  # a failed job must not take the sweep down
-            message = f"{type(exc).__name__}: {exc}"
-            try:
-                store.set_tags(client, run_id, {schema.TAG_ERROR: message[:4000],
-                                                schema.TAG_TRACEBACK: traceback.format_exc()[-4000:]})
-                client.set_terminated(run_id, "FAILED")
-            except Exception:  # the store itself failed; the parent reports the error
-                pass
-            return JobResult(job.name, run_id, "FAILED", time.perf_counter() - start, error=message)
         finally:
             if vlm_client is not None:
                 vlm_client.close()

@@ -1,0 +1,130 @@
+"""The Ray executor on a real local Ray instance (2 CPUs, loopback only): same numbers as the
+local pool, and a worker killed mid-run is retried without a second FINISHED run."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from mlflow.tracking import MlflowClient
+
+from vlmrl_cli.training.config import RunConfig
+from vlmrl_cli.training.events import JobResult, ProgressEvent
+from vlmrl_cli.training.presets import get_preset
+from vlmrl_cli.training.sweep import run_sweep
+
+ray = pytest.importorskip("ray")
+
+
+class _Quiet:
+    def __init__(self) -> None:
+        self.events: list[ProgressEvent] = []
+
+    def planned(self, pending: list[Any], done: list[Any]) -> None: ...
+
+    def progress(self, event: ProgressEvent) -> None:
+        self.events.append(event)
+
+    def finished(self, result: JobResult) -> None: ...
+
+
+@pytest.fixture(scope="module")
+def local_ray() -> Iterator[None]:
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, logging_level="WARNING")
+    yield
+    ray.shutdown()
+
+
+def _histories(uri: str, experiment: str) -> dict[tuple[str, str], list[tuple[int, float, float]]]:
+    client = MlflowClient(tracking_uri=uri)
+    exp = client.get_experiment_by_name(experiment)
+    assert exp is not None
+    out = {}
+    for run in client.search_runs([exp.experiment_id], "tags.`vlmrl.kind` = 'train'"):
+        assert run.info.status == "FINISHED"
+        key = (run.data.tags["vlmrl.arm"], run.data.tags["vlmrl.seed"])
+        native = sorted(client.get_metric_history(run.info.run_id, "episode/native_return"),
+                        key=lambda m: (m.step, m.timestamp))
+        shaped = sorted(client.get_metric_history(run.info.run_id, "episode/shaped_return"),
+                        key=lambda m: (m.step, m.timestamp))
+        out[key] = [(n.step, n.value, s.value) for n, s in zip(native, shaped, strict=True)]
+    return out
+
+
+def test_ray_gives_the_same_histories_as_the_local_pool(tmp_path: Path, local_ray: None) -> None:
+    uri = f"sqlite:///{tmp_path / 'm.db'}"
+    base = RunConfig(arms=("baseline", "hybrid"), seeds=(0, 1), preset="smoke", workers=2, tracking_uri=uri)
+    reporter = _Quiet()
+    ray_summary = run_sweep(dataclasses.replace(base, executor="ray", experiment="ray"), reporter)
+    local_summary = run_sweep(dataclasses.replace(base, executor="local", experiment="local"), _Quiet())
+    assert len(ray_summary.finished) == len(local_summary.finished) == 4
+    assert reporter.events  # progress came back from the Ray tasks
+    ray_h, local_h = _histories(uri, "ray"), _histories(uri, "local")
+    assert set(ray_h) == {("baseline", "0"), ("baseline", "1"), ("hybrid", "0"), ("hybrid", "1")}
+    assert all(ray_h[k] for k in ray_h)
+    assert ray_h == local_h
+    sweep = MlflowClient(tracking_uri=uri).get_run(str(ray_summary.parent_run_id))
+    assert sweep.data.tags["vlmrl.executor"] == "ray"
+
+
+def test_a_killed_ray_worker_is_retried_and_finishes_once(tmp_path: Path, local_ray: None) -> None:
+    uri = f"sqlite:///{tmp_path / 'm.db'}"
+    ppo = dataclasses.replace(get_preset("smoke"), timesteps=30_000)
+    cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="smoke", ppo=ppo, workers=2, tracking_uri=uri,
+                    executor="ray", max_retries=2)
+    box: dict[str, Any] = {}
+    thread = threading.Thread(target=lambda: box.update(summary=run_sweep(cfg, _Quiet())))
+    thread.start()
+    client = MlflowClient(tracking_uri=uri)
+    killed = None
+    deadline = time.monotonic() + 240
+    while killed is None and time.monotonic() < deadline and thread.is_alive():
+        exp = client.get_experiment_by_name("vlmrl") if (tmp_path / "m.db").exists() else None
+        runs = [] if exp is None else client.search_runs(
+            [exp.experiment_id], "tags.`vlmrl.kind` = 'train' and attributes.status = 'RUNNING'")
+        for run in runs:
+            if "episode/native_return" in run.data.metrics:  # training, not still starting
+                killed = run
+                os.kill(int(run.data.tags["vlmrl.owner"].rsplit(":", 1)[1]), signal.SIGKILL)
+        time.sleep(0.5)
+    thread.join(timeout=600)
+    assert killed is not None, "no training run to kill appeared"
+    summary = box["summary"]
+    assert len(summary.finished) == 1 and summary.failed == []
+    assert summary.retried == [killed.info.run_id]
+    exp = client.get_experiment_by_name("vlmrl")
+    assert exp is not None
+    runs = client.search_runs([exp.experiment_id], "tags.`vlmrl.kind` = 'train'")
+    statuses = {r.info.run_id: r.info.status for r in runs}
+    assert statuses[killed.info.run_id] == "FAILED"
+    assert sorted(statuses.values()) == ["FAILED", "FINISHED"]
+    assert "superseded" in client.get_run(killed.info.run_id).data.tags["vlmrl.error"]
+
+
+def test_a_ray_sweep_through_a_loopback_tracking_server(tmp_path: Path, local_ray: None) -> None:
+    """Workers write through ``mlflow server``; artifacts go up through it and come back."""
+    from tests.training.tracking_server import TrackingServer
+
+    server = TrackingServer(tmp_path)
+    server.start()
+    try:
+        cfg = RunConfig(arms=("baseline", "hybrid"), seeds=(0, 1), preset="smoke", workers=2,
+                        tracking_uri=server.uri, executor="ray")
+        summary = run_sweep(cfg, _Quiet())
+        assert len(summary.finished) == 4 and summary.failed == []
+        client = MlflowClient(tracking_uri=server.uri)
+        for result in summary.finished:
+            names = {a.path for a in client.list_artifacts(result.run_id)}
+            assert {"model.zip", "config.json"} <= names
+        local = client.download_artifacts(summary.finished[0].run_id, "config.json", str(tmp_path))
+        assert '"config_hash"' in Path(local).read_text()
+        assert (tmp_path / "artifacts").exists()  # stored by the server, not by the workers
+    finally:
+        server.stop()

@@ -1,0 +1,134 @@
+"""Where a sweep's jobs run: a local process pool, or Ray tasks on a cluster.
+
+Executors only dispatch. Both call the same job function (``worker.train_job`` unless a
+benchmark passes another), so a run trains the same way whichever executor ran it. The sweep
+talks to an executor through four calls: ``submit`` every job, ``poll`` for finished results
+and progress events, ``stop`` (Ctrl-C: running jobs end their runs KILLED, queued jobs return
+CANCELLED without a run) and ``close``.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import queue as queue_mod
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from importlib.util import find_spec
+from typing import Any, Protocol
+
+from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.training.config import RunConfig, TrainJob
+from vlmrl_cli.training.events import JobContext, JobResult, ProgressEvent
+from vlmrl_cli.training.worker import init_worker
+
+EXECUTORS = ("local", "ray")
+RAY_MISSING = "--executor ray needs Ray, which is not installed: pip install 'vlmrl[ray]'."
+
+#: What an executor dispatches: one job, the sweep's shared context -> its result.
+JobFn = Callable[[TrainJob, JobContext], JobResult]
+
+
+@dataclass
+class Polled:
+    results: list[JobResult]
+    events: list[ProgressEvent]
+
+
+class Executor(Protocol):
+    name: str
+
+    def submit(self, jobs: Sequence[TrainJob], job_fn: JobFn, ctx: JobContext) -> None: ...
+
+    def poll(self, timeout_s: float) -> Polled: ...
+
+    @property
+    def outstanding(self) -> int: ...
+
+    def stop(self) -> None: ...
+
+    def close(self) -> None: ...
+
+
+def check_executor(cfg: RunConfig) -> None:
+    """What can be known before anything is created: Ray installed, and a tracking store that
+    machines other than this one can reach when the Ray cluster is remote."""
+    if cfg.executor != "ray":
+        return
+    if find_spec("ray") is None:
+        raise BadInput(RAY_MISSING)
+    if is_remote_address(cfg.ray_address) and not is_server_uri(cfg.tracking_uri):
+        raise BadInput(SHARED_STORE_NEEDED)
+
+
+SHARED_STORE_NEEDED = (
+    "workers on other machines cannot write to a local sqlite or file store: start a tracking server "
+    "(mlflow server --backend-store-uri sqlite:///PATH/mlflow.db --artifacts-destination PATH/artifacts "
+    "--serve-artifacts --host 0.0.0.0 --port 5000) and pass --tracking-uri http://HOST:5000."
+)
+
+
+def is_server_uri(uri: str | None) -> bool:
+    from vlmrl_cli.tracking.store import resolve_tracking_uri
+
+    return resolve_tracking_uri(uri).startswith(("http://", "https://", "databricks"))
+
+
+def is_remote_address(address: str | None) -> bool:
+    """Whether a Ray address names another machine (``auto``, ``local`` and loopback do not)."""
+    if address is None or address in ("auto", "local"):
+        return False
+    host = address.removeprefix("ray://").rsplit(":", 1)[0].strip("[]")
+    return host not in ("127.0.0.1", "localhost", "::1", "0.0.0.0")
+
+
+class LocalExecutor:
+    """A pool of ``workers`` spawned processes on this machine (one torch thread each)."""
+
+    name = "local"
+
+    def __init__(self, workers: int) -> None:
+        ctx = mp.get_context("spawn")
+        self._events: Any = ctx.Queue()
+        self._stop: Any = ctx.Event()
+        self._pool = ProcessPoolExecutor(max_workers=max(1, workers), mp_context=ctx, initializer=init_worker,
+                                         initargs=(self._events, self._stop))
+        self._futures: dict[Future[JobResult], TrainJob] = {}
+
+    def submit(self, jobs: Sequence[TrainJob], job_fn: JobFn, ctx: JobContext) -> None:
+        for job in jobs:
+            self._futures[self._pool.submit(job_fn, job, ctx)] = job
+
+    def poll(self, timeout_s: float) -> Polled:
+        finished, _ = wait(set(self._futures), timeout=timeout_s, return_when=FIRST_COMPLETED)
+        results = []
+        for fut in finished:
+            job = self._futures.pop(fut)
+            if fut.cancelled():
+                results.append(JobResult(job.name, "", "CANCELLED", 0.0))
+                continue
+            exc = fut.exception()
+            results.append(fut.result() if exc is None else
+                           JobResult(job.name, "", "FAILED", 0.0, error=f"worker process lost: {exc}"))
+        return Polled(results, self._drain())
+
+    @property
+    def outstanding(self) -> int:
+        return len(self._futures)
+
+    def stop(self) -> None:
+        # queued jobs never start; running ones see the event, end their run KILLED and return
+        self._stop.set()
+        for fut in self._futures:
+            fut.cancel()
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+    def _drain(self) -> list[ProgressEvent]:
+        events = []
+        while True:
+            try:
+                events.append(self._events.get_nowait())
+            except (queue_mod.Empty, OSError, EOFError):
+                return events

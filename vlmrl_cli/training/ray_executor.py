@@ -1,0 +1,166 @@
+"""The Ray executor: each job is a Ray task (``num_cpus=1``, one torch thread) running the same
+job function as the local pool. Imported only for ``--executor ray`` (Ray is the optional extra
+``vlmrl[ray]``).
+
+Connection: ``--ray-address ADDR`` joins that cluster. Without it, a cluster already running on
+this machine (``ray start --head``, or ``RAY_ADDRESS``) is joined (Ray's ``auto``); failing that,
+a local Ray instance with ``--workers`` CPUs is started for this process.
+
+Progress comes back through a ``ray.util.queue.Queue``; a stop request (Ctrl-C) is a flag actor
+that each task polls from a thread once a second, so running jobs end their runs KILLED exactly as
+in the local pool. A task whose worker process dies (SIGKILL, a lost node) is retried by Ray up to
+``max_retries`` times; the retry's claim marks the dead attempt's run FAILED.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+from collections.abc import Sequence
+from typing import Any
+
+from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.training.config import TrainJob
+from vlmrl_cli.training.events import JobContext, JobResult, ProgressEvent
+from vlmrl_cli.training.executors import SHARED_STORE_NEEDED, JobFn, Polled, is_server_uri
+from vlmrl_cli.training.worker import init_worker
+
+POLL_STOP_S = 1.0
+
+
+class StopFlag:
+    """A flag actor (``num_cpus=0``): set once by the sweep, read by the tasks."""
+
+    def __init__(self) -> None:
+        self.value = False
+
+    def set(self) -> None:
+        self.value = True
+
+    def is_set(self) -> bool:
+        return self.value
+
+
+class _RemoteFlag:
+    """``is_set()`` over the flag actor without an actor call per training step: a thread copies
+    the actor's value into a local event every ``POLL_STOP_S`` seconds."""
+
+    def __init__(self, actor: Any) -> None:
+        import ray
+
+        self._local = threading.Event()
+        self._closed = threading.Event()
+
+        def poll() -> None:
+            while not self._closed.wait(POLL_STOP_S):
+                try:
+                    if ray.get(actor.is_set.remote(), timeout=10):
+                        self._local.set()
+                        return
+                except Exception:  # the driver is gone or busy: keep training, ask again
+                    continue
+
+        threading.Thread(target=poll, name="vlmrl-stop-poll", daemon=True).start()
+
+    def is_set(self) -> bool:
+        return self._local.is_set()
+
+    def close(self) -> None:
+        self._closed.set()
+
+
+class _QueueSink:
+    def __init__(self, queue: Any) -> None:
+        self._queue = queue
+
+    def put(self, event: ProgressEvent) -> None:
+        with contextlib.suppress(Exception):  # progress is best effort; training goes on
+            self._queue.put_nowait(event)
+
+
+def ray_job(job_fn: JobFn, job: TrainJob, ctx: JobContext, progress: Any, stop: Any) -> JobResult:
+    """The body of every Ray task: set the worker up as the local pool does, run the job."""
+    flag = _RemoteFlag(stop)
+    init_worker(_QueueSink(progress), flag, ignore_sigint=False)
+    try:
+        return job_fn(job, ctx)
+    finally:
+        flag.close()
+
+
+def connect(address: str | None, workers: int, tracking_uri: str | None) -> None:
+    """Join or start Ray (see the module docstring); a cluster of several machines needs a
+    tracking server every machine can reach."""
+    import ray
+
+    options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "logging_level": "WARNING"}
+    if not ray.is_initialized():
+        if address is not None and address != "local":
+            try:
+                ray.init(address=address, **options)
+            except (ConnectionError, RuntimeError) as exc:
+                raise BadInput(f"cannot join the Ray cluster at '{address}': {exc}") from exc
+        elif address is None:
+            try:
+                ray.init(address="auto", **options)
+            except (ConnectionError, RuntimeError):
+                ray.init(num_cpus=workers, **options)
+        else:
+            ray.init(num_cpus=workers, **options)
+    alive = [n for n in ray.nodes() if n.get("Alive")]
+    if len(alive) > 1 and not is_server_uri(tracking_uri):
+        raise BadInput(SHARED_STORE_NEEDED)
+
+
+class RayExecutor:
+    name = "ray"
+
+    def __init__(self, address: str | None, workers: int, max_retries: int, tracking_uri: str | None) -> None:
+        import ray
+        from ray.util.queue import Queue
+
+        connect(address, workers, tracking_uri)
+        self._ray = ray
+        self._max_retries = max_retries
+        self._queue = Queue(actor_options={"num_cpus": 0})
+        flag_actor: Any = ray.remote(num_cpus=0)(StopFlag)
+        self._flag = flag_actor.remote()
+        self._refs: dict[Any, TrainJob] = {}
+
+    def submit(self, jobs: Sequence[TrainJob], job_fn: JobFn, ctx: JobContext) -> None:
+        task = self._ray.remote(ray_job).options(num_cpus=1, max_retries=self._max_retries, retry_exceptions=False)
+        for job in jobs:
+            self._refs[task.remote(job_fn, job, ctx, self._queue, self._flag)] = job
+
+    def poll(self, timeout_s: float) -> Polled:
+        results: list[JobResult] = []
+        if self._refs:
+            ready, _ = self._ray.wait(list(self._refs), num_returns=len(self._refs), timeout=timeout_s)
+            for ref in ready:
+                job = self._refs.pop(ref)
+                try:
+                    results.append(self._ray.get(ref))
+                except self._ray.exceptions.RayError as exc:
+                    results.append(JobResult(job.name, "", "FAILED", 0.0, error=(
+                        f"Ray lost the task after {self._max_retries} retries: {type(exc).__name__}: {exc}")[:2000]))
+        return Polled(results, self._drain())
+
+    @property
+    def outstanding(self) -> int:
+        return len(self._refs)
+
+    def stop(self) -> None:
+        self._ray.get(self._flag.set.remote())
+
+    def close(self) -> None:
+        actors: list[Any] = [self._queue.actor, self._flag]
+        for actor in actors:
+            with contextlib.suppress(Exception):  # already gone with a shut-down cluster
+                self._ray.kill(actor)
+
+    def _drain(self) -> list[ProgressEvent]:
+        try:
+            n = self._queue.qsize()
+            return list(self._queue.get_nowait_batch(n)) if n else []
+        except Exception:  # progress is best effort
+            return []
