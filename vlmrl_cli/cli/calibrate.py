@@ -32,6 +32,8 @@ def calibrate(
     timesteps: opt.Timesteps = None,
     preset: opt.Preset = "paper",
     workers: opt.Workers = None,
+    executor: opt.ExecutorOpt = None,
+    ray_address: opt.RayAddress = None,
     eval_episodes: opt.EvalEpisodes = None,
     config: opt.ConfigFile = None,
     sets: opt.Sets = None,

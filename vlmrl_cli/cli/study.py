@@ -69,6 +69,8 @@ def study(
     seed_list: opt.SeedList = None,
     timesteps: opt.Timesteps = None,
     workers: opt.Workers = None,
+    executor: opt.ExecutorOpt = None,
+    ray_address: opt.RayAddress = None,
     eval_episodes: opt.EvalEpisodes = None,
     profiles: Profiles = None,
     flickers: Flickers = None,

@@ -78,3 +78,17 @@ class SweepSummary:
     def retried(self) -> list[str]:
         """Run ids of crashed attempts (a killed worker) that a later attempt superseded."""
         return [run_id for r in self.results for run_id in r.superseded]
+
+
+class StopFlag:
+    """A flag the sweep sets once and jobs read: the body of the Ray executor's stop actor. It
+    lives here, with no heavy import, because an actor process imports its class's module."""
+
+    def __init__(self) -> None:
+        self.value = False
+
+    def set(self) -> None:
+        self.value = True
+
+    def is_set(self) -> bool:
+        return self.value

@@ -15,30 +15,18 @@ in the local pool. A task whose worker process dies (SIGKILL, a lost node) is re
 from __future__ import annotations
 
 import contextlib
+import logging
 import threading
 from collections.abc import Sequence
 from typing import Any
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.training.config import TrainJob
-from vlmrl_cli.training.events import JobContext, JobResult, ProgressEvent
+from vlmrl_cli.training.events import JobContext, JobResult, ProgressEvent, StopFlag
 from vlmrl_cli.training.executors import SHARED_STORE_NEEDED, JobFn, Polled, is_server_uri
 from vlmrl_cli.training.worker import init_worker
 
 POLL_STOP_S = 1.0
-
-
-class StopFlag:
-    """A flag actor (``num_cpus=0``): set once by the sweep, read by the tasks."""
-
-    def __init__(self) -> None:
-        self.value = False
-
-    def set(self) -> None:
-        self.value = True
-
-    def is_set(self) -> bool:
-        return self.value
 
 
 class _RemoteFlag:
@@ -93,7 +81,7 @@ def connect(address: str | None, workers: int, tracking_uri: str | None) -> None
     tracking server every machine can reach."""
     import ray
 
-    options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "logging_level": "WARNING"}
+    options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "logging_level": logging.WARNING}
     if not ray.is_initialized():
         if address is not None and address != "local":
             try:

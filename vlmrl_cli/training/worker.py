@@ -98,8 +98,8 @@ def run_claimed(job: TrainJob, ctx: JobContext, body: Body) -> JobResult:
         run = client.create_run(ctx.experiment_id, tags={
             **run_tags(job, ctx.parent_run_id, ctx.vlm_label, ctx.simulated), **claims.heartbeat_tags()})
         run_id = run.info.run_id
-        decision = claims.claim(client, ctx.experiment_id, run_id, job.arm.name, job.seed, job.config_hash,
-                                ctx.stale_after_s)
+        decision = claims.claim(client, ctx.experiment_id, run_id, job.name, job.arm.name, job.seed,
+                                job.config_hash, ctx.stale_after_s)
     except BaseException as exc:  # the store failed before the job had a run: the next sweep redoes it
         return JobResult(job.name, "", "FAILED", time.perf_counter() - start, error=f"{type(exc).__name__}: {exc}")
     if not decision.won:
@@ -135,8 +135,7 @@ def run_claimed(job: TrainJob, ctx: JobContext, body: Body) -> JobResult:
 
 
 def _finished_rival(client: Any, experiment_id: str, job: TrainJob, run_id: str) -> str | None:
-    query = claims.job_filter(job.arm.name, job.seed, job.config_hash) + " and attributes.status = 'FINISHED'"
-    runs = schema.search_all(client, experiment_id, query)
+    runs = claims.job_runs(client, experiment_id, job.name, job.arm.name, job.seed, job.config_hash, finished=True)
     return next((r.info.run_id for r in runs if r.info.run_id != run_id), None)
 
 
