@@ -8,7 +8,10 @@ import signal
 import subprocess
 import sys
 import time
+from importlib.util import find_spec
 from pathlib import Path
+
+import pytest
 
 from vlmrl_cli.tracking import store
 from vlmrl_cli.training.config import RunConfig
@@ -24,10 +27,16 @@ def _runs(uri: str) -> list:  # type: ignore[type-arg]
     return [] if exp is None else list(client.search_runs([exp.experiment_id]))
 
 
-def test_ctrl_c_stops_cleanly_and_the_rerun_resumes(tmp_path: Path) -> None:
+@pytest.mark.parametrize("executor", [
+    [],
+    # a fresh local Ray instance ("local"): never a cluster another test process started
+    pytest.param(["--executor", "ray", "--ray-address", "local"], id="ray",
+                 marks=pytest.mark.skipif(find_spec("ray") is None, reason="Ray is not installed")),
+])
+def test_ctrl_c_stops_cleanly_and_the_rerun_resumes(tmp_path: Path, executor: list[str]) -> None:
     uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
     args = [sys.executable, "-m", "vlmrl_cli", "run", "--arms", "baseline", "--seed-list", "0", "--preset", "smoke",
-            "--workers", "1", "--tracking-uri", uri]
+            "--workers", "1", "--tracking-uri", uri, *executor]
     proc = subprocess.Popen([*args, "--timesteps", "2000000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env={**os.environ, "COLUMNS": "120"})
     try:
