@@ -90,9 +90,21 @@ def test_a_smoke_grid_writes_every_output_once_and_a_rerun_trains_nothing(tmp_pa
         ([], "[calibrate]\ngird = {}\n", "did you mean 'grid'"),
         ([], '[calibrate.grid]\n"shaping.alpha" = 3\n', "calibrate.grid.shaping.alpha"),
         ([], '[calibrate.grid]\n"ppo.n_steps" = [16, 1]\n', "ppo.batch_size"),
+        (["--set", "ppo.nenvs=1"], "", "did you mean 'ppo.n_envs'"),
+        (["--set", "n_envs"], "", "KEY=VALUE"),
+        (["--set", "vlm.backend=gpt9"], "", "unknown VLM backend 'gpt9'"),
+        (["--preset", "nope"], "", "unknown preset 'nope'"),
+        (["--seed-list", "a,b"], "", "--seed-list"),
+        (["--workers", "0"], "", "invalid workers"),
+        (["--config", "{tmp}/missing.toml"], "", "cannot read the config file"),
+        (["--out", "{tmp}/file/out"], "", "output folder"),  # checked before training, not after
+        (["--tracking-uri", "sqlite:///{tmp}/file/mlflow.db"], "", "cannot be reached"),
+        (["--tracking-uri", "nope://x"], "", "cannot be reached"),
     ],
 )
-def test_a_bad_grid_exits_2_before_anything_exists(tmp_path: Path, args: list[str], toml: str, needle: str) -> None:
+def test_a_bad_input_exits_2_before_anything_exists(tmp_path: Path, args: list[str], toml: str, needle: str) -> None:
+    (tmp_path / "file").write_text("not a folder")
+    args = [a.replace("{tmp}", str(tmp_path)) for a in args]
     if toml:
         (tmp_path / "cal.toml").write_text(toml)
         args = [*args, "--config", str(tmp_path / "cal.toml")]
@@ -101,3 +113,4 @@ def test_a_bad_grid_exits_2_before_anything_exists(tmp_path: Path, args: list[st
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and needle in lines[0], lines
     assert not (tmp_path / "store").exists() and not (tmp_path / "out").exists()
+    assert {p.name for p in tmp_path.iterdir()} <= {"file", "cal.toml"}  # no store, folder or output anywhere

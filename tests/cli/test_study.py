@@ -69,11 +69,35 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
 
 @pytest.mark.parametrize(("args", "needle"), [
     (["--regime", "x=preset=nope"], "unknown preset 'nope'"),
+    (["--regime", "nope"], "unknown preset 'nope'"),
+    (["--regime", "x=ppo.nenvs=1"], "did you mean 'ppo.n_envs'"),
     (["--profiles", "lava"], "unknown simulated-VLM profile 'lava'"),
+    (["--profiles", ","], "--profiles lists no value"),
+    (["--flickers", "abc"], "--flickers takes numbers"),
+    (["--flickers", "2"], "vlm.sim.flicker"),
     (["--vlm-regime", "other"], "not a regime of this study"),
+    (["--arms", "teleport"], "unknown arm 'teleport'"),
+    (["--set", "ppo.nenvs=1"], "did you mean 'ppo.n_envs'"),
+    (["--set", "n_envs"], "KEY=VALUE"),
+    (["--seed-list", "a,b"], "--seed-list"),
+    (["--config", "{tmp}/missing.toml"], "cannot read the config file"),
+    (["--out", "{tmp}/file/out"], "output folder"),
+    (["--tracking-uri", "sqlite:///{tmp}/file/mlflow.db"], "cannot be reached"),
+    (["--tracking-uri", "nope://x"], "cannot be reached"),
+    (["--dry-run", "--arms", "teleport"], "unknown arm 'teleport'"),
 ])
 def test_a_bad_study_exits_2_before_anything_exists(tmp_path: Path, args: list[str], needle: str) -> None:
-    result = _study(tmp_path, *args)
+    (tmp_path / "file").write_text("not a folder")
+    result = _study(tmp_path, *[a.replace("{tmp}", str(tmp_path)) for a in args])
     assert result.exit_code == 2, result.output + result.stderr
-    assert needle in result.stderr
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and needle in lines[0], lines
     assert not (tmp_path / "store").exists() and not (tmp_path / "out").exists()
+    assert [p.name for p in tmp_path.iterdir()] == ["file"]  # no store, VLM cache or output folder anywhere
+
+
+def test_a_dry_run_reads_a_missing_store_without_creating_it(tmp_path: Path) -> None:
+    result = _study(tmp_path, "--dry-run")
+    assert result.exit_code == 0, result.output + result.stderr
+    assert "cost estimate: 10 run(s) to train (0 already FINISHED)" in result.output
+    assert not any(tmp_path.iterdir())  # a read-only step: no store, no folder, no cache, no output

@@ -1,14 +1,17 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
+import tomllib
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.frames.geometry import Zone
-from vlmrl_cli.training.config import RunConfig, load_config_file
-from vlmrl_cli.training.overrides import resolve
+from vlmrl_cli.training.config import RunConfig, load_config_file, resolve, to_toml
 from vlmrl_cli.training.presets import get_preset
 from vlmrl_cli.vlm.config import SimKnobs, VLMConfig
 
@@ -134,8 +137,6 @@ def test_the_preset_name_is_a_label_the_resolved_values_are_the_identity() -> No
 
 
 def test_the_sim_profile_enters_the_hash_but_the_default_keeps_the_old_one() -> None:
-    from vlmrl_cli.training.overrides import resolve
-
     hybrid = {"arms": ["hybrid", "baseline"], "seeds": [0]}
     default = resolve([hybrid])
     named = resolve([hybrid, {"vlm": {"sim": {"profile": "default"}}}])
@@ -147,3 +148,83 @@ def test_the_sim_profile_enters_the_hash_but_the_default_keeps_the_old_one() -> 
     # an explicit knob, in any layer, beats the profile's value
     mixed = resolve([{"vlm": {"sim": {"flicker": 0.3}}}, {"vlm": {"sim": {"profile": "ideal"}}}])
     assert mixed.vlm.sim.flicker == 0.3 and mixed.vlm.sim.patch_px == 1
+
+
+@given(
+    n_envs=st.integers(1, 32),
+    n_steps=st.integers(4, 512),
+    lr=st.floats(1e-6, 1.0),
+    schedule=st.sampled_from(["constant", "linear"]),
+    norm=st.tuples(st.booleans(), st.booleans()),
+    arch=st.lists(st.integers(1, 256), max_size=3).map(tuple),
+)
+def test_to_toml_reads_back_to_the_same_config(
+    n_envs: int, n_steps: int, lr: float, schedule: str, norm: tuple[bool, bool], arch: tuple[int, ...]
+) -> None:
+    ppo = {
+        "n_envs": n_envs,
+        "n_steps": n_steps,
+        "batch_size": min(64, n_envs * n_steps),
+        "learning_rate": lr,
+        "lr_schedule": schedule,
+        "normalize_obs": norm[0],
+        "normalize_reward": norm[1],
+        "net_arch_pi": list(arch),
+    }
+    cfg = resolve(
+        [
+            {
+                "preset": "smoke",
+                "ppo": ppo,
+                "shaping": {"alpha": 3, "label_potentials": {"GOAL": 0.9}},
+                "vlm": {"sim": {"flicker": 0.3}},
+            }
+        ]
+    )
+    again = resolve([tomllib.loads(to_toml(cfg))])
+    assert again == dataclasses.replace(cfg, ppo=cfg.ppo_config)
+    assert [j.config_hash for j in again.jobs()] == [j.config_hash for j in cfg.jobs()]
+
+
+@pytest.mark.parametrize(("in_file", "in_set", "in_flag"), list(itertools.product([False, True], repeat=3)))
+def test_from_sources_lets_flags_beat_set_beat_the_file_beat_the_preset(
+    tmp_path: Path, in_file: bool, in_set: bool, in_flag: bool
+) -> None:
+    path = _write(tmp_path, 'preset = "smoke"\n' + ("[ppo]\nn_epochs = 2\n" if in_file else ""))
+    sets = ["ppo.n_epochs=3"] if in_set else []
+    flags = {"ppo.n_epochs": 4} if in_flag else {}
+    cfg = RunConfig.from_sources(path, flags, sets)
+    smoke = get_preset("smoke")
+    expected = 4 if in_flag else 3 if in_set else 2 if in_file else smoke.n_epochs
+    assert cfg.preset == "smoke" and cfg.ppo_config == dataclasses.replace(smoke, n_epochs=expected)
+
+
+def test_from_sources_takes_the_preset_of_the_highest_source_that_names_one(tmp_path: Path) -> None:
+    path = _write(tmp_path, 'preset = "smoke"\nseeds = [7]\n')
+    by_set = RunConfig.from_sources(path, {}, ["preset=sb3-default"])
+    assert by_set.preset == "sb3-default" and by_set.ppo_config == get_preset("sb3-default")
+    by_flag = RunConfig.from_sources(path, {"preset": "zoo", "arms": ["hybrid"]}, ["preset=sb3-default"])
+    assert by_flag.ppo_config == get_preset("zoo") and by_flag.arms == ("hybrid",) and by_flag.seeds == (7,)
+    assert RunConfig.from_sources(None).ppo_config == get_preset(RunConfig.preset)
+
+
+@pytest.mark.parametrize(
+    ("sets", "match"),
+    [
+        (["ppo.n_envs"], "KEY=VALUE"),
+        (["=3"], "KEY=VALUE"),
+        (["ppo..n_envs=3"], "KEY=VALUE"),
+        (["ppo.n_envs=abc"], "ppo.n_envs"),
+        (["ppo.nenvs=1"], "did you mean 'ppo.n_envs'"),
+        (["ppo=3", "ppo.n_envs=1"], "'ppo' is a value"),
+        (["preset=huge"], "unknown preset 'huge'"),
+    ],
+)
+def test_from_sources_turns_a_bad_set_into_bad_input(sets: list[str], match: str) -> None:
+    with pytest.raises(BadInput, match=match):
+        RunConfig.from_sources(None, {}, sets)
+
+
+def test_from_sources_with_a_missing_file_is_bad_input(tmp_path: Path) -> None:
+    with pytest.raises(BadInput, match="cannot read"):
+        RunConfig.from_sources(tmp_path / "nope.toml", {}, [])

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from typing import Any
 
 import pytest
@@ -11,7 +10,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.training.overrides import merge, nest, parse_assignment, parse_value, parse_values, resolve, to_toml
+from vlmrl_cli.training.config import resolve
+from vlmrl_cli.training.overrides import merge, nest, parse_assignment, parse_value, parse_values
 from vlmrl_cli.training.presets import PRESETS, PPOConfig
 
 KEYS = st.from_regex(r"[a-z][a-z_]{0,8}", fullmatch=True)
@@ -113,42 +113,6 @@ def test_a_malformed_assignment_is_bad_input(text: str) -> None:
 def test_a_key_below_a_value_is_bad_input() -> None:
     with pytest.raises(BadInput, match="'ppo' is a value"):
         nest([("ppo", 3), ("ppo.n_envs", 1)])
-
-
-@given(
-    n_envs=st.integers(1, 32),
-    n_steps=st.integers(4, 512),
-    lr=st.floats(1e-6, 1.0),
-    schedule=st.sampled_from(["constant", "linear"]),
-    norm=st.tuples(st.booleans(), st.booleans()),
-    arch=st.lists(st.integers(1, 256), max_size=3).map(tuple),
-)
-def test_to_toml_reads_back_to_the_same_config(
-    n_envs: int, n_steps: int, lr: float, schedule: str, norm: tuple[bool, bool], arch: tuple[int, ...]
-) -> None:
-    ppo = {
-        "n_envs": n_envs,
-        "n_steps": n_steps,
-        "batch_size": min(64, n_envs * n_steps),
-        "learning_rate": lr,
-        "lr_schedule": schedule,
-        "normalize_obs": norm[0],
-        "normalize_reward": norm[1],
-        "net_arch_pi": list(arch),
-    }
-    cfg = resolve(
-        [
-            {
-                "preset": "smoke",
-                "ppo": ppo,
-                "shaping": {"alpha": 3, "label_potentials": {"GOAL": 0.9}},
-                "vlm": {"sim": {"flicker": 0.3}},
-            }
-        ]
-    )
-    again = resolve([tomllib.loads(to_toml(cfg))])
-    assert again == dataclasses.replace(cfg, ppo=cfg.ppo_config)
-    assert [j.config_hash for j in again.jobs()] == [j.config_hash for j in cfg.jobs()]
 
 
 def test_every_ppo_knob_is_settable_and_typed() -> None:

@@ -52,13 +52,13 @@ def calibrate(
 ) -> CalibrationResult:
     """Train what is missing (one sweep per regime, each with a fresh ``reporter_for(regime)``),
     then score and write. Failed runs stop before scoring; a rerun resumes."""
+    ensure_writable(cfg.out)  # before training: a bad --out must not cost a sweep, nor leave a store
     start = time.perf_counter()
     result = CalibrationResult(pd.DataFrame())
     result.trained, result.failed = train_regimes(cfg.regimes, reporter_for)
     if result.failed:
         result.wall_s = time.perf_counter() - start
         return result
-    ensure_writable(cfg.out)
     client = store.connect(cfg.base.tracking_uri)
     data = load_experiment(client, cfg.base.experiment)
     cfg.out.mkdir(parents=True, exist_ok=True)

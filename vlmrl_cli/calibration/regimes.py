@@ -19,8 +19,8 @@ from typing import Any
 from vlmrl_cli.analysis.calibration import TargetProfile, paper_baseline
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
 from vlmrl_cli.core.errors import BadInput, did_you_mean
-from vlmrl_cli.training.config import RunConfig
-from vlmrl_cli.training.overrides import nest, parse_assignment, parse_values, resolve
+from vlmrl_cli.training.config import RunConfig, resolve
+from vlmrl_cli.training.overrides import nest, parse_assignment, parse_values
 
 DEFAULT_EXPERIMENT = "vlmrl-calibrate"
 DEFAULT_SEEDS = 10

@@ -14,8 +14,7 @@ import typer
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.shaping.arms import ARMS
-from vlmrl_cli.training.config import load_config_file
-from vlmrl_cli.training.overrides import nest, parse_assignment, parse_value
+from vlmrl_cli.training.config import source_layers
 from vlmrl_cli.training.presets import PRESETS
 from vlmrl_cli.vlm.config import BACKENDS, DEFAULT_SIM_PROFILE, SIM_PROFILES, SimKnobs, VLMConfig
 
@@ -224,17 +223,20 @@ def seeds_of(n: int, seed_list: str | None) -> tuple[int, ...]:
     return tuple(range(n))
 
 
-def config_layers(ctx: typer.Context, config: Path | None, sets: list[str] | None, vlm_cfg: VLMConfig
-                  ) -> list[dict[str, Any]]:
-    """The layers of a training command's configuration above the preset, lowest first: the
-    config file, ``--set`` assignments, then the flags typed on the command line."""
-    file_layer = load_config_file(config) if config is not None else {}
-    set_layer = nest((key, parse_value(value)) for key, value in map(parse_assignment, sets or []))
+def typed_flags(ctx: typer.Context, vlm_cfg: VLMConfig) -> dict[str, Any]:
+    """The options of a training command typed on the command line, as dotted config keys: the top
+    layer of its configuration (``{"arms": ["baseline"], "ppo.timesteps": 512}``)."""
     p = ctx.params
     flags: dict[str, Any] = {key: p[param] for param, key in _RUN_KEYS.items() if given(ctx, param)}
     if "arms" in flags:
         flags["arms"] = [a.strip() for a in str(flags["arms"]).split(",") if a.strip()]
     if given(ctx, "seeds") or given(ctx, "seed_list"):
         flags["seeds"] = list(seeds_of(p["seeds"], p.get("seed_list")))
-    flags |= vlm_flags(ctx, vlm_cfg)
-    return [file_layer, set_layer, nest(flags.items())]
+    return flags | vlm_flags(ctx, vlm_cfg)
+
+
+def config_layers(ctx: typer.Context, config: Path | None, sets: list[str] | None, vlm_cfg: VLMConfig
+                  ) -> list[dict[str, Any]]:
+    """The raw layers of a training command's configuration above the preset, lowest first: the
+    config file, ``--set`` assignments, then the flags typed on the command line."""
+    return source_layers(config, typed_flags(ctx, vlm_cfg), sets or [])

@@ -22,13 +22,12 @@ from vlmrl_cli.cli.options import (
     Timesteps,
     TrackingUri,
     Workers,
-    config_layers,
+    typed_flags,
     with_vlm_options,
 )
 from vlmrl_cli.cli.progress import RichSweepReporter
-from vlmrl_cli.training.config import DEFAULT_EXPERIMENT, RunConfig
+from vlmrl_cli.training.config import DEFAULT_EXPERIMENT, RunConfig, to_toml
 from vlmrl_cli.training.events import SweepSummary
-from vlmrl_cli.training.overrides import resolve, to_toml
 from vlmrl_cli.vlm.config import VLMConfig
 
 DryRun = Annotated[
@@ -63,7 +62,7 @@ def run(
 
     console = Console(stderr=False)
     with exit_codes():
-        cfg = resolve(config_layers(ctx, config, sets, vlm_cfg))
+        cfg = RunConfig.from_sources(config, typed_flags(ctx, vlm_cfg), sets or [])
         if dry_run:
             typer.echo(dry_run_text(cfg), nl=False)
             return

@@ -46,16 +46,22 @@ DryRun = Annotated[bool, typer.Option("--dry-run", help="Print the grid and the 
 Out = Annotated[Path, typer.Option("--out", help="Output folder of the regime map, figure, report and manifest.")]
 
 
-def _names(text: str | None) -> list[str] | None:
-    """``"a,b"`` -> ["a", "b"]; ``"none"`` -> []; None (not given) -> None."""
+def _names(text: str | None, flag: str) -> list[str] | None:
+    """``"a,b"`` -> ["a", "b"]; ``"none"`` -> []; None (not given) -> None; ``""`` or ``","`` is
+    ``BadInput`` (an empty shell variable, not a choice: 'none' says it on purpose)."""
     if text is None:
         return None
-    return [] if text.strip().lower() == "none" else [t.strip() for t in text.split(",") if t.strip()]
+    if text.strip().lower() == "none":
+        return []
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    if not names:
+        raise BadInput(f"{flag} lists no value, got '{text}'; pass comma-separated values, or 'none' for no run.")
+    return names
 
 
 def _numbers(text: str | None) -> list[float] | None:
     try:
-        names = _names(text)
+        names = _names(text, "--flickers")
         return None if names is None else [float(v) for v in names]
     except ValueError:
         raise BadInput(f"--flickers takes numbers like 0,0.1,0.3 or 'none', got '{text}'.") from None
@@ -94,7 +100,7 @@ def study(
         file_layer, *upper = opt.config_layers(ctx, config, sets, VLMConfig())
         section = study_section(file_layer.pop("study", {}))
         chosen, notes = choose_regimes(regime or [], section.get("regimes"))
-        profile_list, flicker_list = _names(profiles), _numbers(flickers)
+        profile_list, flicker_list = _names(profiles, "--profiles"), _numbers(flickers)
         cfg = build_study(
             [file_layer, *upper], chosen,
             profiles=profile_list if profile_list is not None else section.get("profiles", DEFAULT_PROFILES),

@@ -1,7 +1,8 @@
 """The configuration of `vlmrl run`: one frozen object, checked whole by ``training/schema.py``.
 
-It is resolved in layers, each overriding the one before (``training/overrides.py``): the PPO
-preset < a TOML config file < ``--set KEY=VALUE`` < flags typed on the command line. Example
+It is resolved in layers, each overriding the one before: the PPO preset < a TOML config file <
+``--set KEY=VALUE`` < flags typed on the command line (``RunConfig.from_sources``). The layers
+are merged by ``training/overrides.py`` and the result checked here, whole. Example
 file (every key optional; ``vlmrl run --dry-run`` prints a complete one)::
 
     arms = ["baseline", "hybrid"]
@@ -35,15 +36,19 @@ from __future__ import annotations
 import dataclasses
 import os
 import tomllib
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import tomli_w
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec
 from vlmrl_cli.shaping.config import ShapingConfig
-from vlmrl_cli.training.presets import PPOConfig, get_preset
+from vlmrl_cli.training.overrides import nest, parse_assignment, parse_value, resolve_raw
+from vlmrl_cli.training.presets import DEFAULT_PRESET, PPOConfig, get_preset
 from vlmrl_cli.vlm.config import VLMConfig, sim_identity
 
 DEFAULT_EXPERIMENT = "vlmrl"
@@ -56,7 +61,7 @@ class RunConfig:
 
     arms: tuple[str, ...] = ("baseline", "hybrid")
     seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
-    preset: str = field(default="paper", metadata={"help": "named PPO preset: the bottom layer of [ppo]"})
+    preset: str = field(default=DEFAULT_PRESET, metadata={"help": "named PPO preset: the bottom layer of [ppo]"})
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)
     experiment: str = DEFAULT_EXPERIMENT
     tracking_uri: str | None = None
@@ -72,6 +77,23 @@ class RunConfig:
     heartbeat_s: float = field(default=30.0, metadata={"help": "how often a training run refreshes its heartbeat"})
     stale_after_s: float = field(default=300.0, metadata={
         "help": "a RUNNING run whose heartbeat is older is taken as dead and its job redone"})
+
+    @classmethod
+    def from_sources(
+        cls, file: Path | None, flags: Mapping[str, Any] | None = None, overrides: Iterable[str] = ()
+    ) -> RunConfig:
+        """The validated config of a TOML ``file`` (or None), ``overrides`` (``--set`` strings,
+        ``"ppo.n_envs=4"``) and ``flags`` typed on the command line (dotted keys, ``{"arms":
+        ["baseline"], "ppo.timesteps": 512}``), in the order preset < file < overrides < flags.
+
+        Raises ``BadInput`` for an unreadable file, a malformed assignment or an invalid value.
+
+        Example:
+            >>> cfg = RunConfig.from_sources(None, {"seeds": [0]}, ["preset=smoke", "seeds=[1, 2]"])
+            >>> cfg.preset, cfg.seeds, cfg.budget
+            ('smoke', (0,), 1024)
+        """
+        return resolve(source_layers(file, flags or {}, overrides))
 
     def validate(self) -> None:
         """Raise ``BadInput`` for anything that would fail later; nothing is trained before."""
@@ -165,7 +187,39 @@ class TrainJob:
         return {k: v for k, v in flatten(self.identity()).items() if ref.get(k) != v}
 
 
-# --- loading from TOML -----------------------------------------------------------------
+# --- building from layers and back to TOML -----------------------------------------------
+
+
+def resolve(layers: Iterable[Mapping[str, Any]]) -> RunConfig:
+    """The validated ``RunConfig`` of ``layers`` (lowest first: config file, ``--set``, flags)."""
+    from vlmrl_cli.training.schema import validate_as
+
+    cfg: RunConfig = validate_as(RunConfig, resolve_raw(layers))
+    return cfg
+
+
+def source_layers(file: Path | None, flags: Mapping[str, Any], sets: Iterable[str]) -> list[dict[str, Any]]:
+    """The raw layers above the preset, lowest first: the config ``file`` (or none), the ``--set``
+    assignments ``sets``, then ``flags`` (dotted keys). Commands with sections of their own
+    (``[calibrate]``, ``[study]``) take these before resolving."""
+    file_layer = load_config_file(file) if file is not None else {}
+    set_layer = nest((key, parse_value(value)) for key, value in map(parse_assignment, sets))
+    return [file_layer, set_layer, nest(flags.items())]
+
+
+def to_toml(cfg: RunConfig) -> str:
+    """``cfg`` as a complete TOML config file that ``--config`` reads back to the same ``cfg``.
+
+    Keys whose value is None are left out (TOML has no null; every such key defaults to None).
+    """
+    raw = to_jsonable(dataclasses.replace(cfg, ppo=cfg.ppo_config))
+    raw["shaping"]["label_potentials"] = dict(raw["shaping"]["label_potentials"])
+    return tomli_w.dumps(_drop_none(raw))
+
+
+def _drop_none(tree: dict[str, Any]) -> dict[str, Any]:
+    return {k: _drop_none(v) if isinstance(v, dict) else v for k, v in tree.items() if v is not None}
+
 
 
 def load_config_file(path: Path) -> dict[str, Any]:

@@ -1,11 +1,12 @@
-"""Resolve a run's configuration from its layers: preset < config file < ``--set`` < flags.
+"""Merge a run's configuration layers: preset < config file < ``--set`` < flags.
 
 Every layer is a nested dict of plain values keyed like the TOML file (``{"ppo": {"n_envs": 1}}``).
 The preset named by the highest layer that names one fills ``[ppo]``; each layer then overrides
 the keys it sets; the simulated VLM's profile (``vlm.sim.profile``) fills the ``[vlm.sim]`` knobs
-that no layer set (an explicit knob, in any layer, beats the profile's value); the merged dict is
-checked whole by ``training/schema.py`` and becomes the frozen ``RunConfig``. Nothing is read or
-written elsewhere: a bad value fails here, before any store, folder or run exists.
+that no layer set (an explicit knob, in any layer, beats the profile's value). The merged dict is
+plain data: ``training/config.py`` checks it whole (``training/schema.py``) and makes it the frozen
+``RunConfig``, so this module does not depend on that class. Nothing is read or written
+elsewhere: a bad value fails before any store, folder or run exists.
 
 ``--set KEY=VALUE`` takes a dotted key and a TOML value (``3``, ``0.3``, ``false``,
 ``[64, 64]``, ``"hf"``); a value that is not TOML is a string, and one with commas a list
@@ -14,23 +15,17 @@ written elsewhere: a bad value fails here, before any store, folder or run exist
 
 from __future__ import annotations
 
-import dataclasses
 import tomllib
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-import tomli_w
-
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.provenance import to_jsonable
-from vlmrl_cli.training.config import RunConfig
-from vlmrl_cli.training.presets import get_preset
-from vlmrl_cli.training.schema import validate_as
+from vlmrl_cli.training.presets import DEFAULT_PRESET, get_preset
 from vlmrl_cli.vlm.config import resolve_sim_profile
 
 #: Top-level keys of older config files that now live in ``[ppo]``.
 MOVED_TO_PPO = ("timesteps", "eval_episodes")
-DEFAULT_PRESET = RunConfig.preset
 
 
 def parse_value(text: str) -> Any:
@@ -143,23 +138,3 @@ def resolve_raw(layers: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
     if isinstance(vlm, Mapping) and isinstance(vlm.get("sim"), Mapping):
         raw["vlm"] = {**vlm, "sim": resolve_sim_profile(vlm["sim"])}
     return raw
-
-
-def resolve(layers: Iterable[Mapping[str, Any]]) -> RunConfig:
-    """The validated ``RunConfig`` of ``layers`` (lowest first: config file, ``--set``, flags)."""
-    cfg: RunConfig = validate_as(RunConfig, resolve_raw(layers))
-    return cfg
-
-
-def to_toml(cfg: RunConfig) -> str:
-    """``cfg`` as a complete TOML config file that ``--config`` reads back to the same ``cfg``.
-
-    Keys whose value is None are left out (TOML has no null; every such key defaults to None).
-    """
-    raw = to_jsonable(dataclasses.replace(cfg, ppo=cfg.ppo_config))
-    raw["shaping"]["label_potentials"] = dict(raw["shaping"]["label_potentials"])
-    return tomli_w.dumps(_drop_none(raw))
-
-
-def _drop_none(tree: dict[str, Any]) -> dict[str, Any]:
-    return {k: _drop_none(v) if isinstance(v, dict) else v for k, v in tree.items() if v is not None}

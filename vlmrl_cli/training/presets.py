@@ -14,6 +14,7 @@ from vlmrl_cli.core.errors import BadInput, did_you_mean
 
 LrSchedule = Literal["constant", "linear"]
 LR_SCHEDULES: tuple[str, ...] = ("constant", "linear")
+DEFAULT_PRESET = "paper"
 
 
 @dataclass(frozen=True)
