@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
-import logging
 import tempfile
 import time
 from pathlib import Path
@@ -25,6 +24,7 @@ from typing import Any
 from vlmrl_cli.training.config import RunConfig, TrainJob
 from vlmrl_cli.training.events import JobResult, ProgressEvent
 from vlmrl_cli.training.presets import get_preset
+from vlmrl_cli.training.ray_executor import start_local
 from vlmrl_cli.training.sweep import run_sweep
 from vlmrl_cli.training.worker import Channels, run_claimed
 
@@ -68,12 +68,11 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="vlmrl-bench-") as tmp:
         root = Path(tmp)
         if not args.skip_ray:
-            import ray
-
             start = time.perf_counter()
-            ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING)
+            start_local(2)
             print(f"Ray local instance start (2 CPUs): {time.perf_counter() - start:.1f} s (not counted below)")
-            # warm the Ray workers' imports once, as a long sweep amortises them
+            # warm the Ray workers' imports once: they outlive a sweep, whereas the local pool starts
+            # its processes (and pays their imports) in every sweep, inside its figure below
             _sweep(dataclasses.replace(_short_jobs(root, 1024, "ray"), experiment="warm-ray", seeds=(0,)))
         _sweep(dataclasses.replace(_short_jobs(root, 1024, "local"), experiment="warm-local", seeds=(0,)))
 

@@ -4,7 +4,6 @@ local pool, and a worker killed mid-run is retried without a second FINISHED run
 from __future__ import annotations
 
 import dataclasses
-import logging
 import os
 import signal
 import threading
@@ -19,6 +18,7 @@ from mlflow.tracking import MlflowClient
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.events import JobResult, ProgressEvent
 from vlmrl_cli.training.presets import get_preset
+from vlmrl_cli.training.ray_executor import start_local
 from vlmrl_cli.training.sweep import run_sweep
 
 ray = pytest.importorskip("ray")
@@ -38,7 +38,7 @@ class _Quiet:
 
 @pytest.fixture(scope="module")
 def local_ray() -> Iterator[None]:
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING)
+    start_local(2)
     yield
     ray.shutdown()
 

@@ -45,8 +45,11 @@ def test_the_server_stopped_and_restarted_mid_sweep(tmp_path: Path) -> None:
         else:
             raise AssertionError("no episode reached the server")
         server.stop()
-        time.sleep(10)  # the worker keeps training and buffering meanwhile
+        down = time.monotonic()
+        time.sleep(30)  # unreachable for 30 s (and while it restarts): the worker waits and buffers
         server.start()
+        assert time.monotonic() - down >= 30
+        assert thread.is_alive(), "the sweep ended while the server was down"
         thread.join(timeout=600)
         assert not thread.is_alive()
         summary = box["summary"]

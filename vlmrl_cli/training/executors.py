@@ -55,10 +55,10 @@ def check_executor(cfg: RunConfig) -> None:
     machines other than this one can reach when the Ray cluster is remote."""
     if cfg.executor != "ray":
         return
-    if find_spec("ray") is None:
-        raise BadInput(RAY_MISSING)
     if is_remote_address(cfg.ray_address) and not is_server_uri(cfg.tracking_uri):
         raise BadInput(SHARED_STORE_NEEDED)
+    if find_spec("ray") is None:
+        raise BadInput(RAY_MISSING)
 
 
 SHARED_STORE_NEEDED = (

@@ -142,16 +142,19 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
     if not pending:
         summary.wall_s = time.perf_counter() - start
         return summary
-    executor = make_executor(cfg, len(pending))
-
-    parent = client.create_run(experiment_id, tags={
-        **store.provenance_tags(vlm_label, simulated),
-        schema.MLFLOW_RUN_NAME: f"sweep-{time.strftime('%Y%m%d-%H%M%S')}",
-        schema.TAG_KIND: schema.KIND_SWEEP,
-        schema.TAG_CONFIG_HASH: config_hash(cfg),
-        schema.TAG_EXECUTOR: cfg.executor,
-        **({schema.TAG_REGIME: cfg.regime} if cfg.regime is not None else {}),
-    })
+    executor = make_executor(cfg, len(pending))  # before the parent run: Ray may refuse the store
+    try:
+        parent = client.create_run(experiment_id, tags={
+            **store.provenance_tags(vlm_label, simulated),
+            schema.MLFLOW_RUN_NAME: f"sweep-{time.strftime('%Y%m%d-%H%M%S')}",
+            schema.TAG_KIND: schema.KIND_SWEEP,
+            schema.TAG_CONFIG_HASH: config_hash(cfg),
+            schema.TAG_EXECUTOR: cfg.executor,
+            **({schema.TAG_REGIME: cfg.regime} if cfg.regime is not None else {}),
+        })
+    except BaseException:
+        executor.close()
+        raise
     summary.parent_run_id = parent.info.run_id
     store.log_params(client, parent.info.run_id, flatten(dataclasses.replace(cfg, ppo=cfg.ppo_config)))
 
