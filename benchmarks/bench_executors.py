@@ -22,19 +22,11 @@ from pathlib import Path
 from typing import Any
 
 from vlmrl_cli.training.config import RunConfig, TrainJob
-from vlmrl_cli.training.events import JobResult, ProgressEvent
+from vlmrl_cli.training.events import JobResult
 from vlmrl_cli.training.presets import get_preset
 from vlmrl_cli.training.ray_executor import start_local
-from vlmrl_cli.training.sweep import run_sweep
-from vlmrl_cli.training.worker import Channels, run_claimed
-
-
-class _Quiet:
-    def planned(self, pending: list[Any], done: list[Any]) -> None: ...
-
-    def progress(self, event: ProgressEvent) -> None: ...
-
-    def finished(self, result: JobResult) -> None: ...
+from vlmrl_cli.training.sweep import SilentReporter, run_sweep
+from vlmrl_cli.training.worker import Channels, run_claimed, train_job
 
 
 def fake_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> JobResult:
@@ -44,7 +36,7 @@ def fake_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> Jo
 
 def _sweep(cfg: RunConfig, job_fn: Any = None) -> tuple[float, int]:
     start = time.perf_counter()
-    summary = run_sweep(cfg, _Quiet()) if job_fn is None else run_sweep(cfg, _Quiet(), job_fn)
+    summary = run_sweep(cfg, SilentReporter(), job_fn or train_job)
     if summary.failed:
         raise SystemExit(f"failed jobs: {[(r.job, r.error) for r in summary.failed][:3]}")
     return time.perf_counter() - start, len(summary.finished)

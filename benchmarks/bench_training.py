@@ -30,7 +30,6 @@ import torch
 from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.training.config import RunConfig
-from vlmrl_cli.training.events import JobResult
 from vlmrl_cli.training.presets import get_preset
 from vlmrl_cli.vlm.config import VLMConfig
 from vlmrl_cli.vlm.parsers import parse_mcq
@@ -81,21 +80,13 @@ def label_agreement(run: dict[str, Any]) -> tuple[int, int, int]:
     return len(run["events"]), differ, len(direct)
 
 
-class _Quiet:
-    def planned(self, pending: list[Any], done: list[Any]) -> None: ...
-
-    def progress(self, event: Any) -> None: ...
-
-    def finished(self, result: JobResult) -> None: ...
-
-
 def sweep_throughput(workers: int, timesteps: int, root: Path) -> float:
-    from vlmrl_cli.training.sweep import run_sweep
+    from vlmrl_cli.training.sweep import SilentReporter, run_sweep
 
     ppo = dataclasses.replace(get_preset("paper"), timesteps=timesteps, eval_episodes=1)
     cfg = RunConfig(arms=("baseline",), seeds=(0, 1), preset="paper", ppo=ppo, workers=workers,
                     experiment=f"bench-{workers}", tracking_uri=f"sqlite:///{root / f'w{workers}.db'}")
-    summary = run_sweep(cfg, _Quiet())
+    summary = run_sweep(cfg, SilentReporter())
     assert not summary.failed, summary.failed
     return 2 * timesteps / summary.wall_s
 

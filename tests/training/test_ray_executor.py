@@ -16,24 +16,22 @@ import pytest
 from mlflow.tracking import MlflowClient
 
 from vlmrl_cli.training.config import RunConfig
-from vlmrl_cli.training.events import JobResult, ProgressEvent
+from vlmrl_cli.training.events import ProgressEvent
 from vlmrl_cli.training.presets import get_preset
 from vlmrl_cli.training.ray_executor import start_local
-from vlmrl_cli.training.sweep import run_sweep
+from vlmrl_cli.training.sweep import SilentReporter, run_sweep
 
 ray = pytest.importorskip("ray")
 
 
-class _Quiet:
+class _Recording(SilentReporter):
+    """Shows nothing; keeps the progress events."""
+
     def __init__(self) -> None:
         self.events: list[ProgressEvent] = []
 
-    def planned(self, pending: list[Any], done: list[Any]) -> None: ...
-
     def progress(self, event: ProgressEvent) -> None:
         self.events.append(event)
-
-    def finished(self, result: JobResult) -> None: ...
 
 
 @pytest.fixture(scope="module")
@@ -62,9 +60,9 @@ def _histories(uri: str, experiment: str) -> dict[tuple[str, str], list[tuple[in
 def test_ray_gives_the_same_histories_as_the_local_pool(tmp_path: Path, local_ray: None) -> None:
     uri = f"sqlite:///{tmp_path / 'm.db'}"
     base = RunConfig(arms=("baseline", "hybrid"), seeds=(0, 1), preset="smoke", workers=2, tracking_uri=uri)
-    reporter = _Quiet()
+    reporter = _Recording()
     ray_summary = run_sweep(dataclasses.replace(base, executor="ray", experiment="ray"), reporter)
-    local_summary = run_sweep(dataclasses.replace(base, executor="local", experiment="local"), _Quiet())
+    local_summary = run_sweep(dataclasses.replace(base, executor="local", experiment="local"), SilentReporter())
     assert len(ray_summary.finished) == len(local_summary.finished) == 4
     assert reporter.events  # progress came back from the Ray tasks
     ray_h, local_h = _histories(uri, "ray"), _histories(uri, "local")
@@ -81,7 +79,7 @@ def test_a_killed_ray_worker_is_retried_and_finishes_once(tmp_path: Path, local_
     cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="smoke", ppo=ppo, workers=2, tracking_uri=uri,
                     executor="ray", max_retries=2)
     box: dict[str, Any] = {}
-    thread = threading.Thread(target=lambda: box.update(summary=run_sweep(cfg, _Quiet())))
+    thread = threading.Thread(target=lambda: box.update(summary=run_sweep(cfg, SilentReporter())))
     thread.start()
     client = MlflowClient(tracking_uri=uri)
     killed = None
@@ -118,7 +116,7 @@ def test_a_ray_sweep_through_a_loopback_tracking_server(tmp_path: Path, local_ra
     try:
         cfg = RunConfig(arms=("baseline", "hybrid"), seeds=(0, 1), preset="smoke", workers=2,
                         tracking_uri=server.uri, executor="ray")
-        summary = run_sweep(cfg, _Quiet())
+        summary = run_sweep(cfg, SilentReporter())
         assert len(summary.finished) == 4 and summary.failed == []
         client = MlflowClient(tracking_uri=server.uri)
         for result in summary.finished:

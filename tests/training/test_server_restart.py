@@ -12,17 +12,8 @@ from mlflow.tracking import MlflowClient
 
 from tests.training.tracking_server import TrackingServer
 from vlmrl_cli.training.config import RunConfig
-from vlmrl_cli.training.events import JobResult, ProgressEvent
 from vlmrl_cli.training.presets import get_preset
-from vlmrl_cli.training.sweep import run_sweep
-
-
-class _Quiet:
-    def planned(self, pending: list[Any], done: list[Any]) -> None: ...
-
-    def progress(self, event: ProgressEvent) -> None: ...
-
-    def finished(self, result: JobResult) -> None: ...
+from vlmrl_cli.training.sweep import SilentReporter, run_sweep
 
 
 def test_the_server_stopped_and_restarted_mid_sweep(tmp_path: Path) -> None:
@@ -31,7 +22,7 @@ def test_the_server_stopped_and_restarted_mid_sweep(tmp_path: Path) -> None:
     ppo = dataclasses.replace(get_preset("smoke"), timesteps=40_000)
     cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="smoke", ppo=ppo, workers=1, tracking_uri=server.uri)
     box: dict[str, Any] = {}
-    thread = threading.Thread(target=lambda: box.update(summary=run_sweep(cfg, _Quiet())))
+    thread = threading.Thread(target=lambda: box.update(summary=run_sweep(cfg, SilentReporter())))
     try:
         thread.start()
         client = MlflowClient(tracking_uri=server.uri)

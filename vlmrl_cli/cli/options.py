@@ -15,6 +15,7 @@ import typer
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.training.config import source_layers
+from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.presets import PRESETS
 from vlmrl_cli.vlm.config import BACKENDS, DEFAULT_SIM_PROFILE, SIM_PROFILES, SimKnobs, VLMConfig
 
@@ -189,7 +190,7 @@ Preset = Annotated[str, typer.Option("--preset", metavar=choices(list(PRESETS)),
                                      help="PPO preset (the bottom layer of [ppo]).")]
 Workers = Annotated[int | None, typer.Option("--workers", help="Worker processes (default: cores).")]
 ExecutorOpt = Annotated[str | None, typer.Option(
-    "--executor", metavar=choices(["local", "ray"]),
+    "--executor", metavar=choices(EXECUTORS),
     help="Where jobs run: local (a process pool, the default) or ray (tasks on a Ray cluster; pip install "
          "'vlmrl[ray]').")]
 RayAddress = Annotated[str | None, typer.Option(

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import filelock
+from tenacity import Retrying, retry_if_exception_type, stop_after_delay, wait_exponential, wait_fixed
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.provenance import cpu_paths, git_commit, package_versions
@@ -106,15 +107,14 @@ def _check_server(uri: str, wait_s: float = 0.0) -> None:
     minutes before giving up), after retrying for ``wait_s`` seconds."""
     import httpx
 
-    deadline = time.monotonic() + wait_s
-    while True:
-        try:
-            httpx.get(uri.rstrip("/") + "/health", timeout=5.0)
-            return
-        except httpx.HTTPError as exc:
-            if time.monotonic() >= deadline:
-                raise BadInput(f"the MLflow tracking server '{uri}' cannot be reached; check --tracking-uri.") from exc
-            time.sleep(1.0)
+    retrying = Retrying(stop=stop_after_delay(wait_s), wait=wait_fixed(1.0),
+                        retry=retry_if_exception_type(httpx.HTTPError), reraise=True)
+    try:
+        for attempt in retrying:
+            with attempt:
+                httpx.get(uri.rstrip("/") + "/health", timeout=5.0)
+    except httpx.HTTPError as exc:
+        raise BadInput(f"the MLflow tracking server '{uri}' cannot be reached; check --tracking-uri.") from exc
 
 
 def artifact_root(tracking_uri: str) -> str | None:
@@ -223,17 +223,15 @@ class BatchLogger:
     def flush(self) -> None:
         """Write everything buffered, retrying a failing store for ``retry_s`` seconds."""
         deadline = self._clock() + self._retry_s
-        delay = 1.0
-        while True:
-            try:
-                self._write()
-                return
-            except Exception:
-                self.failed_writes += 1
-                if self._clock() >= deadline:
+        retrying = Retrying(stop=lambda state: self._clock() >= deadline, wait=wait_exponential(max=30.0),
+                            sleep=self._sleep, reraise=True)
+        for attempt in retrying:
+            with attempt:
+                try:
+                    self._write()
+                except Exception:
+                    self.failed_writes += 1
                     raise
-                self._sleep(delay)
-                delay = min(delay * 2, 30.0)
 
     def _write(self) -> None:
         while self._buffer:

@@ -1,9 +1,12 @@
-"""What workers report to the parent process: plain values, importable without SB3 or torch
+"""What a sweep and its workers exchange: plain values, importable without SB3 or torch
 (the CLI's progress display and help must not pay for those imports)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+
+#: Where a sweep's jobs can run (``RunConfig.executor``): a local process pool, or Ray tasks.
+EXECUTORS = ("local", "ray")
 
 SUCCESS_LENGTH = 200  # MountainCar-v0's time limit: an episode shorter than this reached the flag
 

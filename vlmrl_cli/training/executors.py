@@ -22,7 +22,6 @@ from vlmrl_cli.training.config import RunConfig, TrainJob
 from vlmrl_cli.training.events import JobContext, JobResult, ProgressEvent
 from vlmrl_cli.training.worker import init_worker
 
-EXECUTORS = ("local", "ray")
 RAY_MISSING = "--executor ray needs Ray, which is not installed: pip install 'vlmrl[ray]'."
 
 #: What an executor dispatches: one job, the sweep's shared context -> its result.

@@ -29,6 +29,7 @@ from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.frames.geometry import Zone
 from vlmrl_cli.shaping.arms import parse_arms
 from vlmrl_cli.shaping.config import DEFAULT_LABEL_POTENTIALS
+from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.presets import PRESETS
 from vlmrl_cli.vlm.config import BACKENDS, SIM_PROFILES
 
@@ -96,7 +97,7 @@ RULES: dict[str, tuple[Any, ...]] = {
     "seeds": (AfterValidator(_distinct_seeds),),
     "preset": (AfterValidator(_one_of(PRESETS, "preset")),),
     "workers": (Ge(1),),
-    "executor": (AfterValidator(_one_of(("local", "ray"), "executor")),),
+    "executor": (AfterValidator(_one_of(EXECUTORS, "executor")),),
     "max_retries": (Ge(0),),
     "heartbeat_s": (Gt(0),),
     "stale_after_s": (Gt(0),),

@@ -41,6 +41,19 @@ class SweepReporter(Protocol):
     def finished(self, result: JobResult) -> None: ...
 
 
+class SilentReporter:
+    """A ``SweepReporter`` that shows nothing (scripts, benchmarks, tests)."""
+
+    def planned(self, pending: list[TrainJob], done: list[TrainJob]) -> None:
+        pass
+
+    def progress(self, event: ProgressEvent) -> None:
+        pass
+
+    def finished(self, result: JobResult) -> None:
+        pass
+
+
 def vlm_identity(cfg: RunConfig) -> tuple[str, bool]:
     """The VLM label and simulated flag of the sweep, checking the backend answers at all
     (unreachable server, missing model: ``BadInput`` before anything trains)."""
