@@ -103,3 +103,11 @@ def test_unwritable_out_exits_2(tmp_path: Path, shared_uri: str) -> None:
 def test_states_below_two_is_a_usage_error(tmp_path: Path) -> None:
     result = _invoke("--states", "1", "--out", str(tmp_path / "D"))
     assert result.exit_code == 2
+
+
+def test_help_states_the_default_sweep() -> None:
+    from vlmrl_cli.probe.scoring import DEFAULT_STATES
+
+    result = _invoke("--help")
+    assert result.exit_code == 0
+    assert f"default {DEFAULT_STATES}" in " ".join(result.output.split())

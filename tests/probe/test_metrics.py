@@ -45,6 +45,41 @@ def test_spearman_handles_constant_and_nan() -> None:
     assert metrics.spearman([3, 2, 1], [1, 2, 3]) == pytest.approx(-1.0)
 
 
+def test_spearman_ci_by_hand() -> None:
+    # rho = 0.5 over 28 pairs: z = atanh(0.5) = 0.5493, se = sqrt(1.125 / 25) = 0.2121,
+    # z +- 1.96 se = (0.1335, 0.9651), tanh -> (0.1327, 0.7465)
+    assert metrics.spearman_ci(0.5, 28) == pytest.approx((0.13274690, 0.74653306), abs=1e-7)
+    # no correlation over 103 pairs: +- tanh(1.96 / 10) = +- 0.1935
+    assert metrics.spearman_ci(0.0, 103) == pytest.approx((-0.19352466, 0.19352466), abs=1e-7)
+
+
+def test_spearman_ci_is_undefined_where_fisher_z_is() -> None:
+    for rho, n in ((math.nan, 50), (0.3, 3), (1.0, 50), (-1.0, 50)):
+        assert all(math.isnan(v) for v in metrics.spearman_ci(rho, n))
+    with pytest.raises(ValueError, match="level"):
+        metrics.spearman_ci(0.1, 50, level=1.0)
+
+
+@given(st.floats(-0.999, 0.999), st.integers(4, 10_000))
+def test_spearman_ci_holds_rho_inside_the_open_interval(rho: float, n: int) -> None:
+    lo, hi = metrics.spearman_ci(rho, n)
+    assert -1.0 <= lo <= rho <= hi <= 1.0
+    wider = metrics.spearman_ci(rho, n, level=0.99)
+    assert wider[0] <= lo and hi <= wider[1]
+
+
+@given(st.floats(-0.99, 0.99), st.integers(4, 5_000))
+def test_spearman_ci_narrows_with_more_pairs(rho: float, n: int) -> None:
+    lo, hi = metrics.spearman_ci(rho, n)
+    lo2, hi2 = metrics.spearman_ci(rho, 4 * n)
+    assert hi2 - lo2 < hi - lo
+
+
+def test_finite_pairs_drops_a_pair_when_either_side_is_missing() -> None:
+    x, y = metrics.finite_pairs([1.0, np.nan, 3.0, 4.0], [1.0, 2.0, np.inf, 5.0])
+    assert x.tolist() == [1.0, 4.0] and y.tolist() == [1.0, 5.0]
+
+
 @given(st.lists(st.sampled_from(list(ParseStatus)), max_size=30))
 def test_format_failure_rate_is_a_fraction(statuses: list[ParseStatus]) -> None:
     rate = metrics.format_failure_rate(statuses)

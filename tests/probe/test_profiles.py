@@ -4,15 +4,21 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from vlmrl_cli.frames.geometry import Zone
+from vlmrl_cli.frames.geometry import SCALE, ZONE_EDGES, Zone
+from vlmrl_cli.frames.render import FrameRenderer
+from vlmrl_cli.probe import metrics
+from vlmrl_cli.probe.scoring import DEFAULT_STATES, PAPER_FRAMES, sweep_positions
 from vlmrl_cli.probe.taxonomy import TaxonomyConfig, TaxonomyResult, run_taxonomy
 from vlmrl_cli.vlm.config import SIM_PROFILES, SimKnobs, VLMConfig
-from vlmrl_cli.vlm.parsers import ParseStatus
+from vlmrl_cli.vlm.parsers import ParseStatus, parse_float
+from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
+from vlmrl_cli.vlm.sim import SimulatedVLM
 
 # No sweep position of 12 falls on a zone edge, where a pixel reader off by a fraction of a pixel
-# gives the neighbouring label (25 positions put three frames on edges).
+# gives the neighbouring label (25 positions put three frames on edges; the default 101 puts none).
 STATES = 12
 
 
@@ -65,3 +71,29 @@ def test_flicker_still_works_on_a_profile(results: dict[str, TaxonomyResult], tm
     vlm = VLMConfig(sim=SimKnobs.of_profile("ideal", flicker=1.0), cache_path=tmp_path / "c.sqlite")
     r = run_taxonomy(TaxonomyConfig(vlm=vlm, states=STATES, out=tmp_path / "o", tracking_uri=f"sqlite:///{tmp_path}/m.db"))
     assert r.sweep["mcq.accuracy"] < 0.2
+
+
+def test_the_default_sweep_keeps_clear_of_zone_edges() -> None:
+    # a frame on an edge gets either label from a reader off by a fraction of a pixel
+    gaps = [abs(x - edge) * SCALE for x in sweep_positions(DEFAULT_STATES) for edge in ZONE_EDGES]
+    assert min(gaps) >= 1.5  # pixels
+
+
+def test_llava_table1_float_answers_carry_no_rank_signal_on_the_default_sweep() -> None:
+    """Over 20 simulator seeds the float Spearman scatters around 0 as a null correlation does:
+    mean within +-0.06 (3 standard errors of 0.1 / sqrt(20)), and 95% intervals that hold 0 for at
+    least 17 of 20 seeds. A reader whose answers followed the position would fail both."""
+    xs = sweep_positions(DEFAULT_STATES) + [x for _, x, _ in PAPER_FRAMES]
+    prompt = PROMPTS[PromptKind.FLOAT]
+    with FrameRenderer() as renderer:
+        frames = [renderer.render(x) for x in xs]
+    rhos, covered = [], 0
+    for seed in range(20):
+        vlm = SimulatedVLM(SimKnobs.of_profile("llava-table1", seed=seed))
+        values = [parse_float(vlm.answer(prompt, f)).value for f in frames]
+        rho = metrics.spearman([np.nan if v is None else v for v in values], xs)
+        lo, hi = metrics.spearman_ci(rho, len(xs))
+        rhos.append(rho)
+        covered += lo <= 0.0 <= hi
+    assert abs(float(np.mean(rhos))) < 0.06
+    assert covered >= 17

@@ -77,3 +77,13 @@ def test_printable_never_lets_control_characters_through(text: str) -> None:
     shown = printable(text)
     assert shown.isprintable()
     assert "\n" not in shown
+
+
+def test_with_ci_shows_the_interval_only_when_it_is_defined() -> None:
+    import math
+
+    from vlmrl_cli.probe.table1 import with_ci
+
+    assert with_ci({"r": 0.25, "r_low": -0.1, "r_high": 0.5}, "r") == "0.250 [95% CI -0.100, 0.500]"
+    assert with_ci({"r": 1.0, "r_low": math.nan, "r_high": math.nan}, "r") == "1.000"
+    assert with_ci({}, "r") == "n/a"

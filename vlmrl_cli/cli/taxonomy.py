@@ -17,7 +17,7 @@ from vlmrl_cli.vlm.config import VLMConfig
 
 States = Annotated[
     int | None,
-    typer.Option("--states", min=2, help="Sweep positions over the track (default 25; replay: its frames only)."),
+    typer.Option("--states", min=2, help="Sweep positions over the track (default 101; replay: its frames only)."),
 ]
 
 
@@ -31,6 +31,7 @@ def taxonomy(
 ) -> None:
     """Probe a VLM with float, box and MCQ prompts (paper Section 2); write Table 1 and Figure 1."""
     from vlmrl_cli.probe.scoring import DEFAULT_STATES
+    from vlmrl_cli.probe.table1 import with_ci
     from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
 
     console = Console(stderr=True)
@@ -65,7 +66,7 @@ def taxonomy(
     sweep = result.sweep
     if math.isfinite(sweep.get("mcq.accuracy", math.nan)):
         typer.echo(f"sweep:     MCQ accuracy {sweep['mcq.accuracy']:.2f}, float Spearman "
-                   f"{sweep['float.spearman']:.2f}, box IoU {sweep['box.mean_iou']:.2f}, MCQ dPhi dead zone "
+                   f"{with_ci(sweep, 'float.spearman', 2)}, box IoU {sweep['box.mean_iou']:.2f}, MCQ dPhi dead zone "
                    f"{sweep['mcq.dphi.dead_zone']:.2f}")
     else:
         typer.echo("sweep:     n/a (only the transcript's frames were probed)")

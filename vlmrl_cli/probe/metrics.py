@@ -30,6 +30,13 @@ def absolute_error(predicted: Sequence[float] | np.ndarray, truth: Sequence[floa
     return np.abs(np.asarray(predicted, dtype=float) - np.asarray(truth, dtype=float))
 
 
+def finite_pairs(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs of two (n,) arrays where both values are finite, as two (m,) arrays, m <= n."""
+    x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    keep = np.isfinite(x) & np.isfinite(y)
+    return x[keep], y[keep]
+
+
 def spearman(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> float:
     """Spearman rank correlation of two (n,) arrays over the pairs where both are finite.
 
@@ -39,12 +46,31 @@ def spearman(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -
         >>> spearman([1, 2, 3], [10, 20, 30]), math.isnan(spearman([1, 1, 1], [1, 2, 3]))
         (1.0, True)
     """
-    x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    keep = np.isfinite(x) & np.isfinite(y)
-    x, y = x[keep], y[keep]
+    x, y = finite_pairs(a, b)
     if x.size < 2 or np.all(x == x[0]) or np.all(y == y[0]):
         return math.nan
     return float(stats.spearmanr(x, y).statistic)
+
+
+def spearman_ci(rho: float, n: int, level: float = 0.95) -> tuple[float, float]:
+    """Confidence interval of a Spearman correlation ``rho`` over ``n`` pairs (Fisher z, Bonett-Wright variance).
+
+    z = atanh(rho) is taken as normal with variance (1 + rho^2 / 2) / (n - 3) (Bonett & Wright 2000,
+    Psychometrika 65:23-28), and the bounds are mapped back with tanh. (NaN, NaN) when the interval is
+    undefined: rho NaN, n < 4, or |rho| = 1 (a perfect ranking has no Fisher z).
+
+    Example:
+        >>> lo, hi = spearman_ci(0.0, 103)
+        >>> round(lo, 3), round(hi, 3)
+        (-0.194, 0.194)
+    """
+    if not 0 < level < 1:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    if not math.isfinite(rho) or n < 4 or abs(rho) >= 1:
+        return math.nan, math.nan
+    half = float(stats.norm.ppf(0.5 + level / 2)) * math.sqrt((1 + rho * rho / 2) / (n - 3))
+    z = math.atanh(rho)
+    return math.tanh(z - half), math.tanh(z + half)
 
 
 def iou(a: Box, b: Box) -> float:

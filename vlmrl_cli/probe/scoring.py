@@ -30,7 +30,11 @@ from vlmrl_cli.vlm.parsers import (
 )
 from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
 
-DEFAULT_STATES = 25
+# 101 sweep positions (+ the paper's two frames): a rank correlation of 0 over 103 frames has a 95%
+# interval of about +-0.2 (25 positions gave +-0.4, too wide to tell "no rank signal" from a weak
+# one), and no position falls within 2 px of a zone edge, where a reader off by a fraction of a
+# pixel flips the label (25 positions put three frames exactly on edges).
+DEFAULT_STATES = 101
 # The paper's Figure 1 pair: (panel, x, caption). Always probed, whatever the sweep.
 PAPER_FRAMES: tuple[tuple[str, float, str], ...] = (
     ("a", -0.50, "Absolute valley"),
@@ -186,6 +190,8 @@ def sweep_statistics(probes: list[FrameProbe] | tuple[FrameProbe, ...]) -> dict[
     out["float.mae_x"] = float(np.nanmean(metrics.absolute_error(x_pred, x_true))) if any(
         math.isfinite(v) for v in x_pred) else math.nan
     out["float.spearman"] = metrics.spearman(x_pred, x_true)
+    out["float.spearman_low"], out["float.spearman_high"] = metrics.spearman_ci(
+        out["float.spearman"], len(metrics.finite_pairs(x_pred, x_true)[0]))
 
     boxes = [p.box_result for p in ordered]
     ious = [metrics.iou(b.box, p.truth.box_px) for b, p in zip(boxes, ordered, strict=True) if b.ok and b.box]

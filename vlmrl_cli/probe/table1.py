@@ -139,13 +139,27 @@ def _fmt(value: float, digits: int = 3) -> str:
     return "n/a" if not math.isfinite(value) else f"{value:.{digits}f}"
 
 
+def with_ci(stats: Mapping[str, float], key: str, digits: int = 3) -> str:
+    """``stats[key]`` with its 95% interval from ``key_low`` / ``key_high`` when both are defined.
+
+    Example:
+        >>> with_ci({"r": -0.14, "r_low": -0.33, "r_high": 0.06}, "r", 2), with_ci({"r": 1.0}, "r", 2)
+        ('-0.14 [95% CI -0.33, 0.06]', '1.00')
+    """
+    value = _fmt(stats.get(key, math.nan), digits)
+    low, high = stats.get(f"{key}_low", math.nan), stats.get(f"{key}_high", math.nan)
+    if not (math.isfinite(low) and math.isfinite(high)):
+        return value
+    return f"{value} [95% CI {_fmt(low, digits)}, {_fmt(high, digits)}]"
+
+
 def sweep_frame(sweep: Mapping[str, float]) -> pd.DataFrame:
     """Sweep statistics per prompt kind (n/a where no sweep was probed), cells as strings."""
     def get(key: str) -> float:
         return sweep.get(key, math.nan)
 
     quality = {
-        PromptKind.FLOAT: f"MAE {_fmt(get('float.mae_x'))} x; Spearman {_fmt(get('float.spearman'))}",
+        PromptKind.FLOAT: f"MAE {_fmt(get('float.mae_x'))} x; Spearman {with_ci(sweep, 'float.spearman')}",
         PromptKind.BOX: (f"IoU {_fmt(get('box.mean_iou'))} (parsed), {_fmt(get('box.mean_iou_all'))} (all); "
                          f"centre error {_fmt(get('box.centre_error_px'), 1)} px"),
         PromptKind.MCQ: f"accuracy {_fmt(get('mcq.accuracy'))}",
