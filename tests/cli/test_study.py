@@ -66,6 +66,13 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     again = _study(tmp_path, "--dry-run")
     assert again.exit_code == 0 and "0 run(s) to train (10 already FINISHED)" in again.output
 
+    # a resumed study keeps the first invocation, which trained the runs, on record
+    resumed = _study(tmp_path)
+    assert resumed.exit_code == 0, resumed.output + resumed.stderr
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["runs_trained_now"] == 0
+    assert [h["runs_trained_now"] for h in manifest["earlier_invocations"]] == [10]
+
 
 @pytest.mark.parametrize(("args", "needle"), [
     (["--regime", "x=preset=nope"], "unknown preset 'nope'"),

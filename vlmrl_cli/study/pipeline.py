@@ -250,10 +250,42 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
     return "\n".join(lines)
 
 
+#: The fields of a manifest that say what one invocation did; earlier invocations keep only these.
+INVOCATION_FIELDS = ("command", "git_commit", "versions", "stages", "wall_s", "runs_trained_now", "written_at")
+
+
+def earlier_invocations(previous: Any, experiment: str, tracking_uri: str) -> list[dict[str, Any]]:
+    """The invocations behind an earlier manifest in ``--out``, oldest first, when it describes the same
+    store and experiment (a resumed study); [] otherwise, or when it is not a manifest.
+
+    A resumed study trains only what was missing, so the runs in its tables may come from earlier
+    invocations; their commands, commits and wall times stay on record.
+
+    Example:
+        >>> old = {"experiment": "e", "tracking_uri": "u", "command": "vlmrl study", "wall_s": 7417.0}
+        >>> earlier_invocations(old, "e", "u"), earlier_invocations(old, "e", "other")
+        ([{'command': 'vlmrl study', 'wall_s': 7417.0}], [])
+    """
+    if not isinstance(previous, dict) or (previous.get("experiment"), previous.get("tracking_uri")) != (
+            experiment, tracking_uri):
+        return []
+    history = [h for h in previous.get("earlier_invocations", []) if isinstance(h, dict)]
+    return [*history, {k: previous[k] for k in INVOCATION_FIELDS if k in previous}]
+
+
+def _read_manifest(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+
+
 def _write(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simulated: bool, command: str,
            cost: CostEstimate | None) -> list[Path]:
     out = cfg.out
     out.mkdir(parents=True, exist_ok=True)
+    tracking_uri = store.resolve_tracking_uri(cfg.base.tracking_uri)
+    history = earlier_invocations(_read_manifest(out / "manifest.json"), cfg.base.experiment, tracking_uri)
     names = ["regime_map.md", "regime_map.csv", "vlm_quality.csv", "vlm_quality.png", "hacking.csv", "report.md",
              "manifest.json"]
     paths = [out / n for n in names]
@@ -277,7 +309,7 @@ def _write(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simu
         "runs_trained_now": result.trained,
         "cost_estimate": None if cost is None else cost.__dict__,
         "experiment": cfg.base.experiment,
-        "tracking_uri": store.resolve_tracking_uri(cfg.base.tracking_uri),
+        "tracking_uri": tracking_uri,
         "regimes": [{"id": r.id, "overrides": r.label, "config_hashes": sorted({j.config_hash for j in r.run.jobs()})}
                     for r in cfg.regimes],
         "variants": [{"id": v.id, "overrides": v.label, "config_hash": v.run.jobs()[0].config_hash}
@@ -285,6 +317,7 @@ def _write(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simu
         "vlm_regime": cfg.vlm_regime,
         "notes": list(cfg.notes),
         "written_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "earlier_invocations": history,
     }
     paths[6].write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
     return paths
