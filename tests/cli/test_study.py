@@ -108,3 +108,14 @@ def test_a_dry_run_reads_a_missing_store_without_creating_it(tmp_path: Path) -> 
     assert result.exit_code == 0, result.output + result.stderr
     assert "cost estimate: 10 run(s) to train (0 already FINISHED)" in result.output
     assert not any(tmp_path.iterdir())  # a read-only step: no store, no folder, no cache, no output
+
+
+def test_the_taxonomy_sweep_defaults_to_the_taxonomy_commands(tmp_path: Path) -> None:
+    from vlmrl_cli.probe.scoring import DEFAULT_STATES
+
+    help_text = " ".join(runner.invoke(app, ["study", "--help"]).output.split())
+    assert f"(default {DEFAULT_STATES})" in help_text
+    result = runner.invoke(app, ["study", "--regime", "norm=smoke", "--arms", "hybrid", "--seeds", "1",
+                                 "--dry-run", "--tracking-uri", _uri(tmp_path), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    assert f"taxonomy: {DEFAULT_STATES} sweep positions" in " ".join(result.output.split())

@@ -41,7 +41,8 @@ VlmRegime = Annotated[
     str | None,
     typer.Option("--vlm-regime", help="Regime of the VLM-quality runs (default: paper-calibrated, else the first)."),
 ]
-States = Annotated[int, typer.Option("--states", min=2, help="Taxonomy sweep positions per VLM variant.")]
+States = Annotated[int | None, typer.Option("--states", min=2,
+                                           help="Taxonomy sweep positions per VLM variant (default 101).")]
 DryRun = Annotated[bool, typer.Option("--dry-run", help="Print the grid and the cost estimate; train nothing.")]
 Out = Annotated[Path, typer.Option("--out", help="Output folder of the regime map, figure, report and manifest.")]
 
@@ -81,7 +82,7 @@ def study(
     profiles: Profiles = None,
     flickers: Flickers = None,
     vlm_regime: VlmRegime = None,
-    states: States = 25,
+    states: States = None,
     config: opt.ConfigFile = None,
     sets: opt.Sets = None,
     dry_run: DryRun = False,
@@ -105,7 +106,8 @@ def study(
             [file_layer, *upper], chosen,
             profiles=profile_list if profile_list is not None else section.get("profiles", DEFAULT_PROFILES),
             flickers=flicker_list if flicker_list is not None else section.get("flickers", DEFAULT_FLICKERS),
-            vlm_regime=vlm_regime or section.get("vlm_regime"), notes=notes, out=out, states=states,
+            vlm_regime=vlm_regime or section.get("vlm_regime"), notes=notes, out=out,
+            **({} if states is None else {"states": states}),
         )
         base = cfg.base
         console.print(f"[bold]vlmrl study[/]: {len(cfg.regimes)} regime(s) x arms {', '.join(base.arms)} x seeds "
@@ -113,6 +115,8 @@ def study(
                       f"'{cfg.vlm_regime}'; experiment '{base.experiment}'")
         for r in cfg.all_regimes():
             console.print(f"  {r.id}: {r.label}, {r.run.budget:,} steps per run", markup=False)
+        if cfg.variants:
+            console.print(f"  taxonomy: {cfg.states} sweep positions per VLM variant", markup=False)
         for note in cfg.notes:
             console.print(f"[yellow]note:[/] {note}")
         if base.vlm.backend == "sim":
