@@ -72,6 +72,8 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["runs_trained_now"] == 0
     assert [h["runs_trained_now"] for h in manifest["earlier_invocations"]] == [10]
+    assert "Earlier invocations of this study" in (out / "report.md").read_text()
+    assert "10 run(s) trained" in (out / "report.md").read_text()
 
 
 @pytest.mark.parametrize(("args", "needle"), [

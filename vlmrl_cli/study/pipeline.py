@@ -16,7 +16,7 @@ import math
 import re
 import statistics
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -215,7 +215,7 @@ def _vlm_table(points: pd.DataFrame, top: float) -> str:
 
 
 def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simulated: bool,
-                cost: CostEstimate | None) -> str:
+                cost: CostEstimate | None, history: Sequence[Mapping[str, Any]] = ()) -> str:
     """``report.md``: the generated summary first, then the regime map, VLM quality, reward hacking, method."""
     vlm_line = ("**VLM: the SIMULATED VLM (a pixel-reading stand-in), not a real model: nothing here is evidence "
                 "about a real VLM.**" if simulated else "VLM: a real backend (see the runs' vlmrl.vlm tags).")
@@ -247,6 +247,13 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
                  if cost else "")
     lines += [f"Cost: {result.wall_s:,.0f} s of wall time in this invocation ({result.trained} run(s) trained now); "
               f"the regimes' runs' own wall times sum to {train:,.0f} s.{cost_line}", ""]
+    if history:
+        earlier = "; ".join(
+            f"commit {str(h.get('git_commit', '?'))[:7]} on {str(h.get('written_at', '?'))[:10]}: "
+            f"{h.get('runs_trained_now', '?')} run(s) trained, {float(h.get('wall_s', math.nan)):,.0f} s"
+            for h in history)
+        lines += [f"Earlier invocations of this study on the same store (`manifest.json`, `earlier_invocations`): "
+                  f"{earlier}.", ""]
     return "\n".join(lines)
 
 
@@ -298,7 +305,7 @@ def _write(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simu
     result.vlm_points.assign(vlm=vlm_note.strip()).to_csv(paths[2], index=False)
     analysis.vlm_figure(result.vlm_points, cfg.top, cfg.vlm_regime, simulated).savefig(paths[3], dpi=150)
     hack_frame.to_csv(paths[4], index=False)
-    paths[5].write_text(to_markdown(cfg, result, hack_frame, simulated, cost), encoding="utf-8")
+    paths[5].write_text(to_markdown(cfg, result, hack_frame, simulated, cost, history), encoding="utf-8")
     manifest = {
         "what": "vlmrl study" + (" with the SIMULATED VLM, not a real model" if simulated else ""),
         "command": command,
