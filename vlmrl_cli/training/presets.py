@@ -65,12 +65,13 @@ PRESETS: dict[str, PPOConfig] = {
     # paper reports (272,448). Plain PPO solves every seed with it; `vlmrl calibrate` searches
     # for a regime whose baseline learns like the paper's.
     "paper": replace(ZOO, timesteps=300_000),
-    # The closest regime of the committed calibration (results/calibration/calibration.md, made by
-    # `vlmrl calibrate --grid ppo.normalize_reward=true,false --grid ppo.learning_rate=0.0003,0.0001`,
-    # 10 seeds per regime, 2026-11-29): the paper preset without reward normalisation. Its
-    # baseline reached -130 on 9/10 seeds (90% [60%, 98%]) in 177,331 steps on average, against
-    # the paper's 60% and 272,448: slower and less reliable than `paper`, but not the paper's
-    # baseline (distance 0.795 [0.321, 1.129]; no regime of that grid fell between 40% and 80%).
+    # The closest regime of the committed calibrations (results/calibration/calibration.md, the
+    # default 8-regime grid, and results/calibration/grid-2x2/, `--grid ppo.normalize_reward=true,false
+    # --grid ppo.learning_rate=0.0003,0.0001`; 10 seeds per regime, 2026-11-29): the paper preset
+    # without reward normalisation. Its baseline reached -130 on 9/10 seeds (90% [60%, 98%]) in
+    # 177,331 steps on average, against the paper's 60% and 272,448: slower and less reliable than
+    # `paper`, but not the paper's baseline (distance 0.795 [0.321, 1.129]; no regime of either grid
+    # fell between 40% and 80%).
     "paper-calibrated": replace(ZOO, timesteps=300_000, normalize_reward=False),
 }
 
