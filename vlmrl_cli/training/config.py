@@ -221,7 +221,6 @@ def _drop_none(tree: dict[str, Any]) -> dict[str, Any]:
     return {k: _drop_none(v) if isinstance(v, dict) else v for k, v in tree.items() if v is not None}
 
 
-
 def load_config_file(path: Path) -> dict[str, Any]:
     """Parse a TOML config file into a raw nested dict (checked later, with every other layer)."""
     try:
