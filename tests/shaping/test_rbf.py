@@ -172,3 +172,31 @@ def test_field_on_recorded_frames_equals_a_scalar_reference_bit_for_bit() -> Non
         if view.key not in ref.feats or ref.feats[view.key] is counts:  # first query of this key
             batch = rbf_potential(view.features, np.array(protos), np.array(pots), 0.3, unit=FEATURE_UNIT)
             assert batch == got
+
+
+@given(prototype_sets(), bandwidths, st.data())
+@settings(max_examples=60)
+def test_set_potential_equals_a_field_built_with_the_new_potential(
+    protos: tuple[np.ndarray, np.ndarray], h: float, data: st.DataObject
+) -> None:
+    feats, pots = protos
+    n = feats.shape[0]
+    index = data.draw(st.integers(0, n - 1))
+    new = data.draw(st.floats(-1.0, 1.0))
+    queries = data.draw(arrays(np.float64, (3, D), elements=coords))
+    field = RBFField(h, D)
+    for f, p in zip(feats, pots, strict=True):
+        field.add_prototype(f, float(p))
+    before = [field.value(str(i), q) for i, q in enumerate(queries)]  # keys stored, then updated
+    assert all(math.isfinite(v) for v in before)
+    field.set_potential(index, new)
+    changed = pots.copy()
+    changed[index] = new
+    for i, q in enumerate(queries):
+        assert field.value(str(i), q) == pytest.approx(rbf_potential(q, feats, changed, h), abs=1e-9)
+
+
+def test_set_potential_refuses_an_unknown_prototype() -> None:
+    field = RBFField(0.5, 1)
+    with pytest.raises(IndexError):
+        field.set_potential(0, 1.0)

@@ -152,3 +152,22 @@ def test_deep_copies_of_an_env_share_the_oracle_and_its_cached_client(tmp_path) 
     oracle = SemanticOracle(client, ShapingConfig(), PotentialSource.MCQ)
     assert copy.deepcopy({"oracle": oracle})["oracle"] is oracle
     client.close()
+
+
+class _Stochastic(ScriptedBackend):
+    stochastic = True
+
+
+def test_a_stochastic_vlm_is_asked_every_time_and_its_newest_answer_wins(camera: Camera) -> None:
+    cfg = ShapingConfig()
+    backend = _Stochastic(["BOTTOM", "LEFT_PEAK", "BOTTOM"])
+    oracle = SemanticOracle(VLMClient(backend), cfg, MCQ)  # type: ignore[arg-type]
+    view = camera.view(-0.5)
+    assert oracle.label(view) == cfg.potential_of(Zone.BOTTOM)
+    assert oracle.phi_rbf(view) == cfg.potential_of(Zone.BOTTOM)
+    assert oracle.label(view) == cfg.potential_of(Zone.LEFT_PEAK)  # asked again, not reused
+    assert oracle.phi_rbf(view) == pytest.approx(cfg.potential_of(Zone.LEFT_PEAK))  # one prototype, updated
+    assert oracle.prototypes == 1 and backend.calls == 2
+    assert oracle.stats()["vlm/label_reuses"] == 0.0
+    assert oracle.label(view) == cfg.potential_of(Zone.BOTTOM)
+    assert oracle.prototype_potentials().tolist() == [cfg.potential_of(Zone.BOTTOM)]

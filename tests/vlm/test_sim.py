@@ -139,3 +139,43 @@ def test_widened_bottom_zone_and_anchors(renderer: FrameRenderer) -> None:
         value = parse_float(vlm.answer(PROMPTS[PromptKind.FLOAT], frame)).value
         assert value is not None and abs(value - 0.38) < 0.03
     assert parse_mcq(vlm.answer(PROMPTS[PromptKind.MCQ], renderer.render(0.55))).label is geometry.Zone.GOAL
+
+
+def test_query_flicker_zero_keeps_the_deterministic_answers_and_model_name(renderer: FrameRenderer) -> None:
+    frame = renderer.render(-0.45)
+    plain, zero = SimulatedVLM(SimKnobs()), SimulatedVLM(SimKnobs(query_flicker=0.0), stream=7)
+    assert not zero.stochastic and zero.model == plain.model
+    prompt = PROMPTS[PromptKind.MCQ]
+    assert [zero.answer(prompt, frame) for _ in range(5)] == [plain.answer(prompt, frame)] * 5
+
+
+def test_query_flicker_draws_afresh_per_query_and_reproduces_per_stream(renderer: FrameRenderer) -> None:
+    frame = renderer.render(-0.5)  # BOTTOM: both neighbours exist
+    prompt = PROMPTS[PromptKind.MCQ]
+    knobs = SimKnobs(flicker=0.0, query_flicker=0.5)
+
+    def labels(stream: int) -> list[geometry.Zone | None]:
+        vlm = SimulatedVLM(knobs, stream=stream)
+        assert vlm.stochastic
+        return [parse_mcq(vlm.answer(prompt, frame)).label for _ in range(200)]
+
+    first = labels(0)
+    assert set(first) == {geometry.Zone.LEFT_SLOPE, geometry.Zone.BOTTOM, geometry.Zone.RIGHT_SLOPE}
+    assert 0.4 < first.count(geometry.Zone.BOTTOM) / 200 < 0.6  # P(kept) = 1 - 0.5
+    assert labels(0) == first and labels(1) != first
+
+
+def test_a_stochastic_backend_is_never_cached(tmp_path) -> None:
+    from vlmrl_cli.vlm.config import VLMConfig
+    from vlmrl_cli.vlm.registry import build_client
+
+    client = build_client(VLMConfig(cache_path=tmp_path / "c.sqlite", sim=SimKnobs(query_flicker=0.3)), stream=1)
+    try:
+        assert client.stochastic and client.cache is None
+    finally:
+        client.close()
+    steady = build_client(VLMConfig(cache_path=tmp_path / "c.sqlite"))
+    try:
+        assert not steady.stochastic and steady.cache is not None
+    finally:
+        steady.close()

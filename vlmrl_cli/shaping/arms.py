@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -24,10 +25,25 @@ class ArmSpec:
     potential: PotentialSource
     rbf: bool = True
     lock: bool = True
+    # Added after results existed: ``identity`` below leaves it out while False, so the seven
+    # original arms keep their config hashes (tests/training/test_pinned_hashes.py).
+    placebo: bool = False  # labels mapped through a per-seed shuffled label map (shaping/placebo.py)
 
     @property
     def uses_vlm(self) -> bool:
         return self.potential is not PotentialSource.NONE
+
+    def identity(self) -> dict[str, object]:
+        """The arm as it enters config hashes: every field, ``placebo`` only when set.
+
+        Example:
+            >>> "placebo" in ARMS["hybrid"].identity(), ARMS["hybrid-shuffled"].identity()["placebo"]
+            (False, True)
+        """
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        if not self.placebo:
+            del fields["placebo"]
+        return {k: v.value if isinstance(v, PotentialSource) else v for k, v in fields.items()}
 
 
 ARMS: dict[str, ArmSpec] = {
@@ -44,6 +60,8 @@ ARMS: dict[str, ArmSpec] = {
                 lock=False),
         ArmSpec("vision-float", "PBRS on the VLM's float regression of x (pure-vision setting)", False,
                 PotentialSource.FLOAT, rbf=False, lock=False),
+        ArmSpec("hybrid-shuffled", "placebo: the hybrid with its label map shuffled per seed (same labels, "
+                "no information)", True, PotentialSource.MCQ, placebo=True),
     )
 }
 

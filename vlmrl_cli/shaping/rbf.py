@@ -157,6 +157,30 @@ class RBFField:
         self._num += w * float(potential)
         self._den += w
 
+    def set_potential(self, index: int, potential: float) -> None:
+        """Give prototype ``index`` (insertion order) a new potential, updating every stored key:
+        a stochastic VLM's newest answer about a frame replaces its older one.
+
+        Example:
+            >>> field = RBFField(bandwidth=0.1, dim=1)
+            >>> field.add_prototype(np.array([0.0]), 0.0); field.add_prototype(np.array([1.0]), 1.0)
+            >>> field.value("a", np.array([0.5])); field.set_potential(1, 0.0); field.value("a", np.array([0.5]))
+            0.5
+            0.0
+        """
+        if self._protos is None or not 0 <= index < self.prototypes:
+            raise IndexError(f"no prototype {index}; the field holds {self.prototypes}")
+        old = float(self._potentials[index])
+        new = float(potential)
+        if new == old:
+            return
+        self._potentials[index] = new
+        self._low, self._high = float(self._potentials.min()), float(self._potentials.max())
+        if self._feats is None:
+            return
+        sq = squared_distances(self._feats, self._protos[index], self.unit)
+        self._num += exp(-(sq - self._ref) * self._scale) * (new - old)
+
     def value(self, key: str, feature: np.ndarray) -> float:
         if self._protos is None:
             return 0.0

@@ -89,6 +89,10 @@ class SemanticOracle:
         self._potentials = np.empty(0, dtype=np.float64)
         self._n = 0
         self._label_of: dict[str, float] = {}
+        self._row_of: dict[str, int] = {}
+        # A stochastic VLM (a fresh draw per query) is asked every time: reusing a frame's label
+        # would freeze its first draw, and its newest answer replaces the prototype's potential.
+        self._stochastic = bool(getattr(client, "stochastic", False))
         self._field = RBFField(cfg.bandwidth, FEATURE_DIM, unit=FEATURE_UNIT)
         self._queries = 0
         self._cache_hits = 0
@@ -115,13 +119,15 @@ class SemanticOracle:
         A frame already labelled reuses its own label: a deterministic VLM (greedy decoding,
         the simulated one) answers an identical frame identically, so this changes no label.
         With ``reuse_radius > 0`` the nearest prototype's label is also reused for frames within
-        that feature distance, which saves queries but can change labels near zone edges.
+        that feature distance, which saves queries but can change labels near zone edges. A
+        stochastic VLM's client (``client.stochastic``) is asked at every labelling step, and its
+        newest answer about a frame replaces that prototype's potential.
         """
         known = self._label_of.get(view.key)
-        if known is not None:
+        if known is not None and not self._stochastic:
             self._reuses += 1
             return known
-        if self._n and self.cfg.reuse_radius > 0:
+        if self._n and self.cfg.reuse_radius > 0 and not self._stochastic:
             sq = squared_distances(self._features[: self._n], view.features, unit=FEATURE_UNIT)
             nearest = int(np.argmin(sq))
             if math.sqrt(float(sq[nearest])) < self.cfg.reuse_radius:
@@ -149,7 +155,12 @@ class SemanticOracle:
         return float_potential(number.value)
 
     def _add(self, view: FrameView, potential: float) -> None:
-        if view.key in self._label_of:
+        row = self._row_of.get(view.key)
+        if row is not None:  # only a stochastic VLM asks about a known frame again
+            if self._stochastic and self._label_of[view.key] != potential:
+                self._potentials[row] = potential
+                self._label_of[view.key] = potential
+                self._field.set_potential(row, potential)
             return
         if self._n == self._features.shape[0]:
             grown = np.empty((max(64, 2 * self._n), view.features.shape[0]), dtype=np.int64)
@@ -159,6 +170,7 @@ class SemanticOracle:
             self._potentials = np.resize(self._potentials, grown.shape[0])
         self._features[self._n] = view.features
         self._potentials[self._n] = potential
+        self._row_of[view.key] = self._n
         self._n += 1
         self._label_of[view.key] = potential
         self._field.add_prototype(view.features, potential)

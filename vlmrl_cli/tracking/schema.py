@@ -43,6 +43,8 @@ TAG_PRESET = f"{TAG_PREFIX}preset"
 TAG_OVERRIDES = f"{TAG_PREFIX}overrides"  # "key=value ..." or "none"
 TAG_REGIME = f"{TAG_PREFIX}regime"
 TAG_SIM_PROFILE = f"{TAG_PREFIX}sim_profile"
+TAG_PLACEBO_MAP = f"{TAG_PREFIX}placebo_map"  # a placebo arm's shuffled label map, "LABEL=phi ..."
+TAG_STOCHASTIC_VLM = f"{TAG_PREFIX}stochastic_vlm"  # "true": answers drawn afresh per query, never cached
 TAG_ERROR = f"{TAG_PREFIX}error"
 TAG_TRACEBACK = f"{TAG_PREFIX}traceback"
 TAG_OWNER = f"{TAG_PREFIX}owner"  # "host:pid" of the process training the run

@@ -154,7 +154,7 @@ class TrainJob:
         new cell. The VLM and the shaping knobs count only for arms that use them, so tuning the
         VLM does not redo the baseline. Cache settings never count: they change speed, not answers."""
         ident: dict[str, Any] = {
-            "arm": to_jsonable(self.arm),
+            "arm": self.arm.identity(),
             "ppo": to_jsonable(self.ppo),
             "eval_seed": EVAL_SEED,
         }

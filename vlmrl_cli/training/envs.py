@@ -11,6 +11,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecNormalize
 from vlmrl_cli.shaping.arms import ArmSpec
 from vlmrl_cli.shaping.camera import Camera
 from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.shaping.placebo import oracle_shaping
 from vlmrl_cli.shaping.semantic import SemanticOracle
 from vlmrl_cli.shaping.wrapper import HybridReward
 from vlmrl_cli.training.presets import PPOConfig
@@ -33,7 +34,8 @@ def make_train_env(
     keys for ``baseline``). Then ``DummyVecEnv`` of ``preset.n_envs`` (one process, so the
     camera and oracle are shared by all envs) -> ``VecNormalize`` (observations if
     ``ppo.normalize_obs``, rewards if ``ppo.normalize_reward``, with the learner's gamma; no
-    wrapper when both are off). Env ``i`` is seeded ``seed + i``. The PBRS discount is
+    wrapper when both are off). Env ``i`` is seeded ``seed + i``. A placebo arm's oracle maps
+    labels through ``placebo.oracle_shaping`` (the label map shuffled by ``seed``). The PBRS discount is
     ``shaping.gamma``, or ``ppo.gamma`` when that is None.
     """
     if arm.uses_vlm and client is None:
@@ -42,7 +44,8 @@ def make_train_env(
         raise ValueError(f"n_envs={ppo.n_envs}; a run needs at least one env.")
     gamma = shaping.gamma if shaping.gamma is not None else ppo.gamma
     camera = Camera(shaping.render_quantum) if arm.uses_vlm else None
-    oracle = SemanticOracle(client, shaping, arm.potential, rbf=arm.rbf) if arm.uses_vlm and client else None
+    oracle = (SemanticOracle(client, oracle_shaping(arm, shaping, seed), arm.potential, rbf=arm.rbf)
+              if arm.uses_vlm and client else None)
 
     def make_one() -> gym.Env:
         env: gym.Env = gym.make(ENV_ID)

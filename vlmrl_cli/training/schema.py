@@ -121,6 +121,7 @@ RULES: dict[str, tuple[Any, ...]] = {
     "vlm.timeout_s": (Gt(0),),
     "vlm.retries": (Ge(0),),
     "vlm.sim.flicker": (Interval(ge=0, le=1),),
+    "vlm.sim.query_flicker": (Interval(ge=0, le=1),),
     "vlm.sim.float_noise": (Ge(0),),
     "vlm.sim.box_noise_px": (Ge(0),),
     "vlm.sim.box_failure": (Interval(ge=0, le=1),),

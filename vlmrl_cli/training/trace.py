@@ -19,7 +19,7 @@ def native_returns(job: TrainJob) -> list[float]:
     from vlmrl_cli.training.model import make_model
     from vlmrl_cli.vlm.registry import build_client
 
-    client = build_client(job.vlm) if job.arm.uses_vlm else None
+    client = build_client(job.vlm, stream=job.seed) if job.arm.uses_vlm else None
     try:
         env, _ = make_train_env(job.arm, job.ppo, job.shaping, client, job.seed)
         model = make_model(job.ppo, env, job.seed)

@@ -50,6 +50,7 @@ class TrainedRun:
     vlm_label: str
     simulated: bool
     policy: Policy
+    seed: int = 0  # the training seed (a placebo arm's label map depends on it)
 
 
 def load_trained_run(client: Any, run_id: str, workdir: Path) -> TrainedRun:
@@ -82,6 +83,7 @@ def load_trained_run(client: Any, run_id: str, workdir: Path) -> TrainedRun:
         vlm_label=tags.get(schema.TAG_VLM, "unknown"),
         simulated=tags.get(schema.TAG_SIMULATED) == "true",
         policy=_load_policy(workdir),
+        seed=int(config.get("seed", 0)),
     )
 
 

@@ -145,12 +145,14 @@ def label_frames(run: TrainedRun, positions: list[float], cfg: EvaluateConfig) -
     """Ask the run's VLM (its own config; cache as ``cfg`` says) about the frame of each
     position, rendered by the training camera (snapped to ``render_quantum``)."""
     from vlmrl_cli.shaping.camera import Camera
+    from vlmrl_cli.shaping.placebo import oracle_shaping
     from vlmrl_cli.shaping.semantic import float_potential
     from vlmrl_cli.vlm.parsers import parse_float, parse_mcq
     from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
     from vlmrl_cli.vlm.registry import build_client
 
     mcq = run.arm.potential is PotentialSource.MCQ
+    label_map = oracle_shaping(run.arm, run.shaping, run.seed)  # a placebo's shuffled map
     prompt = PROMPTS[PromptKind.MCQ if mcq else PromptKind.FLOAT]
     client = build_client(replace(run.vlm, use_cache=cfg.use_cache, cache_path=cfg.cache_path))
     camera = Camera(run.shaping.render_quantum)
@@ -160,7 +162,7 @@ def label_frames(run: TrainedRun, positions: list[float], cfg: EvaluateConfig) -
             text = client.ask(prompt, camera.view(x).frame()).text
             if mcq:
                 label = parse_mcq(text)
-                labels.append(FrameLabel(label.label.value, run.shaping.potential_of(label.label))
+                labels.append(FrameLabel(label.label.value, label_map.potential_of(label.label))
                               if label.ok and label.label is not None else FrameLabel(f"({label.status})", None))
             else:
                 number = parse_float(text)

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from vlmrl_cli.core.provenance import flatten
+from vlmrl_cli.shaping.placebo import describe_map, placebo_map
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training import claims
 from vlmrl_cli.training.callbacks import EpisodeTracker
@@ -75,6 +76,10 @@ def run_tags(job: TrainJob, parent_run_id: str | None, vlm_label: str, simulated
         tags[schema.TAG_REGIME] = job.regime
     if job.arm.uses_vlm and job.vlm.backend == "sim":
         tags[schema.TAG_SIM_PROFILE] = job.vlm.sim.profile
+    if job.arm.uses_vlm and job.vlm.backend == "sim" and job.vlm.sim.query_flicker > 0:
+        tags[schema.TAG_STOCHASTIC_VLM] = "true"
+    if job.arm.placebo:
+        tags[schema.TAG_PLACEBO_MAP] = describe_map(placebo_map(job.shaping.label_potentials, job.seed))
     if parent_run_id is not None:
         tags[schema.MLFLOW_PARENT_RUN_ID] = parent_run_id
     return tags
@@ -162,7 +167,7 @@ def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> J
         try:
             store.log_params(client, run_id, {schema.PARAM_TIMESTEPS: str(job.timesteps), **flatten(job.params())})
             if job.arm.uses_vlm:
-                vlm_client = build_client(job.vlm, transcript=out / "transcript.jsonl")
+                vlm_client = build_client(job.vlm, transcript=out / "transcript.jsonl", stream=job.seed)
             env, oracle = make_train_env(job.arm, job.ppo, job.shaping, vlm_client, job.seed)
             model = make_model(job.ppo, env, job.seed)
             metrics = store.BatchLogger(client, run_id)

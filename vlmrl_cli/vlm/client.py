@@ -25,7 +25,8 @@ class VLMClient:
     """Ask a backend about a frame, through the cache, writing every query to the transcript.
 
     ``ask`` is the only entry point; ``MissingAnswer`` and ``BackendUnavailable`` from the
-    backend propagate to the caller. The replay backend is never cached (it is a cache).
+    backend propagate to the caller. The replay backend is never cached (it is a cache), and
+    neither is a ``stochastic`` one (its next answer to the same query may differ).
     """
 
     def __init__(
@@ -35,9 +36,14 @@ class VLMClient:
         transcript: Path | None = None,
     ) -> None:
         self.backend = backend
-        self.cache = cache if backend.name != "replay" else None
+        self.cache = cache if backend.name != "replay" and not self.stochastic else None
         self.transcript = TranscriptWriter(transcript) if transcript is not None else None
         self.stats = ClientStats()
+
+    @property
+    def stochastic(self) -> bool:
+        """True when the backend may answer one query differently each time (never cached)."""
+        return bool(getattr(self.backend, "stochastic", False))
 
     @property
     def label(self) -> str:

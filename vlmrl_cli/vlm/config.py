@@ -21,8 +21,10 @@ DEFAULT_SIM_PROFILE = "default"
 
 @dataclass(frozen=True)
 class SimKnobs:
-    """Knobs of the simulated VLM (``sim``). All randomness is a pure function of
-    (seed, prompt, image bytes), so the same frame always gets the same answer.
+    """Knobs of the simulated VLM (``sim``). All randomness but ``query_flicker``'s is a pure
+    function of (seed, prompt, image bytes), so the same frame always gets the same answer;
+    ``query_flicker > 0`` makes the VLM stochastic (a fresh draw per query, from a stream seeded
+    by (seed, the run's seed)), and its answers then bypass every cache.
 
     ``profile`` names the set of knob values the others were resolved from (``SIM_PROFILES``);
     build a profile's knobs with ``SimKnobs.of_profile``. The dataclass defaults are the
@@ -46,6 +48,11 @@ class SimKnobs:
     )
     box_anchor_x: float | None = field(
         default=None, metadata={"help": "boxes are drawn around the car at this x, not the frame's; None: read it"}
+    )
+    query_flicker: float = field(
+        default=0.0,
+        metadata={"help": "P(a neighbouring MCQ label) drawn afresh at every query, as a sampling VLM at "
+                          "temperature > 0 gives: the same frame can get another label next time (never cached)"},
     )
 
     def __post_init__(self) -> None:
@@ -95,6 +102,7 @@ SIM_PROFILES: dict[str, Mapping[str, Any]] = {
 #: so existing runs and cached answers keep theirs.
 NEUTRAL_SIM_KNOBS: dict[str, Any] = {
     "profile": DEFAULT_SIM_PROFILE, "float_anchor": None, "mcq_bottom_halfwidth": None, "box_anchor_x": None,
+    "query_flicker": 0.0,
 }
 
 

@@ -11,12 +11,13 @@ from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.config import BACKENDS, VLMConfig
 
 
-def build_backend(cfg: VLMConfig) -> Backend:
-    """Instantiate the backend ``cfg.backend``; unknown names are a ``BadInput``."""
+def build_backend(cfg: VLMConfig, stream: int = 0) -> Backend:
+    """Instantiate the backend ``cfg.backend``; unknown names are a ``BadInput``. ``stream`` seeds a
+    stochastic simulated VLM's per-query draws (the training run's seed); others ignore it."""
     if cfg.backend == "sim":
         from vlmrl_cli.vlm.sim import SimulatedVLM
 
-        return SimulatedVLM(cfg.sim)
+        return SimulatedVLM(cfg.sim, stream=stream)
     if cfg.backend == "hf":
         from vlmrl_cli.vlm.hf import HFBackend
 
@@ -32,8 +33,8 @@ def build_backend(cfg: VLMConfig) -> Backend:
     raise BadInput(f"unknown VLM backend '{cfg.backend}'; choose one of {', '.join(BACKENDS)}.")
 
 
-def build_client(cfg: VLMConfig, transcript: Path | None = None) -> VLMClient:
+def build_client(cfg: VLMConfig, transcript: Path | None = None, stream: int = 0) -> VLMClient:
     """The backend of ``cfg`` behind the shared response cache (unless disabled)."""
-    backend = build_backend(cfg)
+    backend = build_backend(cfg, stream)
     cache = ResponseCache(cfg.cache_path) if cfg.use_cache and cfg.cache_path is not None else None
     return VLMClient(backend, cache=cache, transcript=transcript)

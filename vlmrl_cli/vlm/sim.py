@@ -85,6 +85,14 @@ def snap_to_patch(column: float, patch_px: int) -> float:
     return (np.floor(column / patch_px) + 0.5) * patch_px
 
 
+def _neighbour(index: int, left: bool) -> int:
+    """The zone index one step left (or right) of ``index``, turned back at the track's ends."""
+    step = -1 if left else 1
+    if not 0 <= index + step < len(geometry.ZONES):
+        step = -step
+    return index + step
+
+
 class SimulatedVLM:
     """SIMULATED VLM (not a real model): answers the three probe prompts from the pixels.
 
@@ -97,7 +105,10 @@ class SimulatedVLM:
     pixels: a refusal. ``SIM_PROFILES`` (vlm/config.py) names sets of these knobs.
 
     Answers are a pure function of (seed, prompt text, image bytes): the response cache and
-    replay transcripts rely on that.
+    replay transcripts rely on that. The one exception is ``query_flicker > 0``: then each MCQ
+    answer is also moved to a neighbouring label with that probability by a draw from a stream
+    seeded by ``(seed, stream)`` (``stream``: the training run's seed), fresh at every query, so
+    the VLM is ``stochastic`` and its client caches nothing.
 
     Example:
         >>> from vlmrl_cli.frames.render import FrameRenderer
@@ -113,9 +124,9 @@ class SimulatedVLM:
     name = "sim"
     simulated = True
 
-    def __init__(self, knobs: SimKnobs | None = None) -> None:
+    def __init__(self, knobs: SimKnobs | None = None, stream: int = 0) -> None:
         knobs = knobs or SimKnobs()
-        for prob_name in ("flicker", "box_failure"):
+        for prob_name in ("flicker", "box_failure", "query_flicker"):
             value = getattr(knobs, prob_name)
             if not 0.0 <= value <= 1.0:
                 raise ValueError(f"SimKnobs.{prob_name}={value} is a probability; pass a value in [0, 1].")
@@ -129,6 +140,8 @@ class SimulatedVLM:
         # The response cache keys on (backend, model, prompt, image): the knobs that shape the
         # answers go into the model name so that a cached answer never outlives its knobs.
         self.model = f"{MODEL_BASE}/{knobs_digest(knobs)}"
+        self.stochastic = knobs.query_flicker > 0
+        self._draws = np.random.default_rng([knobs.seed, stream, 0x71F1])  # query_flicker only
 
     def _rng(self, prompt: Prompt, frame: Frame) -> np.random.Generator:
         blob = "\x1f".join((str(self.knobs.seed), prompt.text, frame.sha256)).encode()
@@ -178,10 +191,9 @@ class SimulatedVLM:
     def _mcq(self, x_est: float, rng: np.random.Generator) -> str:
         index = geometry.ZONES.index(self.zone(x_est))
         if rng.random() < self.knobs.flicker:
-            step = -1 if rng.random() < 0.5 else 1
-            if not 0 <= index + step < len(geometry.ZONES):
-                step = -step
-            index += step
+            index = _neighbour(index, rng.random() < 0.5)
+        if self.stochastic and self._draws.random() < self.knobs.query_flicker:
+            index = _neighbour(index, self._draws.random() < 0.5)
         template = _MCQ_FORMATS[int(rng.integers(len(_MCQ_FORMATS)))]
         return template.format(label=geometry.ZONES[index].value)
 
