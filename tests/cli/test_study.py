@@ -25,6 +25,7 @@ def _study(root: Path, *args: str):  # type: ignore[no-untyped-def]
         "ppo.normalize_reward=false", "--arms", "baseline,hybrid", "--seeds", "2", "--workers", "2",
         "--set", "ppo.timesteps=512", "--set", "ppo.eval_episodes=1", "--set", f"vlm.cache_path={root / 'c.sqlite'}",
         "--profiles", "default,llava-table1", "--flickers", "none", "--states", "4",
+        "--alphas", "25", "--kin-scales", "0", "--query-flickers", "none",
         "--tracking-uri", _uri(root), "--out", str(root / "out"), *args,
     ])
 
@@ -32,7 +33,7 @@ def _study(root: Path, *args: str):  # type: ignore[no-untyped-def]
 def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) -> None:
     result = _study(tmp_path)
     assert result.exit_code == 0, result.output + result.stderr
-    assert "cost estimate: 10 run(s) to train (0 already FINISHED)" in result.output
+    assert "cost estimate: 14 run(s) to train (0 already FINISHED)" in result.output
     out = tmp_path / "out"
     for name in ("regime_map.md", "regime_map.csv", "vlm_quality.csv", "vlm_quality.png", "hacking.csv",
                  "report.md", "manifest.json"):
@@ -49,14 +50,14 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     assert "SIMULATED VLM" in report and "`norm`" in report and "Hover fraction" in report
     manifest = json.loads((out / "manifest.json").read_text())
     assert [s["stage"] for s in manifest["stages"]] == ["train", "taxonomy", "analysis"]
-    assert manifest["git_commit"] and manifest["runs_trained_now"] == 10
+    assert manifest["git_commit"] and manifest["runs_trained_now"] == 14
 
     client = MlflowClient(tracking_uri=_uri(tmp_path))
     exp = client.get_experiment_by_name("vlmrl-study")
     assert exp is not None
     runs = client.search_runs([exp.experiment_id], max_results=1000)
     train = [r for r in runs if r.data.tags["vlmrl.kind"] == "train"]
-    assert len(train) == 10
+    assert len(train) == 14  # 2 regimes x 2 arms, 1 more profile, semantic and placebo at alpha 25 (x 2 seeds)
     assert {r.data.tags.get("vlmrl.sim_profile") for r in train if r.data.tags["vlmrl.arm"] == "hybrid"} == {
         "default", "llava-table1"}
     (study,) = [r for r in runs if r.data.tags["vlmrl.kind"] == "study"]
@@ -64,16 +65,16 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
         study.info.run_id)}
 
     again = _study(tmp_path, "--dry-run")
-    assert again.exit_code == 0 and "0 run(s) to train (10 already FINISHED)" in again.output
+    assert again.exit_code == 0 and "0 run(s) to train (14 already FINISHED)" in again.output
 
     # a resumed study keeps the first invocation, which trained the runs, on record
     resumed = _study(tmp_path)
     assert resumed.exit_code == 0, resumed.output + resumed.stderr
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["runs_trained_now"] == 0
-    assert [h["runs_trained_now"] for h in manifest["earlier_invocations"]] == [10]
+    assert [h["runs_trained_now"] for h in manifest["earlier_invocations"]] == [14]
     assert "Earlier invocations of this study" in (out / "report.md").read_text()
-    assert "10 run(s) trained" in (out / "report.md").read_text()
+    assert "14 run(s) trained" in (out / "report.md").read_text()
 
 
 @pytest.mark.parametrize(("args", "needle"), [
@@ -85,6 +86,9 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     (["--flickers", "abc"], "--flickers takes numbers"),
     (["--flickers", "2"], "vlm.sim.flicker"),
     (["--vlm-regime", "other"], "not a regime of this study"),
+    (["--alphas", "-1"], "alphas must be finite and >= 0"),
+    (["--kin-scales", "x"], "--kin-scales takes numbers"),
+    (["--query-flickers", "2"], "vlm.sim.query_flicker"),
     (["--arms", "teleport"], "unknown arm 'teleport'"),
     (["--set", "ppo.nenvs=1"], "did you mean 'ppo.n_envs'"),
     (["--set", "n_envs"], "KEY=VALUE"),
@@ -108,7 +112,7 @@ def test_a_bad_study_exits_2_before_anything_exists(tmp_path: Path, args: list[s
 def test_a_dry_run_reads_a_missing_store_without_creating_it(tmp_path: Path) -> None:
     result = _study(tmp_path, "--dry-run")
     assert result.exit_code == 0, result.output + result.stderr
-    assert "cost estimate: 10 run(s) to train (0 already FINISHED)" in result.output
+    assert "cost estimate: 14 run(s) to train (0 already FINISHED)" in result.output
     assert not any(tmp_path.iterdir())  # a read-only step: no store, no folder, no cache, no output
 
 

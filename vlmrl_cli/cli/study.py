@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import sys
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.console import Console
@@ -37,6 +38,21 @@ Flickers = Annotated[
     typer.Option("--flickers", help="Flicker rates of the hybrid's VLM-quality runs (default profile), "
                                     "or 'none' (default: 0,0.1,0.3,0.5)."),
 ]
+Alphas = Annotated[
+    str | None,
+    typer.Option("--alphas", help="PBRS scales of the dose-response cells, comma-separated, or 'none' "
+                                  "(default: 5,25,100; alpha 0, the dense term alone, is always included)."),
+]
+KinScales = Annotated[
+    str | None,
+    typer.Option("--kin-scales", help="Kinematic scales of the dose-response cells, or 'none' (default: 0,0.5,2; "
+                                      "0 is the VLM's potential alone)."),
+]
+QueryFlickers = Annotated[
+    str | None,
+    typer.Option("--query-flickers", help="Per-query (temporal) flicker rates at which hybrid and hybrid-no-lock "
+                                          "are compared, or 'none' (default: 0.3)."),
+]
 VlmRegime = Annotated[
     str | None,
     typer.Option("--vlm-regime", help="Regime of the VLM-quality runs (default: paper-calibrated, else the first)."),
@@ -60,19 +76,25 @@ def _names(text: str | None, flag: str) -> list[str] | None:
     return names
 
 
-def _numbers(text: str | None) -> list[float] | None:
+def _numbers(text: str | None, flag: str = "--flickers") -> list[float] | None:
     try:
-        names = _names(text, "--flickers")
+        names = _names(text, flag)
         return None if names is None else [float(v) for v in names]
     except ValueError:
-        raise BadInput(f"--flickers takes numbers like 0,0.1,0.3 or 'none', got '{text}'.") from None
+        raise BadInput(f"{flag} takes numbers like 0,0.1,0.3 or 'none', got '{text}'.") from None
+
+
+def _pick(flag: list[float] | None, section: Mapping[str, Any], key: str, default: Sequence[float]
+          ) -> Sequence[float]:
+    """A list option: the flag when given, else the [study] table's, else the default."""
+    return flag if flag is not None else section.get(key, default)
 
 
 def study(
     ctx: typer.Context,
     regime: RegimeFlag = None,
     arms: StudyArms = None,
-    seeds: opt.Seeds = 10,
+    seeds: opt.Seeds = 20,
     seed_list: opt.SeedList = None,
     timesteps: opt.Timesteps = None,
     workers: opt.Workers = None,
@@ -81,6 +103,9 @@ def study(
     eval_episodes: opt.EvalEpisodes = None,
     profiles: Profiles = None,
     flickers: Flickers = None,
+    alphas: Alphas = None,
+    kin_scales: KinScales = None,
+    query_flickers: QueryFlickers = None,
     vlm_regime: VlmRegime = None,
     states: States = None,
     config: opt.ConfigFile = None,
@@ -93,7 +118,16 @@ def study(
     """Run regimes x arms x seeds (and the hybrid under several simulated VLMs) through the resumable
     MLflow sweep; write the regime map, the VLM-quality figure and a report generated from the numbers."""
     from vlmrl_cli.calibration.regimes import Regime
-    from vlmrl_cli.study.config import DEFAULT_FLICKERS, DEFAULT_PROFILES, build_study, choose_regimes, study_section
+    from vlmrl_cli.study.config import (
+        DEFAULT_ALPHAS,
+        DEFAULT_FLICKERS,
+        DEFAULT_KIN_SCALES,
+        DEFAULT_PROFILES,
+        DEFAULT_QUERY_FLICKERS,
+        build_study,
+        choose_regimes,
+        study_section,
+    )
     from vlmrl_cli.study.pipeline import estimate_cost, run_study
 
     console = Console()
@@ -106,12 +140,18 @@ def study(
             [file_layer, *upper], chosen,
             profiles=profile_list if profile_list is not None else section.get("profiles", DEFAULT_PROFILES),
             flickers=flicker_list if flicker_list is not None else section.get("flickers", DEFAULT_FLICKERS),
+            alphas=_pick(_numbers(alphas, "--alphas"), section, "alphas", DEFAULT_ALPHAS),
+            kin_scales=_pick(_numbers(kin_scales, "--kin-scales"), section, "kin_scales",
+                             DEFAULT_KIN_SCALES),
+            query_flickers=_pick(_numbers(query_flickers, "--query-flickers"), section,
+                                 "query_flickers", DEFAULT_QUERY_FLICKERS),
             vlm_regime=vlm_regime or section.get("vlm_regime"), notes=notes, out=out,
             **({} if states is None else {"states": states}),
         )
         base = cfg.base
         console.print(f"[bold]vlmrl study[/]: {len(cfg.regimes)} regime(s) x arms {', '.join(base.arms)} x seeds "
-                      f"{list(base.seeds)}, + {len(cfg.variants)} VLM variant(s) of the hybrid in "
+                      f"{list(base.seeds)}, + {len(cfg.variants)} VLM variant(s) of the hybrid and "
+                      f"{len(cfg.cells)} control cell(s) (dose-response, query flicker) in "
                       f"'{cfg.vlm_regime}'; experiment '{base.experiment}'")
         for r in cfg.all_regimes():
             console.print(f"  {r.id}: {r.label}, {r.run.budget:,} steps per run", markup=False)

@@ -19,6 +19,7 @@ Regimes come from ``--regime`` flags, else ``[study.regimes]`` in TOML, else ``D
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -35,10 +36,21 @@ from vlmrl_cli.training.presets import PRESETS
 from vlmrl_cli.vlm.config import SIM_PROFILES
 
 DEFAULT_EXPERIMENT = "vlmrl-study"
-DEFAULT_SEEDS = 10
-DEFAULT_ARMS = ("baseline", "kinematic", "semantic", "hybrid")
+DEFAULT_SEEDS = 20
+PLACEBO_ARM = "hybrid-shuffled"
+DEFAULT_ARMS = ("baseline", "kinematic", "semantic", "hybrid", PLACEBO_ARM)
 VARIANT_ARM = "hybrid"
 CALIBRATED = "paper-calibrated"
+#: The dose-response grid (issue 18): PBRS scales x kinematic scales, in the VLM regime. alpha 0 is
+#: the dense term alone (the kinematic arm; with kin_scale 0 the baseline), kin_scale 0 the VLM's
+#: potential alone (the semantic arm: the paper's "deadlock" case where only the VLM can help). At
+#: alpha 100 the potential pays about as much per episode as R_kin at its default scale (~45).
+DEFAULT_ALPHAS: tuple[float, ...] = (5.0, 25.0, 100.0)
+DEFAULT_KIN_SCALES: tuple[float, ...] = (0.0, 0.5, 2.0)
+#: Per-query (temporal) flicker rates at which the hybrid and hybrid-no-lock are compared: what
+#: the hysteresis lock is for.
+DEFAULT_QUERY_FLICKERS: tuple[float, ...] = (0.3,)
+LOCK_ARMS: tuple[str, ...] = ("hybrid", "hybrid-no-lock")
 NO_NORMALISATION = {"ppo.normalize_obs": False, "ppo.normalize_reward": False}
 #: The default grid: the paper preset, the calibrated one (once `vlmrl calibrate` has produced it),
 #: and a hard regime without VecNormalize (raw observations and rewards).
@@ -47,9 +59,72 @@ DEFAULT_REGIMES: dict[str, Mapping[str, Any]] = {
     CALIBRATED: {"preset": CALIBRATED},
     "hard": {"preset": "paper", **NO_NORMALISATION},
 }
-DEFAULT_PROFILES: tuple[str, ...] = tuple(SIM_PROFILES)
-DEFAULT_FLICKERS: tuple[float, ...] = (0.0, 0.1, 0.3, 0.5)
-_STUDY_KEYS = ("regimes", "profiles", "flickers", "vlm_regime")
+#: The VLM-quality variants are off by default since the dose-response and placebo controls came:
+#: the study of 2026-11-29 (results/study/2026-11-29/) ran them at 10 seeds and found no dependence
+#: it could detect; ``--profiles ideal,default,llava-table1 --flickers 0,0.1,0.3,0.5`` runs them again.
+DEFAULT_PROFILES: tuple[str, ...] = ()
+DEFAULT_FLICKERS: tuple[float, ...] = ()
+_STUDY_KEYS = ("regimes", "profiles", "flickers", "vlm_regime", "alphas", "kin_scales", "query_flickers")
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One control sweep in the VLM regime: a dose-response point (``kind`` ``dose``: the arm that
+    pays ``alpha`` x PBRS + ``kin_scale`` x R_kin, or its placebo) or a temporal-flicker point
+    (``query-flicker``: one of ``LOCK_ARMS`` at ``query_flicker``). ``regime.run`` lists one arm."""
+
+    kind: str
+    arm: str
+    regime: Regime
+    alpha: float = math.nan
+    kin_scale: float = math.nan
+    query_flicker: float = 0.0
+
+    @property
+    def placebo(self) -> bool:
+        return self.arm == PLACEBO_ARM
+
+
+def dose_point(alpha: float, kin_scale: float, placebo: bool = False) -> tuple[str, dict[str, Any]]:
+    """The arm and overrides that pay ``alpha`` x PBRS + ``kin_scale`` x R_kin. A term at 0 is
+    dropped by choosing the arm without it, and a knob the arm ignores is not set, so a point that
+    an ordinary arm already is (alpha 0 = kinematic, kin_scale 0 = semantic) shares its runs.
+
+    Example:
+        >>> dose_point(0, 0), dose_point(0, 2.0), dose_point(25, 0)
+        (('baseline', {}), ('kinematic', {'shaping.kin_scale': 2.0}), ('semantic', {'shaping.alpha': 25.0}))
+        >>> dose_point(5, 0.5), dose_point(100, 0, placebo=True)[0]
+        (('hybrid', {'shaping.alpha': 5.0, 'shaping.kin_scale': 0.5}), 'hybrid-shuffled')
+    """
+    if placebo:  # there is no semantic placebo arm: the placebo with kin_scale 0 pays the same
+        return PLACEBO_ARM, {"shaping.alpha": float(alpha), "shaping.kin_scale": float(kin_scale)}
+    if alpha == 0:
+        return ("baseline", {}) if kin_scale == 0 else ("kinematic", {"shaping.kin_scale": float(kin_scale)})
+    if kin_scale == 0:
+        return "semantic", {"shaping.alpha": float(alpha)}
+    return "hybrid", {"shaping.alpha": float(alpha), "shaping.kin_scale": float(kin_scale)}
+
+
+def control_points(alphas: Sequence[float], kin_scales: Sequence[float], query_flickers: Sequence[float]
+                   ) -> list[tuple[str, str, dict[str, Any], dict[str, float]]]:
+    """The control sweeps, as (name, arm, overrides, knobs) in training order: per kin_scale, the
+    dense-only point, every alpha, then the placebo at the largest alpha; then each query-flicker
+    rate for both ``LOCK_ARMS``. Points at (0, 0) are the baseline; they are listed too, so the
+    dose-response table is complete, and resume finds their runs."""
+    points: list[tuple[str, str, dict[str, Any], dict[str, float]]] = []
+    for kin in kin_scales:
+        for alpha in (0.0, *alphas):
+            arm, over = dose_point(alpha, kin)
+            points.append((f"dose alpha={alpha:g} kin={kin:g}", arm, over, {"alpha": alpha, "kin_scale": kin}))
+        if alphas:
+            top = max(alphas)
+            arm, over = dose_point(top, kin, placebo=True)
+            points.append((f"dose alpha={top:g} kin={kin:g} placebo", arm, over, {"alpha": top, "kin_scale": kin}))
+    for q in query_flickers:
+        for arm in LOCK_ARMS:
+            points.append((f"query-flicker {q:g} {arm}", arm, {"vlm.sim.query_flicker": float(q)},
+                           {"query_flicker": float(q)}))
+    return points
 
 
 @dataclass(frozen=True)
@@ -58,6 +133,7 @@ class StudyConfig:
 
     regimes: tuple[Regime, ...]
     variants: tuple[Regime, ...] = ()  # the hybrid with other VLM knobs, in ``vlm_regime``
+    cells: tuple[Cell, ...] = ()  # dose-response and temporal-flicker controls, in ``vlm_regime``
     vlm_regime: str = ""  # id of the regime whose baseline the variants are compared with
     notes: tuple[str, ...] = ()  # what was left out of the grid, and why
     out: Path = Path("results/study")
@@ -79,8 +155,8 @@ class StudyConfig:
         return max(self.thresholds)
 
     def all_regimes(self) -> tuple[Regime, ...]:
-        """Every sweep to train: the regimes, then the variants."""
-        return (*self.regimes, *self.variants)
+        """Every sweep to train: the regimes, then the variants, then the control cells."""
+        return (*self.regimes, *self.variants, *(c.regime for c in self.cells))
 
 
 def parse_regime(text: str) -> tuple[str, dict[str, Any]]:
@@ -139,7 +215,8 @@ def study_section(raw: Any) -> dict[str, Any]:
             else _bad_regime(str(name))
             for name, spec in regimes.items()
         }
-    for key, kind in (("profiles", str), ("flickers", (int, float))):
+    for key, kind in (("profiles", str), ("flickers", (int, float)), ("alphas", (int, float)),
+                      ("kin_scales", (int, float)), ("query_flickers", (int, float))):
         values = raw.get(key)
         if values is not None and (not isinstance(values, list) or not all(isinstance(v, kind) for v in values)):
             raise BadInput(f"study.{key} must be a list of {'names' if kind is str else 'numbers'}.")
@@ -182,12 +259,16 @@ def build_study(
     profiles: Sequence[str] = DEFAULT_PROFILES,
     flickers: Sequence[float] = DEFAULT_FLICKERS,
     vlm_regime: str | None = None,
+    alphas: Sequence[float] = DEFAULT_ALPHAS,
+    kin_scales: Sequence[float] = DEFAULT_KIN_SCALES,
+    query_flickers: Sequence[float] = DEFAULT_QUERY_FLICKERS,
     notes: Sequence[str] = (),
     **settings: Any,
 ) -> StudyConfig:
     """One validated ``StudyConfig``: every regime's run of every arm (``layers`` above the study's
-    defaults, the regime's overrides above them) and the hybrid's VLM variants in ``vlm_regime``
-    (default: the calibrated regime, else the first). Anything invalid is ``BadInput`` now."""
+    defaults, the regime's overrides above them), the hybrid's VLM variants and the control cells
+    (``control_points``) in ``vlm_regime`` (default: the calibrated regime, else the first).
+    Anything invalid is ``BadInput`` now."""
     if not regimes:
         raise BadInput("the study has no regime; pass --regime NAME[=...] or drop the [study.regimes] table.")
     unknown = [p for p in profiles if p not in SIM_PROFILES]
@@ -202,6 +283,20 @@ def build_study(
         raise BadInput(f"--vlm-regime '{target}' is not a regime of this study{did_you_mean(target, regimes)}.")
     variants: list[Regime] = []
     reference = next(r for r in built if r.id == target)
+    for name, values in (("alphas", alphas), ("kin_scales", kin_scales), ("query_flickers", query_flickers)):
+        bad = [v for v in values if not (math.isfinite(v) and v >= 0)]
+        if bad:
+            raise BadInput(f"{name} must be finite and >= 0, got {bad[0]}.")
+    if reference.run.vlm.backend != "sim" and query_flickers:
+        notes.append(f"no query-flicker cells: the VLM backend is '{reference.run.vlm.backend}', and query_flicker "
+                     "is a knob of the simulated VLM.")
+        query_flickers = ()
+    cells = tuple(
+        Cell(kind="dose" if "query_flicker" not in knobs else "query-flicker", arm=arm,
+             regime=resolve_regime(name, {**regimes[target], **over}, [base, *layers],
+                                   {"regime": f"{target} {name}", "arms": [arm]}), **knobs)
+        for name, arm, over, knobs in control_points(alphas, kin_scales, query_flickers)
+    )
     if reference.run.vlm.backend != "sim":
         notes.append(f"no VLM-quality variants: the VLM backend is '{reference.run.vlm.backend}', and profiles and "
                      "flicker are knobs of the simulated VLM.")
@@ -219,4 +314,5 @@ def build_study(
                 continue
             seen[key] = len(variants)
             variants.append(variant)
-    return StudyConfig(regimes=built, variants=tuple(variants), vlm_regime=target, notes=tuple(notes), **settings)
+    return StudyConfig(regimes=built, variants=tuple(variants), cells=cells, vlm_regime=target, notes=tuple(notes),
+                       **settings)
