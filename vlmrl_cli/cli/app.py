@@ -41,7 +41,7 @@ def _root(
 
 
 def _register() -> None:
-    from vlmrl_cli.cli import calibrate, evaluate, report, run, study, taxonomy
+    from vlmrl_cli.cli import calibrate, evaluate, report, run, study, taxonomy, transfer
 
     app.command("taxonomy")(taxonomy.taxonomy)
     app.command("run")(run.run)
@@ -49,6 +49,8 @@ def _register() -> None:
     app.command("calibrate")(calibrate.calibrate)
     app.command("evaluate")(evaluate.evaluate)
     app.command("study")(study.study)
+    app.command("export")(transfer.export)
+    app.command("import")(transfer.import_)
 
 
 _register()

@@ -1,0 +1,56 @@
+"""`vlmrl export` and `vlmrl import`: finished training runs as one compact file, between stores."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from vlmrl_cli.cli.errors import exit_codes
+from vlmrl_cli.cli.options import Experiment, TrackingUri
+from vlmrl_cli.core.errors import BadInput
+
+ExportFile = Annotated[Path, typer.Option("--out", help="The export file to write (gzip JSON lines: runs.jsonl.gz).")]
+Models = Annotated[bool, typer.Option("--models", help="Include model.zip and vecnormalize.pkl (for vlmrl evaluate).")]
+
+
+def export(
+    out: ExportFile,
+    experiment: Experiment = "vlmrl",
+    tracking_uri: TrackingUri = None,
+    models: Models = False,
+) -> None:
+    """Write every FINISHED training run of an experiment (tags, params, per-episode and evaluation
+    histories, config; models with --models) to one file that `vlmrl import` reads into another store."""
+    from vlmrl_cli.tracking import store
+    from vlmrl_cli.tracking.transfer import export_runs
+
+    with exit_codes():
+        if out.exists() and out.is_dir():
+            raise BadInput(f"--out {out} is a folder; name the export file, e.g. {out / 'runs.jsonl.gz'}.")
+        if not out.parent.is_dir():
+            raise BadInput(f"--out {out}: the folder {out.parent} does not exist; create it first.")
+        client = store.connect_existing(tracking_uri)
+        summary = export_runs(client, experiment, out, models=models)
+        typer.echo(f"exported {summary.written} FINISHED training run(s) of '{experiment}' to {out} "
+                   f"({out.stat().st_size / 1e6:.1f} MB)")
+
+
+def import_(
+    path: Annotated[Path, typer.Argument(help="An export file written by `vlmrl export`.", show_default=False)],
+    experiment: Experiment = "vlmrl",
+    tracking_uri: TrackingUri = None,
+) -> None:
+    """Create the runs of an export file in an experiment (created if missing) as FINISHED runs; runs
+    already there (same arm, seed and config hash) are skipped, so a resumed sweep never retrains them."""
+    from vlmrl_cli.tracking import store
+    from vlmrl_cli.tracking.transfer import import_runs, read_records
+
+    with exit_codes():
+        if not path.is_file():
+            raise BadInput(f"there is no export file {path}; write one with `vlmrl export --out FILE`.")
+        next(iter(read_records(path)), None)  # a file of another kind is refused before the store exists
+        client = store.connect(tracking_uri)
+        summary = import_runs(client, path, experiment)
+        typer.echo(f"imported {summary.written} run(s) into '{experiment}'; {summary.skipped} already present")
