@@ -8,19 +8,40 @@ from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.study.config import build_study, choose_regimes, study_section
 
 
-def test_default_regimes_are_paper_calibrated_and_hard() -> None:
+def test_the_default_regime_is_the_unreliable_calibrated_one() -> None:
     regimes, notes = choose_regimes([], None)
-    assert list(regimes) == ["paper", "paper-calibrated", "hard"] and notes == []
-    assert regimes["hard"] == {"preset": "paper", "ppo.normalize_obs": False, "ppo.normalize_reward": False}
+    assert regimes == {"paper-unreliable": {"preset": "paper-unreliable"}} and notes == []
 
 
 def test_default_regimes_skip_a_missing_preset_with_a_note(monkeypatch: pytest.MonkeyPatch) -> None:
     from vlmrl_cli.training import presets
 
-    monkeypatch.delitem(presets.PRESETS, "paper-calibrated")
+    monkeypatch.delitem(presets.PRESETS, "paper-unreliable")
     regimes, notes = choose_regimes([], None)
-    assert list(regimes) == ["paper", "hard"]
-    assert len(notes) == 1 and "paper-calibrated" in notes[0] and "vlmrl calibrate" in notes[0]
+    assert list(regimes) == []
+    assert len(notes) == 1 and "paper-unreliable" in notes[0] and "vlmrl calibrate" in notes[0]
+
+
+def test_the_default_grid_has_the_placebo_the_dose_response_and_the_lock_test() -> None:
+    regimes, _ = choose_regimes([], None)
+    cfg = build_study([], regimes)
+    assert cfg.base.seeds == tuple(range(20)) and "hybrid-shuffled" in cfg.base.arms
+    doses = [c for c in cfg.cells if c.kind == "dose"]
+    assert {(c.alpha, c.kin_scale) for c in doses if not c.placebo} == {
+        (a, k) for a in (0.0, 5.0, 25.0, 100.0) for k in (0.0, 0.5, 2.0)}
+    assert {(c.alpha, c.kin_scale) for c in doses if c.placebo} == {(100.0, 0.0), (100.0, 0.5), (100.0, 2.0)}
+    main = {j.arm.name: j.config_hash for j in cfg.regimes[0].run.jobs() if j.seed == 0}
+
+    def cell_hash(alpha: float, kin: float) -> str:
+        (cell,) = [c for c in doses if (c.alpha, c.kin_scale) == (alpha, kin) and not c.placebo]
+        return cell.regime.run.jobs()[0].config_hash
+
+    # the corners are the ordinary arms, so their runs are shared, not trained twice
+    assert cell_hash(0.0, 0.0) == main["baseline"] and cell_hash(0.0, 2.0) == main["kinematic"]
+    assert cell_hash(5.0, 0.0) == main["semantic"] and cell_hash(5.0, 2.0) == main["hybrid"]
+    flicker = [c for c in cfg.cells if c.kind == "query-flicker"]
+    assert [(c.arm, c.query_flicker) for c in flicker] == [("hybrid", 0.3), ("hybrid-no-lock", 0.3)]
+    assert all(c.regime.run.vlm.sim.query_flicker == 0.3 for c in flicker)
 
 
 def test_file_regimes_and_variants() -> None:
