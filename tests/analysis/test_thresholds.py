@@ -5,8 +5,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from vlmrl_cli.analysis.censored import restricted
 from vlmrl_cli.analysis.thresholds import (
-    censored_steps_to_threshold,
     full_window_steps_to_threshold,
     rolling_mean_return,
     steps_to_threshold,
@@ -21,8 +21,8 @@ def test_reached_exactly_counts():
 def test_dnf_is_none_and_censored_at_budget():
     ts, ret = [100, 200, 300], [-200, -200, -150]
     assert steps_to_threshold(ts, ret, -130, window=2) is None
-    assert censored_steps_to_threshold(ts, ret, -130, budget=1000, window=2) == 1000
-    assert censored_steps_to_threshold(ts, ret, -190, budget=1000, window=2) == 300
+    assert restricted([np.nan], 1000).tolist() == [1000.0]  # the DNF counts at the budget
+    assert steps_to_threshold(ts, ret, -190, window=2) == 300
 
 
 def test_window_longer_than_run_uses_partial_mean_by_default():
@@ -91,7 +91,7 @@ def test_result_is_an_episode_end_and_censoring_bounds(run, threshold, window):
     ts, ret = run
     s = steps_to_threshold(ts, ret, threshold, window)
     budget = int(ts.max()) + 1
-    c = censored_steps_to_threshold(ts, ret, threshold, budget, window)
+    c = restricted([np.nan if s is None else s], budget)[0]
     if s is None:
         assert c == budget
     else:

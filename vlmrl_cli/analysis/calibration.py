@@ -22,6 +22,7 @@ The inputs are *episode tables*: one row per training episode with columns ``see
 from __future__ import annotations
 
 import json
+import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -33,8 +34,9 @@ import pandas as pd
 from scipy import stats as sps
 
 from vlmrl_cli import paper
-from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, mean_ci, reliability
-from vlmrl_cli.analysis.thresholds import censored_steps_to_threshold, steps_to_threshold
+from vlmrl_cli.analysis import censored
+from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, reliability
+from vlmrl_cli.analysis.thresholds import steps_to_threshold
 from vlmrl_cli.core.errors import BadInput
 
 PAPER_REPORTED = paper.REPORTED
@@ -101,9 +103,10 @@ def seed_steps(
     for seed in sorted(set(episodes["seed"]) if seeds is None else seeds):
         ep = episodes[episodes["seed"] == seed]
         ts, ret = ep["timestep"].to_numpy(), ep["native_return"].to_numpy()
-        steps.append([censored_steps_to_threshold(ts, ret, t, budget, window) for t in thresholds])
         hits = [steps_to_threshold(ts, ret, t, window) for t in thresholds]
-        reached.append([h is not None and h <= budget for h in hits])
+        raw = np.asarray([math.nan if h is None else float(h) for h in hits])
+        steps.append(censored.restricted(raw, budget))  # the one DNF rule (analysis/censored.py)
+        reached.append(censored.reached(raw, budget))
     k = len(thresholds)
     return np.asarray(steps, dtype=float).reshape(-1, k), np.asarray(reached, dtype=bool).reshape(-1, k)
 
@@ -193,7 +196,7 @@ def regime_profile(
         n_seeds=int(reached.shape[0]),
         budget=int(budget),
         reliability=reliability(reached[:, -1], ci),
-        steps=tuple(mean_ci(steps[:, k], rng, n_boot, ci) for k in range(steps.shape[1])),
+        steps=tuple(censored.restricted_mean(steps[:, k], budget, rng, n_boot, ci) for k in range(steps.shape[1])),
         n_reached=tuple(int(n) for n in reached.sum(axis=0)),
         distance=distance_ci(steps, reached[:, -1], target, rng, n_boot, ci),
     )

@@ -8,8 +8,10 @@ as a value tied with every other DNF and above every finished seed.
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -37,6 +39,7 @@ class RankTest:
     n_dnf_a: int
     n_dnf_b: int
     note: str = ""
+    method: str = "exact"  # "exact" (every split enumerated) or "asymptotic" (normal, tie-corrected)
 
 
 def censor(steps: npt.ArrayLike) -> np.ndarray:
@@ -59,8 +62,11 @@ def censored_rank_test(
 
     Args:
         steps_a, steps_b: shapes ``(n_a,)``, ``(n_b,)``, timesteps to the threshold, NaN for DNF.
-        rng: draws the permutations when there are more than ``n_perm`` splits of the seeds
-            (fewer are enumerated exactly, so the p-value is exact with ties).
+        rng: kept for the signature's sake; no p-value is drawn at random any more.
+        n_perm: up to this many splits of the seeds, every split is enumerated and the p-value is
+            exact (with ties); beyond, the normal approximation with tie and continuity correction
+            (``method="asymptotic"``), which has no resolution floor (9,999 random permutations
+            could not give a p below 1/10,000, and printed that floor as if it were exact).
         budget_a, budget_b: the arms' budgets; when they differ a DNF of the shorter one may not be
             slower than a finished seed of the longer one, and the note says so.
 
@@ -85,13 +91,17 @@ def censored_rank_test(
         u = float(np.sum((a[:, None] > b[None, :]) + 0.5 * (a[:, None] == b[None, :])))
         return RankTest(u, float("nan"), 1.0 - u / (a.size * b.size), int(a.size), int(b.size), dnf_a, dnf_b,
                         "; ".join([*notes, "fewer than 2 seeds in an arm: no test"]))
+    exact = math.comb(int(a.size + b.size), int(a.size)) <= n_perm
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all values tied
-        res = sps.mannwhitneyu(a, b, alternative="two-sided",
-                               method=sps.PermutationMethod(n_resamples=n_perm, rng=rng))
+        method: Any = sps.PermutationMethod(n_resamples=n_perm, rng=rng) if exact else "asymptotic"
+        # an infinite DNF is a rank above every finish either way; the normal approximation needs finite values
+        finite_a, finite_b = (np.where(np.isinf(v), np.finfo(float).max, v) for v in (a, b))
+        res = sps.mannwhitneyu(finite_a, finite_b, alternative="two-sided", method=method)
     u = float(res.statistic)
     p = float(res.pvalue) if np.isfinite(res.pvalue) else 1.0
-    return RankTest(u, min(1.0, p), 1.0 - u / (a.size * b.size), int(a.size), int(b.size), dnf_a, dnf_b, note)
+    return RankTest(u, min(1.0, p), 1.0 - u / (a.size * b.size), int(a.size), int(b.size), dnf_a, dnf_b, note,
+                    "exact" if exact else "asymptotic")
 
 
 def _p_greater(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:

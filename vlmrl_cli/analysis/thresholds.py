@@ -113,23 +113,3 @@ def full_window_steps_to_threshold(
         100
     """
     return steps_to_threshold(timesteps, returns, threshold, window, min_episodes=window)
-
-
-def censored_steps_to_threshold(
-    timesteps: npt.ArrayLike,
-    returns: npt.ArrayLike,
-    threshold: float,
-    budget: int,
-    window: int = 100,
-    min_episodes: int = 1,
-) -> int:
-    """``steps_to_threshold``, with a run that never reaches the threshold counted at ``budget``.
-
-    The result is a lower bound on the true (unobserved) steps of a DNF run.
-
-    Example:
-        >>> censored_steps_to_threshold([100, 200], [-200, -199], -130, budget=1000)
-        1000
-    """
-    steps = steps_to_threshold(timesteps, returns, threshold, window, min_episodes)
-    return int(budget) if steps is None else min(steps, int(budget))

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from vlmrl_cli.analysis import stats
+from vlmrl_cli.analysis import censored, stats
 from vlmrl_cli.analysis.load import ExperimentData
 from vlmrl_cli.analysis.proportions import DETACHED_SUCCESS_CUT, detached_successes
 from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM, RankTest, censored_rank_test
@@ -52,9 +52,14 @@ def full_window_key(threshold: float) -> str:
     return f"full_{threshold_key(threshold)}"
 
 
+def finishers_key(threshold: float) -> str:
+    """Row of the paper's convention (mean over the seeds that finished), e.g. ``finishers_steps_-130``."""
+    return f"finishers_{threshold_key(threshold)}"
+
+
 def is_steps(metric: str) -> bool:
-    """Whether ``metric`` is a steps-to-threshold row (partial or full window)."""
-    return metric.startswith(("steps_", "full_steps_"))
+    """Whether ``metric`` is a steps-to-threshold row (partial or full window, or the finishers' mean)."""
+    return metric.startswith(("steps_", "full_steps_", "finishers_steps_"))
 
 
 def per_seed_table(data: ExperimentData, thresholds: Sequence[float], window: int = 100,
@@ -125,8 +130,10 @@ def _paper_steps(reported: dict[str, Any], threshold: float) -> dict[str, Any]:
 def _paper_values(reported: dict[str, Any], metric: str, thresholds: Sequence[float]) -> dict[str, Any]:
     """{arm: value, "speedup": value} the paper reports for ``metric``."""
     for t in thresholds:
-        if metric == threshold_key(t):
-            return _paper_steps(reported, t)
+        if metric == finishers_key(t):  # the paper's steps are means over the seeds that finished
+            return {k: v for k, v in _paper_steps(reported, t).items() if k != "speedup"}
+        if metric == threshold_key(t):  # its speedup is shown beside ours, on our headline row
+            return {k: v for k, v in _paper_steps(reported, t).items() if k == "speedup"}
     if metric == "reliability":
         return dict(reported.get("table2", {}).get("final_reliability", {}))
     if metric == "eval_success":
@@ -164,8 +171,11 @@ def build_table2(
     """
     arms = tuple(order_arms(per_seed["arm"].unique().tolist()))
     top = max(thresholds)
-    labels = {threshold_key(t): f"Steps to reach {t:g}" for t in thresholds}
-    labels |= {full_window_key(t): f"Steps to reach {t:g}, full {window}-episode window" for t in thresholds}
+    labels = {threshold_key(t): f"Steps to reach {t:g} (restricted mean, DNF at the budget)" for t in thresholds}
+    labels |= {full_window_key(t): f"Steps to reach {t:g}, full {window}-episode window (restricted mean)"
+               for t in thresholds}
+    labels |= {finishers_key(t): f"Steps to reach {t:g}, mean over the seeds that finished (the paper's "
+                                 "convention; no verdict rests on it)" for t in thresholds}
     labels |= {
         "reliability": f"Final reliability (seeds reaching {top:g})",
         "eval_success": f"Detached eval: seeds succeeding (success rate >= {100 * detached_cut:g}%)",
@@ -184,11 +194,17 @@ def build_table2(
                 if key not in d:
                     continue
                 s = d[key].to_numpy(dtype=float)
-                summ = stats.summarize_steps(s, budget, stats.stream(rng, f"table2/{key}/{arm}"), n_boot, ci)
-                c = _cell(key, arm, summ.mean, _paper_values(reported, key, thresholds).get(arm), n, summ.n_reached)
+                est = censored.restricted_mean(s, budget, stats.stream(rng, f"table2/{key}/{arm}"), n_boot, ci)
+                hits = int(censored.reached(s, budget).sum())
+                c = _cell(key, arm, est, None, n, hits)
+                summ = stats.summarize_steps(s, budget, stats.stream(rng, f"table2/finishers/{key}/{arm}"), n_boot,
+                                             ci)
                 c |= {"median": summ.median, "censored_mean": summ.censored_mean, "std": summ.std, "iqr": summ.iqr}
                 cells.append(c)
-        reached = np.isfinite(d[threshold_key(top)].to_numpy(dtype=float))
+                if key == threshold_key(t):  # the paper's own convention, beside ours, for its table
+                    cells.append(_cell(finishers_key(t), arm, summ.mean,
+                                       _paper_values(reported, key, thresholds).get(arm), n, summ.n_reached))
+        reached = censored.reached(d[threshold_key(top)].to_numpy(dtype=float), budget)
         rel = stats.reliability(reached, ci)
         cells.append(_cell("reliability", arm, rel, _paper_values(reported, "reliability", thresholds).get(arm), n,
                            int(reached.sum())))
@@ -255,13 +271,15 @@ def compare_steps(
     per_seed: pd.DataFrame, arm: str, ref: str, threshold: float, rng: np.random.Generator | stats.Streams,
     n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, n_perm: int = DEFAULT_N_PERM,
 ) -> tuple[stats.Estimate, RankTest]:
-    """Speedup of ``arm`` over ``ref`` to ``threshold`` (mean steps over finishing seeds, bootstrap CI)
-    and the censored rank test of ``arm`` vs ``ref`` (DNF seeds kept, tied above every finish)."""
+    """Speedup of ``arm`` over ``ref`` to ``threshold`` (ratio of restricted mean steps, DNF at the
+    budget, ``analysis/censored.py``; bootstrap CI) and the censored rank test of ``arm`` vs ``ref``
+    (DNF seeds kept, tied above every finish)."""
     key = threshold_key(threshold)
-    a = per_seed.loc[per_seed["arm"] == arm, key].to_numpy(dtype=float)
-    r = per_seed.loc[per_seed["arm"] == ref, key].to_numpy(dtype=float)
+    mine, theirs = per_seed["arm"] == arm, per_seed["arm"] == ref
+    a, r = per_seed.loc[mine, key].to_numpy(dtype=float), per_seed.loc[theirs, key].to_numpy(dtype=float)
     skey = speedup_key(threshold, arm, ref)
-    est = stats.speedup(r, a, stats.stream(rng, skey), n_boot, ci)
+    est = censored.speedup(r, a, per_seed.loc[theirs, "budget"].to_numpy(dtype=float),
+                           per_seed.loc[mine, "budget"].to_numpy(dtype=float), stats.stream(rng, skey), n_boot, ci)
     test = censored_rank_test(a, r, stats.stream(rng, skey + "/rank"), n_perm, arm_budget(per_seed, arm),
                               arm_budget(per_seed, ref))
     return est, test
@@ -335,7 +353,7 @@ def display_frame(table: Table2) -> pd.DataFrame:
     for metric, label in table.labels.items():
         rec: dict[str, str] = {"Metric": label}
         for arm in table.arms:
-            rec[f"{arm} (ours, mean [{ci_pct}])"] = format_cell(table.cell(metric, arm))
+            rec[f"{arm} (ours [{ci_pct}])"] = format_cell(table.cell(metric, arm))
         for arm in ("hybrid", BASELINE):
             rec[f"{arm} (paper)"] = _paper_cell(metric, table.paper.get(metric, {}).get(arm))
         partial = metric.startswith("steps_")  # speedups are shown beside the paper's (partial) window
@@ -360,8 +378,10 @@ def to_markdown(table: Table2) -> str:
     paper = [c for c in df.columns if "(paper)" in c and c not in speed]
     ours = [c for c in df.columns[1:] if c not in speed and c not in paper]
     parts = []
-    for title, cols in (("Ours (mean [95% CI])", ours), ("Speedup vs baseline (ours, rank-test p) and the paper's",
-                                                          speed), ("The paper", paper)):
+    blocks = (("Ours ([95% CI]; steps: restricted means, a DNF counted at the budget)", ours),
+              ("Speedup vs baseline (ours: ratio of restricted means, rank-test p) and the paper's", speed),
+              ("The paper", paper))
+    for title, cols in blocks:
         block = df[[first, *cols]]
         block = block[block[cols].astype(str).apply(lambda r: any(v.strip() not in ("", "—") for v in r), axis=1)]
         if cols and len(block):

@@ -1,0 +1,114 @@
+"""The one DNF rule (restricted means) and the verdicts, power and p formatting built on it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from vlmrl_cli.analysis import censored
+from vlmrl_cli.analysis.calibration import TargetProfile, regime_profile
+from vlmrl_cli.analysis.load import EPISODE_COLUMNS, RUN_COLUMNS, ExperimentData
+from vlmrl_cli.analysis.stats import Streams
+from vlmrl_cli.study.analysis import regime_row
+
+BUDGET = 1000
+THRESHOLDS = (-190.0, -130.0)
+
+
+def _episodes(seed: int, cross_at: int | None) -> list[dict[str, object]]:
+    """Episodes every 100 steps returning -200 until ``cross_at``, then -100 (never when None)."""
+    return [{"run_id": f"r{seed}", "arm": "baseline", "seed": seed, "timestep": t,
+             "native_return": -100.0 if cross_at is not None and t >= cross_at else -200.0, "length": 100.0,
+             "success": 0.0, "shaped_return": 0.0} for t in range(100, BUDGET + 1, 100)]
+
+
+def _data(crossings: list[int | None]) -> ExperimentData:
+    episodes = pd.DataFrame([e for s, c in enumerate(crossings) for e in _episodes(s, c)])[EPISODE_COLUMNS]
+    runs = pd.DataFrame([{c: np.nan for c in RUN_COLUMNS} | {
+        "run_id": f"r{s}", "arm": "baseline", "seed": s, "config_hash": "h", "preset": "p", "budget": BUDGET,
+        "vlm": "none", "simulated": False, "eval_success_rate": 1.0} for s in range(len(crossings))])
+    return ExperimentData("0", "e", runs, episodes, pd.DataFrame(columns=["run_id", "arm", "seed", "episode",
+                                                                            "length"]))
+
+
+def test_report_study_and_calibrate_give_one_estimate_on_a_censored_example() -> None:
+    # rolling mean over the episodes so far: seed 0 is at -100 from the first episode (reaches -130
+    # at 100), seed 1 never (DNF), seed 2 after one -200 episode (mean -130 once 3.3 episodes: at 400)
+    data = _data([100, None, 200])
+    expected = (100 + BUDGET + 400) / 3
+    row, per_seed = regime_row("r", data, THRESHOLDS, Streams(0), n_boot=50)
+    assert row["baseline.steps"] == pytest.approx(expected)  # the study's map (and the report's Table 2 cell)
+    assert row["baseline.reached"] == 2
+    target = TargetProfile(THRESHOLDS, (500.0, 500.0), 0.5)
+    profile = regime_profile(data.episodes, target, BUDGET, np.random.default_rng(0), window=100, n_boot=50)
+    assert profile.steps[-1].value == pytest.approx(expected)  # calibrate
+    assert profile.n_reached[-1] == 2 and profile.reliability.value == pytest.approx(2 / 3)
+    steps = per_seed.sort_values("seed")["steps_-130"].to_numpy()
+    assert censored.restricted_mean(steps, BUDGET).value == pytest.approx(expected)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.one_of(st.none(), st.integers(1, 2000)), min_size=1, max_size=12))
+def test_restricted_means_keep_every_seed_and_stay_within_the_budget(values: list[int | None]) -> None:
+    steps = np.array([np.nan if v is None else float(v) for v in values])
+    r = censored.restricted(steps, BUDGET)
+    assert r.shape == steps.shape and (r <= BUDGET).all()
+    finished = censored.reached(steps, BUDGET)
+    assert (r[~finished] == BUDGET).all() and (r[finished] == steps[finished]).all()
+    mean = censored.restricted_mean(steps, BUDGET).value
+    assert mean >= np.nanmin(np.where(finished, steps, BUDGET))
+    # dropping the DNF seeds (the paper's convention) can only lower the mean: it flatters failures
+    if finished.any():
+        assert steps[finished].mean() <= mean + 1e-9
+
+
+def test_verdicts_faster_equivalent_inconclusive() -> None:
+    rng = np.random.default_rng(0)
+    same = censored.steps_verdict([500.0, 510.0, 490.0] * 4, [505.0, 495.0, 500.0] * 4, BUDGET, BUDGET, 0.8, rng,
+                                  400)
+    assert same.text == censored.equivalent(1.15) and 1 / 1.15 < same.tost_low <= same.tost_high < 1.15
+    fast = censored.steps_verdict([800.0] * 10, [400.0] * 10, BUDGET, BUDGET, 0.001, rng, 400)
+    assert fast.text == censored.FASTER and fast.speedup.value == pytest.approx(2.0)
+    slow = censored.steps_verdict([400.0] * 10, [800.0] * 10, BUDGET, BUDGET, 0.001, rng, 400)
+    assert slow.text == censored.SLOWER
+    wide = censored.steps_verdict([200.0, 900.0, 300.0], [250.0, 800.0, 600.0], BUDGET, BUDGET, 0.5, rng, 400)
+    assert wide.text == censored.INCONCLUSIVE
+    # alike only because almost every seed DNFs: no equivalence claim
+    dnf = censored.steps_verdict([np.nan] * 9 + [900.0], [np.nan] * 10, BUDGET, BUDGET, 0.9, rng, 400)
+    assert dnf.text == censored.INCONCLUSIVE and dnf.speedup.value == pytest.approx(0.99)
+
+
+def test_a_p_at_the_permutation_floor_is_printed_as_a_bound() -> None:
+    assert censored.format_p(1 / 10_000, "permutation", 9999) == "p < 0.0001"
+    assert censored.format_p(0.0002, "permutation", 9999) == "p = 0.0002"
+    assert censored.format_p(1e-9, "asymptotic") == "p = 1e-09"
+
+
+def test_the_rank_test_has_no_resolution_floor_at_twenty_seeds() -> None:
+    from vlmrl_cli.analysis.ranks import censored_rank_test
+
+    big = censored_rank_test(np.arange(1.0, 21.0), [np.nan] * 20, np.random.default_rng(0))
+    assert big.method == "asymptotic" and big.p_value < 1e-6
+    small = censored_rank_test([1.0, 2.0, 3.0], [np.nan] * 3, np.random.default_rng(0))
+    assert small.method == "exact" and small.p_value == pytest.approx(0.1)
+
+
+def test_power_matches_the_guides_figures() -> None:
+    assert 1.2 < censored.detectable_speedup(0.15, 10, 10) < 1.25
+    assert 1.35 < censored.detectable_speedup(0.25, 10, 10) < 1.45
+    assert censored.seeds_for_reliability(1.0, 0.6) == 16
+    assert censored.fisher_power(1.0, 0.6, 5) < 0.2
+    assert censored.detectable_speedup(0.2, 40, 40) < censored.detectable_speedup(0.2, 10, 10)
+    assert math.isnan(censored.detectable_speedup(0.2, 1, 10))
+
+
+def test_learning_curve_area_weighs_steps() -> None:
+    assert censored.learning_curve_area([100, 300], [-200.0, -100.0], [100, 200], 1000) == pytest.approx(
+        (-200 * 100 - 100 * 200) / 300)
+    assert censored.learning_curve_area([2000], [-100.0], [100], 1000) != censored.learning_curve_area(
+        [2000], [-100.0], [100], 3000)

@@ -1,0 +1,294 @@
+"""The one rule for steps to a threshold, and the verdicts built on it.
+
+**The DNF rule.** Steps to a threshold are right-censored at the run's budget: a seed that did
+not finish (DNF) is only known to need more than its budget. Every estimate, speedup and verdict
+of ``report``, ``study`` and ``calibrate`` uses the *restricted mean*: the mean over all seeds of
+``min(steps, budget)``, a DNF counted at the budget. With every run censored at the same budget
+this is exactly the restricted mean survival time up to the budget (RMST, the area under the
+Kaplan-Meier curve to the budget), a well-defined estimand that keeps every seed. It is a lower
+bound on the unrestricted mean, and a speedup of restricted means is pulled towards 1 when many
+seeds DNF; equivalence is therefore only claimed when each arm finished on at least
+``MIN_FINISHED_FOR_EQUIVALENCE`` of its seeds. A seed *reached* a threshold when its rolling mean
+return crossed it at a step no later than its budget. The paper's convention (the mean over the
+seeds that finished) survives only as a labelled column of Table 2, never as a verdict's basis.
+
+**Verdicts.** Arm ``a`` against reference ``b``: ``faster`` / ``slower`` when the censored rank
+test is significant at ``alpha``; otherwise ``equivalent within M x`` when the ``1 - 2 alpha``
+bootstrap interval of the speedup lies inside ``[1/M, M]`` (two one-sided tests, TOST, on the
+ratio of restricted means; default margin 1.15x); otherwise ``inconclusive``.
+
+All functions are pure; shapes are ``(n_seeds,)`` arrays with NaN for a DNF; randomness comes in
+as an explicit generator.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy import stats as sps
+
+from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, bootstrap_ci
+
+DEFAULT_MARGIN = 1.15
+MIN_FINISHED_FOR_EQUIVALENCE = 0.5
+FASTER, SLOWER, INCONCLUSIVE = "faster", "slower", "inconclusive"
+HIGHER, LOWER = "higher", "lower"
+RULE = ("steps to a threshold are censored at the budget: a seed that never reaches it counts at the budget "
+        "(restricted mean, i.e. the RMST up to the budget); a seed reached it when its rolling mean crossed it "
+        "within the budget")
+
+
+def equivalent(margin: float) -> str:
+    """The verdict text of an equivalence, naming its margin.
+
+    Example:
+        >>> equivalent(1.15)
+        'equivalent within 1.15x'
+    """
+    return f"equivalent within {margin:g}x"
+
+
+def restricted(steps: npt.ArrayLike, budget: npt.ArrayLike) -> np.ndarray:
+    """``min(steps, budget)`` per seed, a DNF (NaN) at the budget: shape ``(n,)``, in env steps.
+
+    Example:
+        >>> restricted([100.0, float("nan"), 2000.0], 1000).tolist()
+        [100.0, 1000.0, 1000.0]
+    """
+    x = np.asarray(steps, dtype=float).reshape(-1)
+    b = np.broadcast_to(np.asarray(budget, dtype=float), x.shape)
+    return np.where(np.isfinite(x), np.minimum(x, b), b)
+
+
+def reached(steps: npt.ArrayLike, budget: npt.ArrayLike) -> np.ndarray:
+    """Whether each seed reached the threshold within its budget: shape ``(n,)`` of bools.
+
+    Example:
+        >>> reached([100.0, float("nan"), 2000.0], 1000).tolist()
+        [True, False, False]
+    """
+    x = np.asarray(steps, dtype=float).reshape(-1)
+    b = np.broadcast_to(np.asarray(budget, dtype=float), x.shape)
+    return np.isfinite(x) & (x <= b)
+
+
+def restricted_mean(steps: npt.ArrayLike, budget: npt.ArrayLike, rng: np.random.Generator | None = None,
+                    n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95) -> Estimate:
+    """The restricted mean of steps (env steps) with a bootstrap CI over seeds when ``rng`` is given.
+
+    Example:
+        >>> restricted_mean([100.0, float("nan"), 300.0], 1000).value
+        466.6666666666667
+    """
+    r = restricted(steps, budget)
+    if r.size == 0:
+        return Estimate(math.nan, n=0, note="no seeds")
+    n_dnf = int((~reached(steps, budget)).sum())
+    note = f"DNF {n_dnf}/{r.size} counted at the budget" if n_dnf else ""
+    if rng is None or r.size < 2:
+        return Estimate(float(r.mean()), n=int(r.size), note=note or ("n=1: no CI" if r.size < 2 else ""))
+    low, high = bootstrap_ci((r,), np.mean, rng, n_boot, ci)
+    return Estimate(float(r.mean()), low, high, n=int(r.size), note=note)
+
+
+def _ratio(b: np.ndarray, a: np.ndarray, axis: int = -1) -> np.ndarray:
+    return np.asarray(np.mean(b, axis=axis) / np.mean(a, axis=axis))
+
+
+def speedup(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget: npt.ArrayLike,
+            arm_budget: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT,
+            ci: float = 0.95) -> Estimate:
+    """Restricted mean steps of the reference over the arm's (above 1: the arm is faster), with a
+    percentile bootstrap CI resampling each arm's seeds independently.
+
+    Example:
+        >>> speedup([280.0, float("nan")], [200.0, 200.0], 300, 300, np.random.default_rng(0), 200).value
+        1.45
+    """
+    b, a = restricted(ref_steps, ref_budget), restricted(arm_steps, arm_budget)
+    if a.size == 0 or b.size == 0:
+        return Estimate(math.nan, n=0, note="an arm has no seeds")
+    value = float(b.mean() / a.mean())
+    n = int(min(a.size, b.size))
+    if n < 2:
+        return Estimate(value, n=n, note="fewer than 2 seeds: no CI")
+    low, high = bootstrap_ci((b, a), _ratio, rng, n_boot, ci)
+    return Estimate(value, low, high, n=n)
+
+
+def tost_equivalent(interval: tuple[float, float], margin: float = DEFAULT_MARGIN) -> bool:
+    """TOST on a ratio: both one-sided tests at level alpha reject iff the ``1 - 2 alpha`` interval
+    lies inside ``[1/margin, margin]``.
+
+    Example:
+        >>> tost_equivalent((0.92, 1.10)), tost_equivalent((0.80, 1.10)), tost_equivalent((float("nan"), 1.0))
+        (True, False, False)
+    """
+    if not margin > 1:
+        raise ValueError(f"the equivalence margin is a ratio > 1, got {margin}")
+    low, high = interval
+    return bool(math.isfinite(low) and math.isfinite(high) and 1 / margin < low and high < margin)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """A comparison's verdict and what it rests on: the speedup (at the report's CI), the ``1 - 2 alpha``
+    interval the equivalence test used, the censored rank test's p, the margin."""
+
+    text: str
+    speedup: Estimate
+    tost_low: float
+    tost_high: float
+    p_value: float
+    margin: float
+
+
+def steps_verdict(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget: npt.ArrayLike,
+                  arm_budget: npt.ArrayLike, p_value: float, rng: np.random.Generator,
+                  n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95, alpha: float = 0.05,
+                  margin: float = DEFAULT_MARGIN) -> Verdict:
+    """The verdict of arm vs reference on steps to one threshold (module docstring), from their steps
+    (NaN = DNF), budgets and the censored rank test's ``p_value``.
+
+    Example:
+        >>> rng = np.random.default_rng(0)
+        >>> steps_verdict([100.0] * 6, [101.0, 99.0] * 3, 1000, 1000, 0.9, rng, 500).text
+        'equivalent within 1.15x'
+    """
+    est = speedup(ref_steps, arm_steps, ref_budget, arm_budget, rng, n_boot, ci)
+    tost = speedup(ref_steps, arm_steps, ref_budget, arm_budget, rng, n_boot, 1 - 2 * alpha)
+    finished = min(float(reached(ref_steps, ref_budget).mean()) if np.size(ref_steps) else 0.0,
+                   float(reached(arm_steps, arm_budget).mean()) if np.size(arm_steps) else 0.0)
+    if math.isfinite(p_value) and p_value < alpha and math.isfinite(est.value) and est.value != 1:
+        text = FASTER if est.value > 1 else SLOWER
+    elif finished >= MIN_FINISHED_FOR_EQUIVALENCE and tost_equivalent((tost.low, tost.high), margin):
+        text = equivalent(margin)
+    else:
+        text = INCONCLUSIVE
+    return Verdict(text, est, tost.low, tost.high, p_value, margin)
+
+
+def difference_verdict(diff: Estimate, tost: tuple[float, float], p_value: float, alpha: float,
+                       delta: float) -> str:
+    """Verdict on a difference where higher is better (e.g. AUC, return units): ``higher``/``lower``
+    when the test is significant, ``equivalent within +-delta`` when the ``1 - 2 alpha`` interval
+    ``tost`` lies inside ``(-delta, delta)``, else ``inconclusive``.
+
+    Example:
+        >>> difference_verdict(Estimate(1.0, -2.0, 3.0), (-1.5, 2.5), 0.4, 0.05, 5.0)
+        'equivalent within +-5'
+    """
+    if math.isfinite(p_value) and p_value < alpha and math.isfinite(diff.value) and diff.value != 0:
+        return HIGHER if diff.value > 0 else LOWER
+    low, high = tost
+    if math.isfinite(low) and math.isfinite(high) and -delta < low and high < delta:
+        return f"equivalent within +-{delta:g}"
+    return INCONCLUSIVE
+
+
+def format_p(p_value: float, method: str = "", n_perm: int = 0) -> str:
+    """A p-value for a table: ``p < 1/(B+1)`` when a permutation p sits at its resolution floor
+    (it cannot be smaller with ``B`` permutations), otherwise two significant digits.
+
+    Example:
+        >>> format_p(0.0001, "permutation", 9999), format_p(0.012), format_p(float("nan"))
+        ('p < 0.0001', 'p = 0.012', 'no test')
+    """
+    if not math.isfinite(p_value):
+        return "no test"
+    if method == "permutation" and n_perm > 0 and p_value <= 1.0 / (n_perm + 1) * (1 + 1e-9):
+        return f"p < {1.0 / (n_perm + 1):.2g}"
+    return f"p = {p_value:.2g}"
+
+
+# ---- a threshold-free measure ------------------------------------------------------------------
+
+
+def learning_curve_area(timesteps: npt.ArrayLike, returns: npt.ArrayLike, lengths: npt.ArrayLike,
+                        budget: int) -> float:
+    """Area under the learning curve, as a mean native return over the budget: each env step of the
+    episodes that ended within the budget weighs the return of its episode (shapes ``(E,)``). No
+    threshold and no window: higher is better, in return units.
+
+    Example:
+        >>> learning_curve_area([200, 300], [-200.0, -100.0], [200, 100], budget=1000)
+        -166.66666666666666
+    """
+    ts = np.asarray(timesteps, dtype=float).reshape(-1)
+    ret = np.asarray(returns, dtype=float).reshape(-1)
+    length = np.asarray(lengths, dtype=float).reshape(-1)
+    keep = (ts <= budget) & np.isfinite(ret) & np.isfinite(length) & (length > 0)
+    if not keep.any():
+        return math.nan
+    return float(np.sum(ret[keep] * length[keep]) / np.sum(length[keep]))
+
+
+# ---- power -------------------------------------------------------------------------------------
+
+
+def detectable_speedup(sd_log: float, n_a: int, n_b: int, alpha: float = 0.05, power: float = 0.8) -> float:
+    """The smallest speedup a two-sided test at ``alpha`` detects with ``power``, for seeds whose log
+    steps have standard deviation ``sd_log`` (normal approximation on log steps, two arms).
+
+    Example:
+        >>> round(detectable_speedup(0.2, 10, 10), 2)
+        1.28
+    """
+    if n_a < 2 or n_b < 2 or not sd_log > 0:
+        return math.nan
+    z = sps.norm.ppf(1 - alpha / 2) + sps.norm.ppf(power)
+    return float(math.exp(z * sd_log * math.sqrt(1 / n_a + 1 / n_b)))
+
+
+def seeds_for_speedup(effect: float, sd_log: float, alpha: float = 0.05, power: float = 0.8) -> int:
+    """Seeds per arm that detect a speedup of ``effect`` (e.g. 1.2) with ``power`` (same model).
+
+    Example:
+        >>> seeds_for_speedup(1.2, 0.2)
+        19
+    """
+    if not effect > 1 or not sd_log > 0:
+        raise ValueError("effect must be > 1 and sd_log > 0")
+    z = sps.norm.ppf(1 - alpha / 2) + sps.norm.ppf(power)
+    return math.ceil(2 * (z * sd_log / math.log(effect)) ** 2)
+
+
+def fisher_power(p_a: float, p_b: float, n: int, alpha: float = 0.05) -> float:
+    """Power of a two-sided Fisher exact test at ``alpha`` telling success rates ``p_a`` and ``p_b``
+    apart with ``n`` seeds per arm (exact: every outcome pair enumerated).
+
+    Example:
+        >>> round(fisher_power(1.0, 0.6, 16), 2) >= 0.8 > round(fisher_power(1.0, 0.6, 10), 2)
+        True
+    """
+    if n < 1:
+        return math.nan
+    ks = np.arange(n + 1)
+    pa, pb = sps.binom.pmf(ks, n, p_a), sps.binom.pmf(ks, n, p_b)
+    total = 0.0
+    for i in ks:
+        if pa[i] < 1e-12:
+            continue
+        for j in ks:
+            if pb[j] < 1e-12:
+                continue
+            if sps.fisher_exact([[i, n - i], [j, n - j]]).pvalue < alpha:
+                total += pa[i] * pb[j]
+    return float(total)
+
+
+def seeds_for_reliability(p_a: float, p_b: float, alpha: float = 0.05, power: float = 0.8,
+                          max_n: int = 200) -> int | None:
+    """The fewest seeds per arm whose Fisher test reaches ``power`` for ``p_a`` vs ``p_b`` (None past ``max_n``).
+
+    Example:
+        >>> seeds_for_reliability(1.0, 0.6)
+        16
+    """
+    for n in range(2, max_n + 1):
+        if fisher_power(p_a, p_b, n, alpha) >= power:
+            return n
+    return None
