@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from tests.report.fake_mlflow import EXPECTED, WINDOW, build_fake_experiment
+from tests.report.fake_mlflow import BUDGET, EXPECTED, WINDOW, build_fake_experiment
 from vlmrl_cli.cli.app import app
 from vlmrl_cli.report import writer
 
@@ -40,8 +40,14 @@ def _report(uri: str, experiment: str, out: Path):
 
 
 def _mean(xs: list[int | None]) -> float:
+    """The paper's convention: the mean over the seeds that finished."""
     done = [x for x in xs if x is not None]
     return sum(done) / len(done)
+
+
+def _restricted(xs: list[int | None]) -> float:
+    """The one DNF rule: every seed, a DNF at the budget."""
+    return sum(BUDGET if x is None else x for x in xs) / len(xs)
 
 
 def test_report_writes_every_file_with_hand_computed_values(store, tmp_path):
@@ -65,16 +71,20 @@ def test_report_writes_every_file_with_hand_computed_values(store, tmp_path):
     cell = long.set_index(["metric", "arm"])
     for arm, by_t in EXPECTED.items():
         for t, steps in by_t.items():
-            assert cell.loc[(f"steps_{t}", arm), "value"] == pytest.approx(_mean(steps))
+            assert cell.loc[(f"steps_{t}", arm), "value"] == pytest.approx(_restricted(steps))
+            assert cell.loc[(f"finishers_steps_{t}", arm), "value"] == pytest.approx(_mean(steps))
     assert cell.loc[("steps_-130", "baseline"), "n_reached"] == 2
     assert cell.loc[("reliability", "hybrid"), "value"] == 1.0
     assert cell.loc[("reliability", "baseline"), "value"] == pytest.approx(2 / 3)
     assert cell.loc[("eval_length", "hybrid"), "value"] == pytest.approx(125.0)
-    assert cell.loc[("speedup_-130", "hybrid"), "value"] == pytest.approx(49000 / 39000)
+    base, hyb = EXPECTED["baseline"], EXPECTED["hybrid"]
+    assert cell.loc[("speedup_-130", "hybrid"), "value"] == pytest.approx(_restricted(base[-130]) /
+                                                                           _restricted(hyb[-130]))
     assert cell.loc[("speedup_-190", "hybrid"), "value"] == pytest.approx((113000 / 3) / 27000)
 
     md = (out / "table2.md").read_text()
-    assert "39,000" in md and "49,000" in md and "(DNF 1/3)" in md and "1.26x" in md
+    assert "39,000" in md and "49,000" in md and "(DNF 1/3)" in md
+    assert f"{_restricted(base[-130]) / _restricted(hyb[-130]):.2f}x" in md
     assert "200,379" in md and "272,448" in md  # the paper's values beside ours
     report = (out / "report.md").read_text()
     assert "SIMULATED VLM" in report and "Verdict rule" in report and kept["hybrid-0"] in report

@@ -36,8 +36,16 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     assert "cost estimate: 14 run(s) to train (0 already FINISHED)" in result.output
     out = tmp_path / "out"
     for name in ("regime_map.md", "regime_map.csv", "vlm_quality.csv", "vlm_quality.png", "hacking.csv",
-                 "report.md", "manifest.json"):
+                 "report.md", "manifest.json", "per_seed.csv", "controls.csv", "controls.md"):
         assert (out / name).is_file(), name
+    per_seed = pd.read_csv(out / "per_seed.csv")
+    assert len(per_seed) == 14 and per_seed["run_id"].is_unique  # every run once
+    assert {"regime", "variant", "arm", "seed", "config_hash", "steps_-130", "reached_-130", "auc", "final_return",
+            "detached_success", "eval_mean_length"} <= set(per_seed.columns)
+    controls = pd.read_csv(out / "controls.csv")
+    assert list(controls["control"]) == ["alpha=25 kin=0 vs alpha=0", "alpha=25 kin=0 vs its placebo"]
+    assert list(controls["a.arm"]) == ["semantic", "semantic"] and list(controls["b.arm"]) == ["baseline",
+                                                                                               "hybrid-shuffled"]
     table = pd.read_csv(out / "regime_map.csv")
     assert list(table["regime"]) == ["norm", "raw"]
     assert {"hybrid.reliability_low", "baseline.steps_high", "hybrid_vs_baseline.speedup", "hybrid_vs_baseline.p",
@@ -46,7 +54,9 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     assert list(points["variant"]) == ["profile default", "profile llava-table1"]
     assert points["mcq_accuracy"].between(0, 1).all()
     report = (out / "report.md").read_text()
-    assert report.index("## Summary") < report.index("## Regime map") < report.index("## Reward hacking")
+    assert report.index("## Summary") < report.index("## Regime map") < report.index("## Controls") < report.index(
+        "## Reward hacking") < report.index("## Method")
+    assert "restricted mean" in report and "equivalent within 1.15x" in report and "Power (80%" in report
     assert "SIMULATED VLM" in report and "`norm`" in report and "Hover fraction" in report
     manifest = json.loads((out / "manifest.json").read_text())
     assert [s["stage"] for s in manifest["stages"]] == ["train", "taxonomy", "analysis"]
@@ -122,6 +132,6 @@ def test_the_taxonomy_sweep_defaults_to_the_taxonomy_commands(tmp_path: Path) ->
     help_text = " ".join(runner.invoke(app, ["study", "--help"]).output.split())
     assert f"(default {DEFAULT_STATES})" in help_text
     result = runner.invoke(app, ["study", "--regime", "norm=smoke", "--arms", "hybrid", "--seeds", "1",
-                                 "--dry-run", "--tracking-uri", _uri(tmp_path), "--out", str(tmp_path / "out")])
+                                 "--profiles", "default", "--dry-run", "--tracking-uri", _uri(tmp_path), "--out", str(tmp_path / "out")])
     assert result.exit_code == 0, result.output
     assert f"taxonomy: {DEFAULT_STATES} sweep positions" in " ".join(result.output.split())

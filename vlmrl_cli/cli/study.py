@@ -128,7 +128,7 @@ def study(
         choose_regimes,
         study_section,
     )
-    from vlmrl_cli.study.pipeline import estimate_cost, run_study
+    from vlmrl_cli.study.pipeline import estimate_cost, finished_per_seed, power_lines, run_study
 
     console = Console()
     with exit_codes():
@@ -166,6 +166,8 @@ def study(
                       f"~{cost.per_run_s:,.0f} s per run / {cost.workers} worker(s) = ~{cost.total_s / 60:,.1f} min; "
                       f"estimated from {cost.how}", markup=False)
         if dry_run:
+            for line in power_lines(cfg, finished_per_seed(cfg)):
+                console.print(line, markup=False)
             return
 
         def reporter_for(r: Regime) -> RichSweepReporter:

@@ -2,10 +2,13 @@
 
 Hybrid vs baseline is what the whole method changes; hybrid vs kinematic is what the VLM itself
 adds (both have the dense term); kinematic vs baseline is what the dense term adds. For each pair
-present in the experiment: the speedup to each threshold (bootstrap CI over finishing seeds) with
-a censored rank test (DNF kept), the reliability and detached-success differences with Newcombe
-intervals and Fisher exact p-values, and the probability of improvement on the final return.
-The unit of every comparison is the seed.
+present in the experiment: the speedup to each threshold (ratio of restricted means, a DNF at
+the budget, bootstrap CI) with a censored rank test (DNF kept) and a verdict (faster, slower,
+equivalent within the margin by TOST, inconclusive: ``analysis/censored.py``), the
+reliability and detached-success differences with Newcombe intervals and Fisher exact
+p-values, the difference in learning-curve area (mean native return over the budget, a
+threshold-free measure) with a rank test and an equivalence margin in return units, and the
+probability of improvement on the final return. The unit of every comparison is the seed.
 """
 
 from __future__ import annotations
@@ -16,12 +19,13 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from scipy import stats as sps
 
-from vlmrl_cli.analysis import stats
+from vlmrl_cli.analysis import censored, stats
 from vlmrl_cli.analysis.proportions import compare_proportions
 from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM, probability_of_improvement
 from vlmrl_cli.core import tables
-from vlmrl_cli.report.table2 import BASELINE, compare_steps, threshold_key
+from vlmrl_cli.report.table2 import BASELINE, judge_steps, threshold_key
 
 
 @dataclass(frozen=True)
@@ -40,11 +44,14 @@ class Pair:
 PAIRS = (
     Pair("hybrid", BASELINE, "the whole method"),
     Pair("hybrid", "kinematic", "what the VLM itself adds"),
+    Pair("hybrid", "hybrid-shuffled", "the labels' content (placebo: the same labels through a shuffled map)"),
     Pair("kinematic", BASELINE, "what the dense kinematic term adds"),
     Pair("semantic", BASELINE, "the VLM potential alone"),
 )
 COLUMNS = ["pair", "meaning", "metric", "label", "unit", "value", "ci_low", "ci_high", "p_value", "test", "n_a", "n_b",
-           "note"]
+           "note", "verdict", "tost_low", "tost_high"]
+#: Equivalence margin of the learning-curve area, in return units (a mean return within +-5 of the other arm's).
+DEFAULT_AUC_DELTA = 5.0
 
 
 def present_pairs(arms: Sequence[str]) -> list[Pair]:
@@ -59,41 +66,76 @@ def present_pairs(arms: Sequence[str]) -> list[Pair]:
 
 
 def _row(pair: Pair, metric: str, label: str, unit: str, est: stats.Estimate, p_value: float, test: str,
-         n_a: int, n_b: int, note: str = "") -> dict[str, Any]:
+         n_a: int, n_b: int, note: str = "", verdict: str = "", tost: tuple[float, float] = (np.nan, np.nan)
+         ) -> dict[str, Any]:
     return {"pair": pair.name, "meaning": pair.meaning, "metric": metric, "label": label, "unit": unit,
             "value": est.value, "ci_low": est.low, "ci_high": est.high, "p_value": p_value, "test": test,
-            "n_a": n_a, "n_b": n_b, "note": "; ".join(filter(None, [est.note, note]))}
+            "n_a": n_a, "n_b": n_b, "note": "; ".join(filter(None, [est.note, note])), "verdict": verdict,
+            "tost_low": tost[0], "tost_high": tost[1]}
+
+
+def _proportion_verdict(diff: float, p_value: float, alpha: float) -> str:
+    if np.isfinite(p_value) and p_value < alpha and np.isfinite(diff) and diff != 0:
+        return censored.HIGHER if diff > 0 else censored.LOWER
+    return censored.INCONCLUSIVE
+
+
+def compare_auc(da: pd.DataFrame, db: pd.DataFrame, rng: np.random.Generator, n_boot: int, ci: float,
+                alpha: float, delta: float) -> tuple[stats.Estimate, float, str, tuple[float, float]]:
+    """Learning-curve area of arm a minus arm b (return units): the difference of means with a
+    bootstrap CI, a two-sided Mann-Whitney p (exact for small samples), the verdict and the
+    ``1 - 2 alpha`` interval its equivalence test used."""
+    a, b = da["auc"].to_numpy(dtype=float), db["auc"].to_numpy(dtype=float)
+    a, b = a[np.isfinite(a)], b[np.isfinite(b)]
+    est = stats.difference_of_means(a, b, rng, n_boot, ci)
+    tost = stats.difference_of_means(a, b, rng, n_boot, 1 - 2 * alpha)
+    p = float(sps.mannwhitneyu(a, b, alternative="two-sided").pvalue) if a.size >= 2 and b.size >= 2 else np.nan
+    return est, p, censored.difference_verdict(est, (tost.low, tost.high), p, alpha, delta), (tost.low, tost.high)
 
 
 def compare_arms(
     per_seed: pd.DataFrame, thresholds: Sequence[float], rng: np.random.Generator | stats.Streams,
     n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, n_perm: int = DEFAULT_N_PERM,
+    alpha: float = 0.05, margin: float = censored.DEFAULT_MARGIN, auc_delta: float = DEFAULT_AUC_DELTA,
+    pairs: Sequence[Pair] | None = None,
 ) -> pd.DataFrame:
     """Every comparison of every present pair (columns ``COLUMNS``), from ``per_seed`` (see ``per_seed_table``).
 
     Metrics: ``speedup_<t>`` (a over b, x), ``reliability_diff`` (seeds reaching the top threshold,
     a minus b), ``detached_success_diff`` (seeds succeeding detached, a minus b), ``poi_final_return``
-    (P(final return of a seed of a > that of b), higher return is better).
+    (P(final return of a seed of a > that of b), higher return is better), and ``auc_diff`` when
+    ``per_seed`` has an ``auc`` column. ``pairs``: the pairs to compare (default: ``PAIRS`` present).
     """
     rows: list[dict[str, Any]] = []
     top = max(thresholds)
-    for pair in present_pairs(per_seed["arm"].unique().tolist()):
+    chosen = present_pairs(per_seed["arm"].unique().tolist()) if pairs is None else pairs
+    for pair in chosen:
         da, db = per_seed[per_seed["arm"] == pair.a], per_seed[per_seed["arm"] == pair.b]
         for t in thresholds:
-            est, test = compare_steps(per_seed, pair.a, pair.b, t, rng, n_boot, ci, n_perm)
-            rows.append(_row(pair, f"speedup_{t:g}", f"Speedup to {t:g} ({pair.a} over {pair.b})", "x", est,
-                             test.p_value, "Mann-Whitney U on steps, DNF censored (permutation p)", test.n_a,
-                             test.n_b, "; ".join(filter(None, [f"P({pair.a} faster) = {test.p_faster:.2f}",
-                                                               test.note]))))
+            judged, test = judge_steps(per_seed, pair.a, pair.b, t, rng, n_boot, ci, n_perm, alpha, margin)
+            rows.append(_row(pair, f"speedup_{t:g}", f"Speedup to {t:g} ({pair.a} over {pair.b})", "x",
+                             judged.speedup, test.p_value,
+                             f"Mann-Whitney U on steps, DNF censored ({test.method} p)", test.n_a, test.n_b,
+                             "; ".join(filter(None, [f"P({pair.a} faster) = {test.p_faster:.2f}", test.note])),
+                             judged.text, (judged.tost_low, judged.tost_high)))
         key = threshold_key(top)
-        rel = compare_proportions(np.isfinite(da[key].to_numpy(dtype=float)),
-                                  np.isfinite(db[key].to_numpy(dtype=float)), ci)
+        rel = compare_proportions(censored.reached(da[key].to_numpy(dtype=float), da["budget"].to_numpy(dtype=float)),
+                                  censored.reached(db[key].to_numpy(dtype=float), db["budget"].to_numpy(dtype=float)),
+                                  ci)
         rows.append(_row(pair, "reliability_diff", f"Reliability difference (seeds reaching {top:g})", "%",
-                         rel.difference, rel.p_value, rel.test, rel.n_a, rel.n_b))
+                         rel.difference, rel.p_value, rel.test, rel.n_a, rel.n_b,
+                         verdict=_proportion_verdict(rel.difference.value, rel.p_value, alpha)))
         det = compare_proportions(da["detached_success"].to_numpy(dtype=float),
                                   db["detached_success"].to_numpy(dtype=float), ci)
         rows.append(_row(pair, "detached_success_diff", "Detached success difference (seeds)", "%",
-                         det.difference, det.p_value, det.test, det.n_a, det.n_b))
+                         det.difference, det.p_value, det.test, det.n_a, det.n_b,
+                         verdict=_proportion_verdict(det.difference.value, det.p_value, alpha)))
+        if "auc" in per_seed:
+            auc, p_auc, v_auc, tost = compare_auc(da, db, stats.stream(rng, f"attribution/auc/{pair.name}"),
+                                                  n_boot, ci, alpha, auc_delta)
+            rows.append(_row(pair, "auc_diff", "Learning-curve area difference (mean native return over the "
+                             "budget, a minus b)", "return", auc, p_auc, "Mann-Whitney U on per-seed areas",
+                             int(da["auc"].notna().sum()), int(db["auc"].notna().sum()), verdict=v_auc, tost=tost))
         poi = probability_of_improvement(da["final_return"], db["final_return"],
                                          stats.stream(rng, f"attribution/poi/{pair.name}"), n_boot, ci)
         rows.append(_row(pair, "poi_final_return", "P(final return higher)", "p", poi, float("nan"),
@@ -113,6 +155,16 @@ def lookup(comparisons: pd.DataFrame, a: str, b: str, metric: str) -> tuple[stat
     return est, float(r["p_value"])
 
 
+def lookup_verdict(comparisons: pd.DataFrame, a: str, b: str, metric: str) -> tuple[str, float, float]:
+    """The verdict of one comparison and the ``1 - 2 alpha`` interval its equivalence test used
+    (``("", nan, nan)`` when absent)."""
+    hit = comparisons[(comparisons["pair"] == f"{a} vs {b}") & (comparisons["metric"] == metric)]
+    if hit.empty:
+        return "", float("nan"), float("nan")
+    r = hit.iloc[0]
+    return str(r["verdict"]), float(r["tost_low"]), float(r["tost_high"])
+
+
 def _fmt(x: float, unit: str) -> str:
     if not np.isfinite(x):
         return "—"
@@ -120,17 +172,19 @@ def _fmt(x: float, unit: str) -> str:
         return f"{100 * x:+.0f} pts"
     if unit == "x":
         return f"{x:.2f}x"
+    if unit == "return":
+        return f"{x:+.1f}"
     return f"{x:.2f}"
 
 
 def attribution_markdown(comparisons: pd.DataFrame, ci: float = 0.95) -> str:
-    """Markdown table: pair (what it isolates), metric, value [CI], p-value and test, seeds."""
+    """Markdown table: pair (what it isolates), metric, value [CI], p-value and test, verdict, seeds."""
     rows = []
     for r in comparisons.itertuples(index=False):
         value = _fmt(r.value, r.unit)
         if np.isfinite(r.ci_low) and np.isfinite(r.ci_high):
             value += f" [{_fmt(r.ci_low, r.unit)}, {_fmt(r.ci_high, r.unit)}]"
-        p = f"{r.p_value:.2g}" if np.isfinite(r.p_value) else "—"
-        rows.append([r.pair, r.meaning, r.label, value, p, r.test, f"{r.n_a}/{r.n_b}"])
-    header = ["Pair", "Isolates", "Metric", f"Ours [{100 * ci:g}% CI]", "p", "Test", "Seeds (a/b)"]
+        p = censored.format_p(r.p_value).removeprefix("p = ") if np.isfinite(r.p_value) else "—"
+        rows.append([r.pair, r.meaning, r.label, value, p, r.test, r.verdict or "—", f"{r.n_a}/{r.n_b}"])
+    header = ["Pair", "Isolates", "Metric", f"Ours [{100 * ci:g}% CI]", "p", "Test", "Verdict", "Seeds (a/b)"]
     return "\n".join(tables.markdown_rows(header, rows)) + "\n"

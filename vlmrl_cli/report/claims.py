@@ -34,7 +34,7 @@ import pandas as pd
 
 from vlmrl_cli.analysis import stats
 from vlmrl_cli.core import tables
-from vlmrl_cli.report.attribution import compare_arms, lookup
+from vlmrl_cli.report.attribution import compare_arms, lookup, lookup_verdict
 from vlmrl_cli.report.table2 import BASELINE, Table2, threshold_key
 
 MIN_SEEDS = 3
@@ -54,7 +54,10 @@ VERDICT_RULE = (
     "below 1 - the CI level; otherwise inconclusive. Proportions of seeds get score intervals (Wilson for one arm, "
     "Newcombe's hybrid score interval for a difference), never a bootstrap that collapses to a point. A claim that "
     "credits the VLM itself is judged on hybrid vs kinematic (same dense term, with and without the VLM); "
-    "without the kinematic arm it is not tested."
+    "without the kinematic arm it is not tested. A speedup claim that would be inconclusive is not reproduced "
+    "when the two arms are equivalent within the margin by two one-sided tests on the ratio of restricted means "
+    "(the 90% interval inside [1/1.15, 1.15] by default): 'no difference' is judged by an equivalence test, "
+    "never by a large p."
 )
 
 
@@ -230,6 +233,11 @@ def evaluate_claims(
             n_seeds = min(int((per_seed["arm"] == a).sum()) for a in need)
         v, reason = verdict(est, paper_f, null, direction, bool(spec.get("approximate")), n_seeds, p_value,
                             1.0 - ci)
+        if comparison is not None and comparison[2].startswith("speedup_") and v == INCONCLUSIVE:
+            judged, low, high = lookup_verdict(comparisons, *comparison)
+            if judged.startswith("equivalent"):  # "no effect" is a claim too: judged by TOST, not by a large p
+                v, reason = NOT_REPRODUCED, (f"{judged} by two one-sided tests (interval [{low:.3g}, {high:.3g}]): no "
+                                             f"speedup as large as the margin; {reason}")
         if cid == "narrower_variance":
             reason = "measure: std across seeds of the final return, hybrid minus baseline; " + reason
         if pair:

@@ -66,7 +66,9 @@ def per_seed_table(data: ExperimentData, thresholds: Sequence[float], window: in
                    min_episodes: int = 1, detached_cut: float = DETACHED_SUCCESS_CUT) -> pd.DataFrame:
     """One row per run: arm, seed, run_id, config_hash, budget, steps to each threshold (NaN = DNF),
     the same with a full window (``full_steps_*``), final return (mean of the last ``window``
-    episodes), shaped minus native return over those episodes, number of episodes, the eval
+    episodes), the learning-curve area (``auc``: mean native return over the budget, return units),
+    the step at which the first complete window ends (``first_window_step``), shaped minus native
+    return over those episodes, number of episodes, the eval
     metrics and ``detached_success`` (1 when the eval success rate is at least ``detached_cut``)."""
     rows = []
     by_run = dict(tuple(data.episodes.groupby("run_id", sort=False)))
@@ -81,6 +83,11 @@ def per_seed_table(data: ExperimentData, thresholds: Sequence[float], window: in
             full = full_window_steps_to_threshold(ts, ret, t, window)
             row[full_window_key(t)] = float("nan") if full is None else float(full)
         row["final_return"] = stats.final_return(ret, window)
+        budget = float(run.budget) if pd.notna(run.budget) else math.inf
+        lengths = ep["length"].to_numpy(dtype=float) if "length" in ep else np.full(len(ep), np.nan)
+        row["auc"] = censored.learning_curve_area(ts, ret, lengths, int(budget) if math.isfinite(budget) else 2**62)
+        # the step at which the first complete window of episodes ends (a floor for every threshold)
+        row["first_window_step"] = float(ts[window - 1]) if len(ts) >= window else float("nan")
         shaped = ep["shaped_return"].to_numpy(dtype=float) if "shaped_return" in ep else np.full(len(ep), np.nan)
         row["shaped_gap"] = stats.final_return(shaped - ret, window)
         row["episodes"] = len(ep)
@@ -146,6 +153,28 @@ def _paper_values(reported: dict[str, Any], metric: str, thresholds: Sequence[fl
 def _cell(metric: str, arm: str, est: stats.Estimate, paper: Any, n: int, n_reached: int | None = None) -> dict:
     return {"metric": metric, "arm": arm, "value": est.value, "ci_low": est.low, "ci_high": est.high, "n": n,
             "n_reached": n_reached, "paper": float(paper) if paper is not None else float("nan"), "note": est.note}
+
+
+def floor_thresholds(per_seed: pd.DataFrame, thresholds: Sequence[float], window: int = 100) -> list[float]:
+    """The thresholds that every seed of every arm crosses at its first complete window of ``window``
+    episodes: a steps-to-threshold there measures how fast episodes end, not learning, and no
+    speedup can be read from it.
+
+    Example:
+        >>> df = pd.DataFrame({"full_steps_-190": [500.0, 510.0], "full_steps_-130": [500.0, 900.0],
+        ...                    "first_window_step": [500.0, 510.0]})
+        >>> floor_thresholds(df, [-190.0, -130.0])
+        [-190.0]
+    """
+    if "first_window_step" not in per_seed or per_seed.empty:
+        return []
+    first = per_seed["first_window_step"].to_numpy(dtype=float)
+    out = []
+    for t in thresholds:
+        full = per_seed.get(full_window_key(t))
+        if full is not None and np.all(np.isfinite(first)) and np.array_equal(full.to_numpy(dtype=float), first):
+            out.append(float(t))
+    return out
 
 
 def build_table2(
@@ -273,16 +302,28 @@ def compare_steps(
 ) -> tuple[stats.Estimate, RankTest]:
     """Speedup of ``arm`` over ``ref`` to ``threshold`` (ratio of restricted mean steps, DNF at the
     budget, ``analysis/censored.py``; bootstrap CI) and the censored rank test of ``arm`` vs ``ref``
-    (DNF seeds kept, tied above every finish)."""
+    (DNF seeds kept, tied above every finish): ``judge_steps`` without its verdict."""
+    judged, test = judge_steps(per_seed, arm, ref, threshold, rng, n_boot, ci, n_perm)
+    return judged.speedup, test
+
+
+def judge_steps(
+    per_seed: pd.DataFrame, arm: str, ref: str, threshold: float, rng: np.random.Generator | stats.Streams,
+    n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, n_perm: int = DEFAULT_N_PERM, alpha: float = 0.05,
+    margin: float = censored.DEFAULT_MARGIN,
+) -> tuple[censored.Verdict, RankTest]:
+    """``compare_steps`` and its verdict (``censored.steps_verdict``): the speedup is the same draw as
+    ``compare_steps``' (one stream), then the ``1 - 2 alpha`` interval of the equivalence test."""
     key = threshold_key(threshold)
     mine, theirs = per_seed["arm"] == arm, per_seed["arm"] == ref
     a, r = per_seed.loc[mine, key].to_numpy(dtype=float), per_seed.loc[theirs, key].to_numpy(dtype=float)
     skey = speedup_key(threshold, arm, ref)
-    est = censored.speedup(r, a, per_seed.loc[theirs, "budget"].to_numpy(dtype=float),
-                           per_seed.loc[mine, "budget"].to_numpy(dtype=float), stats.stream(rng, skey), n_boot, ci)
     test = censored_rank_test(a, r, stats.stream(rng, skey + "/rank"), n_perm, arm_budget(per_seed, arm),
                               arm_budget(per_seed, ref))
-    return est, test
+    judged = censored.steps_verdict(r, a, per_seed.loc[theirs, "budget"].to_numpy(dtype=float),
+                                    per_seed.loc[mine, "budget"].to_numpy(dtype=float), test.p_value,
+                                    stats.stream(rng, skey), n_boot, ci, alpha, margin)
+    return judged, test
 
 
 # ---- formatting -----------------------------------------------------------------------------

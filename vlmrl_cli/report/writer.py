@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from vlmrl_cli import paper
-from vlmrl_cli.analysis import stats
+from vlmrl_cli.analysis import censored, stats
 from vlmrl_cli.analysis.load import ExperimentData, load_experiment
 from vlmrl_cli.analysis.proportions import DETACHED_SUCCESS_CUT
 from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM
@@ -28,6 +28,7 @@ from vlmrl_cli.report.table2 import (
     BASELINE,
     Table2,
     build_table2,
+    floor_thresholds,
     format_cell,
     per_seed_table,
     to_markdown,
@@ -53,6 +54,7 @@ class ReportConfig:
     n_boot: int = stats.DEFAULT_N_BOOT  # bootstrap resamples
     n_perm: int = DEFAULT_N_PERM  # rank-test permutations (fewer splits of the seeds are enumerated exactly)
     seed: int = 0  # seed of the random streams (one per report section and metric)
+    margin: float = censored.DEFAULT_MARGIN  # equivalence margin of a speedup (TOST within [1/margin, margin])
     detached_cut: float = DETACHED_SUCCESS_CUT  # a seed succeeds detached when this share of its episodes do
     reported: Path | None = None  # the paper's numbers (default: the packaged vlmrl_cli/paper/reported.json)
     log_to_mlflow: bool = True  # log the outputs as artifacts of a vlmrl.kind=report run
@@ -206,10 +208,19 @@ def _statistics_md(cfg: ReportConfig) -> list[str]:
         f"- Proportions of seeds (reliability, detached success): {ci} Wilson score interval for one arm; for a "
         "difference of two arms Newcombe's hybrid score interval (method 10, Newcombe 1998) and a two-sided Fisher "
         "exact p-value. These never collapse to a point: 5/5 vs 5/5 is 0 [-0.43, 0.43].",
-        f"- Steps to a threshold: mean over the seeds that reached it with a {ci} percentile bootstrap over seeds "
-        f"({cfg.n_boot} resamples); a speedup is the ratio of those means. Beside it, a Mann-Whitney U test on all "
-        "seeds with each DNF censored at the budget (tied with the other DNFs, slower than every finish), p-value "
-        f"from the exact permutation distribution (or {cfg.n_perm} random permutations when there are more splits).",
+        f"- Steps to a threshold, the one DNF rule of every table and verdict: {censored.RULE}. Restricted means "
+        f"with a {ci} percentile bootstrap over seeds ({cfg.n_boot} resamples); a speedup is the ratio of "
+        "restricted means (a lower bound on the true ratio when the slower arm DNFs). The paper's convention, "
+        "the mean over the seeds that finished, is shown as its own row of Table 2 only. Beside each speedup, a "
+        "Mann-Whitney U test on all seeds with each DNF censored at the budget (tied with the other DNFs, slower "
+        "than every finish): exact when every split of the seeds can be enumerated (up to "
+        f"{cfg.n_perm} splits), else the tie-corrected normal approximation, so no p-value sits at a permutation "
+        "floor.",
+        f"- Verdicts of the attribution table: faster/slower when that test is significant at {1 - cfg.ci:g}; "
+        f"{censored.equivalent(cfg.margin)} when the {100 * (1 - 2 * (1 - cfg.ci)):g}% bootstrap interval of the "
+        f"speedup lies inside [1/{cfg.margin:g}, {cfg.margin:g}] (two one-sided tests) and each arm finished on "
+        "at least half its seeds; otherwise inconclusive. Learning-curve area (threshold-free): per seed the mean "
+        "native return over the budget, compared by a difference of means and a Mann-Whitney test.",
         f"- Full window: the 'full {cfg.window}-episode window' rows count a threshold only once {cfg.window} "
         "episodes have completed (no partial window at the start); the plain rows follow SB3's ep_rew_mean "
         f"(partial windows count once {cfg.min_episodes} episode(s) completed), the paper's reading.",
@@ -232,8 +243,11 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
               + ", ".join(f"{a}={int((per_seed['arm'] == a).sum())}" for a in table.arms),
               f"- Steps to a threshold: first global timestep at which the mean native return of the last "
               f"{cfg.window} completed episodes reaches it (partial windows count once {cfg.min_episodes} "
-              "episode(s) completed); means are over seeds that reached it, DNF = did not reach it within the "
-              "budget.",
+              f"episode(s) completed). {censored.RULE[0].upper()}{censored.RULE[1:]}; DNF = did not reach it "
+              "within the budget.",
+              *[f"- **Floor at {t:g}:** every seed of every arm crosses {t:g} at its first complete window of "
+                f"{cfg.window} episodes, so steps to {t:g} measure how fast episodes end, not learning: read no "
+                "speedup into that row." for t in floor_thresholds(per_seed, table.thresholds, cfg.window)],
               f"- Intervals: {100 * cfg.ci:g}% percentile bootstrap over seeds ({cfg.n_boot} resamples, seed "
               f"{cfg.seed}) for means and ratios; score intervals for proportions of seeds (see below).", ""]
     if warns:
@@ -336,7 +350,8 @@ def write_report(cfg: ReportConfig) -> ReportResult:
     per_seed = per_seed_table(data, thresholds, cfg.window, cfg.min_episodes, cfg.detached_cut)
     table = build_table2(per_seed, data.eval_episodes, reported, thresholds, streams, cfg.window, cfg.ci, cfg.n_boot,
                          cfg.detached_cut, cfg.n_perm)
-    comparisons = attribution.compare_arms(per_seed, thresholds, streams, cfg.n_boot, cfg.ci, cfg.n_perm)
+    comparisons = attribution.compare_arms(per_seed, thresholds, streams, cfg.n_boot, cfg.ci, cfg.n_perm,
+                                           alpha=1 - cfg.ci, margin=cfg.margin)
     results = claims_mod.evaluate_claims(table, per_seed, reported, streams, cfg.n_boot, cfg.ci, comparisons)
     hack = hacking.hacking_frame(per_seed, data.eval_episodes, cfg.ci)
     note = vlm_note(data.runs)

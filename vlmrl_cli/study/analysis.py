@@ -2,8 +2,10 @@
 the plain-language summary. Pure functions of the loaded runs (no training, no MLflow writes).
 
 Every interval reuses the report's statistics: reliability with a Wilson interval and steps to a
-threshold with a bootstrap CI over finishing seeds (``report/table2.py``), speedups with a
-bootstrap CI and a censored Mann-Whitney test (``report/attribution.py compare_arms``).
+threshold as a restricted mean (a DNF at the budget, ``analysis/censored.py``) with a bootstrap CI
+(``report/table2.py``), speedups as ratios of restricted means with a bootstrap CI, a censored
+Mann-Whitney test and a verdict (faster / slower / equivalent within the margin by TOST /
+inconclusive), and the learning-curve area (``report/attribution.py compare_arms``).
 """
 
 from __future__ import annotations
@@ -11,13 +13,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from vlmrl_cli.analysis import stats
+from vlmrl_cli.analysis import censored, stats
 from vlmrl_cli.analysis.load import ExperimentData
 from vlmrl_cli.calibration.pipeline import runs_of
 from vlmrl_cli.core import tables
@@ -32,12 +35,16 @@ from vlmrl_cli.report.table2 import (
     per_seed_table,
     threshold_key,
 )
+from vlmrl_cli.study.config import PLACEBO_ARM, Cell
 from vlmrl_cli.training.config import RunConfig
 
-FASTER, SLOWER, NO_DIFFERENCE, NOT_MEASURED = "faster", "slower", "no detectable difference", "not measurable"
+FASTER, SLOWER, INCONCLUSIVE = censored.FASTER, censored.SLOWER, censored.INCONCLUSIVE
+NOT_MEASURED = "not measurable"
 NEITHER = "neither arm reaches the threshold"
 #: The comparisons of the regime map: (arm a, arm b, what the difference isolates).
-MAP_PAIRS = (("hybrid", BASELINE, "the whole method"), ("hybrid", "kinematic", "what the VLM itself adds"))
+MAP_PAIRS = (("hybrid", BASELINE, "the whole method"), ("hybrid", "kinematic", "what the VLM itself adds"),
+             ("hybrid", PLACEBO_ARM, "the labels' content (placebo)"),
+             ("kinematic", BASELINE, "what the dense term adds"))
 
 
 def _restrict(data: ExperimentData, runs: pd.DataFrame) -> ExperimentData:
@@ -60,36 +67,44 @@ def paired(data: ExperimentData, reference: RunConfig, variant: RunConfig) -> Ex
     return _restrict(data, runs)
 
 
-def verdict(speedup: stats.Estimate, p_value: float, reliability_diff: float, alpha: float = 0.05) -> str:
-    """``faster``/``slower`` when the censored rank test is significant at ``alpha`` (the direction
-    from the speedup, or from the reliability difference when no seed of one arm finished), else
-    ``no detectable difference``; ``not measurable`` without a test.
+def _pair_columns(key: str, comparisons: pd.DataFrame, a: str, b: str, top: float, none_reach: bool
+                  ) -> dict[str, Any]:
+    """The map's columns of one comparison: speedup, CI, p, verdict, TOST interval; reliability and
+    learning-curve area differences with their verdicts."""
+    def get(metric: str) -> dict[str, Any] | None:
+        hit = comparisons[(comparisons["pair"] == f"{a} vs {b}") & (comparisons["metric"] == metric)]
+        return None if hit.empty else dict(hit.iloc[0])
 
-    Example:
-        >>> verdict(stats.Estimate(1.4, 1.1, 1.8), 0.01, 0.0), verdict(stats.Estimate(1.4, 0.9, 1.8), 0.2, 0.0)
-        ('faster', 'no detectable difference')
-        >>> verdict(stats.Estimate(float("nan")), 0.01, 0.6)
-        'faster'
-    """
-    if not math.isfinite(p_value):
-        return NOT_MEASURED
-    if p_value >= alpha:
-        return NO_DIFFERENCE
-    direction = speedup.value - 1.0 if math.isfinite(speedup.value) else reliability_diff
-    if not math.isfinite(direction) or direction == 0:
-        return NO_DIFFERENCE
-    return FASTER if direction > 0 else SLOWER
+    steps, rel, auc = get(f"speedup_{top:g}"), get("reliability_diff"), get("auc_diff")
+    if steps is None:
+        return {f"{key}.speedup": math.nan, f"{key}.low": math.nan, f"{key}.high": math.nan, f"{key}.p": math.nan,
+                f"{key}.verdict": NOT_MEASURED}
+    out = {f"{key}.speedup": steps["value"], f"{key}.low": steps["ci_low"], f"{key}.high": steps["ci_high"],
+           f"{key}.p": steps["p_value"], f"{key}.test": steps["test"], f"{key}.tost_low": steps["tost_low"],
+           f"{key}.tost_high": steps["tost_high"], f"{key}.verdict": NEITHER if none_reach else steps["verdict"]}
+    if rel is not None:
+        out |= {f"{key}.reliability_diff": rel["value"], f"{key}.reliability_diff_low": rel["ci_low"],
+                f"{key}.reliability_diff_high": rel["ci_high"], f"{key}.reliability_p": rel["p_value"],
+                f"{key}.reliability_verdict": rel["verdict"]}
+    if auc is not None:
+        out |= {f"{key}.auc_diff": auc["value"], f"{key}.auc_low": auc["ci_low"], f"{key}.auc_high": auc["ci_high"],
+                f"{key}.auc_p": auc["p_value"], f"{key}.auc_verdict": auc["verdict"]}
+    return out
 
 
 def regime_row(name: str, data: ExperimentData, thresholds: Sequence[float], streams: stats.Streams,
-               n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, alpha: float = 0.05
-               ) -> tuple[dict[str, Any], pd.DataFrame]:
-    """One regime's row of the map (per arm: reliability and steps to the top threshold with CIs;
-    per ``MAP_PAIRS`` pair: speedup, CI, rank-test p and verdict) and its per-seed table."""
+               n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, alpha: float = 0.05,
+               margin: float = censored.DEFAULT_MARGIN) -> tuple[dict[str, Any], pd.DataFrame]:
+    """One regime's row of the map (per arm: reliability and restricted mean steps to the top
+    threshold with CIs; per ``MAP_PAIRS`` pair: speedup, CI, rank-test p and verdict, reliability
+    and learning-curve area differences) and its per-seed table."""
     top = max(thresholds)
     per_seed = per_seed_table(data, thresholds)
     table = build_table2(per_seed, data.eval_episodes, {}, thresholds, streams, n_boot=n_boot, ci=ci)
-    comparisons = attribution.compare_arms(per_seed, thresholds, streams, n_boot, ci)
+    pairs = [attribution.Pair(a, b, meaning) for a, b, meaning in MAP_PAIRS
+             if a in set(per_seed["arm"]) and b in set(per_seed["arm"])]
+    comparisons = attribution.compare_arms(per_seed, thresholds, streams, n_boot, ci, alpha=alpha, margin=margin,
+                                           pairs=pairs)
     row: dict[str, Any] = {"regime": name, "seeds": int(per_seed.groupby("arm").size().max())}
     for arm in table.arms:
         rel, steps = table.cell("reliability", arm), table.cell(threshold_key(top), arm)
@@ -101,20 +116,75 @@ def regime_row(name: str, data: ExperimentData, thresholds: Sequence[float], str
                 f"{arm}.steps_high": steps["ci_high"], f"{arm}.reliability_text": format_cell(rel),
                 f"{arm}.steps_text": format_cell(steps)}
     for a, b, _ in MAP_PAIRS:
-        key = f"{a}_vs_{b}"
-        found = attribution.lookup(comparisons, a, b, f"speedup_{top:g}")
-        rel_diff = attribution.lookup(comparisons, a, b, "reliability_diff")
-        if found is None:
-            row |= {f"{key}.speedup": math.nan, f"{key}.low": math.nan, f"{key}.high": math.nan,
-                    f"{key}.p": math.nan, f"{key}.verdict": NOT_MEASURED}
-            continue
-        est, p = found
-        diff = rel_diff[0].value if rel_diff is not None else math.nan
-        none_reach = row[f"{a}.reached"] == 0 and row[f"{b}.reached"] == 0
-        row |= {f"{key}.speedup": est.value, f"{key}.low": est.low, f"{key}.high": est.high, f"{key}.p": p,
-                f"{key}.reliability_diff": diff,
-                f"{key}.verdict": NEITHER if none_reach else verdict(est, p, diff, alpha)}
+        none_reach = row.get(f"{a}.reached", 0) == 0 and row.get(f"{b}.reached", 0) == 0
+        row |= _pair_columns(f"{a}_vs_{b}", comparisons, a, b, top, none_reach)
     return row, per_seed
+
+
+@dataclass(frozen=True)
+class Control:
+    """A comparison of two control cells: ``a`` (the cell with the VLM's labels, or the lock) against
+    ``b`` (its reference), and what the difference isolates."""
+
+    name: str
+    question: str
+    a: Cell
+    b: Cell
+
+
+def controls(cells: Sequence[Cell]) -> list[Control]:
+    """The comparisons the control cells exist for: each dose cell with a potential against the dense
+    term alone at the same kinematic scale (does the VLM's potential help, by dose?); each VLM dose
+    cell against its placebo (is it the labels' content?); the hybrid against hybrid-no-lock under
+    the same per-query flicker (what the lock is for)."""
+    dose = [c for c in cells if c.kind == "dose"]
+    out = []
+    for c in dose:
+        if c.placebo or c.alpha == 0:
+            continue
+        dense = next((d for d in dose if d.kin_scale == c.kin_scale and d.alpha == 0 and not d.placebo), None)
+        if dense is not None:
+            out.append(Control(f"alpha={c.alpha:g} kin={c.kin_scale:g} vs alpha=0",
+                               "does the VLM's potential help at this dose?", c, dense))
+        placebo = next((d for d in dose if d.placebo and (d.alpha, d.kin_scale) == (c.alpha, c.kin_scale)), None)
+        if placebo is not None:
+            out.append(Control(f"alpha={c.alpha:g} kin={c.kin_scale:g} vs its placebo",
+                               "is it the labels' content?", c, placebo))
+    flicker = [c for c in cells if c.kind == "query-flicker"]
+    for c in flicker:
+        if c.arm != "hybrid":
+            continue
+        other = next((d for d in flicker if d.arm == "hybrid-no-lock" and d.query_flicker == c.query_flicker), None)
+        if other is not None:
+            out.append(Control(f"query flicker {c.query_flicker:g}: hybrid vs hybrid-no-lock",
+                               "what the hysteresis lock is for", c, other))
+    return out
+
+
+def control_row(control: Control, data: ExperimentData, thresholds: Sequence[float], streams: stats.Streams,
+                n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, alpha: float = 0.05,
+                margin: float = censored.DEFAULT_MARGIN) -> dict[str, Any]:
+    """One control comparison's row: each side's arm, knobs, seeds reaching the top threshold and
+    restricted mean steps, then the comparison's columns (as the regime map's)."""
+    top = max(thresholds)
+    a_runs, b_runs = runs_of(data.runs, control.a.regime.run), runs_of(data.runs, control.b.regime.run)
+    both = _restrict(data, pd.concat([a_runs, b_runs]).drop_duplicates("run_id"))
+    per_seed = per_seed_table(both, thresholds)
+    a, b = control.a.arm, control.b.arm
+    pair = attribution.Pair(a, b, control.question)
+    comparisons = attribution.compare_arms(per_seed, thresholds, streams, n_boot, ci, alpha=alpha, margin=margin,
+                                           pairs=[pair])
+    row: dict[str, Any] = {"control": control.name, "question": control.question, "a": control.a.regime.id,
+                           "b": control.b.regime.id, "a.arm": a, "b.arm": b}
+    key = threshold_key(top)
+    for side, arm in (("a", a), ("b", b)):
+        d = per_seed[per_seed["arm"] == arm]
+        steps, budget = d[key].to_numpy(dtype=float), d["budget"].to_numpy(dtype=float)
+        row |= {f"{side}.n": len(d), f"{side}.reached": int(censored.reached(steps, budget).sum()),
+                f"{side}.steps": censored.restricted_mean(steps, budget).value,
+                f"{side}.auc": float(d["auc"].mean()) if len(d) else math.nan}
+    none_reach = row["a.reached"] == 0 and row["b.reached"] == 0
+    return row | _pair_columns("cmp", comparisons, a, b, top, none_reach)
 
 
 def format_speedup(row: dict[str, Any], key: str) -> str:
@@ -124,22 +194,50 @@ def format_speedup(row: dict[str, Any], key: str) -> str:
     low, high = row.get(f"{key}.low", math.nan), row.get(f"{key}.high", math.nan)
     if math.isfinite(low) and math.isfinite(high):
         text += f" [{low:.2f}, {high:.2f}]"
-    p = row.get(f"{key}.p", math.nan)
-    text += f", p = {p:.2g}" if math.isfinite(p) else ", no test"
+    text += ", " + censored.format_p(row.get(f"{key}.p", math.nan))
     return f"{text} ({row.get(f'{key}.verdict', NOT_MEASURED)})"
 
 
-def map_markdown(rows: Sequence[dict[str, Any]], top: float, ci: float = 0.95) -> str:
+def format_difference(row: dict[str, Any], key: str, kind: str) -> str:
+    """A reliability (``kind="reliability"``, points) or area (``"auc"``, return units) difference with
+    its CI, p and verdict, from a map or control row; ``—`` when absent."""
+    value = row.get(f"{key}.{kind}_diff", math.nan)
+    if not isinstance(value, float) or not math.isfinite(value):
+        return "—"
+    scale, unit = (100.0, " pts") if kind == "reliability" else (1.0, "")
+    low, high = row.get(f"{key}.{kind}_{'diff_low' if kind == 'reliability' else 'low'}", math.nan), row.get(
+        f"{key}.{kind}_{'diff_high' if kind == 'reliability' else 'high'}", math.nan)
+    text = f"{scale * value:+.1f}{unit}"
+    if math.isfinite(low) and math.isfinite(high):
+        text += f" [{scale * low:+.1f}, {scale * high:+.1f}]"
+    return f"{text}, {censored.format_p(row.get(f'{key}.{kind}_p', math.nan))} ({row.get(f'{key}.{kind}_verdict')})"
+
+
+def controls_markdown(rows: Sequence[dict[str, Any]], top: float, margin: float, ci: float = 0.95) -> str:
+    """The control comparisons: each side's seeds reaching ``top`` and restricted mean steps, the
+    speedup of a over b with its verdict, the learning-curve area difference with its verdict."""
+    pct = f"{100 * ci:g}%"
+    head = ["Comparison (a vs b)", "Question", f"a: reached {top:g}; steps", f"b: reached {top:g}; steps",
+            f"Speedup a / b [{pct} CI], p (verdict, margin {margin:g}x)", f"Area a - b [{pct} CI], p (verdict)"]
+    body = [[r["control"], r["question"], f"{r['a.reached']}/{r['a.n']}; {r['a.steps']:,.0f}",
+             f"{r['b.reached']}/{r['b.n']}; {r['b.steps']:,.0f}", format_speedup(r, "cmp"),
+             format_difference(r, "cmp", "auc")] for r in rows]
+    return "\n".join(tables.markdown_rows(head, body)) + "\n"
+
+
+def map_markdown(rows: Sequence[dict[str, Any]], top: float, ci: float = 0.95,
+                 margin: float = censored.DEFAULT_MARGIN) -> str:
     """The regime map: one line per regime, each arm's reliability and steps to ``top``, both speedups."""
     arms = order_arms(sorted({k.split(".")[0] for r in rows for k in r if k.endswith(".reliability")}))
     pct = f"{100 * ci:g}%"
     head = ["Regime", "Seeds"] + [f"{a}: reliability [{pct} Wilson]; steps to {top:g} [{pct} CI]" for a in arms]
-    head += [f"Speedup {a} / {b} to {top:g} [{pct} CI], rank p" for a, b, _ in MAP_PAIRS]
+    pairs = [(a, b) for a, b, _ in MAP_PAIRS if any(f"{a}_vs_{b}.speedup" in r for r in rows)]
+    head += [f"Speedup {a} / {b} to {top:g} [{pct} CI], rank p (verdict, margin {margin:g}x)" for a, b in pairs]
     body = []
     for r in rows:
         cells = [f"`{r['regime']}`", str(r["seeds"])]
         cells += [f"{r.get(f'{a}.reliability_text', '—')}; {r.get(f'{a}.steps_text', '—')}" for a in arms]
-        cells += [format_speedup(r, f"{a}_vs_{b}") for a, b, _ in MAP_PAIRS]
+        cells += [format_speedup(r, f"{a}_vs_{b}") for a, b in pairs]
         body.append(cells)
     return "\n".join(tables.markdown_rows(head, body)) + "\n"
 
@@ -177,22 +275,40 @@ def _names(rows: Sequence[dict[str, Any]], key: str, wanted: str) -> list[str]:
     return [f"`{r['regime']}`" for r in rows if r.get(f"{key}.verdict") == wanted]
 
 
-def summary(rows: Sequence[dict[str, Any]], points: pd.DataFrame, top: float, alpha: float, vlm_regime: str
-            ) -> list[str]:
-    """The report's opening: what holds, where, and what does not, in sentences made from the numbers."""
-    lines = []
-    whole, vlm = "hybrid_vs_baseline", "hybrid_vs_kinematic"
-    for key, what in ((whole, "**The hybrid vs the baseline**"),
-                      (vlm, "**What the VLM itself adds** (hybrid vs kinematic, both with the dense term)")):
-        parts = [f"{wanted} in {', '.join(names)}" for wanted in (FASTER, SLOWER, NO_DIFFERENCE, NEITHER, NOT_MEASURED)
-                 if (names := _names(rows, key, wanted))]
-        lines.append(f"- {what}, steps to {top:g} (censored rank test at {alpha:g}): {'; '.join(parts)}.")
+def _answer(row: dict[str, Any], key: str) -> str:
+    """A comparison's verdict in words, with its figures."""
+    return f"**{row.get(f'{key}.verdict', NOT_MEASURED)}** ({format_speedup(row, key).rsplit(' (', 1)[0]})"
+
+
+def summary(rows: Sequence[dict[str, Any]], points: pd.DataFrame, top: float, alpha: float, vlm_regime: str,
+            control_rows: Sequence[dict[str, Any]] = (), margin: float = censored.DEFAULT_MARGIN) -> list[str]:
+    """The report's opening: the answers to the study's questions, in sentences made from the numbers.
+    Every verdict is one of faster / slower (censored rank test at ``alpha``), equivalent within
+    ``margin`` (TOST on the ratio of restricted means) or inconclusive (neither)."""
+    lines = [f"- Verdicts on steps to {top:g}: faster/slower when the censored rank test is significant at "
+             f"{alpha:g}; {censored.equivalent(margin)} when the {100 * (1 - 2 * alpha):g}% interval of the speedup "
+             f"lies inside [1/{margin:g}, {margin:g}] (TOST); otherwise inconclusive. {censored.RULE[0].upper()}"
+             f"{censored.RULE[1:]}."]
     for r in rows:
         rel = ", ".join(f"{a} {r[f'{a}.reached']}/{r[f'{a}.n']}" for a in order_arms(
             [k.split(".")[0] for k in r if k.endswith(".reliability")]))
-        lines.append(f"- `{r['regime']}` ({r['seeds']} seeds per arm): hybrid / baseline "
-                     f"{format_speedup(r, whole)}; hybrid / kinematic {format_speedup(r, vlm)}; seeds reaching "
-                     f"{top:g}: {rel}.")
+        lines.append(f"- `{r['regime']}` ({r['seeds']} seeds per arm), seeds reaching {top:g}: {rel}.")
+        questions = (("hybrid_vs_baseline", "Is the hybrid faster than plain PPO?"),
+                     ("hybrid_vs_kinematic", "Does the VLM add speed beyond the dense term (hybrid vs kinematic)?"),
+                     (f"hybrid_vs_{PLACEBO_ARM}", "Does the VLM's content matter (hybrid vs the placebo)?"),
+                     ("kinematic_vs_baseline", "Does the dense term alone speed learning (kinematic vs baseline)?"))
+        for key, question in questions:
+            if f"{key}.verdict" in r and r[f"{key}.verdict"] != NOT_MEASURED:
+                lines.append(f"  - {question} {_answer(r, key)}; learning-curve area "
+                             f"{format_difference(r, key, 'auc')}.")
+        if "hybrid_vs_baseline.reliability_diff" in r:
+            lines.append(f"  - Is the hybrid more reliable than plain PPO? hybrid minus baseline "
+                         f"{format_difference(r, 'hybrid_vs_baseline', 'reliability')} (Newcombe interval, Fisher "
+                         "exact p).")
+    for c in control_rows:
+        area = format_difference(c, "cmp", "auc")
+        lines.append(f"- Control `{c['control']}` ({c['question']}): {_answer(c, 'cmp')}; seeds reaching {top:g}: "
+                     f"{c['a.reached']}/{c['a.n']} vs {c['b.reached']}/{c['b.n']}; area {area}.")
     finite = points[np.isfinite(points["speedup"]) & np.isfinite(points["mcq_accuracy"])] if len(points) else points
     if len(finite) >= 3:
         rho = spearman(finite["mcq_accuracy"].to_numpy(), finite["speedup"].to_numpy())

@@ -142,6 +142,7 @@ class StudyConfig:
     window: int = 100
     ci: float = 0.95
     alpha: float = 0.05  # significance level of the verdicts
+    margin: float = 1.15  # equivalence margin of a speedup (TOST: within [1/margin, margin])
     n_boot: int = DEFAULT_N_BOOT
     seed: int = 0  # seed of the statistics' random streams
     extra: dict[str, Any] = field(default_factory=dict)  # free-form provenance (the command)

@@ -22,16 +22,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from vlmrl_cli.analysis import stats
+from vlmrl_cli.analysis.censored import RULE, equivalent
 from vlmrl_cli.analysis.load import load_experiment
 from vlmrl_cli.calibration.pipeline import log_summary_run, train_regimes, wall_s
 from vlmrl_cli.calibration.regimes import Regime
 from vlmrl_cli.core import tables
+from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.provenance import config_hash, git_commit, package_versions
 from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
 from vlmrl_cli.report import hacking
+from vlmrl_cli.report.attribution import DEFAULT_AUC_DELTA
+from vlmrl_cli.report.table2 import per_seed_table
 from vlmrl_cli.report.writer import ensure_writable
 from vlmrl_cli.study import analysis
 from vlmrl_cli.study.config import StudyConfig
@@ -104,6 +109,9 @@ def _measured_rates(cfg: StudyConfig) -> dict[str, float]:
 class StudyResult:
     regime_map: pd.DataFrame = field(default_factory=pd.DataFrame)
     vlm_points: pd.DataFrame = field(default_factory=pd.DataFrame)
+    controls: pd.DataFrame = field(default_factory=pd.DataFrame)
+    per_seed: pd.DataFrame = field(default_factory=pd.DataFrame)
+    power: list[str] = field(default_factory=list)
     summary: list[str] = field(default_factory=list)
     files: list[Path] = field(default_factory=list)
     run_id: str | None = None
@@ -153,21 +161,31 @@ def run_study(
     client = store.connect(cfg.base.tracking_uri)
     data = load_experiment(client, cfg.base.experiment)
     streams = stats.Streams(cfg.seed)
-    rows, hack = [], []
+    rows, hack, seeds = [], [], []
     for regime in cfg.regimes:
         sub = analysis.subset(data, regime.run)
-        row, per_seed = analysis.regime_row(regime.id, sub, cfg.thresholds, streams, cfg.n_boot, cfg.ci, cfg.alpha)
+        row, per_seed = analysis.regime_row(regime.id, sub, cfg.thresholds, streams, cfg.n_boot, cfg.ci, cfg.alpha,
+                                            cfg.margin)
         row["overrides"] = regime.label
         row["train_wall_s"] = sum(wall_s(client, r) for r in per_seed["run_id"])
         rows.append(row)
         hack.append(hacking.hacking_frame(per_seed, sub.eval_episodes, cfg.ci).assign(regime=regime.id))
+        seeds.append(per_seed.assign(regime=regime.id, variant=""))
+    for sweep in (*cfg.variants, *(c.regime for c in cfg.cells)):
+        seeds.append(per_seed_table(analysis.subset(data, sweep.run), cfg.thresholds).assign(
+            regime=cfg.vlm_regime, variant=sweep.id))
+    result.per_seed = study_per_seed(seeds, cfg.thresholds)
+    result.controls = pd.DataFrame([analysis.control_row(c, data, cfg.thresholds, streams, cfg.n_boot, cfg.ci,
+                                                         cfg.alpha, cfg.margin) for c in analysis.controls(cfg.cells)])
+    result.power = power_lines(cfg, result.per_seed)
     reference = next(r for r in cfg.regimes if r.id == cfg.vlm_regime)
     points = [analysis.vlm_point(v.id, analysis.paired(data, reference.run, v.run), cfg.top, accuracy[v.id], streams,
                                  cfg.n_boot, cfg.ci) for v in cfg.variants]
     result.regime_map = pd.DataFrame(rows)
     result.vlm_points = pd.DataFrame(points, columns=["variant", "mcq_accuracy", "speedup", "low", "high", "p",
                                                       "hybrid_seeds", "baseline_seeds"])
-    result.summary = analysis.summary(rows, result.vlm_points, cfg.top, cfg.alpha, cfg.vlm_regime)
+    result.summary = analysis.summary(rows, result.vlm_points, cfg.top, cfg.alpha, cfg.vlm_regime,
+                                      result.controls.to_dict("records"), cfg.margin)
     hack_frame = pd.concat(hack, ignore_index=True) if hack else pd.DataFrame()
     simulated = any(r.run.vlm.backend == "sim" for r in cfg.all_regimes())
     stage("analysis", start)
@@ -179,6 +197,104 @@ def run_study(
                                      "vlm_regime": cfg.vlm_regime, "thresholds": str(list(cfg.thresholds))},
                                     result.files, (label, sim))
     return result
+
+
+def finished_per_seed(cfg: StudyConfig) -> pd.DataFrame | None:
+    """The per-seed table of the study's runs already FINISHED in the store (read-only: None when the
+    store or the experiment does not exist, or holds no finished training run)."""
+    uri = store.resolve_tracking_uri(cfg.base.tracking_uri)
+    if uri.startswith("sqlite:///") and not Path(uri.removeprefix("sqlite:///")).exists():
+        return None
+    client = store.connect(uri)
+    exp = client.get_experiment_by_name(cfg.base.experiment)
+    if exp is None or exp.lifecycle_stage == "deleted":
+        return None
+    try:
+        data = load_experiment(client, cfg.base.experiment)
+    except BadInput:  # no finished training run yet
+        return None
+    frames = [per_seed_table(analysis.subset(data, r.run), cfg.thresholds).assign(regime=r.id, variant="")
+              for r in cfg.regimes]
+    frames += [per_seed_table(analysis.subset(data, s.run), cfg.thresholds).assign(regime=cfg.vlm_regime,
+                                                                                   variant=s.id)
+               for s in (*cfg.variants, *(c.regime for c in cfg.cells))]
+    table = study_per_seed([f for f in frames if len(f)], cfg.thresholds)
+    return table if len(table) else None
+
+
+#: The columns of ``per_seed.csv``, after the steps to each threshold and whether each was reached.
+PER_SEED_COLUMNS = ["regime", "variant", "arm", "seed", "config_hash", "run_id", "budget"]
+PER_SEED_TAIL = ["auc", "final_return", "detached_success", "eval_success_rate", "eval_mean_length"]
+
+
+def study_per_seed(frames: Sequence[pd.DataFrame], thresholds: Sequence[float]) -> pd.DataFrame:
+    """One row per run of the study (a run shared by two sweeps once, under the first): regime, variant
+    (the VLM variant or control cell, empty for the regime's own arms), arm, seed, config hash, run id,
+    budget, steps to each threshold (NaN = DNF) and whether it was reached within the budget, the
+    learning-curve area, final return, and the detached evaluation."""
+    from vlmrl_cli.analysis import censored
+
+    if not frames:
+        return pd.DataFrame(columns=PER_SEED_COLUMNS)
+    df = pd.concat(frames, ignore_index=True).drop_duplicates("run_id", keep="first")
+    steps = []
+    for t in thresholds:
+        key = f"steps_{t:g}"
+        df[f"reached_{t:g}"] = censored.reached(df[key].to_numpy(dtype=float), df["budget"].to_numpy(dtype=float))
+        steps += [key, f"reached_{t:g}"]
+    return df[PER_SEED_COLUMNS + steps + PER_SEED_TAIL].reset_index(drop=True)
+
+
+#: The spread of log steps to the top threshold assumed for power when no run has finished yet: the
+#: committed 2026-11-29 study's arms ranged from 0.15 to 0.25 (issue 18's audit).
+DEFAULT_SD_LOG = 0.2
+
+
+def pooled_sd_log(per_seed: pd.DataFrame, top: float) -> float:
+    """The pooled within-arm standard deviation of log restricted steps to ``top`` (NaN without two
+    seeds in some arm)."""
+    from vlmrl_cli.analysis import censored
+
+    key = f"steps_{top:g}"
+    ss, df = 0.0, 0
+    for _, d in per_seed.drop_duplicates("run_id").groupby(["variant", "arm"]):
+        if len(d) < 2:
+            continue
+        x = np.log(censored.restricted(d[key].to_numpy(dtype=float), d["budget"].to_numpy(dtype=float)))
+        ss += float(((x - x.mean()) ** 2).sum())
+        df += len(x) - 1
+    return math.sqrt(ss / df) if df > 0 else math.nan
+
+
+def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None) -> list[str]:
+    """What the study can detect, at 80% power and ``cfg.alpha``: the smallest speedup per comparison
+    with its seeds, the seeds a 1.2x speedup needs, and the seeds that tell 100% from the baseline's
+    reliability. The spread comes from ``per_seed`` (finished runs) when given, else ``DEFAULT_SD_LOG``."""
+    from vlmrl_cli.analysis import censored
+
+    sd = pooled_sd_log(per_seed, cfg.top) if per_seed is not None and len(per_seed) else math.nan
+    source = (f"the pooled sd of log steps to {cfg.top:g} over the finished runs ({sd:.3f})" if sd > 0
+              else f"an assumed sd of log steps of {DEFAULT_SD_LOG} (no finished runs with any spread to measure)")
+    sd = sd if sd > 0 else DEFAULT_SD_LOG
+    n = len(cfg.base.seeds)
+    lines = [f"Power (80%, two-sided alpha {cfg.alpha:g}; normal approximation on log steps, from {source}):"]
+    comparisons = [f"{a} vs {b}" for a, b, _ in analysis.MAP_PAIRS if a in cfg.base.arms and b in cfg.base.arms]
+    comparisons += [c.name for c in analysis.controls(cfg.cells)]
+    mde = censored.detectable_speedup(sd, n, n, cfg.alpha)
+    if comparisons:
+        lines.append(f"- each of {len(comparisons)} comparison(s) at {n} seeds per arm detects a speedup of "
+                     f"{mde:.2f}x or more ({', '.join(comparisons[:4])}{', ...' if len(comparisons) > 4 else ''}).")
+    lines.append(f"- a 1.2x speedup needs {censored.seeds_for_speedup(1.2, sd, cfg.alpha)} seeds per arm; 1.3x needs "
+                 f"{censored.seeds_for_speedup(1.3, sd, cfg.alpha)}.")
+    base = per_seed[(per_seed["arm"] == "baseline") & (per_seed["variant"] == "")] if per_seed is not None and len(
+        per_seed) else None
+    rate = float(base[f"reached_{cfg.top:g}"].mean()) if base is not None and len(base) else 0.6
+    what = "the baseline's observed" if base is not None and len(base) else "the paper's baseline"
+    needed = censored.seeds_for_reliability(1.0, rate, cfg.alpha) if rate < 1 else None
+    lines.append(f"- reliability, 100% against {what} {100 * rate:.0f}% (Fisher exact): power "
+                 f"{censored.fisher_power(1.0, rate, n, cfg.alpha):.2f} at {n} seeds per arm"
+                 + (f"; {needed} seeds per arm give 80%." if needed else "."))
+    return lines
 
 
 def _probe_variants(cfg: StudyConfig) -> dict[str, float]:
@@ -221,10 +337,20 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
                 "about a real VLM.**" if simulated else "VLM: a real backend (see the runs' vlmrl.vlm tags).")
     lines = ["# Study: where does the hybrid's advantage hold?", "", vlm_line, "", "## Summary", "",
              *result.summary, ""]
-    lines += ["## Regime map", "", analysis.map_markdown(result.regime_map.to_dict("records"), cfg.top, cfg.ci)]
+    lines += ["## Regime map", "", analysis.map_markdown(result.regime_map.to_dict("records"), cfg.top, cfg.ci,
+                                                       cfg.margin)]
     lines += ["Regimes (overrides over the study's defaults): "
               + "; ".join(f"`{r.id}` = {r.label}" for r in cfg.regimes) + ".", ""]
     lines += [f"- {n}" for n in cfg.notes] + ([""] if cfg.notes else [])
+    if len(result.controls):
+        lines += ["## Controls: placebo, dose-response, the lock", "",
+                  f"In regime `{cfg.vlm_regime}`. Dose-response: the reward pays alpha x PBRS + kin_scale x R_kin "
+                  "(alpha 0: the dense term alone, the kinematic arm, or the baseline at kin_scale 0; kin_scale 0: "
+                  "the VLM's potential alone, the semantic arm); each cell with a potential is compared with the "
+                  "dense term alone at its kin_scale, and at the largest alpha with its placebo (the same labels "
+                  "through a label map shuffled per seed). The lock: the hybrid against hybrid-no-lock when the "
+                  "VLM's labels are drawn afresh at every query.", "",
+                  analysis.controls_markdown(result.controls.to_dict("records"), cfg.top, cfg.margin, cfg.ci)]
     lines += ["## VLM quality", "",
               f"The hybrid alone, in regime `{cfg.vlm_regime}`, with other simulated-VLM knobs; each variant's MCQ "
               f"accuracy is measured by `vlmrl taxonomy` on the same knobs ({cfg.states} sweep positions; "
@@ -236,12 +362,19 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
         part = hack_frame[hack_frame["regime"] == regime.id] if len(hack_frame) else hack_frame
         lines += [f"### `{regime.id}`", "", hacking.hacking_markdown(part, cfg.ci) if len(part) else "no runs\n"]
     lines += ["## Method", "",
-              f"Reliability: seeds whose rolling mean return ({cfg.window} episodes) reaches {cfg.top:g}, Wilson "
-              f"interval. Steps to {cfg.top:g}: mean over the seeds that reach it, bootstrap CI (DNF counted). "
-              "Speedup: ratio of those means, bootstrap CI; p: two-sided Mann-Whitney U with DNF seeds censored "
-              f"(permutation). Verdict: faster/slower when p < {cfg.alpha:g} (direction from the speedup, or from the "
-              "reliability difference when an arm never finishes), else no detectable difference. The unit is the "
-              "seed.", ""]
+              f"The DNF rule, everywhere: {RULE}. Reliability: the share of seeds that reached {cfg.top:g}, Wilson "
+              f"interval; differences of reliability with a Newcombe interval and a Fisher exact p. Steps to "
+              f"{cfg.top:g}: restricted mean over all seeds, bootstrap CI. Speedup: the ratio of restricted means, "
+              "bootstrap CI; p: two-sided Mann-Whitney U on steps with DNF seeds tied above every finish (exact "
+              "when every split of the seeds can be enumerated, else the tie-corrected normal approximation). "
+              f"Verdict: faster/slower when p < {cfg.alpha:g}; {equivalent(cfg.margin)} when the "
+              f"{100 * (1 - 2 * cfg.alpha):g}% bootstrap interval of the speedup lies inside [1/{cfg.margin:g}, "
+              f"{cfg.margin:g}] (two one-sided tests) and each arm finished on at least half its seeds; otherwise "
+              "inconclusive. A speedup of restricted means is a lower bound on the speedup of true means when the "
+              "slower arm DNFs. Learning-curve area: per seed, the mean native return over the budget (each step "
+              "weighs its episode's return); a difference of means with a bootstrap CI, a Mann-Whitney p, and "
+              f"equivalence within +-{DEFAULT_AUC_DELTA:g} return points. The unit is the seed. `per_seed.csv` "
+              "holds every run's figures, so every number here can be recomputed.", "", *result.power, ""]
     train = sum(r.get("train_wall_s", 0.0) for r in result.regime_map.to_dict("records"))
     cost_line = (f" Estimated up front: {cost.pending} run(s) to train, {cost.total_s / 60:.0f} min ({cost.how})."
                  if cost else "")
@@ -294,11 +427,11 @@ def _write(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simu
     tracking_uri = store.resolve_tracking_uri(cfg.base.tracking_uri)
     history = earlier_invocations(_read_manifest(out / "manifest.json"), cfg.base.experiment, tracking_uri)
     names = ["regime_map.md", "regime_map.csv", "vlm_quality.csv", "vlm_quality.png", "hacking.csv", "report.md",
-             "manifest.json"]
+             "manifest.json", "per_seed.csv", "controls.csv", "controls.md"]
     paths = [out / n for n in names]
     vlm_note = " SIMULATED VLM, not a real model." if simulated else ""
     paths[0].write_text(f"# Regime map{' (SIMULATED VLM)' if simulated else ''}\n\n"
-                        + analysis.map_markdown(result.regime_map.to_dict("records"), cfg.top, cfg.ci)
+                        + analysis.map_markdown(result.regime_map.to_dict("records"), cfg.top, cfg.ci, cfg.margin)
                         + "\n" + "\n".join(f"- {n}" for n in cfg.notes) + "\n", encoding="utf-8")
     result.regime_map.drop(columns=[c for c in result.regime_map if c.endswith("_text")]).assign(
         vlm=vlm_note.strip()).to_csv(paths[1], index=False)
@@ -306,6 +439,11 @@ def _write(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simu
     analysis.vlm_figure(result.vlm_points, cfg.top, cfg.vlm_regime, simulated).savefig(paths[3], dpi=150)
     hack_frame.to_csv(paths[4], index=False)
     paths[5].write_text(to_markdown(cfg, result, hack_frame, simulated, cost, history), encoding="utf-8")
+    result.per_seed.assign(vlm=vlm_note.strip()).to_csv(paths[7], index=False)
+    result.controls.assign(vlm=vlm_note.strip()).to_csv(paths[8], index=False)
+    paths[9].write_text(f"# Controls{' (SIMULATED VLM)' if simulated else ''}\n\n"
+                        + (analysis.controls_markdown(result.controls.to_dict("records"), cfg.top, cfg.margin, cfg.ci)
+                           if len(result.controls) else "No control cell was run.\n"), encoding="utf-8")
     manifest = {
         "what": "vlmrl study" + (" with the SIMULATED VLM, not a real model" if simulated else ""),
         "command": command,
@@ -321,6 +459,9 @@ def _write(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simu
                     for r in cfg.regimes],
         "variants": [{"id": v.id, "overrides": v.label, "config_hash": v.run.jobs()[0].config_hash}
                      for v in cfg.variants],
+        "cells": [{"id": c.regime.id, "kind": c.kind, "arm": c.arm, "overrides": c.regime.label,
+                   "config_hash": c.regime.run.jobs()[0].config_hash} for c in cfg.cells],
+        "margin": cfg.margin,
         "vlm_regime": cfg.vlm_regime,
         "notes": list(cfg.notes),
         "written_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
