@@ -132,6 +132,7 @@ def test_the_taxonomy_sweep_defaults_to_the_taxonomy_commands(tmp_path: Path) ->
     help_text = " ".join(runner.invoke(app, ["study", "--help"]).output.split())
     assert f"(default {DEFAULT_STATES})" in help_text
     result = runner.invoke(app, ["study", "--regime", "norm=smoke", "--arms", "hybrid", "--seeds", "1",
-                                 "--profiles", "default", "--dry-run", "--tracking-uri", _uri(tmp_path), "--out", str(tmp_path / "out")])
+                                 "--profiles", "default", "--dry-run", "--tracking-uri", _uri(tmp_path),
+                                 "--out", str(tmp_path / "out")])
     assert result.exit_code == 0, result.output
     assert f"taxonomy: {DEFAULT_STATES} sweep positions" in " ".join(result.output.split())
