@@ -60,6 +60,9 @@ def test_a_resumed_sweep_reuses_imported_runs(source: str, tmp_path: Path) -> No
     uri = f"sqlite:///{tmp_path / 'm.db'}"
     result = runner.invoke(app, ["import", str(path), "--tracking-uri", uri, "--experiment", "dst"])
     assert result.exit_code == 0 and "imported 4 run(s)" in result.output, result.output + result.stderr
+    again = runner.invoke(app, ["export", "--out", str(tmp_path / "more.jsonl.gz"), "--tracking-uri", source,
+                                "--experiment", "src", "--skip-exported", str(path)])
+    assert again.exit_code == 2 and "not in the earlier exports (4 are)" in again.stderr
     dry = runner.invoke(app, ["run", "--arms", "baseline,hybrid-shuffled", "--seeds", "2", "--preset", "smoke",
                               "--set", "ppo.eval_episodes=2", "--tracking-uri", uri, "--experiment", "dst",
                               "--dry-run"])

@@ -15,30 +15,39 @@ ExportFile = Annotated[Path, typer.Option("--out", help="The export file to writ
 Models = Annotated[bool, typer.Option("--models", help="Include model.zip and vecnormalize.pkl (for vlmrl evaluate).")]
 
 
+Earlier = Annotated[list[Path] | None, typer.Option(
+    "--skip-exported", help="An earlier export file, repeatable: its runs are left out (an incremental export).")]
+
+
 def export(
     out: ExportFile,
     experiment: Experiment = "vlmrl",
     tracking_uri: TrackingUri = None,
     models: Models = False,
+    skip_exported: Earlier = None,
 ) -> None:
     """Write every FINISHED training run of an experiment (tags, params, per-episode and evaluation
     histories, config; models with --models) to one file that `vlmrl import` reads into another store."""
     from vlmrl_cli.tracking import store
-    from vlmrl_cli.tracking.transfer import export_runs
+    from vlmrl_cli.tracking.transfer import export_runs, exported_ids
 
     with exit_codes():
         if out.exists() and out.is_dir():
             raise BadInput(f"--out {out} is a folder; name the export file, e.g. {out / 'runs.jsonl.gz'}.")
         if not out.parent.is_dir():
             raise BadInput(f"--out {out}: the folder {out.parent} does not exist; create it first.")
+        missing = [p for p in skip_exported or [] if not p.is_file()]
+        if missing:
+            raise BadInput(f"--skip-exported {missing[0]}: no such export file.")
+        skip = exported_ids(skip_exported or [])
         client = store.connect_existing(tracking_uri)
-        summary = export_runs(client, experiment, out, models=models)
+        summary = export_runs(client, experiment, out, models=models, skip=skip)
         typer.echo(f"exported {summary.written} FINISHED training run(s) of '{experiment}' to {out} "
-                   f"({out.stat().st_size / 1e6:.1f} MB)")
+                   f"({out.stat().st_size / 1e6:.1f} MB); {summary.skipped} left out as exported before")
 
 
 def import_(
-    path: Annotated[Path, typer.Argument(help="An export file written by `vlmrl export`.", show_default=False)],
+    paths: Annotated[list[Path], typer.Argument(help="Export files written by `vlmrl export`.", show_default=False)],
     experiment: Experiment = "vlmrl",
     tracking_uri: TrackingUri = None,
 ) -> None:
@@ -48,9 +57,12 @@ def import_(
     from vlmrl_cli.tracking.transfer import import_runs, read_records
 
     with exit_codes():
-        if not path.is_file():
-            raise BadInput(f"there is no export file {path}; write one with `vlmrl export --out FILE`.")
-        next(iter(read_records(path)), None)  # a file of another kind is refused before the store exists
+        for path in paths:
+            if not path.is_file():
+                raise BadInput(f"there is no export file {path}; write one with `vlmrl export --out FILE`.")
+            next(iter(read_records(path)), None)  # a file of another kind is refused before the store exists
         client = store.connect(tracking_uri)
-        summary = import_runs(client, path, experiment)
-        typer.echo(f"imported {summary.written} run(s) into '{experiment}'; {summary.skipped} already present")
+        for path in paths:
+            summary = import_runs(client, path, experiment)
+            typer.echo(f"{path}: imported {summary.written} run(s) into '{experiment}'; {summary.skipped} "
+                       "already present")

@@ -15,7 +15,7 @@ from the same source run) is skipped, so importing twice changes nothing.
 Format (``FORMAT``), one object per line::
 
     {"format": "vlmrl-runs/1", "source_run_id": ..., "run_name": ..., "start_time": ms, "end_time": ms,
-     "tags": {...}, "params": {...}, "latest": {key: [step, timestamp, value]},
+     "tags": {...}, "params": {...}, "latest": {key: [0, end_time, last value]},
      "histories": {key: {"step": [...], "ts": [...], "value": [...]}},
      "artifacts": {"config.json": "<text>"}, "binary": {"model.zip": "<base64>"}}
 """
@@ -26,7 +26,7 @@ import base64
 import gzip
 import json
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -62,12 +62,10 @@ def _history(client: Any, run_id: str, key: str) -> dict[str, list[Any]]:
 
 def _record(client: Any, run: Any, models: bool, workdir: Path) -> dict[str, Any]:
     run_id = run.info.run_id
-    latest = {}
-    for key in run.data.metrics:
-        if key in HISTORY_KEYS:
-            continue
-        last = max(client.get_metric_history(run_id, key), key=lambda p: (p.step, p.timestamp))
-        latest[key] = [int(last.step), int(last.timestamp), float(last.value)]
+    # other metrics keep their last value only (their histories, e.g. train/*, serve MLflow's UI, not
+    # the analysis), at step 0 and the run's end time
+    when = int(run.info.end_time or run.info.start_time or 0)
+    latest = {k: [0, when, float(v)] for k, v in run.data.metrics.items() if k not in HISTORY_KEYS}
     present = {a.path for a in client.list_artifacts(run_id)}
     wanted = [n for n in (*TEXT_ARTIFACTS, *(MODEL_ARTIFACTS if models else ())) if n in present]
     store.download_artifacts(client, run_id, wanted, workdir)
@@ -87,18 +85,27 @@ def _record(client: Any, run: Any, models: bool, workdir: Path) -> dict[str, Any
     }
 
 
+def exported_ids(paths: Sequence[Path]) -> set[str]:
+    """The source run ids already in the export files ``paths`` (for an incremental export)."""
+    return {r["source_run_id"] for p in paths for r in read_records(p)}
+
+
 def export_runs(client: Any, experiment: str, path: Path, models: bool = False,
-                progress: Callable[[int, int], None] | None = None) -> TransferSummary:
+                progress: Callable[[int, int], None] | None = None, skip: set[str] | None = None) -> TransferSummary:
     """Write the FINISHED training runs of ``experiment`` to the gzip JSON-lines file ``path``
-    (written to a temporary name first, so a failed export leaves no partial file).
-    ``progress(done, total)`` is called after each run. ``BadInput`` when there is none."""
+    (written to a temporary name first, so a failed export leaves no partial file), but those whose
+    run id is in ``skip`` (exported before: ``skipped`` counts them). ``progress(done, total)`` is
+    called after each run. ``BadInput`` when there is nothing to export."""
     exp = client.get_experiment_by_name(experiment)
     if exp is None or exp.lifecycle_stage == "deleted":
         raise BadInput(f"MLflow experiment '{experiment}' does not exist in this store; pass --experiment NAME.")
     runs = schema.search_all(client, exp.experiment_id,
                              schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN}, finished=True))
+    before = len(runs)
+    runs = [r for r in runs if r.info.run_id not in (skip or set())]
     if not runs:
-        raise BadInput(f"MLflow experiment '{experiment}' has no FINISHED training run to export.")
+        raise BadInput(f"MLflow experiment '{experiment}' has no FINISHED training run to export"
+                       + (f" that is not in the earlier exports ({before} are)." if before else "."))
     runs.sort(key=lambda r: (r.info.start_time or 0, r.info.run_id))
     partial = path.with_name(path.name + ".partial")
     with gzip.open(partial, "wt", encoding="utf-8", compresslevel=9) as out:
@@ -108,7 +115,7 @@ def export_runs(client: Any, experiment: str, path: Path, models: bool = False,
             if progress is not None:
                 progress(i, len(runs))
     partial.replace(path)
-    return TransferSummary(len(runs))
+    return TransferSummary(len(runs), before - len(runs))
 
 
 def read_records(path: Path) -> Iterator[dict[str, Any]]:
