@@ -87,6 +87,8 @@ def test_a_smoke_grid_writes_every_output_once_and_a_rerun_trains_nothing(tmp_pa
         (["--grid", "ppo.nenvs=1,2"], "", "did you mean 'ppo.n_envs'"),
         (["--grid", "ppo.gamma=0.9,1.5"], "", "ppo.gamma"),
         (["--grid", "ppo.n_envs="], "", "lists no value"),
+        (["--grid", "ppo.n_envs=1,2", "--grid", "ppo.n_envs=4"], "", "--grid ppo.n_envs is given twice"),
+        (["--set", "shaping.alpha=-1"], "", "shaping.alpha"),
         ([], "[calibrate]\ngird = {}\n", "did you mean 'grid'"),
         ([], '[calibrate.grid]\n"shaping.alpha" = 3\n', "calibrate.grid.shaping.alpha"),
         ([], '[calibrate.grid]\n"ppo.n_steps" = [16, 1]\n', "ppo.batch_size"),

@@ -110,3 +110,19 @@ def test_errors_exit_2_with_one_sentence_and_create_no_folder(
     assert result.stderr.startswith("error:") and words in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
     assert not out.exists() and not (tmp_path / "missing").exists()
+
+
+def test_a_parent_run_id_names_its_children_and_arm_seed_pick_one(trained: tuple[Path, str]) -> None:
+    root, child = trained
+    client = MlflowClient(tracking_uri=_uri(root))
+    exp = client.get_experiment_by_name("e")
+    assert exp is not None
+    (parent,) = client.search_runs([exp.experiment_id], filter_string="tags.`vlmrl.kind` = 'sweep'")
+    refused = _evaluate(root, parent.info.run_id)
+    assert refused.exit_code == 2 and child in refused.stderr and "--arm ARM --seed N" in refused.stderr
+    picked = _evaluate(root, parent.info.run_id, "--arm", "hybrid", "--seed", "0", "--episodes", "1",
+                       "--out", str(root / "picked"))
+    assert picked.exit_code == 0, picked.output + picked.stderr
+    assert child in picked.output
+    wrong = _evaluate(root, child, "--arm", "hybrid")
+    assert wrong.exit_code == 2 and "drop them" in wrong.stderr

@@ -153,3 +153,33 @@ def test_config_file_sets_knobs_and_flags_override_it(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output + result.stderr
     (run,) = _children(_runs(tmp_path, "from-file"))
     assert run.data.tags["vlmrl.seed"] == "5" and run.data.params["timesteps"] == "256"
+
+
+def test_the_run_ends_with_its_child_runs_and_the_dry_run_lists_them_again(tmp_path: Path) -> None:
+    result = _run(tmp_path, "--arms", "baseline", "--seeds", "2", "--workers", "1")
+    assert result.exit_code == 0, result.output + result.stderr
+    ids = {r.data.tags["vlmrl.seed"]: r.info.run_id for r in _children(_runs(tmp_path))}
+    assert "training runs (vlmrl evaluate RUN_ID):" in result.output
+    for seed, run_id in ids.items():
+        assert any(line.split()[:3] == ["baseline", seed, run_id] for line in result.output.splitlines()), seed
+    dry = _run(tmp_path, "--arms", "baseline", "--seeds", "2", "--dry-run")
+    assert dry.exit_code == 0 and all(run_id in dry.output for run_id in ids.values()), dry.output
+
+
+@pytest.mark.parametrize(("args", "needle"), [
+    (["--arms", "baseline,,hybrid"], "has an empty entry"),
+    (["--seeds", "2", "--seed-list", "3"], "--seeds and --seed-list both given"),
+    (["--seed-list", "3,,4"], "has an empty entry"),
+    (["--seed-list", "3,3"], "lists a seed twice"),
+    (["--seed-list", "a,b"], "must be comma-separated integers"),
+    (["--set", "shaping.alpha=-1"], "invalid shaping.alpha = -1"),
+    (["--set", "shaping.alpha=nan"], "input should be a finite number"),
+    (["--set", "shaping.kin_scale=inf"], "input should be a finite number"),
+])
+def test_ambiguous_or_non_finite_input_is_refused_before_anything_exists(tmp_path: Path, args: list[str],
+                                                                          needle: str) -> None:
+    result = _run(tmp_path, *args)
+    assert result.exit_code == 2, result.output + result.stderr
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and needle in lines[0], lines
+    assert not any(tmp_path.iterdir())

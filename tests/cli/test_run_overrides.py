@@ -145,7 +145,7 @@ def test_dry_run_tells_finished_from_pending_after_a_partial_sweep(tmp_path: Pat
     assert _run(tmp_path, "--seed-list", "0").exit_code == 0
     result = _run(tmp_path, "--seed-list", "0,1", "--dry-run")
     assert result.exit_code == 0, result.output + result.stderr
-    rows = {line.split()[2]: line.split()[-1] for line in result.output.splitlines() if line.startswith("# baseline")}
+    rows = {line.split()[2]: line.split()[4] for line in result.output.splitlines() if line.startswith("# baseline")}
     assert rows == {"0": "FINISHED", "1": "pending"}
     assert "1 FINISHED, 1 pending" in result.output
     assert len(_children(tmp_path)) == 1  # the dry run trained nothing

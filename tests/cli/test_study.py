@@ -86,6 +86,12 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     assert "Earlier invocations of this study" in (out / "report.md").read_text()
     assert "14 run(s) trained" in (out / "report.md").read_text()
 
+    # a progress report of a larger grid: nothing trained, the missing runs named
+    partial = _study(tmp_path, "--no-train", "--seeds", "3")
+    assert partial.exit_code == 0, partial.output + partial.stderr
+    text = (out / "report.md").read_text()
+    assert "PARTIAL: 7 of the 21 runs are not FINISHED yet" in text and "0 run(s) trained now" in partial.output
+
 
 @pytest.mark.parametrize(("args", "needle"), [
     (["--regime", "x=preset=nope"], "unknown preset 'nope'"),
@@ -93,6 +99,9 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     (["--regime", "x=ppo.nenvs=1"], "did you mean 'ppo.n_envs'"),
     (["--profiles", "lava"], "unknown simulated-VLM profile 'lava'"),
     (["--profiles", ","], "--profiles lists no value"),
+    (["--profiles", "default,,ideal"], "has an empty entry"),
+    (["--arms", "baseline,,hybrid"], "has an empty entry"),
+    (["--seeds", "2", "--seed-list", "3"], "--seeds and --seed-list both given"),
     (["--flickers", "abc"], "--flickers takes numbers"),
     (["--flickers", "2"], "vlm.sim.flicker"),
     (["--vlm-regime", "other"], "not a regime of this study"),
@@ -102,7 +111,6 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     (["--arms", "teleport"], "unknown arm 'teleport'"),
     (["--set", "ppo.nenvs=1"], "did you mean 'ppo.n_envs'"),
     (["--set", "n_envs"], "KEY=VALUE"),
-    (["--seed-list", "a,b"], "--seed-list"),
     (["--config", "{tmp}/missing.toml"], "cannot read the config file"),
     (["--out", "{tmp}/file/out"], "output folder"),
     (["--tracking-uri", "sqlite:///{tmp}/file/mlflow.db"], "cannot be reached"),

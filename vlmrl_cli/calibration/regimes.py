@@ -93,13 +93,19 @@ def flatten_grid(table: Mapping[str, Any], prefix: str = "") -> dict[str, list[A
 
 
 def grid_flags(items: Sequence[str]) -> dict[str, list[Any]]:
-    """``--grid KEY=V1,V2`` flags -> ``{dotted key: values}``; a repeated key keeps its last list.
+    """``--grid KEY=V1,V2`` flags -> ``{dotted key: values}``; a key given twice is ``BadInput`` (one
+    of the two lists would be dropped).
 
     Example:
         >>> grid_flags(["ppo.n_envs=1,4", "ppo.normalize_obs=true,false"])
         {'ppo.n_envs': [1, 4], 'ppo.normalize_obs': [True, False]}
     """
-    return {key: parse_values(values) for key, values in (parse_assignment(item, "--grid") for item in items)}
+    out: dict[str, list[Any]] = {}
+    for key, values in (parse_assignment(item, "--grid") for item in items):
+        if key in out:
+            raise BadInput(f"--grid {key} is given twice; list all its values once: --grid {key}=V1,V2,...")
+        out[key] = parse_values(values)
+    return out
 
 
 def grid_product(grid: Mapping[str, Sequence[Any]]) -> list[dict[str, Any]]:

@@ -11,6 +11,34 @@ from vlmrl_cli.cli.options import CachePath, NoCache, OutDir, TrackingUri
 from vlmrl_cli.vlm.config import DEFAULT_CACHE
 
 
+def resolve_child(run_id: str, tracking_uri: str | None, arm: str | None, seed: int | None) -> str:
+    """``run_id`` itself for a training run; for a sweep's parent run, its child of ``--arm``/``--seed``,
+    or ``BadInput`` naming the children to pick from."""
+    from mlflow.exceptions import MlflowException
+
+    from vlmrl_cli.core.errors import BadInput
+    from vlmrl_cli.report.children import children_of
+    from vlmrl_cli.tracking import schema, store
+
+    client = store.connect_existing(tracking_uri)
+    try:
+        run = client.get_run(run_id)
+    except MlflowException:
+        return run_id  # evaluate_run says there is no such run
+    if run.data.tags.get(schema.TAG_KIND) != schema.KIND_SWEEP:
+        if arm is not None or seed is not None:
+            raise BadInput(f"--arm/--seed pick a child of a sweep's parent run; run {run_id} is a training run "
+                           "already: drop them.")
+        return run_id
+    children = children_of(client, run)
+    picked = [c for c in children if (arm is None or c.arm == arm) and (seed is None or c.seed == seed)]
+    if arm is not None and seed is not None and len(picked) == 1:
+        return picked[0].run_id
+    listed = ", ".join(f"{c.arm} seed {c.seed} = {c.run_id}" for c in picked or children) or "none it trained itself"
+    raise BadInput(f"run {run_id} is a sweep's parent run, not a training run; pass --arm ARM --seed N, or one of "
+                   f"its training runs: {listed} (`vlmrl run ... --dry-run` lists every job's run).")
+
+
 def evaluate(
     run_id: Annotated[str, typer.Argument(help="MLflow run id of a finished training run (`vlmrl run` prints them).")],
     episodes: Annotated[int, typer.Option("--episodes", min=1, help="Detached evaluation episodes.")] = 10,
@@ -21,6 +49,10 @@ def evaluate(
     tracking_uri: TrackingUri = None,
     no_cache: NoCache = False,
     cache_path: CachePath = DEFAULT_CACHE,
+    arm: Annotated[str | None, typer.Option("--arm", help="With a sweep's parent run id: the arm of the child "
+                                                          "run to evaluate.")] = None,
+    seed: Annotated[int | None, typer.Option("--seed", help="With a sweep's parent run id: the seed of the child "
+                                                           "run to evaluate.")] = None,
 ) -> None:
     """Evaluate a trained policy on native MountainCar-v0 and write a captioned GIF of one episode.
 
@@ -30,6 +62,7 @@ def evaluate(
     from vlmrl_cli.training.watch import EvaluateConfig, evaluate_run
 
     with exit_codes():
+        run_id = resolve_child(run_id, tracking_uri, arm, seed)
         cfg = EvaluateConfig(run_id=run_id, tracking_uri=tracking_uri, out=out, episodes=episodes,
                              episode_index=episode_index, use_cache=not no_cache, cache_path=cache_path)
         done = evaluate_run(cfg)

@@ -212,13 +212,30 @@ _RUN_KEYS = {"arms": "arms", "preset": "preset", "timesteps": "ppo.timesteps", "
              "executor": "executor", "ray_address": "ray_address"}
 
 
+def list_entries(text: str, flag: str) -> list[str]:
+    """``"a, b"`` -> ["a", "b"]; an empty entry (``"a,,b"``, a trailing comma, an empty string) is
+    ``BadInput``: a typo or an empty shell variable, not a choice.
+
+    Example:
+        >>> list_entries("baseline, hybrid", "--arms")
+        ['baseline', 'hybrid']
+    """
+    entries = [t.strip() for t in text.split(",")]
+    if not text.strip() or any(not t for t in entries):
+        raise BadInput(f"{flag} '{text}' has an empty entry; list the values separated by single commas.")
+    return entries
+
+
 def seeds_of(n: int, seed_list: str | None) -> tuple[int, ...]:
     """``--seed-list 3,7`` -> (3, 7); else ``--seeds N`` -> (0, ..., N-1)."""
     if seed_list is not None:
         try:
-            return tuple(int(s) for s in seed_list.split(",") if s.strip())
+            seeds = tuple(int(s) for s in list_entries(seed_list, "--seed-list"))
         except ValueError:
             raise BadInput(f"--seed-list must be comma-separated integers, got '{seed_list}'.") from None
+        if len(set(seeds)) != len(seeds):
+            raise BadInput(f"--seed-list '{seed_list}' lists a seed twice; list each seed once.")
+        return seeds
     if n < 1:
         raise BadInput(f"--seeds must be at least 1, got {n}.")
     return tuple(range(n))
@@ -230,7 +247,9 @@ def typed_flags(ctx: typer.Context, vlm_cfg: VLMConfig) -> dict[str, Any]:
     p = ctx.params
     flags: dict[str, Any] = {key: p[param] for param, key in _RUN_KEYS.items() if given(ctx, param)}
     if "arms" in flags:
-        flags["arms"] = [a.strip() for a in str(flags["arms"]).split(",") if a.strip()]
+        flags["arms"] = list_entries(str(flags["arms"]), "--arms")
+    if given(ctx, "seeds") and given(ctx, "seed_list"):
+        raise BadInput("--seeds and --seed-list both given; pass --seeds N for 0..N-1 or --seed-list A,B,... alone.")
     if given(ctx, "seeds") or given(ctx, "seed_list"):
         flags["seeds"] = list(seeds_of(p["seeds"], p.get("seed_list")))
     return flags | vlm_flags(ctx, vlm_cfg)

@@ -84,6 +84,7 @@ def run(
                 console.print("Nothing to train: every (arm, seed) run of this configuration is already FINISHED.")
             return
         console.print(sweep_summary_line(summary))
+        print_children(console, cfg, summary.experiment_id)
         if summary.failed:
             for r in summary.failed:
                 console.print(f"[red]{r.job}: {r.status} {r.error or ''}[/]")
@@ -101,16 +102,42 @@ def sweep_summary_line(summary: SweepSummary) -> str:
     return line
 
 
+def print_children(console: Console, cfg: RunConfig, experiment_id: str) -> None:
+    """The sweep's training runs, one plain line each (readable at 80 columns and in a pipe): the ids
+    `vlmrl evaluate` takes."""
+    from vlmrl_cli.report.children import HEADER, child_rows, format_rows
+    from vlmrl_cli.tracking import store
+
+    rows = [HEADER, *format_rows(child_rows(store.connect(cfg.tracking_uri), experiment_id, cfg.jobs()))]
+    widths = [max(len(r[i]) for r in rows) for i in range(len(HEADER))]
+    console.print("training runs (vlmrl evaluate RUN_ID):", markup=False)
+    for r in rows:
+        console.print("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip(), markup=False,
+                      highlight=False, soft_wrap=True)
+
+
 def dry_run_text(cfg: RunConfig) -> str:
-    """The resolved config as TOML, then the job list as TOML comments, so the whole text is a
-    config file that ``--config`` reads back."""
+    """The resolved config as TOML, then the job list as TOML comments (with the run id, steps to
+    -130 and detached success of each job already FINISHED), so the whole text is a config file
+    that ``--config`` reads back."""
+    from vlmrl_cli.report.children import child_rows, format_rows
+    from vlmrl_cli.tracking import store
     from vlmrl_cli.training.sweep import dry_plan
 
     plan = dry_plan(cfg)
     done = {(j.arm.name, j.seed) for j in plan.done}
-    lines = [f"# {plan.note}", "# arm        seed  config_hash   status"]
+    found = {}
+    if plan.done and plan.experiment_id is not None:
+        rows = child_rows(store.connect(cfg.tracking_uri), plan.experiment_id, plan.done)
+        found = {(r.arm, r.seed): cells for r, cells in zip(rows, format_rows(rows), strict=True)}
+    lines = [f"# {plan.note}", "# arm        seed  config_hash   status    run id                            "
+             "steps to -130  detached success"]
     for job in cfg.jobs():
         status = "FINISHED" if (job.arm.name, job.seed) in done else "pending"
-        lines.append(f"# {job.arm.name:<10} {job.seed:>4}  {job.config_hash}  {status}")
+        line = f"# {job.arm.name:<10} {job.seed:>4}  {job.config_hash}  {status:<8}"
+        cells = found.get((job.arm.name, job.seed))
+        if cells is not None:
+            line += f"  {cells[2]:<32}  {cells[4]:>13}  {cells[5]}"
+        lines.append(line.rstrip())
     lines.append(f"# {len(plan.done)} FINISHED, {len(plan.pending)} pending; nothing was trained.")
     return "# vlmrl run --dry-run: the resolved configuration\n" + to_toml(cfg) + "\n" + "\n".join(lines) + "\n"

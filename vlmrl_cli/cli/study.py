@@ -60,6 +60,9 @@ VlmRegime = Annotated[
 States = Annotated[int | None, typer.Option("--states", min=2,
                                            help="Taxonomy sweep positions per VLM variant (default 101).")]
 DryRun = Annotated[bool, typer.Option("--dry-run", help="Print the grid and the cost estimate; train nothing.")]
+NoTrain = Annotated[bool, typer.Option("--no-train", help="Analyse the runs already FINISHED and write the report; "
+                                                          "train nothing (a long study's progress; the report says "
+                                                          "PARTIAL and what is missing).")]
 Out = Annotated[Path, typer.Option("--out", help="Output folder of the regime map, figure, report and manifest.")]
 
 
@@ -73,7 +76,7 @@ def _names(text: str | None, flag: str) -> list[str] | None:
     names = [t.strip() for t in text.split(",") if t.strip()]
     if not names:
         raise BadInput(f"{flag} lists no value, got '{text}'; pass comma-separated values, or 'none' for no run.")
-    return names
+    return opt.list_entries(text, flag)
 
 
 def _numbers(text: str | None, flag: str = "--flickers") -> list[float] | None:
@@ -111,6 +114,7 @@ def study(
     config: opt.ConfigFile = None,
     sets: opt.Sets = None,
     dry_run: DryRun = False,
+    no_train: NoTrain = False,
     out: Out = Path("results/study"),
     experiment: opt.Experiment = "vlmrl-study",
     tracking_uri: opt.TrackingUri = None,
@@ -174,7 +178,8 @@ def study(
             console.print(f"[bold]{r.id}[/]: {r.label}", highlight=False)
             return RichSweepReporter(console)
 
-        result = run_study(cfg, reporter_for, command=" ".join(["vlmrl", *sys.argv[1:]]), cost=cost)
+        result = run_study(cfg, reporter_for, command=" ".join(["vlmrl", *sys.argv[1:]]), cost=cost,
+                           train=not no_train)
         if result.failed:
             for f in result.failed:
                 console.print(f"[red]{f.job}: {f.status} {f.error or ''}[/]")

@@ -28,7 +28,7 @@ import pandas as pd
 from vlmrl_cli.analysis import stats
 from vlmrl_cli.analysis.censored import RULE, equivalent
 from vlmrl_cli.analysis.load import load_experiment
-from vlmrl_cli.calibration.pipeline import log_summary_run, train_regimes, wall_s
+from vlmrl_cli.calibration.pipeline import log_summary_run, runs_of, train_regimes, wall_s
 from vlmrl_cli.calibration.regimes import Regime
 from vlmrl_cli.core import tables
 from vlmrl_cli.core.errors import BadInput
@@ -112,6 +112,7 @@ class StudyResult:
     controls: pd.DataFrame = field(default_factory=pd.DataFrame)
     per_seed: pd.DataFrame = field(default_factory=pd.DataFrame)
     power: list[str] = field(default_factory=list)
+    missing: dict[str, int] = field(default_factory=dict)  # sweep -> jobs without a FINISHED run
     summary: list[str] = field(default_factory=list)
     files: list[Path] = field(default_factory=list)
     run_id: str | None = None
@@ -139,9 +140,11 @@ def run_study(
     reporter_for: Callable[[Regime], AbstractContextManager[SweepReporter]],
     command: str = "",
     cost: CostEstimate | None = None,
+    train: bool = True,
 ) -> StudyResult:
     """Train what is missing, probe each variant's VLM, then analyse and write. Failed runs stop
-    before the analysis; a rerun resumes."""
+    before the analysis; a rerun resumes. ``train=False`` analyses the runs already FINISHED (a
+    long study's progress): the report names what is missing, and no comparison lacking a side is made."""
     result = StudyResult()
 
     def stage(name: str, start: float, **extra: Any) -> None:
@@ -149,7 +152,8 @@ def run_study(
 
     ensure_writable(cfg.out)
     start = time.perf_counter()
-    result.trained, result.failed = train_regimes(cfg.all_regimes(), reporter_for)
+    if train:
+        result.trained, result.failed = train_regimes(cfg.all_regimes(), reporter_for)
     stage("train", start, runs_trained_now=result.trained)
     if result.failed:
         return result
@@ -175,8 +179,11 @@ def run_study(
         seeds.append(per_seed_table(analysis.subset(data, sweep.run), cfg.thresholds).assign(
             regime=cfg.vlm_regime, variant=sweep.id))
     result.per_seed = study_per_seed(seeds, cfg.thresholds)
+    result.missing = missing_runs(cfg, result.per_seed)
+    ready = [c for c in analysis.controls(cfg.cells)
+             if all(len(runs_of(data.runs, side.regime.run)) >= 2 for side in (c.a, c.b))]
     result.controls = pd.DataFrame([analysis.control_row(c, data, cfg.thresholds, streams, cfg.n_boot, cfg.ci,
-                                                         cfg.alpha, cfg.margin) for c in analysis.controls(cfg.cells)])
+                                                         cfg.alpha, cfg.margin) for c in ready])
     result.power = power_lines(cfg, result.per_seed)
     reference = next(r for r in cfg.regimes if r.id == cfg.vlm_regime)
     points = [analysis.vlm_point(v.id, analysis.paired(data, reference.run, v.run), cfg.top, accuracy[v.id], streams,
@@ -225,6 +232,18 @@ def finished_per_seed(cfg: StudyConfig) -> pd.DataFrame | None:
 #: The columns of ``per_seed.csv``, after the steps to each threshold and whether each was reached.
 PER_SEED_COLUMNS = ["regime", "variant", "arm", "seed", "config_hash", "run_id", "budget"]
 PER_SEED_TAIL = ["auc", "final_return", "detached_success", "eval_success_rate", "eval_mean_length"]
+
+
+def missing_runs(cfg: StudyConfig, per_seed: pd.DataFrame) -> dict[str, int]:
+    """Per sweep (regime, variant or cell), how many of its jobs have no FINISHED run in ``per_seed``."""
+    have = set(zip(per_seed["arm"], per_seed["seed"].astype(int), per_seed["config_hash"], strict=True)) if len(
+        per_seed) else set()
+    out = {}
+    for sweep in cfg.all_regimes():
+        n = sum((j.arm.name, j.seed, j.config_hash) not in have for j in sweep.run.jobs())
+        if n:
+            out[sweep.id] = n
+    return out
 
 
 def study_per_seed(frames: Sequence[pd.DataFrame], thresholds: Sequence[float]) -> pd.DataFrame:
@@ -335,8 +354,17 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
     """``report.md``: the generated summary first, then the regime map, VLM quality, reward hacking, method."""
     vlm_line = ("**VLM: the SIMULATED VLM (a pixel-reading stand-in), not a real model: nothing here is evidence "
                 "about a real VLM.**" if simulated else "VLM: a real backend (see the runs' vlmrl.vlm tags).")
-    lines = ["# Study: where does the hybrid's advantage hold?", "", vlm_line, "", "## Summary", "",
-             *result.summary, ""]
+    lines = ["# Study: where does the hybrid's advantage hold?", "", vlm_line, ""]
+    if result.missing:
+        jobs = {(j.arm.name, j.seed, j.config_hash) for s in cfg.all_regimes() for j in s.run.jobs()}
+        have = set(zip(result.per_seed["arm"], result.per_seed["seed"].astype(int), result.per_seed["config_hash"],
+                       strict=True))
+        lines += [f"**PARTIAL: {len(jobs - have)} of the {len(jobs)} runs are not FINISHED yet** (the "
+                  "study is still training; rerun `vlmrl study` with the same arguments to resume). Comparisons "
+                  "with a side that has fewer than 2 runs are left out; the others use the seeds finished so far. "
+                  "Missing, per sweep (a run shared by two sweeps counts in both): "
+                  + "; ".join(f"`{k}` {v}" for k, v in result.missing.items()) + ".", ""]
+    lines += ["## Summary", "", *result.summary, ""]
     lines += ["## Regime map", "", analysis.map_markdown(result.regime_map.to_dict("records"), cfg.top, cfg.ci,
                                                        cfg.margin)]
     lines += ["Regimes (overrides over the study's defaults): "
@@ -459,6 +487,7 @@ def _write(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simu
                     for r in cfg.regimes],
         "variants": [{"id": v.id, "overrides": v.label, "config_hash": v.run.jobs()[0].config_hash}
                      for v in cfg.variants],
+        "missing_runs": result.missing,
         "cells": [{"id": c.regime.id, "kind": c.kind, "arm": c.arm, "overrides": c.regime.label,
                    "config_hash": c.regime.run.jobs()[0].config_hash} for c in cfg.cells],
         "margin": cfg.margin,

@@ -131,6 +131,7 @@ RULES: dict[str, tuple[Any, ...]] = {
     "vlm.sim.mcq_bottom_halfwidth": (Ge(0),),
     "shaping.label_potentials": (BeforeValidator(_label_table), AfterValidator(_all_labels)),
     "shaping.gamma": (Interval(gt=0, le=1),),
+    "shaping.alpha": (Ge(0),),
     "shaping.query_every": (Ge(1),),
     "shaping.confirm": (Ge(1),),
     "shaping.bandwidth": (Gt(0),),
@@ -186,7 +187,8 @@ def _model(cls: type, prefix: str = "") -> type[BaseModel]:
         validators["consistent"] = _model_validator(mode="after")(check)
     return create_model(  # type: ignore[call-overload,no-any-return]
         f"{cls.__name__}Input",
-        __config__=ConfigDict(extra="forbid", strict=True, frozen=True),
+        # no knob means anything at NaN or infinity: refused here, before any store or run exists
+        __config__=ConfigDict(extra="forbid", strict=True, frozen=True, allow_inf_nan=False),
         __validators__=validators,
         **fields,
     )

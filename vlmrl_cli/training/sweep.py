@@ -108,6 +108,7 @@ class DryPlan:
     pending: list[TrainJob]
     done: list[TrainJob]
     note: str  # where the answer came from (or why every job is pending)
+    experiment_id: str | None = None  # the experiment checked, when it exists
 
 
 def dry_plan(cfg: RunConfig) -> DryPlan:
@@ -122,7 +123,8 @@ def dry_plan(cfg: RunConfig) -> DryPlan:
     if exp is None or exp.lifecycle_stage == "deleted":
         return DryPlan(jobs, [], f"experiment '{cfg.experiment}' does not exist in {uri}: every job is pending")
     found = plan(client, str(exp.experiment_id), jobs, cfg.stale_after_s)
-    return DryPlan(found.pending, found.done, f"checked against experiment '{cfg.experiment}' in {uri}")
+    return DryPlan(found.pending, found.done, f"checked against experiment '{cfg.experiment}' in {uri}",
+                   str(exp.experiment_id))
 
 
 def make_executor(cfg: RunConfig, n_jobs: int) -> Executor:
