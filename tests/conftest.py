@@ -1,4 +1,5 @@
-"""Test-wide settings: a headless matplotlib backend and single-threaded torch."""
+"""Test-wide settings: headless matplotlib and pygame backends (torch's threads are set by the nox
+session's OMP_NUM_THREADS/MKL_NUM_THREADS, and by each training worker itself)."""
 
 from __future__ import annotations
 

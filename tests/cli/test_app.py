@@ -31,7 +31,8 @@ def test_help_imports_no_heavy_library() -> None:
         "from typer.testing import CliRunner\n"
         "from vlmrl_cli.cli.app import app\n"
         "for args in (['--help'], ['run', '--help'], ['report', '--help'], ['calibrate', '--help'],"
-        " ['evaluate', '--help'], ['taxonomy', '--help']):\n"
+        " ['evaluate', '--help'], ['taxonomy', '--help'], ['study', '--help'], ['export', '--help'],"
+        " ['import', '--help']):\n"
         "    assert CliRunner().invoke(app, args).exit_code == 0, args\n"
         f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))\n"
     )

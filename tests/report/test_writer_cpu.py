@@ -2,7 +2,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from vlmrl_cli.analysis.load import CPU_COLUMNS, RUN_COLUMNS, ExperimentData
+from vlmrl_cli.analysis.load import RUN_COLUMNS, ExperimentData
 from vlmrl_cli.report.writer import _cpu_warnings
 
 
@@ -22,4 +22,15 @@ def test_each_differing_cpu_path_gets_one_warning_naming_its_values() -> None:
     assert len(warns) == 2
     assert "BLAS kernel" in warns[0] and "openblas Haswell; openblas SkylakeX" in warns[0]
     assert "torch" in warns[1] and "baseline included" in warns[1]
-    assert set(CPU_COLUMNS.values()) <= set(RUN_COLUMNS)
+
+
+def test_the_cpu_tags_of_a_run_become_its_cpu_columns() -> None:
+    from types import SimpleNamespace
+
+    from vlmrl_cli.analysis.load import _run_row
+
+    tags = {"vlmrl.cpu.numpy_simd": "AVX2", "vlmrl.cpu.blas": "openblas Haswell", "vlmrl.arm": "baseline"}
+    run = SimpleNamespace(info=SimpleNamespace(run_id="r", end_time=0),
+                          data=SimpleNamespace(tags=tags, params={}, metrics={}))
+    row = _run_row(run)
+    assert (row["cpu_numpy_simd"], row["cpu_blas"], row["cpu_torch"]) == ("AVX2", "openblas Haswell", "unrecorded")

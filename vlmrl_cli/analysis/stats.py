@@ -247,35 +247,6 @@ def difference_of_means(
     return Estimate(value, low, high, n=int(min(x.size, y.size)))
 
 
-def _std_ratio(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.asarray(np.std(a, axis=axis, ddof=1) / np.std(b, axis=axis, ddof=1))
-
-
-def std_ratio(
-    a: npt.ArrayLike, b: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
-) -> Estimate:
-    """Spread across seeds of arm ``a`` relative to arm ``b``: ``std(a) / std(b)`` (ddof=1), shapes ``(n,)``.
-
-    Below 1 means ``a`` is narrower. The CI is NaN (with a reason) when either arm has fewer than
-    3 seeds, or when resamples of ``b`` have zero spread (the ratio is then undefined).
-
-    Example:
-        >>> std_ratio([1.0, 2.0, 3.0], [2.0, 4.0, 6.0], np.random.default_rng(0), n_boot=100).value
-        0.5
-    """
-    x, y = _finite(a), _finite(b)
-    if x.size < 2 or y.size < 2:
-        return Estimate(float("nan"), n=int(min(x.size, y.size)), note="fewer than 2 seeds: no spread")
-    sy = float(y.std(ddof=1))
-    value = float(x.std(ddof=1) / sy) if sy > 0 else float("inf") if x.std() > 0 else float("nan")
-    if x.size < 3 or y.size < 3:
-        return Estimate(value, n=int(min(x.size, y.size)), note="fewer than 3 seeds: no CI")
-    low, high = bootstrap_ci((x, y), _std_ratio, rng, n_boot, ci)
-    note = "" if np.isfinite(low) and np.isfinite(high) else "some resamples have zero spread: no CI"
-    return Estimate(value, low, high, n=int(min(x.size, y.size)), note=note)
-
-
 def _std_diff(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
     return np.asarray(np.std(a, axis=axis, ddof=1) - np.std(b, axis=axis, ddof=1))
 
@@ -285,7 +256,7 @@ def std_difference(
 ) -> Estimate:
     """``std(a) - std(b)`` across seeds (ddof=1; shapes ``(n_a,)``, ``(n_b,)``) with a bootstrap CI.
 
-    Below 0 means ``a`` is narrower. Unlike ``std_ratio`` it stays defined when an arm has zero spread.
+    Below 0 means ``a`` is narrower. It stays defined when an arm has zero spread (a ratio of spreads would not).
 
     Example:
         >>> std_difference([1.0, 1.0, 1.0], [0.0, 2.0, 4.0], np.random.default_rng(0), n_boot=100).value

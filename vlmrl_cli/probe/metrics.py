@@ -11,14 +11,12 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
 from scipy import stats
 
 from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION, SCREEN_WIDTH, Zone
 from vlmrl_cli.shaping.config import DEFAULT_LABEL_POTENTIALS
 from vlmrl_cli.vlm.parsers import Box, ParseStatus
 
-UNPARSED = "UNPARSED"
 # Statuses where the model's text itself failed (NO_ANSWER is the transcript's gap, not the model's).
 FORMAT_FAILURES = frozenset({ParseStatus.FORMAT_COLLAPSE, ParseStatus.EMPTY, ParseStatus.AMBIGUOUS})
 # Below this a potential difference counts as zero: the potentials are sums of a few decimals.
@@ -120,24 +118,6 @@ def mcq_accuracy(predicted: Sequence[Zone | None], truth: Sequence[Zone]) -> flo
     if not truth:
         return math.nan
     return sum(p == t for p, t in zip(predicted, truth, strict=True)) / len(truth)
-
-
-def confusion_matrix(predicted: Sequence[Zone | None], truth: Sequence[Zone]) -> pd.DataFrame:
-    """Counts of (true zone, predicted zone): rows every Zone, columns every Zone plus UNPARSED.
-
-    Example:
-        >>> cm = confusion_matrix([Zone.BOTTOM, None], [Zone.BOTTOM, Zone.LEFT_SLOPE])
-        >>> int(cm.loc["BOTTOM", "BOTTOM"]), int(cm.loc["LEFT_SLOPE", "UNPARSED"]), cm.shape
-        (1, 1, (6, 7))
-    """
-    labels = [z.value for z in Zone]
-    true_col = pd.Series([t.value for t in truth], name="true", dtype=object)
-    pred_col = pd.Series([p.value if p is not None else UNPARSED for p in predicted], name="predicted",
-                         dtype=object)
-    table = pd.crosstab(true_col, pred_col) if len(true_col) else pd.DataFrame()
-    table = table.reindex(index=labels, columns=[*labels, UNPARSED], fill_value=0).fillna(0).astype(int)
-    table.index.name, table.columns.name = "true", "predicted"
-    return table
 
 
 # --- the consequence on the potential ------------------------------------------------------

@@ -12,7 +12,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from vlmrl_cli.tracking import schema
 from vlmrl_cli.tracking.store import BatchLogger
-from vlmrl_cli.training.events import SUCCESS_LENGTH, ProgressEvent
+from vlmrl_cli.training.events import ProgressEvent, episode_success
 
 
 class EpisodeTracker(BaseCallback):
@@ -60,7 +60,10 @@ class EpisodeTracker(BaseCallback):
             record = {
                 schema.METRIC_NATIVE_RETURN: float(ep["r"]),
                 schema.METRIC_LENGTH: float(length),
-                schema.METRIC_SUCCESS: float(info.get("is_success", length < SUCCESS_LENGTH)),
+                # HybridReward reports is_success on every arm; without it, SB3's TimeLimit.truncated tells
+                # a time-limit cut from the env's own end
+                schema.METRIC_SUCCESS: float(info.get("is_success", episode_success(
+                    not info.get("TimeLimit.truncated", False), length))),
                 schema.METRIC_SHAPED_RETURN: float(info.get("shaped_return", ep["r"])),
             }
             self.episodes.append({"timestep": float(self.num_timesteps), **record})

@@ -9,7 +9,7 @@ import gymnasium as gym
 import numpy as np
 
 from vlmrl_cli.shaping.hacking import HoverSummary, summarize_hovering
-from vlmrl_cli.training.events import SUCCESS_LENGTH
+from vlmrl_cli.training.events import episode_success
 
 Policy = Callable[[np.ndarray], int]
 
@@ -72,7 +72,7 @@ def evaluate_detached(policy: Policy, episodes: int, seed: int) -> EvalResult:
                 done = terminated or truncated
             returns.append(total)
             lengths.append(length)
-            successes.append(bool(terminated) and length <= SUCCESS_LENGTH)
+            successes.append(episode_success(terminated, length))
             positions.append(np.asarray(xs))
     finally:
         env.close()

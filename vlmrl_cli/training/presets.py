@@ -13,7 +13,6 @@ from typing import Literal
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 
 LrSchedule = Literal["constant", "linear"]
-LR_SCHEDULES: tuple[str, ...] = ("constant", "linear")
 DEFAULT_PRESET = "paper"
 
 
