@@ -8,6 +8,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
+
 REPO = Path(__file__).resolve().parents[1]
 
 

@@ -12,6 +12,8 @@ from typer.testing import CliRunner
 
 from vlmrl_cli.cli.app import app
 
+pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
+
 runner = CliRunner()
 
 

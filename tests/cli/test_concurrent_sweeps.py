@@ -9,7 +9,10 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 from mlflow.tracking import MlflowClient
+
+pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
 
 
 def test_two_sweeps_2_s_apart_train_each_job_once(tmp_path: Path) -> None:

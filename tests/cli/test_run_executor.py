@@ -10,6 +10,8 @@ from typer.testing import CliRunner
 from vlmrl_cli.cli.app import app
 from vlmrl_cli.training import executors
 
+pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
+
 runner = CliRunner()
 
 

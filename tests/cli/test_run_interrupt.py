@@ -18,6 +18,8 @@ from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.presets import get_preset
 from vlmrl_cli.training.sweep import plan
 
+pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
+
 
 def _runs(uri: str) -> list:  # type: ignore[type-arg]
     # through vlmrl's own connect: it takes the store's init lock, so this poll cannot race the

@@ -33,6 +33,7 @@ def _run(root: Path, *args: str):  # type: ignore[no-untyped-def]
 SETS = ("--set", "ppo.n_envs=1", "--set", "ppo.n_steps=128", "--set", "ppo.normalize_reward=false")
 
 
+@pytest.mark.slow
 def test_set_reaches_the_run_params_and_tags_and_changes_the_config_hash(tmp_path: Path) -> None:
     result = _run(
         tmp_path,
@@ -141,6 +142,7 @@ def test_dry_run_prints_toml_that_config_reads_back_to_the_same_jobs(tmp_path: P
     assert len(jobs) == 4 and all(line.endswith("pending") for line in jobs)
 
 
+@pytest.mark.slow
 def test_dry_run_tells_finished_from_pending_after_a_partial_sweep(tmp_path: Path) -> None:
     assert _run(tmp_path, "--seed-list", "0").exit_code == 0
     result = _run(tmp_path, "--seed-list", "0,1", "--dry-run")

@@ -30,6 +30,7 @@ def _study(root: Path, *args: str):  # type: ignore[no-untyped-def]
     ])
 
 
+@pytest.mark.slow
 def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) -> None:
     result = _study(tmp_path)
     assert result.exit_code == 0, result.output + result.stderr

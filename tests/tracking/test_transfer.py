@@ -16,6 +16,8 @@ from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.tracking import store
 from vlmrl_cli.tracking.transfer import FORMAT, TAG_IMPORTED_FROM, export_runs, import_runs, read_records
 
+pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
+
 runner = CliRunner()
 
 

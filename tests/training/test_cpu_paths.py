@@ -18,6 +18,8 @@ import pytest
 
 from vlmrl_cli.core.provenance import cpu_paths
 
+pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
+
 STEPS = 50_000
 
 _PROBE = """

@@ -21,6 +21,8 @@ from vlmrl_cli.training.presets import get_preset
 from vlmrl_cli.training.ray_executor import start_local
 from vlmrl_cli.training.sweep import SilentReporter, run_sweep
 
+pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
+
 ray = pytest.importorskip("ray")
 
 

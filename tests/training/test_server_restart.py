@@ -8,12 +8,15 @@ import time
 from pathlib import Path
 from typing import Any
 
+import pytest
 from mlflow.tracking import MlflowClient
 
 from tests.training.tracking_server import TrackingServer
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.presets import get_preset
 from vlmrl_cli.training.sweep import SilentReporter, run_sweep
+
+pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
 
 
 def test_the_server_stopped_and_restarted_mid_sweep(tmp_path: Path) -> None:
