@@ -175,3 +175,18 @@ def test_every_table_names_the_simulated_vlm(store, tmp_path):
         assert "SIMULATED VLM" in (out / name).read_text(), name
     for name in ("table2.csv", "claims.csv", "per_seed.csv"):
         assert pd.read_csv(out / name)["vlm"].astype(str).str.contains("SIMULATED VLM").any(), name
+
+
+@pytest.mark.parametrize(("args", "needle"), [
+    (["--experiment", ""], "an experiment needs a name"),
+    (["--experiment", "E "], "starts or ends with a space"),
+    (["--tracking-uri", " "], "the tracking URI is empty"),
+    (["--margin", "1"], "equivalence margin"),
+])
+def test_bad_names_and_margins_exit_2_before_anything_exists(tmp_path, args, needle):
+    res = runner.invoke(app, ["report", "--tracking-uri", f"sqlite:///{tmp_path / 's' / 'm.db'}",
+                              "--out", str(tmp_path / "rep"), *args])
+    assert res.exit_code == 2, res.output + res.stderr
+    lines = [line for line in res.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and needle in lines[0], lines
+    assert not any(tmp_path.iterdir())

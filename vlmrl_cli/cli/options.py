@@ -25,6 +25,8 @@ TrackingUri = Annotated[
 ]
 OutDir = Annotated[Path | None, typer.Option("--out", help="Output folder (default under results/).")]
 Experiment = Annotated[str, typer.Option("--experiment", help="MLflow experiment name.")]
+Margin = Annotated[float, typer.Option(
+    "--margin", help="Equivalence margin of a speedup: 'equivalent' when the 90% interval lies inside [1/M, M].")]
 
 def choices(names: Sequence[str]) -> str:
     """The metavar listing an option's choices in the help (``[a|b|c]``); the values are checked,

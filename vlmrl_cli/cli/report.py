@@ -10,7 +10,7 @@ from rich.console import Console
 from rich.table import Table
 
 from vlmrl_cli.cli.errors import exit_codes
-from vlmrl_cli.cli.options import Experiment, OutDir, TrackingUri
+from vlmrl_cli.cli.options import Experiment, Margin, OutDir, TrackingUri
 from vlmrl_cli.core.errors import BadInput
 
 DEFAULT_OUT = Path("results/report")
@@ -39,6 +39,7 @@ def report(
     out: OutDir = None,
     thresholds: Annotated[str, typer.Option("--thresholds", help="Reward targets, comma-separated.")] = DEFAULT_THR,
     window: Annotated[int, typer.Option("--window", help="Episodes in the rolling mean return.")] = 100,
+    margin: Margin = 1.15,
 ) -> None:
     """Write Table 2, Figures 2-4, the claims table and report.md from finished runs in MLflow."""
     from vlmrl_cli.report.table2 import display_frame
@@ -46,7 +47,7 @@ def report(
 
     with exit_codes():
         cfg = ReportConfig(experiment=experiment, tracking_uri=tracking_uri, out=out or DEFAULT_OUT,
-                           thresholds=parse_thresholds(thresholds), window=window)
+                           thresholds=parse_thresholds(thresholds), window=window, margin=margin)
         result = write_report(cfg)
         console = Console()
         df = display_frame(result.table)

@@ -115,6 +115,7 @@ def study(
     sets: opt.Sets = None,
     dry_run: DryRun = False,
     no_train: NoTrain = False,
+    margin: opt.Margin = 1.15,
     out: Out = Path("results/study"),
     experiment: opt.Experiment = "vlmrl-study",
     tracking_uri: opt.TrackingUri = None,
@@ -149,7 +150,7 @@ def study(
                              DEFAULT_KIN_SCALES),
             query_flickers=_pick(_numbers(query_flickers, "--query-flickers"), section,
                                  "query_flickers", DEFAULT_QUERY_FLICKERS),
-            vlm_regime=vlm_regime or section.get("vlm_regime"), notes=notes, out=out,
+            vlm_regime=vlm_regime or section.get("vlm_regime"), notes=notes, out=out, margin=margin,
             **({} if states is None else {"states": states}),
         )
         base = cfg.base

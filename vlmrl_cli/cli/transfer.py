@@ -28,10 +28,14 @@ def export(
 ) -> None:
     """Write every FINISHED training run of an experiment (tags, params, per-episode and evaluation
     histories, config; models with --models) to one file that `vlmrl import` reads into another store."""
+    from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
     from vlmrl_cli.tracking import store
     from vlmrl_cli.tracking.transfer import export_runs, exported_ids
 
     with exit_codes():
+        problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
+        if problem:
+            raise BadInput(problem + ".")
         if out.exists() and out.is_dir():
             raise BadInput(f"--out {out} is a folder; name the export file, e.g. {out / 'runs.jsonl.gz'}.")
         if not out.parent.is_dir():
@@ -53,10 +57,14 @@ def import_(
 ) -> None:
     """Create the runs of an export file in an experiment (created if missing) as FINISHED runs; runs
     already there (same arm, seed and config hash) are skipped, so a resumed sweep never retrains them."""
+    from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
     from vlmrl_cli.tracking import store
     from vlmrl_cli.tracking.transfer import import_runs, read_records
 
     with exit_codes():
+        problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
+        if problem:
+            raise BadInput(problem + ".")
         for path in paths:
             if not path.is_file():
                 raise BadInput(f"there is no export file {path}; write one with `vlmrl export --out FILE`.")

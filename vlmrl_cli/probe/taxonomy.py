@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.core.provenance import config_hash, flatten
 from vlmrl_cli.frames.render import FrameRenderer
 from vlmrl_cli.probe.scoring import (
@@ -61,6 +62,9 @@ class TaxonomyConfig:
     def __post_init__(self) -> None:
         if self.states is not None and self.states < 2:
             raise BadInput(f"--states {self.states} is too few: a sweep needs at least 2 positions.")
+        problem = experiment_problem(self.experiment) or tracking_uri_problem(self.tracking_uri)
+        if problem:
+            raise BadInput(problem + ".")
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,7 @@ and ``report.md``, then log them as artifacts of a ``vlmrl.kind=report`` run."""
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -21,6 +22,7 @@ from vlmrl_cli.analysis.proportions import DETACHED_SUCCESS_CUT
 from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM
 from vlmrl_cli.core import tables
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
 from vlmrl_cli.report import attribution, figures, hacking
 from vlmrl_cli.report import claims as claims_mod
@@ -71,6 +73,11 @@ class ReportResult:
 
 
 def _validate(cfg: ReportConfig) -> None:
+    problem = experiment_problem(cfg.experiment) or tracking_uri_problem(cfg.tracking_uri)
+    if problem:
+        raise BadInput(problem + ".")
+    if not cfg.margin > 1 or not math.isfinite(cfg.margin):
+        raise BadInput(f"the equivalence margin is a ratio above 1 (e.g. 1.15), got {cfg.margin}.")
     if not cfg.thresholds:
         raise BadInput("no reward threshold given; pass --thresholds like -190,-160,-130.")
     if cfg.window < 1:

@@ -284,6 +284,9 @@ def build_study(
         raise BadInput(f"--vlm-regime '{target}' is not a regime of this study{did_you_mean(target, regimes)}.")
     variants: list[Regime] = []
     reference = next(r for r in built if r.id == target)
+    margin = settings.get("margin", 1.15)
+    if not (math.isfinite(margin) and margin > 1):
+        raise BadInput(f"--margin is a ratio above 1 (e.g. 1.15), got {margin}.")
     for name, values in (("alphas", alphas), ("kin_scales", kin_scales), ("query_flickers", query_flickers)):
         bad = [v for v in values if not (math.isfinite(v) and v >= 0)]
         if bad:

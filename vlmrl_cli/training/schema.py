@@ -26,6 +26,7 @@ from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Val
 from pydantic import model_validator as _model_validator
 
 from vlmrl_cli.core.errors import BadInput, did_you_mean
+from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.frames.geometry import Zone
 from vlmrl_cli.shaping.arms import parse_arms
 from vlmrl_cli.shaping.config import DEFAULT_LABEL_POTENTIALS
@@ -60,6 +61,20 @@ def _one_of(choices: tuple[str, ...] | dict[str, Any], what: str) -> Callable[[s
         return value
 
     return check
+
+
+def _name(value: str) -> str:
+    problem = experiment_problem(value)
+    if problem:
+        raise ValueError(problem)
+    return value
+
+
+def _uri(value: str | None) -> str | None:
+    problem = tracking_uri_problem(value)
+    if problem:
+        raise ValueError(problem)
+    return value
 
 
 def _layer_sizes(sizes: tuple[int, ...]) -> tuple[int, ...]:
@@ -97,6 +112,8 @@ RULES: dict[str, tuple[Any, ...]] = {
     "seeds": (AfterValidator(_distinct_seeds),),
     "preset": (AfterValidator(_one_of(PRESETS, "preset")),),
     "workers": (Ge(1),),
+    "experiment": (AfterValidator(_name),),
+    "tracking_uri": (AfterValidator(_uri),),
     "executor": (AfterValidator(_one_of(EXECUTORS, "executor")),),
     "max_retries": (Ge(0),),
     "heartbeat_s": (Gt(0),),

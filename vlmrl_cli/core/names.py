@@ -1,0 +1,32 @@
+"""Checks of the names and URIs every command takes, in one place (each returns why a value is
+wrong, or None): the run schema turns them into validation errors, the other configs into
+``BadInput``, before any store, folder or cache exists."""
+
+from __future__ import annotations
+
+
+def experiment_problem(value: str) -> str | None:
+    """Why ``value`` is no usable MLflow experiment name, or None.
+
+    Example:
+        >>> experiment_problem("vlmrl"), experiment_problem(""), experiment_problem(" x") is not None
+        (None, 'an experiment needs a name; pass --experiment NAME', True)
+    """
+    if not value.strip():
+        return "an experiment needs a name; pass --experiment NAME"
+    if value != value.strip():
+        return f"'{value}' starts or ends with a space; pass the name without it"
+    return None
+
+
+def tracking_uri_problem(value: str | None) -> str | None:
+    """Why ``value`` is no usable tracking URI (None, the default store, is fine), or None.
+
+    Example:
+        >>> tracking_uri_problem(None), tracking_uri_problem("sqlite:///m.db"), tracking_uri_problem(" ") is not None
+        (None, None, True)
+    """
+    if value is not None and not value.strip():
+        return ("the tracking URI is empty; pass sqlite:///PATH/mlflow.db or http://HOST:PORT, or leave it out for "
+                "the default")
+    return None
