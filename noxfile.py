@@ -21,17 +21,30 @@ def _install(session: nox.Session, extras: str = "dev") -> None:
 
 
 def _lint(session: nox.Session) -> None:
-    session.run("ruff", "check", "vlmrl_cli", "tests", "noxfile.py", "benchmarks", "scripts")
-    session.run("mypy", "vlmrl_cli", "tests", "benchmarks", "scripts")
+    session.run("ruff", "check", "vlmrl_cli", "tests", "noxfile.py", "benchmarks", "scripts", "docs/hooks.py")
+    session.run("mypy", "vlmrl_cli", "tests", "benchmarks", "scripts", "docs/hooks.py")
+
+
+def _docs(session: nox.Session) -> None:
+    session.run("mkdocs", "build", "--strict", "--site-dir", os.path.join(session.create_tmp(), "site"))
 
 
 @nox.session
 def tests(session: nox.Session) -> None:
-    """ruff, mypy, then the test suite, in one environment (what CI runs), with the Ray extra."""
+    """ruff, mypy, the docs site (mkdocs --strict), then the test suite, in one environment (what CI
+    runs), with the Ray extra."""
     _install(session, "dev,ray")
     _lint(session)
+    _docs(session)
     session.run("pytest", "-n", "2", "--dist", "loadfile", *session.posargs,
                 env={"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
+
+
+@nox.session
+def docs(session: nox.Session) -> None:
+    """Build the documentation site (mkdocs --strict) into site/."""
+    _install(session)
+    session.run("mkdocs", "build", "--strict")
 
 
 @nox.session

@@ -59,12 +59,14 @@ EVAL_SEED = 1_000_000  # detached evaluation episode i resets with seed EVAL_SEE
 class RunConfig:
     """Everything `vlmrl run` does, as one value: logged whole, hashed per job for resume."""
 
-    arms: tuple[str, ...] = ("baseline", "hybrid")
-    seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
+    arms: tuple[str, ...] = field(default=("baseline", "hybrid"), metadata={"help": "arms to train (shaping/arms.py)"})
+    seeds: tuple[int, ...] = field(default=(0, 1, 2, 3, 4), metadata={"help": "training seeds, each a run per arm"})
     preset: str = field(default=DEFAULT_PRESET, metadata={"help": "named PPO preset: the bottom layer of [ppo]"})
-    workers: int = field(default_factory=lambda: os.cpu_count() or 1)
-    experiment: str = DEFAULT_EXPERIMENT
-    tracking_uri: str | None = None
+    workers: int = field(default_factory=lambda: os.cpu_count() or 1, metadata={
+        "help": "worker processes (one torch thread each); default: the cores"})
+    experiment: str = field(default=DEFAULT_EXPERIMENT, metadata={"help": "MLflow experiment of the runs"})
+    tracking_uri: str | None = field(default=None, metadata={
+        "help": "MLflow store; None: $MLFLOW_TRACKING_URI or sqlite:///mlflow.db"})
     ppo: PPOConfig | None = field(default=None, metadata={"help": "None = the preset's values"})
     vlm: VLMConfig = field(default_factory=VLMConfig)
     shaping: ShapingConfig = field(default_factory=ShapingConfig)
