@@ -112,3 +112,8 @@ def test_learning_curve_area_weighs_steps() -> None:
         (-200 * 100 - 100 * 200) / 300)
     assert censored.learning_curve_area([2000], [-100.0], [100], 1000) != censored.learning_curve_area(
         [2000], [-100.0], [100], 3000)
+
+
+def test_no_speedup_is_claimed_when_neither_arm_finishes() -> None:
+    est = censored.speedup([np.nan] * 3, [np.nan] * 3, BUDGET, BUDGET, np.random.default_rng(0), 100)
+    assert math.isnan(est.value) and est.note == "neither arm reached the threshold"

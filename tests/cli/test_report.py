@@ -190,3 +190,17 @@ def test_bad_names_and_margins_exit_2_before_anything_exists(tmp_path, args, nee
     lines = [line for line in res.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and needle in lines[0], lines
     assert not any(tmp_path.iterdir())
+
+
+def test_the_console_summary_reads_at_80_columns_in_a_pipe_even_when_every_seed_is_dnf(tmp_path):
+    from tests.report.fake_mlflow import FakeRun
+
+    uri = f"sqlite:///{tmp_path / 'm.db'}"
+    build_fake_experiment(uri, "DNF", runs=[FakeRun(a, s, 79, -190.0, 0.0, 200.0) for a in ("hybrid", "baseline")
+                                             for s in range(3)])
+    res = _report(uri, "DNF", tmp_path / "rep")
+    assert res.exit_code == 0, res.output + res.stderr
+    lines = res.output.splitlines()
+    assert max(len(line) for line in lines if not line.startswith(("Report written", "Logged as"))) <= 80
+    assert "neither arm reached the threshold" in res.output and "1.00x" not in res.output
+    assert "Warning" not in res.stderr and "warn(" not in res.stderr

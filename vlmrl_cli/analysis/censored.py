@@ -111,6 +111,9 @@ def speedup(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget: npt.
     b, a = restricted(ref_steps, ref_budget), restricted(arm_steps, arm_budget)
     if a.size == 0 or b.size == 0:
         return Estimate(math.nan, n=0, note="an arm has no seeds")
+    if not (reached(ref_steps, ref_budget).any() or reached(arm_steps, arm_budget).any()):
+        # budget / budget = 1 would read as "no difference"; nothing is known but that both exceed it
+        return Estimate(math.nan, n=int(min(a.size, b.size)), note="neither arm reached the threshold")
     value = float(b.mean() / a.mean())
     n = int(min(a.size, b.size))
     if n < 2:

@@ -7,11 +7,11 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
-from rich.table import Table
 
 from vlmrl_cli.cli.errors import exit_codes
 from vlmrl_cli.cli.options import Experiment, Margin, OutDir, TrackingUri
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.report.table2 import BASELINE, Table2, format_cell, format_speedup, threshold_key
 
 DEFAULT_OUT = Path("results/report")
 DEFAULT_THR = "-190,-160,-130"
@@ -33,6 +33,21 @@ def parse_thresholds(text: str) -> tuple[float, ...]:
     return values
 
 
+def console_summary(table: Table2, experiment: str) -> list[str]:
+    """Table 2's headline rows as short plain lines (readable at 80 columns and in a pipe); the
+    full table is in table2.md."""
+    lines = [f"Table 2, experiment {experiment} (full table: table2.md)"]
+    for t in table.thresholds:
+        lines.append(f"steps to {t:g} (restricted mean, a DNF at the budget):")
+        for arm in table.arms:
+            lines.append(f"  {arm:<16} {format_cell(table.cell(threshold_key(t), arm))}")
+            if arm != BASELINE and table.has_baseline:
+                lines.append(f"  {'':<16} speedup vs baseline {format_speedup(table.speedup(t, arm))}")
+    lines.append("reliability (seeds reaching the top threshold):")
+    lines += [f"  {arm:<16} {format_cell(table.cell('reliability', arm))}" for arm in table.arms]
+    return lines
+
+
 def report(
     experiment: Experiment = "vlmrl",
     tracking_uri: TrackingUri = None,
@@ -42,7 +57,6 @@ def report(
     margin: Margin = 1.15,
 ) -> None:
     """Write Table 2, Figures 2-4, the claims table and report.md from finished runs in MLflow."""
-    from vlmrl_cli.report.table2 import display_frame
     from vlmrl_cli.report.writer import ReportConfig, write_report
 
     with exit_codes():
@@ -50,14 +64,8 @@ def report(
                            thresholds=parse_thresholds(thresholds), window=window, margin=margin)
         result = write_report(cfg)
         console = Console()
-        df = display_frame(result.table)
-        keep = [c for c in df.columns if "(paper)" not in c or "speedup" in c]
-        table = Table(title=f"Table 2 — experiment {experiment}", show_lines=False)
-        for col in keep:
-            table.add_column(col, overflow="fold")
-        for row in df[keep].itertuples(index=False):
-            table.add_row(*map(str, row))
-        console.print(table)
+        for line in console_summary(result.table, experiment):
+            console.print(line, markup=False, highlight=False, soft_wrap=True)
         for w in result.warnings:
             console.print(f"[yellow]warning:[/] {w}")
         console.print(f"Report written to {result.out}/ ({len(result.files)} files; see report.md)")
