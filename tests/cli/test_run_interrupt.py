@@ -71,3 +71,32 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_resumes(tmp_path: Path, executor: li
     assert exp is not None
     found = plan(client, exp.experiment_id, cfg.jobs())
     assert [j.name for j in found.pending] == ["baseline-s0"] and found.done == [] and found.elsewhere == []
+
+
+def test_ctrl_c_to_the_whole_group_while_workers_start_stops_at_once(tmp_path: Path) -> None:
+    """A terminal's Ctrl-C reaches every process of the group, the workers still importing torch
+    included: the sweep stops with 130 and no traceback, the parent run KILLED, nothing RUNNING."""
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    args = [sys.executable, "-m", "vlmrl_cli", "run", "--arms", "baseline,hybrid", "--seeds", "2", "--preset", "smoke",
+            "--workers", "2", "--tracking-uri", uri, "--timesteps", "200000"]
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+                            env={**os.environ, "COLUMNS": "120"})
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:  # the parent run exists: workers are spawning
+            if (tmp_path / "mlflow.db").exists() and any(r.data.tags.get("vlmrl.kind") == "sweep" for r in _runs(uri)):
+                break
+            time.sleep(0.2)
+        os.killpg(proc.pid, signal.SIGINT)
+        sent = time.monotonic()
+        _, stderr = proc.communicate(timeout=90)
+        took = time.monotonic() - sent
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr and "InvalidStateError" not in stderr, stderr[-3000:]
+    assert took < 60, took
+    statuses = [(r.data.tags["vlmrl.kind"], r.info.status) for r in _runs(uri)]
+    assert ("sweep", "KILLED") in statuses and all(status != "RUNNING" for _, status in statuses), statuses

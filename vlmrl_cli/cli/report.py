@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.console import Console
@@ -11,7 +11,9 @@ from rich.console import Console
 from vlmrl_cli.cli.errors import exit_codes
 from vlmrl_cli.cli.options import Experiment, Margin, OutDir, TrackingUri
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.report.table2 import BASELINE, Table2, format_cell, format_speedup, threshold_key
+
+if TYPE_CHECKING:  # the CLI imports no analysis code before a command runs (help stays fast)
+    from vlmrl_cli.report.table2 import Table2
 
 DEFAULT_OUT = Path("results/report")
 DEFAULT_THR = "-190,-160,-130"
@@ -36,6 +38,8 @@ def parse_thresholds(text: str) -> tuple[float, ...]:
 def console_summary(table: Table2, experiment: str) -> list[str]:
     """Table 2's headline rows as short plain lines (readable at 80 columns and in a pipe); the
     full table is in table2.md."""
+    from vlmrl_cli.report.table2 import BASELINE, format_cell, format_speedup, threshold_key
+
     lines = [f"Table 2, experiment {experiment} (full table: table2.md)"]
     for t in table.thresholds:
         lines.append(f"steps to {t:g} (restricted mean, a DNF at the budget):")

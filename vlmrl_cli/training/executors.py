@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import queue as queue_mod
-from collections.abc import Callable, Sequence
+import signal
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from contextlib import contextmanager
 from dataclasses import dataclass
 from importlib.util import find_spec
 from typing import Any, Protocol
@@ -81,6 +83,19 @@ def is_remote_address(address: str | None) -> bool:
     return host not in ("127.0.0.1", "localhost", "::1", "0.0.0.0")
 
 
+@contextmanager
+def _sigint_blocked() -> Iterator[None]:
+    """SIGINT held pending (not lost) in this thread, and in every process started meanwhile."""
+    if not hasattr(signal, "pthread_sigmask"):  # not POSIX: nothing to block
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
 class LocalExecutor:
     """A pool of ``workers`` spawned processes on this machine (one torch thread each)."""
 
@@ -95,8 +110,13 @@ class LocalExecutor:
         self._futures: dict[Future[JobResult], TrainJob] = {}
 
     def submit(self, jobs: Sequence[TrainJob], job_fn: JobFn, ctx: JobContext) -> None:
-        for job in jobs:
-            self._futures[self._pool.submit(job_fn, job, ctx)] = job
+        # The pool spawns its processes here. A terminal's Ctrl-C goes to the whole process group,
+        # and a worker still importing (before init_worker ignores SIGINT) would die with a
+        # traceback and break the pool; with SIGINT blocked while they start, they inherit the
+        # block and never see it. Here a Ctrl-C waits until the block ends, then reaches the sweep.
+        with _sigint_blocked():
+            for job in jobs:
+                self._futures[self._pool.submit(job_fn, job, ctx)] = job
 
     def poll(self, timeout_s: float) -> Polled:
         finished, _ = wait(set(self._futures), timeout=timeout_s, return_when=FIRST_COMPLETED)
@@ -116,10 +136,11 @@ class LocalExecutor:
         return len(self._futures)
 
     def stop(self) -> None:
-        # queued jobs never start; running ones see the event, end their run KILLED and return
+        # Queued jobs see the event as they start and return CANCELLED without a run; running ones
+        # end their run KILLED and return. No future is cancelled: in CPython 3.11 a result that
+        # arrives for a future cancelled meanwhile raises InvalidStateError in the pool's manager
+        # thread, which then never finishes and hangs the sweep.
         self._stop.set()
-        for fut in self._futures:
-            fut.cancel()
 
     def close(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)

@@ -157,6 +157,9 @@ def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> J
     start = time.perf_counter()
     progress, stop = channels.progress, channels.stop
 
+    def stopped() -> bool:  # a Ctrl-C during the imports or the set-up ends the job before it trains
+        return stop is not None and bool(stop.is_set())
+
     def send(event: ProgressEvent) -> None:
         if progress is not None:
             progress.put(event)
@@ -166,15 +169,19 @@ def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> J
         vlm_client = None
         try:
             store.log_params(client, run_id, {schema.PARAM_TIMESTEPS: str(job.timesteps), **flatten(job.params())})
+            if stopped():
+                return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start)
             if job.arm.uses_vlm:
                 vlm_client = build_client(job.vlm, transcript=out / "transcript.jsonl", stream=job.seed)
             env, oracle = make_train_env(job.arm, job.ppo, job.shaping, vlm_client, job.seed)
             model = make_model(job.ppo, env, job.seed)
+            if stopped():
+                return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start)
             metrics = store.BatchLogger(client, run_id)
             model.set_logger(Logger(folder=None, output_formats=[MetricsOutputFormat(metrics)]))
             tracker = EpisodeTracker(
                 job.name, job.timesteps, metrics=metrics, progress=send,
-                should_stop=(lambda: bool(stop.is_set())) if stop is not None else None,
+                should_stop=stopped if stop is not None else None,
                 vlm_stats=oracle.stats if oracle is not None else None,
             )
             model.learn(total_timesteps=job.timesteps, callback=tracker)
