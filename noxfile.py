@@ -4,6 +4,7 @@ first (a plain `torch` requirement can pull a multi-GB CUDA build)."""
 from __future__ import annotations
 
 import os
+import tempfile
 import time
 
 import nox
@@ -26,7 +27,11 @@ def _lint(session: nox.Session) -> None:
 
 
 def _docs(session: nox.Session) -> None:
-    session.run("mkdocs", "build", "--strict", "--site-dir", os.path.join(session.create_tmp(), "site"))
+    # tempfile, not session.create_tmp(): that also points TMPDIR into .nox/ (inside the checkout) for
+    # every later command, which puts pytest's temporary folders inside a git repository and Ray's
+    # socket paths past the length a Unix socket allows
+    with tempfile.TemporaryDirectory(prefix="vlmrl-site-") as site:
+        session.run("mkdocs", "build", "--strict", "--site-dir", site)
 
 
 @nox.session
