@@ -85,16 +85,24 @@ def estimate_cost(cfg: StudyConfig) -> CostEstimate:
     return CostEstimate(pending, done, seconds / pending if pending else 0.0, seconds / workers, workers, how)
 
 
+def _existing_experiment(cfg: StudyConfig) -> tuple[Any, Any] | None:
+    """The client and the study's experiment, read-only: None when the store or the experiment does
+    not exist (nothing is created)."""
+    uri = store.resolve_tracking_uri(cfg.base.tracking_uri)
+    if uri.startswith("sqlite:///") and not Path(uri.removeprefix("sqlite:///")).exists():
+        return None
+    client = store.connect(uri)
+    exp = client.get_experiment_by_name(cfg.base.experiment)
+    return None if exp is None or exp.lifecycle_stage == "deleted" else (client, exp)
+
+
 def _measured_rates(cfg: StudyConfig) -> dict[str, float]:
     """Median seconds per step and arm over the experiment's finished training runs (empty when
     the store or experiment does not exist: nothing is created)."""
-    uri = store.resolve_tracking_uri(cfg.base.tracking_uri)
-    if uri.startswith("sqlite:///") and not Path(uri.removeprefix("sqlite:///")).exists():
+    found_exp = _existing_experiment(cfg)
+    if found_exp is None:
         return {}
-    client = store.connect(uri)
-    exp = client.get_experiment_by_name(cfg.base.experiment)
-    if exp is None or exp.lifecycle_stage == "deleted":
-        return {}
+    client, exp = found_exp
     found = schema.search_all(client, exp.experiment_id, schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN},
                                                                           finished=True))
     per_arm: dict[str, list[float]] = {}
@@ -175,9 +183,7 @@ def run_study(
         rows.append(row)
         hack.append(hacking.hacking_frame(per_seed, sub.eval_episodes, cfg.ci).assign(regime=regime.id))
         seeds.append(per_seed.assign(regime=regime.id, variant=""))
-    for sweep in (*cfg.variants, *(c.regime for c in cfg.cells)):
-        seeds.append(per_seed_table(analysis.subset(data, sweep.run), cfg.thresholds).assign(
-            regime=cfg.vlm_regime, variant=sweep.id))
+    seeds += _other_sweep_frames(cfg, data)
     result.per_seed = study_per_seed(seeds, cfg.thresholds)
     result.missing = missing_runs(cfg, result.per_seed)
     ready = [c for c in analysis.controls(cfg.cells)
@@ -206,25 +212,26 @@ def run_study(
     return result
 
 
+def _other_sweep_frames(cfg: StudyConfig, data: Any) -> list[pd.DataFrame]:
+    """The per-seed tables of the VLM variants and control cells (in the VLM regime), by sweep id."""
+    return [per_seed_table(analysis.subset(data, sweep.run), cfg.thresholds).assign(regime=cfg.vlm_regime,
+                                                                                     variant=sweep.id)
+            for sweep in (*cfg.variants, *(c.regime for c in cfg.cells))]
+
+
 def finished_per_seed(cfg: StudyConfig) -> pd.DataFrame | None:
     """The per-seed table of the study's runs already FINISHED in the store (read-only: None when the
     store or the experiment does not exist, or holds no finished training run)."""
-    uri = store.resolve_tracking_uri(cfg.base.tracking_uri)
-    if uri.startswith("sqlite:///") and not Path(uri.removeprefix("sqlite:///")).exists():
-        return None
-    client = store.connect(uri)
-    exp = client.get_experiment_by_name(cfg.base.experiment)
-    if exp is None or exp.lifecycle_stage == "deleted":
+    found_exp = _existing_experiment(cfg)
+    if found_exp is None:
         return None
     try:
-        data = load_experiment(client, cfg.base.experiment)
+        data = load_experiment(found_exp[0], cfg.base.experiment)
     except BadInput:  # no finished training run yet
         return None
     frames = [per_seed_table(analysis.subset(data, r.run), cfg.thresholds).assign(regime=r.id, variant="")
               for r in cfg.regimes]
-    frames += [per_seed_table(analysis.subset(data, s.run), cfg.thresholds).assign(regime=cfg.vlm_regime,
-                                                                                   variant=s.id)
-               for s in (*cfg.variants, *(c.regime for c in cfg.cells))]
+    frames += _other_sweep_frames(cfg, data)
     table = study_per_seed([f for f in frames if len(f)], cfg.thresholds)
     return table if len(table) else None
 
@@ -234,10 +241,16 @@ PER_SEED_COLUMNS = ["regime", "variant", "arm", "seed", "config_hash", "run_id",
 PER_SEED_TAIL = ["auc", "final_return", "detached_success", "eval_success_rate", "eval_mean_length"]
 
 
+def finished_keys(per_seed: pd.DataFrame) -> set[tuple[str, int, str]]:
+    """The (arm, seed, config hash) of every run in ``per_seed``: the jobs that have a FINISHED run."""
+    if not len(per_seed):
+        return set()
+    return set(zip(per_seed["arm"], per_seed["seed"].astype(int), per_seed["config_hash"], strict=True))
+
+
 def missing_runs(cfg: StudyConfig, per_seed: pd.DataFrame) -> dict[str, int]:
     """Per sweep (regime, variant or cell), how many of its jobs have no FINISHED run in ``per_seed``."""
-    have = set(zip(per_seed["arm"], per_seed["seed"].astype(int), per_seed["config_hash"], strict=True)) if len(
-        per_seed) else set()
+    have = finished_keys(per_seed)
     out = {}
     for sweep in cfg.all_regimes():
         n = sum((j.arm.name, j.seed, j.config_hash) not in have for j in sweep.run.jobs())
@@ -357,8 +370,7 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
     lines = ["# Study: where does the hybrid's advantage hold?", "", vlm_line, ""]
     if result.missing:
         jobs = {(j.arm.name, j.seed, j.config_hash) for s in cfg.all_regimes() for j in s.run.jobs()}
-        have = set(zip(result.per_seed["arm"], result.per_seed["seed"].astype(int), result.per_seed["config_hash"],
-                       strict=True))
+        have = finished_keys(result.per_seed)
         lines += [f"**PARTIAL: {len(jobs - have)} of the {len(jobs)} runs are not FINISHED yet** (the "
                   "study is still training; rerun `vlmrl study` with the same arguments to resume). Comparisons "
                   "with a side that has fewer than 2 runs are left out; the others use the seeds finished so far. "
