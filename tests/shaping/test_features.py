@@ -58,3 +58,13 @@ def test_distance_grows_smoothly_with_small_displacements(renderer: FrameRendere
 def test_far_apart_frames_are_at_the_saturated_distance(renderer: FrameRenderer) -> None:
     a, b = (frame_features(renderer.render(x).pixels) for x in (-1.0, -0.2))
     assert 1.2 < float(np.linalg.norm(a - b)) < 1.7
+
+
+@settings(max_examples=10, deadline=None)
+@given(arrays(np.uint8, (400, 600, 3), elements=st.integers(0, 255), fill=st.integers(0, 255)))
+def test_counts_equal_the_per_pixel_weighted_sum_everywhere(pixels: np.ndarray) -> None:
+    """Summing channels per block before weighting (the fast path) changes no count."""
+    px = pixels.astype(np.int64)
+    darkness = 255_000 - (px[..., 0] * 299 + px[..., 1] * 587 + px[..., 2] * 114)
+    reference = darkness.reshape(400 // BLOCK, BLOCK, 600 // BLOCK, BLOCK).sum(axis=(1, 3)).reshape(-1)
+    assert np.array_equal(darkness_counts(pixels), reference)

@@ -230,3 +230,13 @@ def test_batch_logger_flush_retries_then_gives_up_after_retry_s() -> None:
     client.failures = 0
     logger.flush()  # the point survived the failed flush
     assert client.points == [1.0]
+
+
+def test_connect_leaves_no_lock_file_in_the_temp_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import tempfile
+
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    store.connect(f"sqlite:///{tmp_path}/mlflow.db")
+    assert list(temp.iterdir()) == []

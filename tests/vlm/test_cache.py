@@ -54,3 +54,38 @@ def test_client_serves_the_second_query_from_the_cache(tmp_path: Path) -> None:
     assert first.text == second.text and not first.cached and second.cached
     assert (client.stats.cache_hits, client.stats.cache_misses) == (1, 1)
     client.close()
+
+
+def _rows_on_disk(path: Path) -> int:
+    import sqlite3
+
+    with sqlite3.connect(str(path)) as db:
+        return int(db.execute("SELECT COUNT(*) FROM responses").fetchone()[0])
+
+
+def test_answers_are_written_in_batches_and_served_while_pending(tmp_path: Path) -> None:
+    path = tmp_path / "c.sqlite"
+    cache = ResponseCache(path, batch=3, max_age_s=3600.0)
+    keys = [cache_key("sim", "m", "p", str(i)) for i in range(4)]
+    for i, key in enumerate(keys[:2]):
+        cache.put(key, "sim", "m", f"A{i}", 0.1)
+    assert _rows_on_disk(path) == 0  # pending: no commit yet
+    assert cache.get(keys[1]) == ("A1", 0.1)  # but served from memory
+    cache.put(keys[2], "sim", "m", "A2", 0.1)
+    assert _rows_on_disk(path) == 3  # the third answer fills the batch
+    cache.put(keys[3], "sim", "m", "A3", 0.1)
+    cache.close()  # close writes what is pending
+    assert _rows_on_disk(path) == 4
+
+
+def test_an_old_pending_answer_is_written_without_a_full_batch(tmp_path: Path) -> None:
+    path = tmp_path / "c.sqlite"
+    cache = ResponseCache(path, batch=100, max_age_s=0.0)  # a slow backend: flush at once
+    cache.put(cache_key("sim", "m", "p", "a"), "sim", "m", "BOTTOM", 2.0)
+    assert _rows_on_disk(path) == 1
+    cache.close()
+
+
+def test_a_bad_batch_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="batch"):
+        ResponseCache(tmp_path / "c.sqlite", batch=0)

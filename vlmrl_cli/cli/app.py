@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import sys
+from collections.abc import Sequence
 from typing import Annotated
 
 import typer
+
+from vlmrl_cli.cli.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED
 
 app = typer.Typer(
     name="vlmrl",
@@ -56,5 +60,36 @@ def _register() -> None:
 _register()
 
 
+def cli(args: Sequence[str] | None = None) -> int:
+    """Run ``vlmrl ARGS`` and return its exit code; every refusal is one ``error:`` line.
+
+    click's own usage errors (an unknown flag, ``--seeds two``) are printed in the same one-line
+    format as ours, with the command's ``--help`` named, instead of click's Usage/Try/Error block.
+    """
+    try:  # typer >= 0.22 runs its own copy of click; older versions run click itself
+        from typer._click import exceptions as click
+    except ImportError:  # pragma: no cover - depends on the installed typer
+        from click import exceptions as click  # type: ignore[no-redef]
+
+    command = typer.main.get_command(app)
+    try:
+        code = command.main(args=list(args) if args is not None else None, prog_name="vlmrl", standalone_mode=False)
+    except click.NoArgsIsHelpError as exc:  # bare `vlmrl` or `vlmrl run`-style groups: show the help
+        print(exc.format_message(), file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except click.UsageError as exc:
+        where = exc.ctx.command_path if exc.ctx is not None else "vlmrl"
+        message = " ".join(exc.format_message().split())
+        print(f"error: {message} (see '{where} --help')", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except click.ClickException as exc:
+        print(f"error: {' '.join(exc.format_message().split())}", file=sys.stderr)
+        return exc.exit_code
+    except typer.Abort:
+        print("interrupted.", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    return code if isinstance(code, int) else 0
+
+
 def main() -> None:
-    app()
+    sys.exit(cli())

@@ -58,6 +58,7 @@ def run(
 
     Settings resolve in layers: the --preset < --config FILE < --set KEY=VALUE < other flags.
     """
+    from vlmrl_cli.training.preflight import preflight
     from vlmrl_cli.training.sweep import run_sweep
 
     console = Console(stderr=False)
@@ -66,6 +67,7 @@ def run(
         if dry_run:
             typer.echo(dry_run_text(cfg), nl=False)
             return
+        preflight(cfg)  # refuse before the header: the sweep checks again for callers of its API
         console.print(f"[bold]vlmrl run[/]: arms {', '.join(cfg.arms)} x seeds {list(cfg.seeds)}, preset "
                       f"{cfg.preset}, {cfg.budget:,} steps each, {cfg.workers} worker(s) ({cfg.executor}), "
                       f"experiment '{cfg.experiment}'")

@@ -25,6 +25,7 @@ from typing import Any
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
+from vlmrl_cli.core.paths import folder_problem
 from vlmrl_cli.core.provenance import config_hash, flatten
 from vlmrl_cli.frames.render import FrameRenderer
 from vlmrl_cli.probe.scoring import (
@@ -40,6 +41,7 @@ from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.config import VLMConfig
+from vlmrl_cli.vlm.preflight import check_vlm
 from vlmrl_cli.vlm.prompts import PROMPTS
 from vlmrl_cli.vlm.registry import build_client
 
@@ -118,6 +120,9 @@ def _staging_folder(out: Path) -> Path:
         raise BadInput(f"--out {out} is a file; pass a folder.")
     if out.exists() and not os.access(out, os.W_OK):
         raise BadInput(f"--out {out} is not writable; pass a folder you can write to.")
+    problem = folder_problem(out)
+    if problem:
+        raise BadInput(f"cannot write the output folder {out} ({problem}); pass a writable --out.")
     parent = out.resolve().parent
     try:
         parent.mkdir(parents=True, exist_ok=True)
@@ -154,12 +159,16 @@ def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None) -> Tax
     from vlmrl_cli.probe.figure1 import save_figure1
     from vlmrl_cli.probe.table1 import write_tables
 
+    problem = folder_problem(cfg.out)
+    if problem:
+        raise BadInput(f"cannot write the output folder {cfg.out} ({problem}); pass a writable --out.")
+    check_vlm(cfg.vlm)  # cache path, model, server, transcript: before the store and folders exist
+    tracker = store.connect(cfg.tracking_uri)
     staging = _staging_folder(cfg.out)
     client: VLMClient | None = None
     try:
         client = build_client(cfg.vlm, transcript=staging / "transcript.jsonl")
         backend = client.backend
-        tracker = store.connect(cfg.tracking_uri)
         experiment_id = store.ensure_experiment(tracker, cfg.experiment)
         planned, is_sweep = plan_frames(cfg.states, backend)
         run_name = f"taxonomy-{backend.name}-{cfg.states if is_sweep else 'transcript'}-{config_hash(cfg)[:6]}"

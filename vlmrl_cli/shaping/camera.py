@@ -83,6 +83,11 @@ class Camera:
     def _cell_position(self, cell: int) -> float:
         return min(max(MIN_POSITION + cell * self.render_quantum, MIN_POSITION), MAX_POSITION)
 
+    def grid_positions(self) -> list[float]:
+        """Every position the camera can show (one per grid cell, track end to track end)."""
+        last = round((MAX_POSITION - MIN_POSITION) / self.render_quantum)
+        return [self._cell_position(cell) for cell in range(last + 1)]
+
     def rendered_position(self, x: float) -> float:
         """The position (x units) whose frame ``view(x)`` shows: ``x`` snapped to the grid."""
         return self._cell_position(self._cell(float(x)))

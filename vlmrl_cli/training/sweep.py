@@ -27,7 +27,8 @@ from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training.claims import ACTIVE, Liveness, RunRecord, is_stale, mark_stale
 from vlmrl_cli.training.config import RunConfig, TrainJob
 from vlmrl_cli.training.events import JobContext, JobResult, ProgressEvent, SweepSummary
-from vlmrl_cli.training.executors import Executor, JobFn, LocalExecutor, check_executor
+from vlmrl_cli.training.executors import Executor, JobFn, LocalExecutor
+from vlmrl_cli.training.preflight import preflight
 from vlmrl_cli.training.worker import train_job
 
 
@@ -139,8 +140,7 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
     """Validate, plan, train the pending jobs through ``cfg.executor``, record the sweep.
     ``job_fn`` is what each job runs (a benchmark passes a fake trainer)."""
     start = time.perf_counter()
-    cfg.validate()
-    check_executor(cfg)
+    preflight(cfg)
     client = store.connect(cfg.tracking_uri)
     tracking_uri = store.resolve_tracking_uri(cfg.tracking_uri)
     vlm_label, simulated = vlm_identity(cfg)

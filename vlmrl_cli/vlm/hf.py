@@ -108,6 +108,52 @@ def _one_line(exc: BaseException, limit: int = 200) -> str:
     return text[:limit].rstrip(". ")
 
 
+def locate_model(cfg: VLMConfig) -> tuple[Path, bool]:
+    """``(path, local)`` of ``cfg.model`` without loading it: a local folder with a config.json
+    (``local``) or a hub id; ``BackendUnavailable`` for a missing model, a path that is no model
+    folder. (A hub id is only checked when loading, or by ``hub_problem``.)"""
+    if not cfg.model:
+        raise BackendUnavailable(
+            f"the hf backend needs --model: a Hugging Face hub id such as {PAPER_MODEL} "
+            "or the path of a downloaded model folder."
+        )
+    model_id = cfg.model
+    path = Path(model_id).expanduser()
+    local = path.is_dir()
+    if not local and (path.exists() or _looks_like_path(model_id)):
+        raise BackendUnavailable(
+            f"cannot load the model '{model_id}' with transformers: no such local folder; "
+            "pass --model PATH to a downloaded model folder or a Hugging Face hub id."
+        )
+    if local and not (path / "config.json").is_file():
+        raise BackendUnavailable(
+            f"cannot load the model '{model_id}' with transformers: the folder has no config.json; "
+            "pass --model the folder that save_pretrained (or `hf download`) wrote."
+        )
+    return path, local
+
+
+def hub_problem(model_id: str, timeout_s: float = 10.0) -> str | None:
+    """Why the hub id ``model_id`` cannot be loaded here, or None: it is in the local Hugging
+    Face cache, or the hub answers for it (offline mode, ``HF_HUB_OFFLINE``, asks no server)."""
+    import os
+
+    from huggingface_hub import try_to_load_from_cache
+
+    if isinstance(try_to_load_from_cache(model_id, "config.json"), str):
+        return None
+    if os.environ.get("HF_HUB_OFFLINE", "").strip().lower() in ("1", "true", "yes", "on"):
+        return f"the model '{model_id}' is not in the local Hugging Face cache and HF_HUB_OFFLINE is set"
+    try:
+        from huggingface_hub import model_info
+
+        model_info(model_id, timeout=timeout_s)
+    except Exception as exc:  # no network, no such repository, gated: all say the same to a user
+        why = _one_line(exc, 120)
+        return f"the model '{model_id}' is neither in the local Hugging Face cache nor on the hub ({why})"
+    return None
+
+
 @dataclass
 class _Loaded:
     processor: Any
@@ -144,24 +190,8 @@ class HFBackend:
         Raises ``BackendUnavailable`` with one sentence when the model cannot be loaded, and
         ``BadInput`` for an unknown dtype.
         """
-        if not cfg.model:
-            raise BackendUnavailable(
-                f"the hf backend needs --model: a Hugging Face hub id such as {PAPER_MODEL} "
-                "or the path of a downloaded model folder."
-            )
-        model_id = cfg.model
-        path = Path(model_id).expanduser()
-        local = path.is_dir()
-        if not local and (path.exists() or _looks_like_path(model_id)):
-            raise BackendUnavailable(
-                f"cannot load the model '{model_id}' with transformers: no such local folder; "
-                "pass --model PATH to a downloaded model folder or a Hugging Face hub id."
-            )
-        if local and not (path / "config.json").is_file():
-            raise BackendUnavailable(
-                f"cannot load the model '{model_id}' with transformers: the folder has no config.json; "
-                "pass --model the folder that save_pretrained (or `hf download`) wrote."
-            )
+        model_id = cfg.model or ""
+        path, local = locate_model(cfg)
         device = resolve_device(cfg.device)
         dtype = resolve_dtype(cfg.dtype, device)
         source = str(path) if local else model_id

@@ -1,0 +1,52 @@
+"""Can a path be written? Checked without leaving anything behind, before any command creates
+its store, output folder or cache (each check returns why not, or None)."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+
+def _nearest_existing(path: Path) -> Path:
+    current = path.absolute()
+    while not current.exists() and current != current.parent:
+        current = current.parent
+    return current
+
+
+def _probe(folder: Path) -> str | None:
+    """Why nothing can be created in the existing ``folder``, or None (a folder made and removed
+    at once: permissions, read-only mounts and pseudo file systems such as /proc all answer)."""
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".vlmrl-probe-", dir=folder))
+    except OSError as exc:
+        return f"nothing can be created in {folder} ({exc.strerror or exc})"
+    return None
+
+
+def folder_problem(path: Path) -> str | None:
+    """Why ``path`` cannot be used as an output folder (made if missing), or None.
+
+    Example:
+        >>> import tempfile, pathlib
+        >>> root = pathlib.Path(tempfile.mkdtemp())
+        >>> folder_problem(root / "new" / "out") is None, (root / "new").exists()
+        (True, False)
+        >>> _ = (root / "f").write_text("x")
+        >>> folder_problem(root / "f" / "out").endswith("is a file, not a folder")
+        True
+    """
+    existing = _nearest_existing(path)
+    if not existing.is_dir():
+        return f"{existing} is a file, not a folder"
+    return _probe(existing)
+
+
+def file_problem(path: Path) -> str | None:
+    """Why a file cannot be created (or rewritten) at ``path``, or None; nothing is created."""
+    if path.exists():
+        if path.is_dir():
+            return f"{path} is a folder, not a file"
+        return None if os.access(path, os.W_OK) else f"{path} is not writable"
+    return folder_problem(path.parent)
