@@ -46,6 +46,7 @@ def calibrate(
     and rank the regimes by their distance to the paper's baseline learning profile."""
     from vlmrl_cli.calibration.pipeline import calibrate as run_calibration
     from vlmrl_cli.calibration.regimes import CalibrateConfig, Regime, build_regimes, calibrate_section, grid_flags
+    from vlmrl_cli.training.cost import estimate_sweeps
 
     console = Console()
     with exit_codes():
@@ -57,6 +58,7 @@ def calibrate(
             f"[bold]vlmrl calibrate[/]: {len(cfg.regimes)} regime(s) x seeds {list(base.seeds)} of the "
             f"baseline, preset {base.preset}, {base.budget:,} steps each, experiment '{base.experiment}'"
         )
+        console.print(f"cost estimate: {estimate_sweeps([r.run for r in cfg.regimes]).line()}", markup=False)
 
         def reporter_for(regime: Regime) -> RichSweepReporter:
             console.print(f"[bold]{regime.id}[/]: {regime.label}")

@@ -124,6 +124,7 @@ def dry_run_text(cfg: RunConfig) -> str:
     that ``--config`` reads back."""
     from vlmrl_cli.report.children import child_rows, format_rows
     from vlmrl_cli.tracking import store
+    from vlmrl_cli.training.cost import estimate_sweeps
     from vlmrl_cli.training.sweep import dry_plan
 
     plan = dry_plan(cfg)
@@ -142,4 +143,6 @@ def dry_run_text(cfg: RunConfig) -> str:
             line += f"  {cells[2]:<32}  {cells[4]:>13}  {cells[5]}"
         lines.append(line.rstrip())
     lines.append(f"# {len(plan.done)} FINISHED, {len(plan.pending)} pending; nothing was trained.")
+    if plan.pending:
+        lines.append(f"# cost estimate: {estimate_sweeps([cfg]).line()}")
     return "# vlmrl run --dry-run: the resolved configuration\n" + to_toml(cfg) + "\n" + "\n".join(lines) + "\n"

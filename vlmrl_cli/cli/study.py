@@ -167,9 +167,7 @@ def study(
         if base.vlm.backend == "sim":
             console.print("[yellow]VLM: the SIMULATED VLM (a pixel-reading stand-in), not a real model.[/]")
         cost = estimate_cost(cfg)
-        console.print(f"cost estimate: {cost.pending} run(s) to train ({cost.done} already FINISHED) x "
-                      f"~{cost.per_run_s:,.0f} s per run / {cost.workers} worker(s) = ~{cost.total_s / 60:,.1f} min; "
-                      f"estimated from {cost.how}", markup=False)
+        console.print(f"cost estimate: {cost.line()}", markup=False)
         if dry_run:
             for line in power_lines(cfg, finished_per_seed(cfg)):
                 console.print(line, markup=False)

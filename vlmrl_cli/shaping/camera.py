@@ -73,20 +73,19 @@ class Camera:
         self._renderer: FrameRenderer | None = None
         self._views: dict[int, FrameView] = {}
         self._frames: OrderedDict[int, Frame] = OrderedDict()
+        self._last = round((MAX_POSITION - MIN_POSITION) / self.render_quantum)  # the last grid cell
 
     def _cell(self, x: float) -> int:
         if not math.isfinite(x):
             raise ValueError(f"x must be finite, got {x}")
-        last = round((MAX_POSITION - MIN_POSITION) / self.render_quantum)
-        return min(max(round((x - MIN_POSITION) / self.render_quantum), 0), last)
+        return min(max(round((x - MIN_POSITION) / self.render_quantum), 0), self._last)
 
     def _cell_position(self, cell: int) -> float:
         return min(max(MIN_POSITION + cell * self.render_quantum, MIN_POSITION), MAX_POSITION)
 
     def grid_positions(self) -> list[float]:
         """Every position the camera can show (one per grid cell, track end to track end)."""
-        last = round((MAX_POSITION - MIN_POSITION) / self.render_quantum)
-        return [self._cell_position(cell) for cell in range(last + 1)]
+        return [self._cell_position(cell) for cell in range(self._last + 1)]
 
     def rendered_position(self, x: float) -> float:
         """The position (x units) whose frame ``view(x)`` shows: ``x`` snapped to the grid."""

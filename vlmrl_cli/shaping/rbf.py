@@ -124,6 +124,9 @@ class RBFField:
         self._den = np.empty(0, dtype=np.float64)
         self._ref = np.empty(0, dtype=np.float64)  # squared distance the weights are relative to
         self._low, self._high = math.inf, -math.inf  # range of the prototype potentials
+        # each key's value as ``value`` returns it, until the next prototype or potential change:
+        # a plain dict lookup per env step instead of two numpy scalar reads
+        self._values: dict[str, float] = {}
 
     @property
     def prototypes(self) -> int:
@@ -140,6 +143,7 @@ class RBFField:
 
     def add_prototype(self, feature: np.ndarray, potential: float) -> None:
         row = self._row(feature)
+        self._values.clear()
         self._protos = row if self._protos is None else np.vstack([self._protos, row])
         self._potentials = np.append(self._potentials, float(potential))
         self._low = min(self._low, float(potential))
@@ -176,6 +180,7 @@ class RBFField:
         if new == old:
             return
         self._potentials[index] = new
+        self._values.clear()
         self._low, self._high = float(self._potentials.min()), float(self._potentials.max())
         if self._feats is None:
             return
@@ -183,6 +188,9 @@ class RBFField:
         self._num += exp(-(sq - self._ref) * self._scale) * (new - old)
 
     def value(self, key: str, feature: np.ndarray) -> float:
+        known = self._values.get(key)
+        if known is not None:
+            return known
         if self._protos is None:
             return 0.0
         row = self._index.get(key)
@@ -198,5 +206,6 @@ class RBFField:
             self._den = np.append(self._den, den)
             self._ref = np.append(self._ref, ref)
         # called every env step: plain floats, and the documented bound kept exact
-        value = float(self._num[row]) / float(self._den[row])
-        return min(max(value, self._low), self._high)
+        value = min(max(float(self._num[row]) / float(self._den[row]), self._low), self._high)
+        self._values[key] = value
+        return value

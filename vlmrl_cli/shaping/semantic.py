@@ -218,7 +218,9 @@ class EpisodePotential:
         if self.steps_since_label >= self.query_every:
             self.steps_since_label = 0
             self._label(view)
-        return self._phi(view)
+        # _phi, inlined: this runs every env step
+        base = self.oracle.phi_rbf(view) if self.oracle.rbf else self.held
+        return max(self.lock_state.level, base) if self.lock else base
 
     def _label(self, view: FrameView) -> None:
         potential = self.oracle.label(view)

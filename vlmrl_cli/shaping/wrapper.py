@@ -114,7 +114,9 @@ class HybridReward(gym.Wrapper[np.ndarray, int, np.ndarray, int], gym.utils.Reco
         if self.arm.kinematic:
             reward += kinematic_reward(float(obs[0]), self.shaping.kin_scale, self.shaping.kin_offset)
         if self._episode is not None:
-            phi_next = self._episode.step(self._view())
+            assert self.camera is not None  # with the episode: checked in __init__
+            # the camera images the simulator (as env.render() would), not the observation
+            phi_next = self._episode.step(self.camera.view(float(self._sim.state[0])))
             reward += pbrs_term(self._phi, phi_next, self.gamma, self.shaping.alpha, terminated)
             self._phi = phi_next
         self._return += reward

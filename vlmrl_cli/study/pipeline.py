@@ -14,7 +14,6 @@ from __future__ import annotations
 import json
 import math
 import re
-import statistics
 import time
 from collections.abc import Callable, Mapping, Sequence
 from contextlib import AbstractContextManager
@@ -41,48 +40,14 @@ from vlmrl_cli.report.writer import ensure_writable
 from vlmrl_cli.study import analysis
 from vlmrl_cli.study.config import StudyConfig
 from vlmrl_cli.tracking import schema, store
-from vlmrl_cli.training.config import TrainJob
-from vlmrl_cli.training.sweep import JobResult, SweepReporter, dry_plan, vlm_identity
+from vlmrl_cli.training import cost as cost_model
+from vlmrl_cli.training.cost import CostEstimate
+from vlmrl_cli.training.sweep import JobResult, SweepReporter, vlm_identity
 
 KIND = schema.KIND_STUDY
-#: Seconds per environment step of one run on one worker, when the store has no finished run to
-#: measure: `nox -s repro` on 2 cores trained 20 runs of 300,000 steps in 665 s of wall time.
-FALLBACK_S_PER_STEP = 665.0 * 2 / (20 * 300_000)
-
-
-@dataclass(frozen=True)
-class CostEstimate:
-    """What a study will train: ``pending`` runs (``done`` already FINISHED), about ``per_run_s``
-    seconds each on one worker, ``total_s`` of wall time over ``workers``; ``how``: the basis."""
-
-    pending: int
-    done: int
-    per_run_s: float
-    total_s: float
-    workers: int
-    how: str
-
-
 def estimate_cost(cfg: StudyConfig) -> CostEstimate:
-    """The study's cost, read without writing: pending jobs from the store (``dry_plan``) times a
-    per-step time measured on the store's finished runs of the same arm (``perf/wall_s``), else
-    ``FALLBACK_S_PER_STEP``."""
-    rates = _measured_rates(cfg)
-    fallback = statistics.median(rates.values()) if rates else FALLBACK_S_PER_STEP
-    pending_jobs: dict[tuple[str, int, str], TrainJob] = {}
-    done_jobs: set[tuple[str, int, str]] = set()
-    for regime in cfg.all_regimes():  # a job shared by two sweeps (same knobs) is trained once
-        plan = dry_plan(regime.run)
-        done_jobs |= {(j.arm.name, j.seed, j.config_hash) for j in plan.done}
-        pending_jobs |= {(j.arm.name, j.seed, j.config_hash): j for j in plan.pending}
-    pending, done = len(pending_jobs), len(done_jobs)
-    seconds = sum(j.timesteps * rates.get(j.arm.name, fallback) for j in pending_jobs.values())
-    workers = max(1, cfg.base.workers)
-    how = (f"per-step wall time of {len(rates)} arm(s) measured on finished runs in experiment "
-           f"'{cfg.base.experiment}' (perf/wall_s)" if rates else
-           f"no finished run to measure yet: {FALLBACK_S_PER_STEP * 1e3:.2f} ms per step and worker, from "
-           "`nox -s repro` on 2 cores (20 runs x 300,000 steps in 665 s)")
-    return CostEstimate(pending, done, seconds / pending if pending else 0.0, seconds / workers, workers, how)
+    """The study's cost, read without writing (``training.cost.estimate_sweeps`` of its regimes)."""
+    return cost_model.estimate_sweeps([regime.run for regime in cfg.all_regimes()])
 
 
 def _existing_experiment(cfg: StudyConfig) -> tuple[Any, Any] | None:
@@ -94,23 +59,6 @@ def _existing_experiment(cfg: StudyConfig) -> tuple[Any, Any] | None:
     client = store.connect(uri)
     exp = client.get_experiment_by_name(cfg.base.experiment)
     return None if exp is None or exp.lifecycle_stage == "deleted" else (client, exp)
-
-
-def _measured_rates(cfg: StudyConfig) -> dict[str, float]:
-    """Median seconds per step and arm over the experiment's finished training runs (empty when
-    the store or experiment does not exist: nothing is created)."""
-    found_exp = _existing_experiment(cfg)
-    if found_exp is None:
-        return {}
-    client, exp = found_exp
-    found = schema.search_all(client, exp.experiment_id, schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN},
-                                                                          finished=True))
-    per_arm: dict[str, list[float]] = {}
-    for run in found:
-        wall, steps = run.data.metrics.get(schema.METRIC_WALL_S), run.data.params.get(schema.PARAM_TIMESTEPS)
-        if wall and steps and float(steps) > 0:
-            per_arm.setdefault(run.data.tags.get(schema.TAG_ARM, ""), []).append(wall / float(steps))
-    return {arm: statistics.median(v) for arm, v in per_arm.items()}
 
 
 @dataclass

@@ -176,8 +176,11 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
     ctx = JobContext(tracking_uri, experiment_id, parent.info.run_id, vlm_label, simulated,
                      heartbeat_s=cfg.heartbeat_s, stale_after_s=cfg.stale_after_s)
     status = "FINISHED"
-    try:
-        with _stop_on_sigint() as interrupted:
+    # The flag handler stays installed through the shutdown as well: a Ctrl-C while the executor
+    # closes (Ray's shutdown sleeps) or the parent run is being closed must not escape half-way
+    # and leave the parent RUNNING; it marks the parent KILLED and the sweep exits 130.
+    with _stop_on_sigint() as interrupted:
+        try:
             executor.submit(pending, job_fn, ctx)
             while executor.outstanding:
                 polled = executor.poll(0.2)
@@ -189,19 +192,21 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
                 if interrupted.is_set() and status != "KILLED":
                     status = "KILLED"
                     executor.stop()
-        if status == "KILLED":
-            raise KeyboardInterrupt
-        if summary.failed:
-            status = "FAILED"
-    except BaseException:
-        status = status if status == "KILLED" else "FAILED"
-        raise
-    finally:
-        executor.close()
-        summary.wall_s = time.perf_counter() - start
-        store.log_params(client, parent.info.run_id, {"sweep.pending": ",".join(j.name for j in pending)})
-        client.log_metric(parent.info.run_id, schema.METRIC_SWEEP_WALL_S, summary.wall_s)
-        client.set_terminated(parent.info.run_id, status)
+            if summary.failed and status != "KILLED":
+                status = "FAILED"
+        except BaseException:
+            status = "KILLED" if status == "KILLED" or interrupted.is_set() else "FAILED"
+            raise
+        finally:
+            executor.close()
+            summary.wall_s = time.perf_counter() - start
+            store.log_params(client, parent.info.run_id, {"sweep.pending": ",".join(j.name for j in pending)})
+            client.log_metric(parent.info.run_id, schema.METRIC_SWEEP_WALL_S, summary.wall_s)
+            if interrupted.is_set():
+                status = "KILLED"
+            client.set_terminated(parent.info.run_id, status)
+    if status == "KILLED":
+        raise KeyboardInterrupt
     return summary
 
 

@@ -1,0 +1,44 @@
+"""Cost estimates: measured per-step time, scaled for the worker count and the sweeps' utilisation."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from vlmrl_cli.training.config import RunConfig
+from vlmrl_cli.training.cost import FALLBACK_S_PER_STEP, Timings, contention, estimate, estimate_sweeps
+from vlmrl_cli.training.presets import get_preset
+
+
+def _jobs(arms: tuple[str, ...], seeds: int, steps: int = 100_000) -> list:  # type: ignore[type-arg]
+    ppo = dataclasses.replace(get_preset("smoke"), timesteps=steps)
+    return RunConfig(arms=arms, seeds=tuple(range(seeds)), preset="smoke", ppo=ppo).jobs()
+
+
+def test_measured_arms_are_used_per_arm_and_divided_over_the_workers() -> None:
+    timings = Timings({"baseline": (1e-4, 2), "hybrid": (2e-4, 2)}, utilisation=1.0, runs=10)
+    cost = estimate(_jobs(("baseline", "hybrid"), 2), done=3, workers=2, timings=timings, cores=2)
+    assert cost.pending == 4 and cost.done == 3
+    assert cost.per_run_s == pytest.approx((2 * 10 + 2 * 20) / 4)
+    assert cost.total_s == pytest.approx(60 / 2)
+    assert "4 run(s) to train (3 already FINISHED)" in cost.line() and "10 finished run(s)" in cost.line()
+
+
+def test_more_workers_than_cores_slow_each_run_and_idle_time_adds_up() -> None:
+    timings = Timings({"baseline": (1e-4, 2)}, utilisation=0.5, runs=4)
+    two = estimate(_jobs(("baseline",), 4), 0, workers=2, timings=timings, cores=2)
+    four = estimate(_jobs(("baseline",), 4), 0, workers=4, timings=timings, cores=2)
+    assert four.per_run_s == pytest.approx(2 * two.per_run_s)  # each run gets half a core
+    assert four.total_s == pytest.approx(two.total_s)  # no faster on 2 cores
+    assert two.total_s == pytest.approx(4 * 10 / 2 / 0.5)
+    assert contention(3, 2) == 1.5
+
+
+def test_an_arm_never_measured_takes_the_median_and_an_empty_store_the_fallback(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    timings = Timings({"baseline": (1e-4, 1)}, runs=1)
+    assert estimate(_jobs(("semantic",), 1), 0, 1, timings, cores=2).per_run_s == pytest.approx(10)
+    cfg = RunConfig(arms=("baseline",), seeds=(0,), tracking_uri=f"sqlite:///{tmp_path}/none.db")
+    cost = estimate_sweeps([cfg])
+    assert cost.per_run_s == pytest.approx(cfg.budget * FALLBACK_S_PER_STEP) and "no finished run" in cost.how
+    assert not (tmp_path / "none.db").exists()
