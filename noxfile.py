@@ -78,10 +78,11 @@ def repro(session: nox.Session) -> None:
 
 @nox.session
 def study(session: nox.Session) -> None:
-    """`vlmrl study` with its defaults (regimes paper, paper-calibrated once that preset exists, and hard
-    without normalisation; four arms x 10 seeds; the hybrid under the simulated-VLM profiles and
-    flicker rates) into results/study/; MLflow in results/_scratch/ (git-ignored). Resumable: rerun
-    after an interruption. Extra arguments go to `vlmrl study` (e.g. `nox -s study -- --seeds 3`)."""
+    """`vlmrl study` with its defaults (regime paper-unreliable; baseline, hybrid, its placebo
+    hybrid-shuffled, kinematic and semantic x 20 seeds; the alpha x kin_scale dose-response with its
+    placebo cells; hybrid vs hybrid-no-lock under per-query flicker) into results/study/; MLflow in
+    results/_scratch/ (git-ignored). Resumable: rerun after an interruption. Extra arguments go to
+    `vlmrl study` (e.g. `nox -s study -- --seeds 3`)."""
     _install(session)
     scratch = os.path.join("results", "_scratch")
     os.makedirs(scratch, exist_ok=True)

@@ -30,6 +30,7 @@ from vlmrl_cli.report import figures
 from vlmrl_cli.report.table2 import threshold_key
 from vlmrl_cli.report.writer import ensure_writable
 from vlmrl_cli.tracking import schema, store
+from vlmrl_cli.tracking.lifecycle import tracked_run
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.sweep import JobResult, SweepReporter, run_sweep
 
@@ -284,6 +285,6 @@ def log_summary_run(client: Any, experiment_id: str, kind: str, key: str, params
         )
         run_id = str(run.info.run_id)
         store.log_params(client, run_id, params)
-    store.log_artifacts(client, run_id, files)
-    client.set_terminated(run_id, "FINISHED")
+    with tracked_run(client, run_id):
+        store.log_artifacts(client, run_id, files)
     return run_id

@@ -38,6 +38,7 @@ from vlmrl_cli.probe.scoring import (
     sweep_statistics,
 )
 from vlmrl_cli.tracking import schema, store
+from vlmrl_cli.tracking.lifecycle import tracked_run
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.config import VLMConfig
@@ -174,7 +175,7 @@ def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None) -> Tax
         run_name = f"taxonomy-{backend.name}-{cfg.states if is_sweep else 'transcript'}-{config_hash(cfg)[:6]}"
         run = tracker.create_run(experiment_id, run_name=run_name)
         run_id = str(run.info.run_id)
-        try:
+        with tracked_run(tracker, run_id):
             store.set_tags(tracker, run_id, {
                 **store.provenance_tags(client.label, backend.simulated),
                 schema.TAG_COMMAND: schema.COMMAND_TAXONOMY,
@@ -208,13 +209,6 @@ def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None) -> Tax
             batch.flush()
             store.log_artifacts(tracker, run_id, sorted(staging.iterdir()))
             files = _move_into_place(staging, cfg.out)
-        except KeyboardInterrupt:
-            tracker.set_terminated(run_id, "KILLED")
-            raise
-        except BaseException:
-            tracker.set_terminated(run_id, "FAILED")
-            raise
-        tracker.set_terminated(run_id, "FINISHED")
         return TaxonomyResult(
             out=cfg.out, run_id=run_id, backend_label=label, simulated=backend.simulated,
             provenance=provenance, probes=tuple(probes), sweep=sweep, files=files,

@@ -38,6 +38,7 @@ from vlmrl_cli.report.table2 import (
 )
 from vlmrl_cli.shaping.hacking import HOVER_FLAG
 from vlmrl_cli.tracking import schema, store
+from vlmrl_cli.tracking.lifecycle import tracked_run
 
 DEFAULT_REPORTED = paper.REPORTED
 
@@ -320,15 +321,11 @@ def _log_report_run(client: Any, data: ExperimentData, cfg: ReportConfig, files:
     else:
         run = client.create_run(experiment_id, run_name=f"report of {data.experiment_name} -> {cfg.out}", tags=tags)
         rid = str(run.info.run_id)
-    try:
+    with tracked_run(client, rid):
         if not same:  # params are write-once in MLflow; the same key means the same params
             store.log_params(client, rid, flatten(cfg))
         store.set_tags(client, rid, {schema.TAG_REPORT_RUNS: ",".join(data.runs["run_id"])[:5000]})
         store.log_artifacts(client, rid, files, "report")
-    except Exception:
-        client.set_terminated(rid, status="FAILED")
-        raise
-    client.set_terminated(rid)
     return rid
 
 

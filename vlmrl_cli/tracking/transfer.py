@@ -33,6 +33,7 @@ from typing import Any
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.tracking import schema, store
+from vlmrl_cli.tracking.lifecycle import tracked_run
 
 FORMAT = "vlmrl-runs/1"
 HISTORY_KEYS: tuple[str, ...] = (
@@ -148,7 +149,9 @@ def _create(client: Any, experiment_id: str, record: dict[str, Any]) -> None:
     run = client.create_run(experiment_id, start_time=record["start_time"], tags=tags,
                             run_name=record.get("run_name"))
     run_id = run.info.run_id
-    try:
+    # never left RUNNING, and a failed import is FAILED: never taken for a finished run
+    with tracked_run(client, run_id) as handle:
+        handle.end_time = record["end_time"]
         store.log_params(client, run_id, record["params"])
         metrics = [Metric(k, float(v), int(ts), int(step)) for k, (step, ts, v) in record["latest"].items()]
         for key, h in record["histories"].items():
@@ -165,10 +168,6 @@ def _create(client: Any, experiment_id: str, record: dict[str, Any]) -> None:
                 (Path(tmp) / name).write_bytes(base64.b64decode(blob))
                 files.append(Path(tmp) / name)
             store.log_artifacts(client, run_id, files)
-        client.set_terminated(run_id, "FINISHED", end_time=record["end_time"])
-    except BaseException:
-        client.set_terminated(run_id, "FAILED")  # never left RUNNING, never taken for a finished run
-        raise
 
 
 def import_runs(client: Any, path: Path, experiment: str,

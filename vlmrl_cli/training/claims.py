@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from vlmrl_cli.tracking import schema, store
+from vlmrl_cli.tracking.lifecycle import RunStatus, terminate
 
 ACTIVE = ("RUNNING", "SCHEDULED")
 
@@ -163,7 +164,7 @@ def claim(client: Any, experiment_id: str, run_id: str, name: str, arm: str, see
 
 def mark_stale(client: Any, run_id: str, why: str) -> None:
     store.set_tags(client, run_id, {schema.TAG_ERROR: why})
-    client.set_terminated(run_id, "FAILED")
+    terminate(client, run_id, RunStatus.FAILED)
 
 
 def heartbeat_tags() -> dict[str, str]:

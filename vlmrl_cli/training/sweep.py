@@ -24,6 +24,7 @@ from typing import Any, Protocol
 from vlmrl_cli.core.provenance import config_hash, flatten
 from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.tracking import schema, store
+from vlmrl_cli.tracking.lifecycle import RunStatus, terminate
 from vlmrl_cli.training.claims import ACTIVE, Liveness, RunRecord, is_stale, mark_stale
 from vlmrl_cli.training.config import RunConfig, TrainJob
 from vlmrl_cli.training.events import JobContext, JobResult, ProgressEvent, SweepSummary
@@ -204,7 +205,7 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
             client.log_metric(parent.info.run_id, schema.METRIC_SWEEP_WALL_S, summary.wall_s)
             if interrupted.is_set():
                 status = "KILLED"
-            client.set_terminated(parent.info.run_id, status)
+            terminate(client, parent.info.run_id, RunStatus(status))
     if status == "KILLED":
         raise KeyboardInterrupt
     return summary

@@ -24,6 +24,7 @@ import numpy as np
 from vlmrl_cli.core.provenance import flatten
 from vlmrl_cli.shaping.placebo import describe_map, placebo_map
 from vlmrl_cli.tracking import schema, store
+from vlmrl_cli.tracking.lifecycle import RunStatus, terminate
 from vlmrl_cli.training import claims
 from vlmrl_cli.training.callbacks import EpisodeTracker
 from vlmrl_cli.training.config import EVAL_SEED, TrainJob
@@ -116,23 +117,23 @@ def run_claimed(job: TrainJob, ctx: JobContext, body: Body) -> JobResult:
             rival = _finished_rival(client, ctx.experiment_id, job, run_id)
             if rival is not None:  # two claimants raced past each other: keep the first FINISHED run only
                 store.set_tags(client, run_id, {schema.TAG_ERROR: f"duplicate of FINISHED run {rival}"})
-                client.set_terminated(run_id, "KILLED")
+                terminate(client, run_id, RunStatus.KILLED)
                 return dataclasses.replace(result, status="SKIPPED", error=f"duplicate of FINISHED run {rival}",
                                            superseded=decision.superseded, wall_s=time.perf_counter() - start)
-            client.set_terminated(run_id, "FINISHED")
+            terminate(client, run_id, RunStatus.FINISHED)
         else:
-            client.set_terminated(run_id, result.status)
+            terminate(client, run_id, RunStatus(result.status))
         return dataclasses.replace(result, superseded=decision.superseded, wall_s=time.perf_counter() - start)
     except KeyboardInterrupt:  # a terminal's Ctrl-C reaches Ray's workers too: a stop, not a failure
         with contextlib.suppress(Exception):
-            client.set_terminated(run_id, "KILLED")
+            terminate(client, run_id, RunStatus.KILLED)
         return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start, superseded=decision.superseded)
     except BaseException as exc:  # a failed job must not take the sweep down
         message = f"{type(exc).__name__}: {exc}"
         try:
             store.set_tags(client, run_id, {schema.TAG_ERROR: message[:4000],
                                             schema.TAG_TRACEBACK: traceback.format_exc()[-4000:]})
-            client.set_terminated(run_id, "FAILED")
+            terminate(client, run_id, RunStatus.FAILED)
         except Exception:  # the store itself failed; the parent reports the error
             pass
         return JobResult(job.name, run_id, "FAILED", time.perf_counter() - start, error=message,
