@@ -200,3 +200,16 @@ def test_set_potential_refuses_an_unknown_prototype() -> None:
     field = RBFField(0.5, 1)
     with pytest.raises(IndexError):
         field.set_potential(0, 1.0)
+
+
+def test_a_known_spread_skips_only_a_check_and_a_wide_one_still_refuses_overflow() -> None:
+    from vlmrl_cli.shaping.rbf import squared_distances
+
+    rng = np.random.default_rng(3)
+    points = rng.integers(0, 10**8, size=(7, 600), dtype=np.int64)
+    feature = rng.integers(0, 10**8, size=600, dtype=np.int64)
+    assert np.array_equal(squared_distances(points, feature, 5.0, spread=10**8),
+                          squared_distances(points, feature, 5.0))
+    huge = np.array([[0, 2**40]], dtype=np.int64)
+    with pytest.raises(ValueError, match="too large"):
+        squared_distances(huge, np.array([2**40, 0], dtype=np.int64), spread=2**40)

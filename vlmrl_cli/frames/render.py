@@ -60,12 +60,19 @@ class FrameRenderer:
         self._env: Any = gym.make("MountainCar-v0", render_mode="rgb_array").unwrapped
         self._env.reset(seed=0)
 
-    def render(self, x: float, velocity: float = 0.0, frame_id: str | None = None) -> Frame:
-        """Render the frame of position ``x`` (and ``velocity``, which the picture ignores)."""
+    def render(self, x: float, velocity: float = 0.0, frame_id: str | None = None,
+               sha256: str | None = None) -> Frame:
+        """Render the frame of position ``x`` (and ``velocity``, which the picture ignores).
+
+        ``sha256``: the digest of this very frame, known from an earlier render of the same
+        position (gymnasium draws it identically), so it is not hashed again.
+        """
         if not MIN_POSITION <= x <= MAX_POSITION:
             raise ValueError(f"x={x} is outside the track [{MIN_POSITION}, {MAX_POSITION}]")
         self._env.state = np.array([x, np.clip(velocity, -MAX_SPEED, MAX_SPEED)], dtype=np.float64)
         pixels = self._env.render()
+        if sha256 is not None:
+            return Frame(pixels=np.ascontiguousarray(pixels, dtype=np.uint8), sha256=sha256, frame_id=frame_id)
         return Frame.from_pixels(pixels, frame_id=frame_id)
 
     def close(self) -> None:

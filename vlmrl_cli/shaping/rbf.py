@@ -17,12 +17,15 @@ from vlmrl_cli.core.fp import exp
 _INT64_MAX = np.iinfo(np.int64).max
 
 
-def squared_distances(points: np.ndarray, feature: np.ndarray, unit: float = 1.0) -> np.ndarray:
+def squared_distances(points: np.ndarray, feature: np.ndarray, unit: float = 1.0,
+                      spread: int | None = None) -> np.ndarray:
     """``||points_i - feature||^2 / unit^2`` for each row: ``(N, D)``, ``(D,)`` -> ``(N,)`` float64.
 
     For integer arrays the sum is exact (int64) and only its conversion to float64 rounds, so
     the result is the same on every CPU; ``unit`` converts counts to feature units (e.g.
-    ``FEATURE_UNIT``). Float arrays are summed in float64 (the tests' small examples).
+    ``FEATURE_UNIT``). Float arrays are summed in float64 (the tests' small examples). ``spread``
+    (integers only): the caller's guarantee that every entry of both lies within a range of that
+    width, so no difference exceeds it; the overflow check then needs no pass over the data.
 
     Example:
         >>> squared_distances(np.array([[0, 0], [3, 4]]), np.array([0, 0]), unit=5.0).tolist()
@@ -30,7 +33,8 @@ def squared_distances(points: np.ndarray, feature: np.ndarray, unit: float = 1.0
     """
     if np.issubdtype(points.dtype, np.integer) and np.issubdtype(feature.dtype, np.integer):
         diff = points.astype(np.int64) - feature.astype(np.int64)[None, :]
-        if diff.size and int(np.abs(diff).max()) ** 2 * diff.shape[1] > _INT64_MAX:
+        known_safe = spread is not None and spread**2 * diff.shape[1] <= _INT64_MAX
+        if diff.size and not known_safe and int(np.abs(diff).max()) ** 2 * diff.shape[1] > _INT64_MAX:
             raise ValueError("integer features too large for an exact int64 squared distance")
         # einsum sums the int64 products without a (N, D) temporary; integer sums are exact
         return np.einsum("ij,ij->i", diff, diff).astype(np.float64) / (unit * unit)
@@ -127,6 +131,7 @@ class RBFField:
         # each key's value as ``value`` returns it, until the next prototype or potential change:
         # a plain dict lookup per env step instead of two numpy scalar reads
         self._values: dict[str, float] = {}
+        self._entry_low, self._entry_high = 0, 0  # range of every integer feature entry seen
 
     @property
     def prototypes(self) -> int:
@@ -139,7 +144,19 @@ class RBFField:
         integer = bool(np.issubdtype(f.dtype, np.integer))
         if self._protos is not None and integer != bool(np.issubdtype(self._protos.dtype, np.integer)):
             raise ValueError("features must all be integers (exact distances) or all floats, not a mix")
-        return f.astype(np.int64 if integer else np.float64)[None, :]
+        row = f.astype(np.int64 if integer else np.float64)[None, :]
+        if integer and row.size:
+            first = self._protos is None and self._feats is None
+            low, high = int(row.min()), int(row.max())
+            self._entry_low = low if first else min(self._entry_low, low)
+            self._entry_high = high if first else max(self._entry_high, high)
+        return row
+
+    def _spread(self) -> int | None:
+        """The width of the range of every integer entry seen (None for float features)."""
+        if self._protos is not None and not np.issubdtype(self._protos.dtype, np.integer):
+            return None
+        return self._entry_high - self._entry_low
 
     def add_prototype(self, feature: np.ndarray, potential: float) -> None:
         row = self._row(feature)
@@ -150,7 +167,7 @@ class RBFField:
         self._high = max(self._high, float(potential))
         if self._feats is None:
             return
-        sq = squared_distances(self._feats, row[0], self.unit)
+        sq = squared_distances(self._feats, row[0], self.unit, self._spread())
         closer = sq < self._ref
         # rebase keys whose nearest prototype is the new one, so no weight underflows
         # (the others get exp(0) = 1; clipping first keeps exp from overflowing on them)
@@ -184,7 +201,7 @@ class RBFField:
         self._low, self._high = float(self._potentials.min()), float(self._potentials.max())
         if self._feats is None:
             return
-        sq = squared_distances(self._feats, self._protos[index], self.unit)
+        sq = squared_distances(self._feats, self._protos[index], self.unit, self._spread())
         self._num += exp(-(sq - self._ref) * self._scale) * (new - old)
 
     def value(self, key: str, feature: np.ndarray) -> float:
@@ -196,7 +213,7 @@ class RBFField:
         row = self._index.get(key)
         if row is None:
             f = self._row(feature)
-            sq = squared_distances(self._protos, f[0], self.unit)
+            sq = squared_distances(self._protos, f[0], self.unit, self._spread())
             ref = float(sq.min())
             num, den = _weighted_mean(exp(-(sq - ref) * self._scale), self._potentials)
             row = self._num.shape[0]
