@@ -38,3 +38,13 @@ def test_help_imports_no_heavy_library() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_calibrate_and_study_take_the_vlm_options_run_takes(tmp_path, monkeypatch, capsys) -> None:  # type: ignore[no-untyped-def]
+    from vlmrl_cli.cli.app import cli
+
+    monkeypatch.chdir(tmp_path)
+    vlm = ["--vlm", "openai", "--base-url", "http://127.0.0.1:8000/v1", "--model", "M"]
+    for command in ("study", "calibrate"):
+        assert cli([command, *vlm, "--dry-run"]) == 0, capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []  # a dry run creates nothing

@@ -25,8 +25,13 @@ Grid = Annotated[
 Out = Annotated[Path, typer.Option("--out", help="Output folder of calibration.md/csv/png and manifest.json.")]
 
 
+DryRun = Annotated[bool, typer.Option("--dry-run", help="Print the regimes and the cost estimate; train nothing.")]
+
+
+@opt.with_vlm_options
 def calibrate(
     ctx: typer.Context,
+    vlm_cfg: VLMConfig,
     seeds: opt.Seeds = 10,
     seed_list: opt.SeedList = None,
     timesteps: opt.Timesteps = None,
@@ -39,6 +44,7 @@ def calibrate(
     sets: opt.Sets = None,
     grid: Grid = None,
     out: Out = Path("results/calibration"),
+    dry_run: DryRun = False,
     experiment: opt.Experiment = "vlmrl-calibrate",
     tracking_uri: opt.TrackingUri = None,
 ) -> None:
@@ -50,7 +56,7 @@ def calibrate(
 
     console = Console()
     with exit_codes():
-        file_layer, *upper = opt.config_layers(ctx, config, sets, VLMConfig())
+        file_layer, *upper = opt.config_layers(ctx, config, sets, vlm_cfg)
         file_grid = calibrate_section(file_layer.pop("calibrate", {}))
         cfg = CalibrateConfig(build_regimes([file_layer, *upper], file_grid | grid_flags(grid or [])), out=out)
         base = cfg.base
@@ -59,6 +65,11 @@ def calibrate(
             f"baseline, preset {base.preset}, {base.budget:,} steps each, experiment '{base.experiment}'"
         )
         console.print(f"cost estimate: {estimate_sweeps([r.run for r in cfg.regimes]).line()}", markup=False)
+        if dry_run:
+            for regime in cfg.regimes:
+                console.print(f"  {regime.id}: {regime.label}", markup=False)
+            console.print("dry run: nothing was trained.")
+            return
 
         def reporter_for(regime: Regime) -> RichSweepReporter:
             console.print(f"[bold]{regime.id}[/]: {regime.label}")

@@ -93,8 +93,10 @@ def _pick(flag: list[float] | None, section: Mapping[str, Any], key: str, defaul
     return flag if flag is not None else section.get(key, default)
 
 
+@opt.with_vlm_options
 def study(
     ctx: typer.Context,
+    vlm_cfg: VLMConfig,
     regime: RegimeFlag = None,
     arms: StudyArms = None,
     seeds: opt.Seeds = 20,
@@ -137,7 +139,7 @@ def study(
 
     console = Console()
     with exit_codes():
-        file_layer, *upper = opt.config_layers(ctx, config, sets, VLMConfig())
+        file_layer, *upper = opt.config_layers(ctx, config, sets, vlm_cfg)
         section = study_section(file_layer.pop("study", {}))
         chosen, notes = choose_regimes(regime or [], section.get("regimes"))
         profile_list, flicker_list = _names(profiles, "--profiles"), _numbers(flickers)
