@@ -66,7 +66,13 @@ def _history(client: Any, run_id: str, key: str) -> pd.DataFrame:
     return df[["step", "rank", "value"]]
 
 
-def _episodes(client: Any, run_id: str) -> pd.DataFrame:
+def _episodes(client: Any, run_id: str, table: str | None = None) -> pd.DataFrame:
+    """The run's episodes: from its per-episode table artifact ``table`` when it has one, else
+    (runs made before the table existed, imported runs) merged from the metric histories."""
+    if table:
+        from_table = _episodes_from_table(client, run_id, table)
+        if from_table is not None:
+            return from_table
     merged: pd.DataFrame | None = None
     for key, column in EPISODE_METRICS.items():
         h = _history(client, run_id, key).rename(columns={"value": column})
@@ -74,6 +80,26 @@ def _episodes(client: Any, run_id: str) -> pd.DataFrame:
     assert merged is not None
     merged = merged.sort_values(["step", "rank"]).rename(columns={"step": "timestep"})
     return merged.drop(columns="rank").reset_index(drop=True)
+
+
+def _episodes_from_table(client: Any, run_id: str, name: str) -> pd.DataFrame | None:
+    import tempfile
+    from pathlib import Path
+
+    from vlmrl_cli.tracking import store
+
+    with tempfile.TemporaryDirectory(prefix="vlmrl-episodes-") as tmp:
+        try:
+            store.download_artifacts(client, run_id, [name], Path(tmp))
+            table = pd.read_csv(Path(tmp) / name, dtype=float)
+        except Exception:  # not there (an imported run) or unreadable: the histories hold the same data
+            return None
+    columns = {"timestep": "timestep", **EPISODE_METRICS}
+    if set(table.columns) != set(columns):
+        return None
+    table = table.rename(columns=columns)[["timestep", *EPISODE_METRICS.values()]]
+    table["timestep"] = table["timestep"].astype("int64")  # as the histories' steps
+    return table
 
 
 def _int_or_nan(text: str | None) -> float:
@@ -114,6 +140,7 @@ def load_experiment(client: Any, experiment: str) -> ExperimentData:
                                                                           finished=True))
     if not found:
         raise BadInput(f"MLflow experiment '{experiment}' has no finished training runs; run `vlmrl run` first.")
+    tables = {r.info.run_id: r.data.tags.get(schema.TAG_EPISODES_TABLE) for r in found}
     runs = pd.DataFrame([_run_row(r) for r in found], columns=RUN_COLUMNS)
     runs = (runs.sort_values("end_time", ascending=False, kind="stable")
             .drop_duplicates(["arm", "seed", "config_hash"], keep="first"))
@@ -123,7 +150,7 @@ def load_experiment(client: Any, experiment: str) -> ExperimentData:
 
     episodes, evals = [], []
     for row in runs.itertuples(index=False):
-        ep = _episodes(client, row.run_id)
+        ep = _episodes(client, row.run_id, tables.get(row.run_id))
         ep.insert(0, "seed", row.seed)
         ep.insert(0, "arm", row.arm)
         ep.insert(0, "run_id", row.run_id)

@@ -16,6 +16,8 @@ from collections.abc import Mapping
 from typing import Any
 
 TAG_PREFIX = "vlmrl."
+#: The per-episode table a training run writes at its end (one row per episode, ``EPISODE_TABLE_COLUMNS``).
+EPISODES_TABLE = "episodes.csv"
 
 # ---- tags every vlmrl run carries (store.provenance_tags) ------------------------------------
 TAG_VLM = f"{TAG_PREFIX}vlm"
@@ -45,6 +47,7 @@ TAG_REGIME = f"{TAG_PREFIX}regime"
 TAG_SIM_PROFILE = f"{TAG_PREFIX}sim_profile"
 TAG_PLACEBO_MAP = f"{TAG_PREFIX}placebo_map"  # a placebo arm's shuffled label map, "LABEL=phi ..."
 TAG_STOCHASTIC_VLM = f"{TAG_PREFIX}stochastic_vlm"  # "true": answers drawn afresh per query, never cached
+TAG_EPISODES_TABLE = f"{TAG_PREFIX}episodes_table"  # artifact name of the per-episode table, if written
 TAG_ERROR = f"{TAG_PREFIX}error"
 TAG_TRACEBACK = f"{TAG_PREFIX}traceback"
 TAG_OWNER = f"{TAG_PREFIX}owner"  # "host:pid" of the process training the run

@@ -43,7 +43,8 @@ HISTORY_KEYS: tuple[str, ...] = (
 TEXT_ARTIFACTS: tuple[str, ...] = ("config.json",)
 MODEL_ARTIFACTS: tuple[str, ...] = ("model.zip", "vecnormalize.pkl")
 #: Tags that name the source store's runs or processes; an imported run gets ``TAG_IMPORTED_FROM``.
-_DROPPED_TAGS = (schema.MLFLOW_PARENT_RUN_ID, schema.TAG_OWNER, schema.TAG_HEARTBEAT)
+# the per-episode table is not exported (its histories are): an imported run reads those
+_DROPPED_TAGS = (schema.MLFLOW_PARENT_RUN_ID, schema.TAG_OWNER, schema.TAG_HEARTBEAT, schema.TAG_EPISODES_TABLE)
 TAG_IMPORTED_FROM = f"{schema.TAG_PREFIX}imported_from"
 
 

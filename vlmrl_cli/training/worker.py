@@ -197,7 +197,9 @@ def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> J
             metrics.log({schema.METRIC_WALL_S: time.perf_counter() - start}, step=job.timesteps)
             metrics.flush()
             _save_artifacts(out, job, model, env)
+            write_episodes_table(tracker.episodes, out / schema.EPISODES_TABLE)
             store.log_artifacts(client, run_id, [p for p in out.iterdir()])
+            store.set_tags(client, run_id, {schema.TAG_EPISODES_TABLE: schema.EPISODES_TABLE})
             return JobResult(job.name, run_id, "FINISHED", time.perf_counter() - start,
                              result.success_rate, result.mean_length)
         finally:
@@ -216,6 +218,21 @@ def _log_eval(metrics: store.BatchLogger, result: EvalResult) -> None:
     for i, (ret, length, ok) in enumerate(zip(result.returns, result.lengths, result.successes, strict=True)):
         metrics.log({schema.METRIC_EVAL_EPISODE_RETURN: float(ret), schema.METRIC_EVAL_EPISODE_LENGTH: float(length),
                      schema.METRIC_EVAL_EPISODE_SUCCESS: float(ok)}, step=i)
+
+
+def write_episodes_table(episodes: list[dict[str, float]], path: Path) -> None:
+    """The run's episodes as one CSV table (the metric histories hold the same values, for the
+    MLflow UI): ``timestep`` then each ``episode/*`` metric, floats written exactly (repr)."""
+    import pandas as pd
+
+    columns = ["timestep", *EPISODE_TABLE_METRICS]
+    table = pd.DataFrame([[e[c] for c in columns] for e in episodes], columns=columns, dtype=float)
+    table.to_csv(path, index=False)
+
+
+#: The metric keys of ``EpisodeTracker``'s records, in the table's column order.
+EPISODE_TABLE_METRICS = (schema.METRIC_NATIVE_RETURN, schema.METRIC_LENGTH, schema.METRIC_SUCCESS,
+                         schema.METRIC_SHAPED_RETURN)
 
 
 def _save_artifacts(out: Path, job: TrainJob, model: Any, env: Any) -> None:
