@@ -38,7 +38,7 @@ def _range(rule: Any) -> str:
 
 
 def _rows(cls: type, section: str) -> list[str]:
-    from vlmrl_cli.training.schema import RULES
+    from vlmrl_cli.core.fields import help_of, rules_of
 
     hints = typing.get_type_hints(cls)
     rows = []
@@ -52,8 +52,8 @@ def _rows(cls: type, section: str) -> list[str]:
         else:
             default = "(required)"
         key = f"{section}.{f.name}" if section else f.name
-        rules = ", ".join(filter(None, (_range(r) for r in RULES.get(key, ()))))
-        help_text = str(f.metadata.get("help", "")).replace("|", "\\|")
+        rules = ", ".join(filter(None, (_range(r) for r in rules_of(f))))
+        help_text = help_of(f).replace("|", "\\|")
         rows.append(f"| `{key}` | `{_type_name(hints[f.name])}` | `{default}` | {rules} | {help_text} |")
     return rows
 

@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
+
+from annotated_types import Ge, Gt, Interval
+from pydantic import AfterValidator, BeforeValidator
 
 from vlmrl_cli.frames.geometry import Zone
 
@@ -19,31 +23,59 @@ DEFAULT_LABEL_POTENTIALS: tuple[tuple[Zone, float], ...] = (
 )
 
 
+def _label_table(value: Any) -> Any:
+    """TOML writes the label map as a table of the labels it changes (the others keep their
+    default); a full config gives ``[[label, potential], ...]``. Either way the result is the
+    tuple of ``(Zone, potential)`` pairs the strict check expects."""
+    if isinstance(value, dict):
+        value = list(({zone.value: p for zone, p in DEFAULT_LABEL_POTENTIALS} | value).items())
+    if not isinstance(value, (list, tuple)) or not all(isinstance(p, (list, tuple)) and len(p) == 2 for p in value):
+        raise ValueError("give a table of label = potential")
+    unknown = [label for label, _ in value if label not in Zone.__members__]
+    if unknown:
+        raise ValueError(f"unknown label '{unknown[0]}'; known: {', '.join(Zone)}")
+    if any(isinstance(p, bool) or not isinstance(p, (int, float)) for _, p in value):
+        raise ValueError("every label's potential must be a number")
+    return tuple((Zone(label), float(p)) for label, p in value)
+
+
+def _all_labels(pairs: tuple[tuple[Zone, float], ...]) -> tuple[tuple[Zone, float], ...]:
+    missing = set(Zone) - {z for z, _ in pairs}
+    if missing:
+        raise ValueError(f"no potential for {sorted(missing)[0]}; give a potential for every label")
+    return pairs
+
+
 @dataclass(frozen=True)
 class ShapingConfig:
     """Knobs of the semantic potential and the reward fusion; each field says its unit."""
 
     label_potentials: tuple[tuple[Zone, float], ...] = field(
-        default=DEFAULT_LABEL_POTENTIALS, metadata={"help": "MCQ label -> raw potential"}
+        default=DEFAULT_LABEL_POTENTIALS,
+        metadata={"rules": (BeforeValidator(_label_table), AfterValidator(_all_labels)),
+                  "help": "MCQ label -> raw potential"}
     )
-    alpha: float = field(default=5.0, metadata={"help": "PBRS scale (the paper gives none)"})
-    gamma: float | None = field(default=None, metadata={"help": "PBRS discount; None = PPO's gamma"})
-    query_every: int = field(default=10, metadata={"help": "ask the VLM at most every k env steps"})
-    confirm: int = field(default=2, metadata={"help": "agreeing labels that confirm a milestone"})
+    alpha: float = field(default=5.0, metadata={"rules": (Ge(0),), "help": "PBRS scale (the paper gives none)"})
+    gamma: float | None = field(default=None, metadata={"rules": (Interval(gt=0, le=1),),
+                                                        "help": "PBRS discount; None = PPO's gamma"})
+    query_every: int = field(default=10, metadata={"rules": (Ge(1),), "help": "ask the VLM at most every k env steps"})
+    confirm: int = field(default=2, metadata={"rules": (Ge(1),), "help": "agreeing labels that confirm a milestone"})
     # Feature distance grows ~0.075 per pixel of car shift and saturates (~1.4) beyond ~40 px
     # (measured, see shaping/features.py): 0.3 keeps far prototypes from pulling Phi to the mean.
-    bandwidth: float = field(default=0.3, metadata={"help": "RBF kernel width, feature-distance units"})
+    bandwidth: float = field(default=0.3, metadata={"rules": (Gt(0),),
+                                                    "help": "RBF kernel width, feature-distance units"})
     # 0 = reuse only an identical frame's label: a deterministic VLM answers it identically, so
     # the cache changes no label; > 0 also reuses the nearest prototype within this distance.
     reuse_radius: float = field(
-        default=0.0, metadata={"help": "also reuse a prototype's label within this feature distance (~0.075/px)"}
+        default=0.0, metadata={"rules": (Ge(0),),
+                               "help": "also reuse a prototype's label within this feature distance (~0.075/px)"}
     )
     kin_scale: float = field(default=2.0, metadata={"help": "R_kin = max(0, scale (x + offset))"})
     kin_offset: float = field(default=0.4, metadata={"help": "see kin_scale (Eq. 1)"})
     # MountainCar's picture depends on x only; one pixel of car motion is 1.8 / 600 = 0.003 in x,
     # so at most 601 distinct frames exist and the VLM is asked at most 601 times per run.
     render_quantum: float = field(
-        default=0.003, metadata={"help": "render positions on this grid (x units; 1 px = 0.003)"}
+        default=0.003, metadata={"rules": (Gt(0),), "help": "render positions on this grid (x units; 1 px = 0.003)"}
     )
 
     def potential_of(self, label: Zone) -> float:

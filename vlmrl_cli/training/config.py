@@ -42,42 +42,90 @@ from pathlib import Path
 from typing import Any
 
 import tomli_w
+from annotated_types import Ge, Gt
+from pydantic import AfterValidator
 
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.core.fields import one_of
+from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
-from vlmrl_cli.shaping.arms import ARMS, ArmSpec
+from vlmrl_cli.shaping.arms import ARMS, ArmSpec, parse_arms
 from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.overrides import nest, parse_assignment, parse_value, resolve_raw
-from vlmrl_cli.training.presets import DEFAULT_PRESET, PPOConfig, get_preset
+from vlmrl_cli.training.presets import DEFAULT_PRESET, PRESETS, PPOConfig, get_preset
 from vlmrl_cli.vlm.config import VLMConfig, sim_identity
 
 DEFAULT_EXPERIMENT = "vlmrl"
 EVAL_SEED = 1_000_000  # detached evaluation episode i resets with seed EVAL_SEED + i
 
 
+def _known_arms(arms: tuple[str, ...]) -> tuple[str, ...]:
+    try:
+        parse_arms(",".join(arms))
+    except BadInput as exc:
+        raise ValueError(str(exc).removesuffix(".")) from None
+    return arms
+
+
+def _distinct_seeds(seeds: tuple[int, ...]) -> tuple[int, ...]:
+    if not seeds:
+        raise ValueError("no seed given; pass --seeds N (N >= 1) or --seed-list 0,1,2")
+    if len(set(seeds)) != len(seeds):
+        raise ValueError("a seed is listed twice; list each seed once")
+    if any(s < 0 for s in seeds):
+        raise ValueError("seeds must be non-negative integers")
+    return seeds
+
+
+def _name(value: str) -> str:
+    problem = experiment_problem(value)
+    if problem:
+        raise ValueError(problem)
+    return value
+
+
+def _uri(value: str | None) -> str | None:
+    problem = tracking_uri_problem(value)
+    if problem:
+        raise ValueError(problem)
+    return value
+
+
+def _known_preset(value: str) -> str:
+    return one_of(PRESETS, "preset")(value)
+
+
 @dataclass(frozen=True)
 class RunConfig:
     """Everything `vlmrl run` does, as one value: logged whole, hashed per job for resume."""
 
-    arms: tuple[str, ...] = field(default=("baseline", "hybrid"), metadata={"help": "arms to train (shaping/arms.py)"})
-    seeds: tuple[int, ...] = field(default=(0, 1, 2, 3, 4), metadata={"help": "training seeds, each a run per arm"})
-    preset: str = field(default=DEFAULT_PRESET, metadata={"help": "named PPO preset: the bottom layer of [ppo]"})
-    workers: int = field(default_factory=lambda: os.cpu_count() or 1, metadata={
+    arms: tuple[str, ...] = field(default=("baseline", "hybrid"), metadata={"rules": (AfterValidator(_known_arms),),
+                                                                            "help": "arms to train (shaping/arms.py)"})
+    seeds: tuple[int, ...] = field(default=(0, 1, 2, 3, 4), metadata={"rules": (AfterValidator(_distinct_seeds),),
+                                                                      "help": "training seeds, each a run per arm"})
+    preset: str = field(default=DEFAULT_PRESET, metadata={"rules": (AfterValidator(_known_preset),),
+                                                          "help": "named PPO preset: the bottom layer of [ppo]"})
+    workers: int = field(default_factory=lambda: os.cpu_count() or 1, metadata={"rules": (Ge(1),),
         "help": "worker processes (one torch thread each); default: the cores"})
-    experiment: str = field(default=DEFAULT_EXPERIMENT, metadata={"help": "MLflow experiment of the runs"})
-    tracking_uri: str | None = field(default=None, metadata={
+    experiment: str = field(default=DEFAULT_EXPERIMENT, metadata={"rules": (AfterValidator(_name),),
+                                                                  "help": "MLflow experiment of the runs"})
+    tracking_uri: str | None = field(default=None, metadata={"rules": (AfterValidator(_uri),),
         "help": "MLflow store; None: $MLFLOW_TRACKING_URI or sqlite:///mlflow.db"})
     ppo: PPOConfig | None = field(default=None, metadata={"help": "None = the preset's values"})
     vlm: VLMConfig = field(default_factory=VLMConfig)
     shaping: ShapingConfig = field(default_factory=ShapingConfig)
     regime: str | None = field(default=None, metadata={"help": "calibration regime label (a tag, not hashed)"})
     # where and how the jobs run: none of these changes what a run computes, so none is hashed
-    executor: str = field(default="local", metadata={"help": "local (a process pool) or ray"})
+    executor: str = field(default="local", metadata={"rules": (AfterValidator(one_of(EXECUTORS, "executor")),),
+                                                     "help": "local (a process pool) or ray"})
     ray_address: str | None = field(default=None, metadata={
         "help": "Ray cluster to join (None: a running local cluster, else a new local instance)"})
-    max_retries: int = field(default=2, metadata={"help": "Ray retries of a job whose worker process died"})
-    heartbeat_s: float = field(default=30.0, metadata={"help": "how often a training run refreshes its heartbeat"})
-    stale_after_s: float = field(default=300.0, metadata={
+    max_retries: int = field(default=2, metadata={"rules": (Ge(0),),
+                                                  "help": "Ray retries of a job whose worker process died"})
+    heartbeat_s: float = field(default=30.0, metadata={"rules": (Gt(0),),
+                                                       "help": "how often a training run refreshes its heartbeat"})
+    stale_after_s: float = field(default=300.0, metadata={"rules": (Gt(0),),
         "help": "a RUNNING run whose heartbeat is older is taken as dead and its job redone"})
 
     @classmethod

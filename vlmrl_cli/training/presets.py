@@ -10,36 +10,49 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
+from annotated_types import Ge, Gt, Interval
+from pydantic import AfterValidator
+
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 
 LrSchedule = Literal["constant", "linear"]
 DEFAULT_PRESET = "paper"
 
 
+def _layer_sizes(sizes: tuple[int, ...]) -> tuple[int, ...]:
+    if any(n < 1 for n in sizes):
+        raise ValueError("every hidden layer needs at least 1 unit")
+    return sizes
+
+
 @dataclass(frozen=True)
 class PPOConfig:
     """Every PPO knob (SB3 names) and the budget. New knobs default to SB3's own defaults."""
 
-    n_envs: int = field(default=16, metadata={"help": "parallel envs in one DummyVecEnv"})
-    n_steps: int = field(default=16, metadata={"help": "steps per env per rollout"})
-    batch_size: int = field(default=64, metadata={"help": "minibatch size; at most n_envs x n_steps"})
-    n_epochs: int = field(default=4, metadata={"help": "passes over each rollout"})
-    learning_rate: float = field(default=3e-4, metadata={"help": "Adam step size (initial, if linear)"})
+    n_envs: int = field(default=16, metadata={"rules": (Ge(1),), "help": "parallel envs in one DummyVecEnv"})
+    n_steps: int = field(default=16, metadata={"rules": (Ge(1),), "help": "steps per env per rollout"})
+    batch_size: int = field(default=64, metadata={"rules": (Ge(1),),
+                                                  "help": "minibatch size; at most n_envs x n_steps"})
+    n_epochs: int = field(default=4, metadata={"rules": (Ge(1),), "help": "passes over each rollout"})
+    learning_rate: float = field(default=3e-4, metadata={"rules": (Gt(0),),
+                                                         "help": "Adam step size (initial, if linear)"})
     lr_schedule: LrSchedule = field(
         default="constant", metadata={"help": "constant, or linear: learning_rate decays to 0 at the budget"}
     )
-    gamma: float = field(default=0.99, metadata={"help": "discount"})
-    gae_lambda: float = field(default=0.98, metadata={"help": "GAE lambda"})
-    clip_range: float = field(default=0.2, metadata={"help": "PPO ratio clip"})
-    ent_coef: float = field(default=0.0, metadata={"help": "entropy bonus coefficient"})
-    vf_coef: float = field(default=0.5, metadata={"help": "value loss coefficient"})
-    max_grad_norm: float = field(default=0.5, metadata={"help": "gradient clip (global norm)"})
+    gamma: float = field(default=0.99, metadata={"rules": (Interval(gt=0, le=1),), "help": "discount"})
+    gae_lambda: float = field(default=0.98, metadata={"rules": (Interval(ge=0, le=1),), "help": "GAE lambda"})
+    clip_range: float = field(default=0.2, metadata={"rules": (Gt(0),), "help": "PPO ratio clip"})
+    ent_coef: float = field(default=0.0, metadata={"rules": (Ge(0),), "help": "entropy bonus coefficient"})
+    vf_coef: float = field(default=0.5, metadata={"rules": (Ge(0),), "help": "value loss coefficient"})
+    max_grad_norm: float = field(default=0.5, metadata={"rules": (Gt(0),), "help": "gradient clip (global norm)"})
     normalize_obs: bool = field(default=True, metadata={"help": "VecNormalize observations"})
     normalize_reward: bool = field(default=True, metadata={"help": "VecNormalize rewards (by the discounted return)"})
-    net_arch_pi: tuple[int, ...] = field(default=(64, 64), metadata={"help": "policy MLP hidden sizes"})
-    net_arch_vf: tuple[int, ...] = field(default=(64, 64), metadata={"help": "value MLP hidden sizes"})
-    timesteps: int = field(default=300_000, metadata={"help": "training budget, env steps"})
-    eval_episodes: int = field(default=100, metadata={"help": "detached evaluation episodes"})
+    net_arch_pi: tuple[int, ...] = field(default=(64, 64), metadata={"rules": (AfterValidator(_layer_sizes),),
+                                                                     "help": "policy MLP hidden sizes"})
+    net_arch_vf: tuple[int, ...] = field(default=(64, 64), metadata={"rules": (AfterValidator(_layer_sizes),),
+                                                                     "help": "value MLP hidden sizes"})
+    timesteps: int = field(default=300_000, metadata={"rules": (Ge(1),), "help": "training budget, env steps"})
+    eval_episodes: int = field(default=100, metadata={"rules": (Ge(1),), "help": "detached evaluation episodes"})
 
     @property
     def vec_normalize(self) -> bool:

@@ -1,10 +1,11 @@
 """The typed input schema of a run's configuration, checked whole before anything runs.
 
 Field names, types and defaults come from the frozen dataclasses themselves (``RunConfig``,
-``PPOConfig``, ``VLMConfig``, ``SimKnobs``, ``ShapingConfig``); the ranges and the cross-field
-rules are declared here, once, in ``RULES`` and ``CHECKS``. pydantic builds one model per
-dataclass from both and validates a raw configuration (the merged layers of preset, config file,
-``--set`` and flags) with TOML's typing: strict JSON mode, so ``alpha = "big"`` or
+``PPOConfig``, ``VLMConfig``, ``SimKnobs``, ``ShapingConfig``). Each field declares its ranges
+and value checks once, in its own metadata (``core.fields``: ``metadata={"rules": ..., "help":
+...}``); the rules over several fields of a section are ``CHECKS`` here. pydantic builds one
+model per dataclass from both and validates a raw configuration (the merged layers of preset,
+config file, ``--set`` and flags) with TOML's typing: strict JSON mode, so ``alpha = "big"`` or
 ``n_envs = 1.5`` is an error, while an integer is a valid float.
 
 Every failure becomes one ``BadInput`` sentence that names the dotted key, e.g.
@@ -21,140 +22,11 @@ import typing
 from collections.abc import Callable
 from typing import Annotated, Any
 
-from annotated_types import Ge, Gt, Interval
-from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, ValidationError, create_model
+from pydantic import BaseModel, ConfigDict, ValidationError, create_model
 from pydantic import model_validator as _model_validator
 
 from vlmrl_cli.core.errors import BadInput, did_you_mean
-from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
-from vlmrl_cli.frames.geometry import Zone
-from vlmrl_cli.shaping.arms import parse_arms
-from vlmrl_cli.shaping.config import DEFAULT_LABEL_POTENTIALS
-from vlmrl_cli.training.events import EXECUTORS
-from vlmrl_cli.training.presets import PRESETS
-from vlmrl_cli.vlm.config import BACKENDS, SIM_PROFILES
-
-
-def _known_arms(arms: tuple[str, ...]) -> tuple[str, ...]:
-    try:
-        parse_arms(",".join(arms))
-    except BadInput as exc:
-        raise ValueError(str(exc).removesuffix(".")) from None
-    return arms
-
-
-def _distinct_seeds(seeds: tuple[int, ...]) -> tuple[int, ...]:
-    if not seeds:
-        raise ValueError("no seed given; pass --seeds N (N >= 1) or --seed-list 0,1,2")
-    if len(set(seeds)) != len(seeds):
-        raise ValueError("a seed is listed twice; list each seed once")
-    if any(s < 0 for s in seeds):
-        raise ValueError("seeds must be non-negative integers")
-    return seeds
-
-
-def _one_of(choices: tuple[str, ...] | dict[str, Any], what: str) -> Callable[[str], str]:
-    def check(value: str) -> str:
-        if value not in choices:
-            hint = did_you_mean(value, choices)
-            raise ValueError(f"unknown {what} '{value}'{hint}; choose from {', '.join(choices)}")
-        return value
-
-    return check
-
-
-def _name(value: str) -> str:
-    problem = experiment_problem(value)
-    if problem:
-        raise ValueError(problem)
-    return value
-
-
-def _uri(value: str | None) -> str | None:
-    problem = tracking_uri_problem(value)
-    if problem:
-        raise ValueError(problem)
-    return value
-
-
-def _layer_sizes(sizes: tuple[int, ...]) -> tuple[int, ...]:
-    if any(n < 1 for n in sizes):
-        raise ValueError("every hidden layer needs at least 1 unit")
-    return sizes
-
-
-def _label_table(value: Any) -> Any:
-    """TOML writes the label map as a table of the labels it changes (the others keep their
-    default); a full config gives ``[[label, potential], ...]``. Either way the result is the
-    tuple of ``(Zone, potential)`` pairs the strict check expects."""
-    if isinstance(value, dict):
-        value = list(({zone.value: p for zone, p in DEFAULT_LABEL_POTENTIALS} | value).items())
-    if not isinstance(value, (list, tuple)) or not all(isinstance(p, (list, tuple)) and len(p) == 2 for p in value):
-        raise ValueError("give a table of label = potential")
-    unknown = [label for label, _ in value if label not in Zone.__members__]
-    if unknown:
-        raise ValueError(f"unknown label '{unknown[0]}'; known: {', '.join(Zone)}")
-    if any(isinstance(p, bool) or not isinstance(p, (int, float)) for _, p in value):
-        raise ValueError("every label's potential must be a number")
-    return tuple((Zone(label), float(p)) for label, p in value)
-
-
-def _all_labels(pairs: tuple[tuple[Zone, float], ...]) -> tuple[tuple[Zone, float], ...]:
-    missing = set(Zone) - {z for z, _ in pairs}
-    if missing:
-        raise ValueError(f"no potential for {sorted(missing)[0]}; give a potential for every label")
-    return pairs
-
-
-#: Ranges and value checks per dotted key. Keys not listed take any value of their type.
-RULES: dict[str, tuple[Any, ...]] = {
-    "arms": (AfterValidator(_known_arms),),
-    "seeds": (AfterValidator(_distinct_seeds),),
-    "preset": (AfterValidator(_one_of(PRESETS, "preset")),),
-    "workers": (Ge(1),),
-    "experiment": (AfterValidator(_name),),
-    "tracking_uri": (AfterValidator(_uri),),
-    "executor": (AfterValidator(_one_of(EXECUTORS, "executor")),),
-    "max_retries": (Ge(0),),
-    "heartbeat_s": (Gt(0),),
-    "stale_after_s": (Gt(0),),
-    "ppo.n_envs": (Ge(1),),
-    "ppo.n_steps": (Ge(1),),
-    "ppo.batch_size": (Ge(1),),
-    "ppo.n_epochs": (Ge(1),),
-    "ppo.learning_rate": (Gt(0),),
-    "ppo.gamma": (Interval(gt=0, le=1),),
-    "ppo.gae_lambda": (Interval(ge=0, le=1),),
-    "ppo.clip_range": (Gt(0),),
-    "ppo.ent_coef": (Ge(0),),
-    "ppo.vf_coef": (Ge(0),),
-    "ppo.max_grad_norm": (Gt(0),),
-    "ppo.net_arch_pi": (AfterValidator(_layer_sizes),),
-    "ppo.net_arch_vf": (AfterValidator(_layer_sizes),),
-    "ppo.timesteps": (Ge(1),),
-    "ppo.eval_episodes": (Ge(1),),
-    "vlm.backend": (AfterValidator(_one_of(BACKENDS, "VLM backend")),),
-    "vlm.max_new_tokens": (Ge(1),),
-    "vlm.timeout_s": (Gt(0),),
-    "vlm.retries": (Ge(0),),
-    "vlm.sim.flicker": (Interval(ge=0, le=1),),
-    "vlm.sim.query_flicker": (Interval(ge=0, le=1),),
-    "vlm.sim.float_noise": (Ge(0),),
-    "vlm.sim.box_noise_px": (Ge(0),),
-    "vlm.sim.box_failure": (Interval(ge=0, le=1),),
-    "vlm.sim.patch_px": (Ge(1),),
-    "vlm.sim.latency_s": (Ge(0),),
-    "vlm.sim.profile": (AfterValidator(_one_of(SIM_PROFILES, "simulated-VLM profile")),),
-    "vlm.sim.mcq_bottom_halfwidth": (Ge(0),),
-    "shaping.label_potentials": (BeforeValidator(_label_table), AfterValidator(_all_labels)),
-    "shaping.gamma": (Interval(gt=0, le=1),),
-    "shaping.alpha": (Ge(0),),
-    "shaping.query_every": (Ge(1),),
-    "shaping.confirm": (Ge(1),),
-    "shaping.bandwidth": (Gt(0),),
-    "shaping.reuse_radius": (Ge(0),),
-    "shaping.render_quantum": (Gt(0),),
-}
+from vlmrl_cli.core.fields import rules_of
 
 
 def _ppo_consistent(ppo: Any) -> Any:
@@ -176,7 +48,7 @@ CHECKS: dict[str, Callable[[Any], Any]] = {"ppo": _ppo_consistent}
 @functools.cache
 def _model(cls: type, prefix: str = "") -> type[BaseModel]:
     """A pydantic model with the fields of dataclass ``cls``, its nested dataclasses as nested
-    models, and the ``RULES``/``CHECKS`` of keys under ``prefix``."""
+    models, each field's own rules (``rules_of``) and the ``CHECKS`` of keys under ``prefix``."""
     hints = typing.get_type_hints(cls)
     fields: dict[str, Any] = {}
     for f in dataclasses.fields(cls):
@@ -186,7 +58,7 @@ def _model(cls: type, prefix: str = "") -> type[BaseModel]:
         if nested is not None:
             sub = _model(nested, f"{key}.")
             tp = sub | None if type(None) in typing.get_args(tp) else sub
-        rules = RULES.get(key, ())
+        rules = rules_of(f)
         if rules:
             tp = Annotated[tp, *rules]
         if f.default is not dataclasses.MISSING:

@@ -8,7 +8,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from annotated_types import Ge, Gt, Interval
+from pydantic import AfterValidator
+
 from vlmrl_cli import paper
+from vlmrl_cli.core.fields import one_of
 
 BACKENDS: tuple[str, ...] = ("sim", "hf", "openai", "replay")
 PAPER_MODEL = "llava-hf/llava-1.5-7b-hf"
@@ -17,6 +21,10 @@ DEFAULT_CACHE = Path(".vlmrl-cache") / "responses.sqlite"
 
 
 DEFAULT_SIM_PROFILE = "default"
+
+
+def _known_profile(value: str) -> str:
+    return one_of(lambda: SIM_PROFILES, "simulated-VLM profile")(value)
 
 
 @dataclass(frozen=True)
@@ -30,28 +38,35 @@ class SimKnobs:
     build a profile's knobs with ``SimKnobs.of_profile``. The dataclass defaults are the
     ``default`` profile, today's simulated VLM, whose answers never change."""
 
-    flicker: float = field(default=0.1, metadata={"help": "P(answer a neighbouring MCQ label)"})
-    float_noise: float = field(default=0.25, metadata={"help": "std of the float answer, in x units"})
-    box_noise_px: float = field(default=20.0, metadata={"help": "std of box corner jitter, pixels"})
-    box_failure: float = field(default=0.2, metadata={"help": "P(box format collapse)"})
-    patch_px: int = field(default=28, metadata={"help": "spatial resolution: car seen on this pixel grid"})
-    latency_s: float = field(default=0.0, metadata={"help": "fixed latency per query (benchmarks)"})
+    flicker: float = field(default=0.1, metadata={"rules": (Interval(ge=0, le=1),),
+                                                  "help": "P(answer a neighbouring MCQ label)"})
+    float_noise: float = field(default=0.25, metadata={"rules": (Ge(0),),
+                                                       "help": "std of the float answer, in x units"})
+    box_noise_px: float = field(default=20.0, metadata={"rules": (Ge(0),), "help": "std of box corner jitter, pixels"})
+    box_failure: float = field(default=0.2, metadata={"rules": (Interval(ge=0, le=1),),
+                                                      "help": "P(box format collapse)"})
+    patch_px: int = field(default=28, metadata={"rules": (Ge(1),),
+                                                "help": "spatial resolution: car seen on this pixel grid"})
+    latency_s: float = field(default=0.0, metadata={"rules": (Ge(0),), "help": "fixed latency per query (benchmarks)"})
     seed: int = field(default=0, metadata={"help": "seed of the simulated answers"})
-    profile: str = field(default=DEFAULT_SIM_PROFILE, metadata={"help": "named profile the knobs come from"})
+    profile: str = field(default=DEFAULT_SIM_PROFILE, metadata={"rules": (AfterValidator(_known_profile),),
+                                                                "help": "named profile the knobs come from"})
     float_anchor: float | None = field(
         default=None,
         metadata={"help": "float answers are this value (+ float_noise) whatever the frame; None: read the car"},
     )
     mcq_bottom_halfwidth: float | None = field(
         default=None,
-        metadata={"help": "MCQ answers BOTTOM within this distance (x units) of the valley; None: true zones"},
+        metadata={"rules": (Ge(0),),
+                  "help": "MCQ answers BOTTOM within this distance (x units) of the valley; None: true zones"},
     )
     box_anchor_x: float | None = field(
         default=None, metadata={"help": "boxes are drawn around the car at this x, not the frame's; None: read it"}
     )
     query_flicker: float = field(
         default=0.0,
-        metadata={"help": "P(a neighbouring MCQ label) drawn afresh at every query, as a sampling VLM at "
+        metadata={"rules": (Interval(ge=0, le=1),),
+                  "help": "P(a neighbouring MCQ label) drawn afresh at every query, as a sampling VLM at "
                           "temperature > 0 gives: the same frame can get another label next time (never cached)"},
     )
 
@@ -138,16 +153,18 @@ class VLMConfig:
     """Which VLM answers, and how. ``api_key_env`` names an environment variable; the key
     itself is never stored, logged or hashed."""
 
-    backend: str = "sim"
-    model: str | None = None
-    base_url: str | None = None
-    api_key_env: str = "OPENAI_API_KEY"
-    device: str | None = None
-    dtype: str = "auto"
-    max_new_tokens: int = 32
-    timeout_s: float = 30.0
-    retries: int = 3
-    transcript_in: Path | None = None
-    cache_path: Path | None = DEFAULT_CACHE
-    use_cache: bool = True
+    backend: str = field(default="sim", metadata={"rules": (AfterValidator(one_of(BACKENDS, "VLM backend")),),
+                                                  "help": "sim (the SIMULATED VLM), hf, openai or replay"})
+    model: str | None = field(default=None, metadata={"help": "hf: hub id or local folder; openai: served model name"})
+    base_url: str | None = field(default=None, metadata={"help": "openai: server URL, e.g. http://host:8000/v1"})
+    api_key_env: str = field(default="OPENAI_API_KEY", metadata={"help": "openai: variable holding the API key"})
+    device: str | None = field(default=None, metadata={"help": "hf: torch device (None: cuda if present)"})
+    dtype: str = field(default="auto", metadata={"help": "hf: torch dtype (auto, float32, float16, bfloat16)"})
+    max_new_tokens: int = field(default=32, metadata={"rules": (Ge(1),), "help": "hf/openai: answer length cap"})
+    timeout_s: float = field(default=30.0, metadata={"rules": (Gt(0),), "help": "openai: seconds per request"})
+    retries: int = field(default=3, metadata={"rules": (Ge(0),), "help": "openai: retries with backoff"})
+    transcript_in: Path | None = field(default=None, metadata={
+        "help": "replay: JSONL transcript (None: the paper's Table 1 transcript)"})
+    cache_path: Path | None = field(default=DEFAULT_CACHE, metadata={"help": "sqlite file of the response cache"})
+    use_cache: bool = field(default=True, metadata={"help": "read and write the response cache"})
     sim: SimKnobs = field(default_factory=SimKnobs)

@@ -1,0 +1,43 @@
+"""How a configuration field declares itself once: its type (the annotation), its help text and
+its rules (``annotated_types`` ranges, pydantic validators) in the field's metadata::
+
+    n_envs: int = field(default=16, metadata={"rules": (Ge(1),), "help": "parallel envs"})
+
+The input schema (``training/schema.py``) applies ``rules_of`` to every field; the docs'
+configuration reference prints both. A renamed field keeps its rules.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Collection
+from typing import Any
+
+from vlmrl_cli.core.errors import did_you_mean
+
+
+def rules_of(f: dataclasses.Field[Any]) -> tuple[Any, ...]:
+    """The validation rules a dataclass field declares (none: any value of its type)."""
+    return tuple(f.metadata.get("rules", ()))
+
+
+def help_of(f: dataclasses.Field[Any]) -> str:
+    """The help text a dataclass field declares ("" when it has none)."""
+    return str(f.metadata.get("help", ""))
+
+
+def one_of(choices: Collection[str] | Callable[[], Collection[str]], what: str) -> Callable[[str], str]:
+    """A validator accepting only ``choices`` (or what the callable returns when it runs, for a
+    table defined after the field), with a did-you-mean hint.
+
+    Example:
+        >>> one_of(("sim", "hf"), "backend")("sim")
+        'sim'
+    """
+    def check(value: str) -> str:
+        known = choices() if callable(choices) else choices
+        if value not in known:
+            raise ValueError(f"unknown {what} '{value}'{did_you_mean(value, known)}; choose from {', '.join(known)}")
+        return value
+
+    return check
