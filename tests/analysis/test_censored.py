@@ -11,10 +11,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from vlmrl_cli.analysis import censored
-from vlmrl_cli.analysis.calibration import TargetProfile, regime_profile
+from vlmrl_cli.analysis.learning_profile import TargetProfile, regime_profile
 from vlmrl_cli.analysis.load import EPISODE_COLUMNS, RUN_COLUMNS, ExperimentData
 from vlmrl_cli.analysis.stats import Streams
-from vlmrl_cli.study.analysis import regime_row
+from vlmrl_cli.study.verdicts import regime_row
 
 BUDGET = 1000
 THRESHOLDS = (-190.0, -130.0)

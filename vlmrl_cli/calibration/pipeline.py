@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from vlmrl_cli.analysis.calibration import RegimeProfile, regime_profile
+from vlmrl_cli.analysis.learning_profile import RegimeProfile, regime_profile
 from vlmrl_cli.analysis.load import load_experiment
 from vlmrl_cli.calibration.regimes import CalibrateConfig, Regime
 from vlmrl_cli.core import tables

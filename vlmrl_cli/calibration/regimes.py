@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from vlmrl_cli.analysis.calibration import TargetProfile, paper_baseline
+from vlmrl_cli.analysis.learning_profile import TargetProfile, paper_baseline
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.training.config import RunConfig, resolve

@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from vlmrl_cli.cli.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED
+from vlmrl_cli.cli.exit_codes import EXIT_BAD_INPUT, EXIT_INTERRUPTED
 
 app = typer.Typer(
     name="vlmrl",

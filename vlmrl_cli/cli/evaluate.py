@@ -6,7 +6,7 @@ from typing import Annotated
 
 import typer
 
-from vlmrl_cli.cli.errors import exit_codes
+from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import CachePath, NoCache, OutDir, TrackingUri
 from vlmrl_cli.vlm.config import DEFAULT_CACHE
 
@@ -59,7 +59,7 @@ def evaluate(
     Outputs go to --out (default results/evaluate/RUN_ID/) and to the run's MLflow artifacts
     under evaluate/.
     """
-    from vlmrl_cli.training.watch import EvaluateConfig, evaluate_run
+    from vlmrl_cli.training.evaluate_trained import EvaluateConfig, evaluate_run
 
     with exit_codes():
         run_id = resolve_child(run_id, tracking_uri, arm, seed)

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 from rich.console import Console
 
-from vlmrl_cli.cli.errors import exit_codes
+from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import Experiment, Margin, OutDir, TrackingUri
 from vlmrl_cli.core.errors import BadInput
 

@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from vlmrl_cli.cli.errors import exit_codes
+from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import (
     Arms,
     ConfigFile,

@@ -11,7 +11,7 @@ import typer
 from rich.console import Console
 
 from vlmrl_cli.cli import options as opt
-from vlmrl_cli.cli.errors import exit_codes
+from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.progress import RichSweepReporter
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.vlm.config import VLMConfig

@@ -11,7 +11,7 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from vlmrl_cli.cli.errors import exit_codes
+from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import Experiment, OutDir, TrackingUri, with_vlm_options
 from vlmrl_cli.vlm.config import VLMConfig
 

@@ -3,7 +3,7 @@ its rules (``annotated_types`` ranges, pydantic validators) in the field's metad
 
     n_envs: int = field(default=16, metadata={"rules": (Ge(1),), "help": "parallel envs"})
 
-The input schema (``training/schema.py``) applies ``rules_of`` to every field; the docs'
+The input schema (``training/validation.py``) applies ``rules_of`` to every field; the docs'
 configuration reference prints both. A renamed field keeps its rules.
 """
 

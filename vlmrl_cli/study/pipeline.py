@@ -37,7 +37,7 @@ from vlmrl_cli.report import hacking
 from vlmrl_cli.report.attribution import DEFAULT_AUC_DELTA
 from vlmrl_cli.report.table2 import per_seed_table
 from vlmrl_cli.report.writer import ensure_writable
-from vlmrl_cli.study import analysis
+from vlmrl_cli.study import verdicts
 from vlmrl_cli.study.config import StudyConfig
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training import cost as cost_model
@@ -123,8 +123,8 @@ def run_study(
     streams = stats.Streams(cfg.seed)
     rows, hack, seeds = [], [], []
     for regime in cfg.regimes:
-        sub = analysis.subset(data, regime.run)
-        row, per_seed = analysis.regime_row(regime.id, sub, cfg.thresholds, streams, cfg.n_boot, cfg.ci, cfg.alpha,
+        sub = verdicts.subset(data, regime.run)
+        row, per_seed = verdicts.regime_row(regime.id, sub, cfg.thresholds, streams, cfg.n_boot, cfg.ci, cfg.alpha,
                                             cfg.margin)
         row["overrides"] = regime.label
         row["train_wall_s"] = sum(wall_s(client, r) for r in per_seed["run_id"])
@@ -134,18 +134,18 @@ def run_study(
     seeds += _other_sweep_frames(cfg, data)
     result.per_seed = study_per_seed(seeds, cfg.thresholds)
     result.missing = missing_runs(cfg, result.per_seed)
-    ready = [c for c in analysis.controls(cfg.cells)
+    ready = [c for c in verdicts.controls(cfg.cells)
              if all(len(runs_of(data.runs, side.regime.run)) >= 2 for side in (c.a, c.b))]
-    result.controls = pd.DataFrame([analysis.control_row(c, data, cfg.thresholds, streams, cfg.n_boot, cfg.ci,
+    result.controls = pd.DataFrame([verdicts.control_row(c, data, cfg.thresholds, streams, cfg.n_boot, cfg.ci,
                                                          cfg.alpha, cfg.margin) for c in ready])
     result.power = power_lines(cfg, result.per_seed)
     reference = next(r for r in cfg.regimes if r.id == cfg.vlm_regime)
-    points = [analysis.vlm_point(v.id, analysis.paired(data, reference.run, v.run), cfg.top, accuracy[v.id], streams,
+    points = [verdicts.vlm_point(v.id, verdicts.paired(data, reference.run, v.run), cfg.top, accuracy[v.id], streams,
                                  cfg.n_boot, cfg.ci) for v in cfg.variants]
     result.regime_map = pd.DataFrame(rows)
     result.vlm_points = pd.DataFrame(points, columns=["variant", "mcq_accuracy", "speedup", "low", "high", "p",
                                                       "hybrid_seeds", "baseline_seeds"])
-    result.summary = analysis.summary(rows, result.vlm_points, cfg.top, cfg.alpha, cfg.vlm_regime,
+    result.summary = verdicts.summary(rows, result.vlm_points, cfg.top, cfg.alpha, cfg.vlm_regime,
                                       result.controls.to_dict("records"), cfg.margin)
     hack_frame = pd.concat(hack, ignore_index=True) if hack else pd.DataFrame()
     simulated = any(r.run.vlm.backend == "sim" for r in cfg.all_regimes())
@@ -162,7 +162,7 @@ def run_study(
 
 def _other_sweep_frames(cfg: StudyConfig, data: Any) -> list[pd.DataFrame]:
     """The per-seed tables of the VLM variants and control cells (in the VLM regime), by sweep id."""
-    return [per_seed_table(analysis.subset(data, sweep.run), cfg.thresholds).assign(regime=cfg.vlm_regime,
+    return [per_seed_table(verdicts.subset(data, sweep.run), cfg.thresholds).assign(regime=cfg.vlm_regime,
                                                                                      variant=sweep.id)
             for sweep in (*cfg.variants, *(c.regime for c in cfg.cells))]
 
@@ -177,7 +177,7 @@ def finished_per_seed(cfg: StudyConfig) -> pd.DataFrame | None:
         data = load_experiment(found_exp[0], cfg.base.experiment)
     except BadInput:  # no finished training run yet
         return None
-    frames = [per_seed_table(analysis.subset(data, r.run), cfg.thresholds).assign(regime=r.id, variant="")
+    frames = [per_seed_table(verdicts.subset(data, r.run), cfg.thresholds).assign(regime=r.id, variant="")
               for r in cfg.regimes]
     frames += _other_sweep_frames(cfg, data)
     table = study_per_seed([f for f in frames if len(f)], cfg.thresholds)
@@ -258,8 +258,8 @@ def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None) -> list[
     sd = sd if sd > 0 else DEFAULT_SD_LOG
     n = len(cfg.base.seeds)
     lines = [f"Power (80%, two-sided alpha {cfg.alpha:g}; normal approximation on log steps, from {source}):"]
-    comparisons = [f"{a} vs {b}" for a, b, _ in analysis.MAP_PAIRS if a in cfg.base.arms and b in cfg.base.arms]
-    comparisons += [c.name for c in analysis.controls(cfg.cells)]
+    comparisons = [f"{a} vs {b}" for a, b, _ in verdicts.MAP_PAIRS if a in cfg.base.arms and b in cfg.base.arms]
+    comparisons += [c.name for c in verdicts.controls(cfg.cells)]
     mde = censored.detectable_speedup(sd, n, n, cfg.alpha)
     if comparisons:
         lines.append(f"- each of {len(comparisons)} comparison(s) at {n} seeds per arm detects a speedup of "
@@ -325,7 +325,7 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
                   "Missing, per sweep (a run shared by two sweeps counts in both): "
                   + "; ".join(f"`{k}` {v}" for k, v in result.missing.items()) + ".", ""]
     lines += ["## Summary", "", *result.summary, ""]
-    lines += ["## Regime map", "", analysis.map_markdown(result.regime_map.to_dict("records"), cfg.top, cfg.ci,
+    lines += ["## Regime map", "", verdicts.map_markdown(result.regime_map.to_dict("records"), cfg.top, cfg.ci,
                                                        cfg.margin)]
     lines += ["Regimes (overrides over the study's defaults): "
               + "; ".join(f"`{r.id}` = {r.label}" for r in cfg.regimes) + ".", ""]
@@ -338,7 +338,7 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
                   "dense term alone at its kin_scale, and at the largest alpha with its placebo (the same labels "
                   "through a label map shuffled per seed). The lock: the hybrid against hybrid-no-lock when the "
                   "VLM's labels are drawn afresh at every query.", "",
-                  analysis.controls_markdown(result.controls.to_dict("records"), cfg.top, cfg.margin, cfg.ci)]
+                  verdicts.controls_markdown(result.controls.to_dict("records"), cfg.top, cfg.margin, cfg.ci)]
     lines += ["## VLM quality", "",
               f"The hybrid alone, in regime `{cfg.vlm_regime}`, with other simulated-VLM knobs; each variant's MCQ "
               f"accuracy is measured by `vlmrl taxonomy` on the same knobs ({cfg.states} sweep positions; "
@@ -419,18 +419,18 @@ def _write(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simu
     paths = [out / n for n in names]
     vlm_note = " SIMULATED VLM, not a real model." if simulated else ""
     paths[0].write_text(f"# Regime map{' (SIMULATED VLM)' if simulated else ''}\n\n"
-                        + analysis.map_markdown(result.regime_map.to_dict("records"), cfg.top, cfg.ci, cfg.margin)
+                        + verdicts.map_markdown(result.regime_map.to_dict("records"), cfg.top, cfg.ci, cfg.margin)
                         + "\n" + "\n".join(f"- {n}" for n in cfg.notes) + "\n", encoding="utf-8")
     result.regime_map.drop(columns=[c for c in result.regime_map if c.endswith("_text")]).assign(
         vlm=vlm_note.strip()).to_csv(paths[1], index=False)
     result.vlm_points.assign(vlm=vlm_note.strip()).to_csv(paths[2], index=False)
-    analysis.vlm_figure(result.vlm_points, cfg.top, cfg.vlm_regime, simulated).savefig(paths[3], dpi=150)
+    verdicts.vlm_figure(result.vlm_points, cfg.top, cfg.vlm_regime, simulated).savefig(paths[3], dpi=150)
     hack_frame.to_csv(paths[4], index=False)
     paths[5].write_text(to_markdown(cfg, result, hack_frame, simulated, cost, history), encoding="utf-8")
     result.per_seed.assign(vlm=vlm_note.strip()).to_csv(paths[7], index=False)
     result.controls.assign(vlm=vlm_note.strip()).to_csv(paths[8], index=False)
     paths[9].write_text(f"# Controls{' (SIMULATED VLM)' if simulated else ''}\n\n"
-                        + (analysis.controls_markdown(result.controls.to_dict("records"), cfg.top, cfg.margin, cfg.ci)
+                        + (verdicts.controls_markdown(result.controls.to_dict("records"), cfg.top, cfg.margin, cfg.ci)
                            if len(result.controls) else "No control cell was run.\n"), encoding="utf-8")
     manifest = {
         "what": "vlmrl study" + (" with the SIMULATED VLM, not a real model" if simulated else ""),

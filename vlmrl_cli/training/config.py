@@ -1,4 +1,4 @@
-"""The configuration of `vlmrl run`: one frozen object, checked whole by ``training/schema.py``.
+"""The configuration of `vlmrl run`: one frozen object, checked whole by ``training/validation.py``.
 
 It is resolved in layers, each overriding the one before: the PPO preset < a TOML config file <
 ``--set KEY=VALUE`` < flags typed on the command line (``RunConfig.from_sources``). The layers
@@ -147,7 +147,7 @@ class RunConfig:
 
     def validate(self) -> None:
         """Raise ``BadInput`` for anything that would fail later; nothing is trained before."""
-        from vlmrl_cli.training.schema import validate_as
+        from vlmrl_cli.training.validation import validate_as
 
         validate_as(RunConfig, to_jsonable(self))
         if self.stale_after_s < 2 * self.heartbeat_s:
@@ -242,7 +242,7 @@ class TrainJob:
 
 def resolve(layers: Iterable[Mapping[str, Any]]) -> RunConfig:
     """The validated ``RunConfig`` of ``layers`` (lowest first: config file, ``--set``, flags)."""
-    from vlmrl_cli.training.schema import validate_as
+    from vlmrl_cli.training.validation import validate_as
 
     cfg: RunConfig = validate_as(RunConfig, resolve_raw(layers))
     return cfg

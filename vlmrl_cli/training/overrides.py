@@ -4,7 +4,7 @@ Every layer is a nested dict of plain values keyed like the TOML file (``{"ppo":
 The preset named by the highest layer that names one fills ``[ppo]``; each layer then overrides
 the keys it sets; the simulated VLM's profile (``vlm.sim.profile``) fills the ``[vlm.sim]`` knobs
 that no layer set (an explicit knob, in any layer, beats the profile's value). The merged dict is
-plain data: ``training/config.py`` checks it whole (``training/schema.py``) and makes it the frozen
+plain data: ``training/config.py`` checks it whole (``training/validation.py``) and makes it the frozen
 ``RunConfig``, so this module does not depend on that class. Nothing is read or written
 elsewhere: a bad value fails before any store, folder or run exists.
 

@@ -2,7 +2,7 @@
 
 A preset is only the bottom layer of a run's PPO configuration: a config file's ``[ppo]`` table
 and ``--set ppo.KEY=VALUE`` override any field (see ``training/overrides.py``). The ranges each
-field must respect are declared once, in ``training/schema.py``.
+field must respect are declared once, in ``training/validation.py``.
 """
 
 from __future__ import annotations

@@ -25,10 +25,10 @@ from vlmrl_cli.core.provenance import config_hash, flatten
 from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import RunStatus, terminate
-from vlmrl_cli.training.claims import ACTIVE, Liveness, RunRecord, is_stale, mark_stale
 from vlmrl_cli.training.config import RunConfig, TrainJob
 from vlmrl_cli.training.events import JobContext, JobResult, ProgressEvent, SweepSummary
 from vlmrl_cli.training.executors import Executor, JobFn, LocalExecutor
+from vlmrl_cli.training.leases import ACTIVE, Liveness, RunRecord, is_stale, mark_stale
 from vlmrl_cli.training.preflight import preflight
 from vlmrl_cli.training.worker import train_job
 

@@ -14,7 +14,7 @@ from vlmrl_cli.shaping.arms import ARMS, ArmSpec
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training.evaluation import Policy
-from vlmrl_cli.training.schema import validate_as
+from vlmrl_cli.training.validation import validate_as
 from vlmrl_cli.vlm.config import VLMConfig
 
 MODEL = "model.zip"

@@ -25,7 +25,7 @@ from vlmrl_cli.core.provenance import flatten
 from vlmrl_cli.shaping.placebo import describe_map, placebo_map
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import RunStatus, terminate
-from vlmrl_cli.training import claims
+from vlmrl_cli.training import leases
 from vlmrl_cli.training.callbacks import EpisodeTracker
 from vlmrl_cli.training.config import EVAL_SEED, TrainJob
 from vlmrl_cli.training.evaluation import EvalResult, evaluate_detached
@@ -92,7 +92,7 @@ def train_job(job: TrainJob, ctx: JobContext) -> JobResult:
 
 
 def run_claimed(job: TrainJob, ctx: JobContext, body: Body) -> JobResult:
-    """Create the job's run, claim the job (``claims.claim``), then run ``body`` under a heartbeat.
+    """Create the job's run, claim the job (``leases.claim``), then run ``body`` under a heartbeat.
     Never raises: failures end as a FAILED run. A job that starts after a stop request returns
     CANCELLED without creating a run; a job another live run owns returns SKIPPED."""
     start = time.perf_counter()
@@ -102,16 +102,16 @@ def run_claimed(job: TrainJob, ctx: JobContext, body: Body) -> JobResult:
     try:
         client = store.connect(ctx.tracking_uri, wait_s=ctx.connect_wait_s)
         run = client.create_run(ctx.experiment_id, tags={
-            **run_tags(job, ctx.parent_run_id, ctx.vlm_label, ctx.simulated), **claims.heartbeat_tags()})
+            **run_tags(job, ctx.parent_run_id, ctx.vlm_label, ctx.simulated), **leases.heartbeat_tags()})
         run_id = run.info.run_id
-        decision = claims.claim(client, ctx.experiment_id, run_id, job.name, job.arm.name, job.seed,
+        decision = leases.claim(client, ctx.experiment_id, run_id, job.name, job.arm.name, job.seed,
                                 job.config_hash, ctx.stale_after_s)
     except BaseException as exc:  # the store failed before the job had a run: the next sweep redoes it
         return JobResult(job.name, "", "FAILED", time.perf_counter() - start, error=f"{type(exc).__name__}: {exc}")
     if not decision.won:
         return JobResult(job.name, run_id, "SKIPPED", time.perf_counter() - start, error=decision.reason)
     try:
-        with claims.heartbeat(client, run_id, ctx.heartbeat_s):
+        with leases.heartbeat(client, run_id, ctx.heartbeat_s):
             result = body(job, client, run_id, channels)
         if result.status == "FINISHED":
             rival = _finished_rival(client, ctx.experiment_id, job, run_id)
@@ -141,7 +141,7 @@ def run_claimed(job: TrainJob, ctx: JobContext, body: Body) -> JobResult:
 
 
 def _finished_rival(client: Any, experiment_id: str, job: TrainJob, run_id: str) -> str | None:
-    runs = claims.job_runs(client, experiment_id, job.name, job.arm.name, job.seed, job.config_hash, finished=True)
+    runs = leases.job_runs(client, experiment_id, job.name, job.arm.name, job.seed, job.config_hash, finished=True)
     return next((r.info.run_id for r in runs if r.info.run_id != run_id), None)
 
 

@@ -9,8 +9,8 @@ import sys
 from hypothesis import given
 from hypothesis import strategies as st
 
-from vlmrl_cli.training import claims
-from vlmrl_cli.training.claims import Liveness, RunRecord, decide, is_stale
+from vlmrl_cli.training import leases
+from vlmrl_cli.training.leases import Liveness, RunRecord, decide, is_stale
 
 HOST = "node-a"
 
@@ -81,7 +81,7 @@ def test_a_retry_supersedes_the_attempt_its_own_sweep_dispatched_before() -> Non
 def test_failed_and_killed_runs_do_not_compete() -> None:
     own = _run("b", 500)
     others = [_run("a", 0, status="FAILED"), _run("c", 1, status="KILLED")]
-    assert decide(own, [*others, own], _live()) == claims.Decision(True, "")
+    assert decide(own, [*others, own], _live()) == leases.Decision(True, "")
 
 
 records = st.builds(
@@ -113,21 +113,21 @@ def test_at_most_one_claimant_wins_whatever_the_runs(runs: list[RunRecord]) -> N
 
 
 def test_pid_alive_sees_a_dead_and_a_reaped_process() -> None:
-    assert claims.pid_alive(os.getpid())
+    assert leases.pid_alive(os.getpid())
     child = subprocess.Popen([sys.executable, "-c", "pass"])
     child.wait()
-    assert not claims.pid_alive(child.pid)
+    assert not leases.pid_alive(child.pid)
 
 
 def test_pid_alive_calls_an_unreaped_child_dead() -> None:
     child = subprocess.Popen([sys.executable, "-c", "pass"])
     try:
         for _ in range(200):  # until the child has exited (a zombie until we wait for it)
-            if not claims.pid_alive(child.pid):
+            if not leases.pid_alive(child.pid):
                 break
             import time
 
             time.sleep(0.05)
-        assert not claims.pid_alive(child.pid)
+        assert not leases.pid_alive(child.pid)
     finally:
         child.wait()

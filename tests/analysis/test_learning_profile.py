@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from vlmrl_cli.analysis.calibration import (
+from vlmrl_cli.analysis.learning_profile import (
     TargetProfile,
     distance,
     distance_ci,

@@ -10,8 +10,8 @@ from vlmrl_cli.frames.geometry import Zone
 from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.kinematic import kinematic_reward
+from vlmrl_cli.training.evaluate_trained import EvaluateConfig, label_frames, play_episode
 from vlmrl_cli.training.trained import TrainedRun
-from vlmrl_cli.training.watch import EvaluateConfig, label_frames, play_episode
 from vlmrl_cli.vlm.config import VLMConfig
 
 
