@@ -21,12 +21,12 @@ import time
 from pathlib import Path
 from typing import Any
 
+from vlmrl_cli.sweep.ray_executor import start_local
+from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
+from vlmrl_cli.sweep.worker import Channels, run_claimed, train_job
 from vlmrl_cli.training.config import RunConfig, TrainJob
 from vlmrl_cli.training.events import JobResult
 from vlmrl_cli.training.presets import get_preset
-from vlmrl_cli.training.ray_executor import start_local
-from vlmrl_cli.training.sweep import SilentReporter, run_sweep
-from vlmrl_cli.training.worker import Channels, run_claimed, train_job
 
 
 def fake_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> JobResult:

@@ -85,7 +85,7 @@ def label_agreement(run: dict[str, Any]) -> tuple[int, int, int]:
 
 
 def sweep_throughput(workers: int, timesteps: int, root: Path) -> float:
-    from vlmrl_cli.training.sweep import SilentReporter, run_sweep
+    from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
 
     ppo = dataclasses.replace(get_preset("paper"), timesteps=timesteps, eval_episodes=1)
     cfg = RunConfig(arms=("baseline",), seeds=(0, 1), preset="paper", ppo=ppo, workers=workers,

@@ -1,5 +1,6 @@
 """The import graph runs one way: core/frames -> vlm -> shaping -> probe/training/analysis ->
-report -> cli, with no module importing itself back through others (no cycle)."""
+sweep/report -> calibration -> study -> cli, with no module importing itself back through others
+(no cycle)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ LAYERS = {
     "tracking": 1, "vlm": 1,
     "shaping": 2,
     "probe": 3, "training": 3, "analysis": 3,
+    "sweep": 4,  # many runs of the training layer's one run
     "report": 4,
     "calibration": 5,
     "study": 6,  # builds on calibration's regimes and sweeps

@@ -7,8 +7,8 @@ from pathlib import Path
 import pandas as pd
 
 from vlmrl_cli.analysis.load import _episodes
+from vlmrl_cli.sweep.worker import EPISODE_TABLE_METRICS, write_episodes_table
 from vlmrl_cli.tracking import schema, store
-from vlmrl_cli.training.worker import EPISODE_TABLE_METRICS, write_episodes_table
 
 
 def test_the_table_and_the_histories_give_identical_frames_and_a_missing_table_falls_back(tmp_path: Path) -> None:

@@ -8,7 +8,7 @@ import pytest
 from typer.testing import CliRunner
 
 from vlmrl_cli.cli.app import app
-from vlmrl_cli.training import executors
+from vlmrl_cli.sweep import executors
 
 pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
 

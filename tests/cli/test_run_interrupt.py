@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
+from vlmrl_cli.sweep.runner import plan
 from vlmrl_cli.tracking import store
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.presets import get_preset
-from vlmrl_cli.training.sweep import plan
 
 pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
 

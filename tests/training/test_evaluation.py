@@ -35,7 +35,7 @@ class _Recorder:
 
 
 def test_detached_evaluation_logs_the_hovering_diagnostic() -> None:
-    from vlmrl_cli.training.worker import _log_eval
+    from vlmrl_cli.sweep.worker import _log_eval
 
     rec = _Recorder()
     _log_eval(rec, evaluate_detached(_energy_pumping, episodes=2, seed=0))  # type: ignore[arg-type]

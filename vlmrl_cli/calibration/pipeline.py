@@ -29,10 +29,10 @@ from vlmrl_cli.core.provenance import config_hash, flatten, git_commit, package_
 from vlmrl_cli.report import figures
 from vlmrl_cli.report.table2 import threshold_key
 from vlmrl_cli.report.writer import ensure_writable
+from vlmrl_cli.sweep.runner import JobResult, SweepReporter, run_sweep
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
 from vlmrl_cli.training.config import RunConfig
-from vlmrl_cli.training.sweep import JobResult, SweepReporter, run_sweep
 
 KIND = schema.KIND_CALIBRATION
 

@@ -52,7 +52,7 @@ def calibrate(
     and rank the regimes by their distance to the paper's baseline learning profile."""
     from vlmrl_cli.calibration.pipeline import calibrate as run_calibration
     from vlmrl_cli.calibration.regimes import CalibrateConfig, Regime, build_regimes, calibrate_section, grid_flags
-    from vlmrl_cli.training.cost import estimate_sweeps
+    from vlmrl_cli.sweep.cost import estimate_sweeps
 
     console = Console()
     with exit_codes():

@@ -58,8 +58,8 @@ def run(
 
     Settings resolve in layers: the --preset < --config FILE < --set KEY=VALUE < other flags.
     """
-    from vlmrl_cli.training.preflight import preflight
-    from vlmrl_cli.training.sweep import run_sweep
+    from vlmrl_cli.sweep.preflight import preflight
+    from vlmrl_cli.sweep.runner import run_sweep
 
     console = Console(stderr=False)
     with exit_codes():
@@ -123,9 +123,9 @@ def dry_run_text(cfg: RunConfig) -> str:
     -130 and detached success of each job already FINISHED), so the whole text is a config file
     that ``--config`` reads back."""
     from vlmrl_cli.report.children import child_rows, format_rows
+    from vlmrl_cli.sweep.cost import estimate_sweeps
+    from vlmrl_cli.sweep.runner import dry_plan
     from vlmrl_cli.tracking import store
-    from vlmrl_cli.training.cost import estimate_sweeps
-    from vlmrl_cli.training.sweep import dry_plan
 
     plan = dry_plan(cfg)
     done = {(j.arm.name, j.seed) for j in plan.done}

@@ -39,10 +39,10 @@ from vlmrl_cli.report.table2 import per_seed_table
 from vlmrl_cli.report.writer import ensure_writable
 from vlmrl_cli.study import verdicts
 from vlmrl_cli.study.config import StudyConfig
+from vlmrl_cli.sweep import cost as cost_model
+from vlmrl_cli.sweep.cost import CostEstimate
+from vlmrl_cli.sweep.runner import JobResult, SweepReporter, vlm_identity
 from vlmrl_cli.tracking import schema, store
-from vlmrl_cli.training import cost as cost_model
-from vlmrl_cli.training.cost import CostEstimate
-from vlmrl_cli.training.sweep import JobResult, SweepReporter, vlm_identity
 
 KIND = schema.KIND_STUDY
 def estimate_cost(cfg: StudyConfig) -> CostEstimate:

@@ -1,5 +1,5 @@
 """The PPO learner of one run, built in one place so that every knob of ``PPOConfig`` reaches
-both the worker (``training/worker.py``) and the determinism probe (``training/trace.py``)."""
+both the worker (``sweep/worker.py``) and the determinism probe (``training/trace.py``)."""
 
 from __future__ import annotations
 

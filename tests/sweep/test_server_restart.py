@@ -11,10 +11,10 @@ from typing import Any
 import pytest
 from mlflow.tracking import MlflowClient
 
-from tests.training.tracking_server import TrackingServer
+from tests.sweep.tracking_server import TrackingServer
+from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.presets import get_preset
-from vlmrl_cli.training.sweep import SilentReporter, run_sweep
 
 pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
 

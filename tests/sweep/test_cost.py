@@ -6,8 +6,8 @@ import dataclasses
 
 import pytest
 
+from vlmrl_cli.sweep.cost import FALLBACK_S_PER_STEP, Timings, contention, estimate, estimate_sweeps
 from vlmrl_cli.training.config import RunConfig
-from vlmrl_cli.training.cost import FALLBACK_S_PER_STEP, Timings, contention, estimate, estimate_sweeps
 from vlmrl_cli.training.presets import get_preset
 
 

@@ -7,7 +7,7 @@ import dataclasses
 import pytest
 
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.training import executors
+from vlmrl_cli.sweep import executors
 from vlmrl_cli.training.config import RunConfig
 
 

@@ -23,9 +23,9 @@ import numpy as np
 
 from vlmrl_cli.core.provenance import flatten
 from vlmrl_cli.shaping.placebo import describe_map, placebo_map
+from vlmrl_cli.sweep import leases
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import RunStatus, terminate
-from vlmrl_cli.training import leases
 from vlmrl_cli.training.callbacks import EpisodeTracker
 from vlmrl_cli.training.config import EVAL_SEED, TrainJob
 from vlmrl_cli.training.evaluation import EvalResult, evaluate_detached

@@ -15,11 +15,11 @@ from typing import Any
 import pytest
 from mlflow.tracking import MlflowClient
 
+from vlmrl_cli.sweep.ray_executor import start_local
+from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.events import ProgressEvent
 from vlmrl_cli.training.presets import get_preset
-from vlmrl_cli.training.ray_executor import start_local
-from vlmrl_cli.training.sweep import SilentReporter, run_sweep
 
 pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
 
@@ -111,7 +111,7 @@ def test_a_killed_ray_worker_is_retried_and_finishes_once(tmp_path: Path, local_
 
 def test_a_ray_sweep_through_a_loopback_tracking_server(tmp_path: Path, local_ray: None) -> None:
     """Workers write through ``mlflow server``; artifacts go up through it and come back."""
-    from tests.training.tracking_server import TrackingServer
+    from tests.sweep.tracking_server import TrackingServer
 
     server = TrackingServer(tmp_path)
     server.start()

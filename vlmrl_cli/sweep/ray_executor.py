@@ -21,10 +21,10 @@ from collections.abc import Sequence
 from typing import Any
 
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.sweep.executors import SHARED_STORE_NEEDED, JobFn, Polled, is_server_uri
+from vlmrl_cli.sweep.worker import init_worker
 from vlmrl_cli.training.config import TrainJob
 from vlmrl_cli.training.events import JobContext, JobResult, ProgressEvent, StopFlag
-from vlmrl_cli.training.executors import SHARED_STORE_NEEDED, JobFn, Polled, is_server_uri
-from vlmrl_cli.training.worker import init_worker
 
 POLL_STOP_S = 1.0
 

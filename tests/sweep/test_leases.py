@@ -9,8 +9,8 @@ import sys
 from hypothesis import given
 from hypothesis import strategies as st
 
-from vlmrl_cli.training import leases
-from vlmrl_cli.training.leases import Liveness, RunRecord, decide, is_stale
+from vlmrl_cli.sweep import leases
+from vlmrl_cli.sweep.leases import Liveness, RunRecord, decide, is_stale
 
 HOST = "node-a"
 

@@ -20,9 +20,9 @@ from importlib.util import find_spec
 from typing import Any, Protocol
 
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.sweep.worker import init_worker
 from vlmrl_cli.training.config import RunConfig, TrainJob
 from vlmrl_cli.training.events import JobContext, JobResult, ProgressEvent
-from vlmrl_cli.training.worker import init_worker
 
 RAY_MISSING = "--executor ray needs Ray, which is not installed: pip install 'vlmrl[ray]'."
 

@@ -114,8 +114,8 @@ def estimate(pending: Sequence[TrainJob], done: int, workers: int, timings: Timi
 def estimate_sweeps(cfgs: Sequence[RunConfig]) -> CostEstimate:
     """The cost of training what ``cfgs`` (sweeps into one experiment, e.g. a calibration's or a
     study's regimes) still miss, read without writing; a job two sweeps share counts once."""
+    from vlmrl_cli.sweep.runner import dry_plan
     from vlmrl_cli.tracking import store
-    from vlmrl_cli.training.sweep import dry_plan
 
     pending: dict[tuple[str, int, str], TrainJob] = {}
     done: set[tuple[str, int, str]] = set()

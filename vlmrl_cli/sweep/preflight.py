@@ -4,8 +4,8 @@ VLM cache): the executor can start, and the VLM the shaped arms need can answer 
 from __future__ import annotations
 
 from vlmrl_cli.shaping.arms import PotentialSource
+from vlmrl_cli.sweep.executors import check_executor
 from vlmrl_cli.training.config import RunConfig
-from vlmrl_cli.training.executors import check_executor
 from vlmrl_cli.vlm.preflight import check_coverage, check_vlm
 from vlmrl_cli.vlm.prompts import PromptKind
 

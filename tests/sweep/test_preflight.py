@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.sweep.preflight import preflight
 from vlmrl_cli.training.config import RunConfig
-from vlmrl_cli.training.preflight import preflight
 from vlmrl_cli.vlm.config import VLMConfig
 
 

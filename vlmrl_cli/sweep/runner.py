@@ -23,14 +23,14 @@ from typing import Any, Protocol
 
 from vlmrl_cli.core.provenance import config_hash, flatten
 from vlmrl_cli.shaping.arms import ARMS
+from vlmrl_cli.sweep.executors import Executor, JobFn, LocalExecutor
+from vlmrl_cli.sweep.leases import ACTIVE, Liveness, RunRecord, is_stale, mark_stale
+from vlmrl_cli.sweep.preflight import preflight
+from vlmrl_cli.sweep.worker import train_job
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import RunStatus, terminate
 from vlmrl_cli.training.config import RunConfig, TrainJob
 from vlmrl_cli.training.events import JobContext, JobResult, ProgressEvent, SweepSummary
-from vlmrl_cli.training.executors import Executor, JobFn, LocalExecutor
-from vlmrl_cli.training.leases import ACTIVE, Liveness, RunRecord, is_stale, mark_stale
-from vlmrl_cli.training.preflight import preflight
-from vlmrl_cli.training.worker import train_job
 
 
 class SweepReporter(Protocol):
@@ -131,7 +131,7 @@ def dry_plan(cfg: RunConfig) -> DryPlan:
 
 def make_executor(cfg: RunConfig, n_jobs: int) -> Executor:
     if cfg.executor == "ray":
-        from vlmrl_cli.training.ray_executor import RayExecutor
+        from vlmrl_cli.sweep.ray_executor import RayExecutor
 
         return RayExecutor(cfg.ray_address, cfg.workers, cfg.max_retries, cfg.tracking_uri)
     return LocalExecutor(min(cfg.workers, n_jobs))
