@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import sys
 from collections.abc import Sequence
 from typing import Annotated
@@ -92,4 +93,9 @@ def cli(args: Sequence[str] | None = None) -> int:
 
 
 def main() -> None:
-    sys.exit(cli())
+    code = cli()
+    # The command is over (its runs closed, its exit code known); interpreter exit now runs atexit
+    # callbacks, such as Ray's shutdown, which sleeps. A Ctrl-C there would print a traceback from
+    # inside them and change nothing, so the exit is left to finish.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.exit(code)
