@@ -21,7 +21,7 @@ from vlmrl_cli.training.events import JobResult, ProgressEvent
 
 
 class RichSweepReporter:
-    """Implements ``training.sweep.SweepReporter`` on a rich ``Progress``."""
+    """Implements ``sweep.runner.SweepReporter`` on a rich ``Progress``."""
 
     def __init__(self, console: Console) -> None:
         self.console = console

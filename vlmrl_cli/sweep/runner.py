@@ -3,7 +3,7 @@ resumably and safely beside other sweeps on the same store.
 
 Resume rule: a job whose (arm, seed, config hash) already has a FINISHED run in the experiment
 is skipped. A job with a *live* RUNNING run (fresh heartbeat, owner process alive: see
-``claims``) belongs to another sweep and is left to it. RUNNING runs that are stale (a crash,
+``leases``) belongs to another sweep and is left to it. RUNNING runs that are stale (a crash,
 a killed worker) are marked FAILED and their job is trained again. Each job is claimed
 atomically when it starts, so two sweeps started together never train the same job twice.
 One parent run records each invocation that trains anything.
