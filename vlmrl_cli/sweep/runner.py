@@ -159,30 +159,31 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
         summary.wall_s = time.perf_counter() - start
         return summary
     executor = make_executor(cfg, len(pending))  # before the parent run: Ray may refuse the store
-    try:
-        parent = client.create_run(experiment_id, tags={
-            **store.provenance_tags(vlm_label, simulated),
-            schema.MLFLOW_RUN_NAME: f"sweep-{time.strftime('%Y%m%d-%H%M%S')}",
-            schema.TAG_KIND: schema.KIND_SWEEP,
-            schema.TAG_CONFIG_HASH: config_hash(cfg),
-            schema.TAG_EXECUTOR: cfg.executor,
-            **({schema.TAG_REGIME: cfg.regime} if cfg.regime is not None else {}),
-        })
-    except BaseException:
-        executor.close()
-        raise
-    summary.parent_run_id = parent.info.run_id
-    store.log_params(client, parent.info.run_id, flatten(dataclasses.replace(cfg, ppo=cfg.ppo_config)))
-
-    ctx = JobContext(tracking_uri, experiment_id, parent.info.run_id, vlm_label, simulated,
-                     heartbeat_s=cfg.heartbeat_s, stale_after_s=cfg.stale_after_s)
     status = "FINISHED"
-    # The flag handler stays installed through the shutdown as well: a Ctrl-C while the executor
-    # closes (Ray's shutdown sleeps) or the parent run is being closed must not escape half-way
-    # and leave the parent RUNNING; it marks the parent KILLED and the sweep exits 130.
+    # The flag handler is installed before the parent run exists and stays installed through the
+    # shutdown: a Ctrl-C while the parent is being created or its params logged, while the executor
+    # closes (Ray's shutdown sleeps) or the parent run is being closed must not escape half-way and
+    # leave the parent RUNNING; it marks the parent KILLED and the sweep exits 130.
     with _stop_on_sigint() as interrupted:
         try:
-            executor.submit(pending, job_fn, ctx)
+            parent = client.create_run(experiment_id, tags={
+                **store.provenance_tags(vlm_label, simulated),
+                schema.MLFLOW_RUN_NAME: f"sweep-{time.strftime('%Y%m%d-%H%M%S')}",
+                schema.TAG_KIND: schema.KIND_SWEEP,
+                schema.TAG_CONFIG_HASH: config_hash(cfg),
+                schema.TAG_EXECUTOR: cfg.executor,
+                **({schema.TAG_REGIME: cfg.regime} if cfg.regime is not None else {}),
+            })
+        except BaseException:
+            executor.close()
+            raise
+        summary.parent_run_id = parent.info.run_id
+        try:
+            store.log_params(client, parent.info.run_id, flatten(dataclasses.replace(cfg, ppo=cfg.ppo_config)))
+            ctx = JobContext(tracking_uri, experiment_id, parent.info.run_id, vlm_label, simulated,
+                             heartbeat_s=cfg.heartbeat_s, stale_after_s=cfg.stale_after_s)
+            if not interrupted.is_set():  # a Ctrl-C during start-up: nothing is submitted
+                executor.submit(pending, job_fn, ctx)
             while executor.outstanding:
                 polled = executor.poll(0.2)
                 for event in polled.events:
