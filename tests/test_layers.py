@@ -1,4 +1,4 @@
-"""The import graph runs one way: core/frames -> vlm -> shaping -> probe/training/analysis ->
+"""The import graph runs one way: core/frames -> vlm -> shaping -> tasks -> probe/training/analysis ->
 sweep/report -> calibration -> study -> cli, with no module importing itself back through others
 (no cycle)."""
 
@@ -15,12 +15,13 @@ LAYERS = {
     "core": 0, "paper": 0, "frames": 0,
     "tracking": 1, "vlm": 1,
     "shaping": 2,
-    "probe": 3, "training": 3, "analysis": 3,
-    "sweep": 4,  # many runs of the training layer's one run
-    "report": 4,
-    "calibration": 5,
-    "study": 6,  # builds on calibration's regimes and sweeps
-    "cli": 7,
+    "tasks": 3,  # the one place that knows an environment: builds on frames, vlm and shaping
+    "probe": 4, "training": 4, "analysis": 4,
+    "sweep": 5,  # many runs of the training layer's one run
+    "report": 5,
+    "calibration": 6,
+    "study": 7,  # builds on calibration's regimes and sweeps
+    "cli": 8,
 }
 
 

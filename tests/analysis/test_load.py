@@ -5,8 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pandas as pd
+import pytest
 
-from vlmrl_cli.analysis.load import _episodes
+from vlmrl_cli.analysis.load import _episodes, check_one_task
+from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.sweep.worker import EPISODE_TABLE_METRICS, write_episodes_table
 from vlmrl_cli.tracking import schema, store
 
@@ -31,3 +33,16 @@ def test_the_table_and_the_histories_give_identical_frames_and_a_missing_table_f
     assert from_table["native_return"].tolist() == [e[schema.METRIC_NATIVE_RETURN] for e in episodes]
     # a tag naming a table the run does not hold (an imported run) falls back to the histories
     pd.testing.assert_frame_equal(_episodes(client, run_id, "missing.csv"), from_histories, check_exact=True)
+
+
+class _Run:
+    def __init__(self, task: str | None) -> None:
+        self.data = type("D", (), {"tags": {} if task is None else {"vlmrl.task": task}})()
+
+
+def test_a_report_never_mixes_tasks_and_old_runs_are_mountain_car() -> None:
+    check_one_task([_Run(None), _Run("mountain-car")], "e")  # untagged runs predate tasks
+    with pytest.raises(BadInput, match=r"mixes tasks \(acrobot, mountain-car\)"):
+        check_one_task([_Run(None), _Run("acrobot")], "e")
+    with pytest.raises(BadInput, match="runs of task 'acrobot'"):
+        check_one_task([_Run("acrobot")], "e")

@@ -8,7 +8,7 @@ from hypothesis.extra.numpy import arrays
 
 from vlmrl_cli.frames.geometry import SCALE
 from vlmrl_cli.frames.render import FrameRenderer
-from vlmrl_cli.shaping.features import BLOCK, FEATURE_DIM, FEATURE_UNIT, darkness_counts, frame_features
+from vlmrl_cli.shaping.features import BLOCK, FEATURE_DIM, FEATURE_UNIT, darkness_counts, feature_dim, frame_features
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +41,7 @@ def test_counts_equal_a_scalar_integer_sum(pixels: np.ndarray, data: st.DataObje
 
 
 def test_rejects_a_frame_of_the_wrong_shape() -> None:
-    with pytest.raises(ValueError, match="shape"):
+    with pytest.raises(ValueError, match="multiples of 20 px"):
         frame_features(np.zeros((10, 10, 3), dtype=np.uint8))
 
 
@@ -68,3 +68,11 @@ def test_counts_equal_the_per_pixel_weighted_sum_everywhere(pixels: np.ndarray) 
     darkness = 255_000 - (px[..., 0] * 299 + px[..., 1] * 587 + px[..., 2] * 114)
     reference = darkness.reshape(400 // BLOCK, BLOCK, 600 // BLOCK, BLOCK).sum(axis=(1, 3)).reshape(-1)
     assert np.array_equal(darkness_counts(pixels), reference)
+
+
+def test_any_frame_of_whole_blocks_has_one_feature_per_block() -> None:
+    frame = np.zeros((500, 500, 3), dtype=np.uint8)
+    frame[:20, :20] = 255  # the first block white
+    counts = darkness_counts(frame)
+    assert counts.shape == (feature_dim(frame.shape),) == (625,)
+    assert counts[0] == 0 and bool((counts[1:] == FEATURE_UNIT).all())

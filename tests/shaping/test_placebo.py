@@ -79,4 +79,4 @@ def test_the_placebo_is_a_new_cell_and_the_hybrid_keeps_its_hash() -> None:
 
 def test_describe_map_names_every_label() -> None:
     line = describe_map(placebo_map(DEFAULT_LABEL_POTENTIALS, 0))
-    assert [part.split("=")[0] for part in line.split()] == [z.value for z, _ in DEFAULT_LABEL_POTENTIALS]
+    assert [part.split("=")[0] for part in line.split()] == [str(z) for z, _ in DEFAULT_LABEL_POTENTIALS]

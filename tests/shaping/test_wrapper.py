@@ -174,3 +174,28 @@ def test_constructor_validates_its_arguments() -> None:
     oracle = SemanticOracle(sim_client(), cfg, ARMS["hybrid"].potential, rbf=True)
     with pytest.raises(ValueError, match="does not match"):
         HybridReward(base, ARMS["hybrid-no-rbf"], cfg, gamma=GAMMA, camera=Camera(), oracle=oracle)
+
+
+def test_another_scene_brings_its_dense_term_observation_and_simulator() -> None:
+    from gymnasium.envs.classic_control.acrobot import AcrobotEnv
+
+    from vlmrl_cli.shaping.scene import Scene
+
+    def bonus(obs: np.ndarray, scale: float, offset: float) -> float:  # a dense term of the whole observation
+        return scale * float(np.abs(obs).sum()) + offset
+
+    scene = Scene("acrobot-test", (6,), bonus, AcrobotEnv)
+    env = HybridReward(gym.make("Acrobot-v1"), ARMS["kinematic"], ShapingConfig(kin_scale=0.5, kin_offset=0.1),
+                       gamma=0.99, scene=scene)
+    env.reset(seed=0)
+    obs, reward, *_, info = env.step(1)
+    assert reward == pytest.approx(info["native_reward"] + bonus(obs, 0.5, 0.1))
+    with pytest.raises(ValueError, match=r"wraps acrobot-test.*shape \(6,\); got shape \(2,\)"):
+        HybridReward(gym.make("MountainCar-v0"), ARMS["kinematic"], ShapingConfig(), gamma=0.99, scene=scene)
+    moving = Scene("mc-wrong-sim", (2,), bonus, AcrobotEnv)
+    client = sim_client()
+    oracle = SemanticOracle(client, ShapingConfig(), ARMS["hybrid"].potential)
+    with pytest.raises(ValueError, match="images mc-wrong-sim's simulator"):
+        HybridReward(gym.make("MountainCar-v0"), ARMS["hybrid"], ShapingConfig(), gamma=0.99, camera=Camera(),
+                     oracle=oracle, scene=moving)
+    client.close()

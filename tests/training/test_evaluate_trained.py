@@ -8,11 +8,17 @@ import pytest
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.frames.geometry import Zone
 from vlmrl_cli.shaping.arms import ARMS
+from vlmrl_cli.shaping.camera import Camera, FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.kinematic import kinematic_reward
 from vlmrl_cli.training.evaluate_trained import EvaluateConfig, label_frames, play_episode
 from vlmrl_cli.training.trained import TrainedRun
 from vlmrl_cli.vlm.config import VLMConfig
+
+
+def _views(positions: list[float]) -> list[FrameView]:
+    camera = Camera(ShapingConfig().render_quantum)  # the training camera (closed views stay loadable)
+    return [camera.view(x) for x in positions]
 
 
 def _energy(obs: np.ndarray) -> int:
@@ -39,7 +45,7 @@ def _run(arm: str) -> TrainedRun:
 
 def test_mcq_labels_carry_the_label_potential() -> None:
     cfg = EvaluateConfig("r", use_cache=False)
-    labels = label_frames(_run("hybrid"), [-1.15, -0.52, 0.55], cfg)
+    labels = label_frames(_run("hybrid"), _views([-1.15, -0.52, 0.55]), cfg)
     potentials = dict(ShapingConfig().label_potentials)
     assert len(labels) == 3
     for label in labels:
@@ -48,7 +54,7 @@ def test_mcq_labels_carry_the_label_potential() -> None:
 
 
 def test_float_arm_labels_show_the_parsed_position() -> None:
-    labels = label_frames(_run("vision-float"), [-0.5, 0.3], EvaluateConfig("r", use_cache=False))
+    labels = label_frames(_run("vision-float"), _views([-0.5, 0.3]), EvaluateConfig("r", use_cache=False))
     for label in labels:
         assert label.answer.startswith("x=") or label.potential is None
         assert label.potential is None or 0.0 <= label.potential <= 1.0

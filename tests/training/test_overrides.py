@@ -136,6 +136,9 @@ def test_every_ppo_knob_is_settable_and_typed() -> None:
             "net_arch_vf": [128, 128],
             "timesteps": 5000,
             "eval_episodes": 7,
+            "use_sde": False,
+            "log_std_init": -1.0,
+            "ortho_init": False,
         }
     }
     assert set(layer["ppo"]) == {f.name for f in dataclasses.fields(PPOConfig)}

@@ -135,3 +135,19 @@ def test_in_frame_pixel_boxes_round_trip(x0: int, y0: int, w: int, h: int) -> No
 def test_every_label_parses_in_every_form(zone: Zone, template: str, lower: bool) -> None:
     text = template.format(zone.value.lower() if lower else zone.value)
     assert parse_mcq(text).label is zone
+
+
+@pytest.mark.parametrize(("text", "label"), [
+    ("HIGH_SWING", "HIGH_SWING"), ("Answer: high swing.", "HIGH_SWING"), ("The image shows ABOVE-BAR", "ABOVE_BAR"),
+    ("Choice = low_swing", "LOW_SWING"),
+])
+def test_another_tasks_vocabulary_parses_into_its_labels(text: str, label: str) -> None:
+    labels = ("HANGING", "LOW_SWING", "HIGH_SWING", "ABOVE_BAR")
+    assert parse_mcq(text, labels).label == label
+
+
+def test_another_tasks_vocabulary_keeps_the_ambiguity_and_collapse_rules() -> None:
+    labels = ("NEAR", "NEAR_GOAL")  # a label inside another: the longer one wins where it fits
+    assert parse_mcq("NEAR GOAL", labels).label == "NEAR_GOAL"
+    assert parse_mcq("NEAR or NEAR_GOAL", labels).status is ParseStatus.AMBIGUOUS
+    assert parse_mcq("BOTTOM", labels).status is ParseStatus.FORMAT_COLLAPSE  # MountainCar's zone is not a label here

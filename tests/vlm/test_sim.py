@@ -12,7 +12,7 @@ from vlmrl_cli.frames.render import Frame, FrameRenderer
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.config import SimKnobs
 from vlmrl_cli.vlm.parsers import ParseStatus, parse_box, parse_float, parse_mcq
-from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
+from vlmrl_cli.vlm.prompts import PROMPTS, Milestones, PromptKind, mcq_prompt
 from vlmrl_cli.vlm.sim import REFUSAL, SimulatedVLM, wheel_column
 
 EXACT = SimKnobs(flicker=0.0, float_noise=0.0, box_noise_px=0.0, box_failure=0.0)
@@ -154,7 +154,7 @@ def test_query_flicker_draws_afresh_per_query_and_reproduces_per_stream(renderer
     prompt = PROMPTS[PromptKind.MCQ]
     knobs = SimKnobs(flicker=0.0, query_flicker=0.5)
 
-    def labels(stream: int) -> list[geometry.Zone | None]:
+    def labels(stream: int) -> list[str | None]:
         vlm = SimulatedVLM(knobs, stream=stream)
         assert vlm.stochastic
         return [parse_mcq(vlm.answer(prompt, frame)).label for _ in range(200)]
@@ -179,3 +179,31 @@ def test_a_stochastic_backend_is_never_cached(tmp_path) -> None:
         assert not steady.stochastic and steady.cache is not None
     finally:
         steady.close()
+
+
+class _TwoLabels:
+    """A task reader for the test: LEFT when the car is left of the valley, else RIGHT."""
+
+    name = "two"
+    milestones = Milestones(("LEFT", "RIGHT"), mcq_prompt("Where is the car?", ("LEFT", "RIGHT")))
+
+    def read(self, pixels: np.ndarray) -> str | None:
+        column = wheel_column(pixels)
+        return None if column is None else ("LEFT" if column < 200 else "RIGHT")
+
+
+def test_a_task_reader_answers_its_own_labels_with_flicker_and_no_numbers() -> None:
+    reader = _TwoLabels()
+    with FrameRenderer() as renderer:
+        left, right = renderer.render(-1.0), renderer.render(0.3)
+    steady = SimulatedVLM(SimKnobs(flicker=0.0), reader=reader)
+    assert steady.model.startswith("pixel-reader-v1-two/") and steady.simulated
+    prompt = reader.milestones.prompt
+    assert parse_mcq(steady.answer(prompt, left), reader.milestones.labels).label == "LEFT"
+    assert parse_mcq(steady.answer(prompt, right), reader.milestones.labels).label == "RIGHT"
+    assert parse_float(steady.answer(PROMPTS[PromptKind.FLOAT], left)).value is None  # MCQ only
+    blank = Frame.from_pixels(np.full((400, 600, 3), 255, dtype=np.uint8))
+    assert steady.answer(prompt, blank) == REFUSAL
+    noisy = SimulatedVLM(SimKnobs(flicker=1.0), reader=reader)  # every answer moves to the neighbour
+    assert parse_mcq(noisy.answer(prompt, left), reader.milestones.labels).label == "RIGHT"
+    assert SimulatedVLM(SimKnobs(), reader=None).model != steady.model  # cached answers never mix

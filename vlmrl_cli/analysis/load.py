@@ -8,6 +8,7 @@ param ``timesteps``; metrics ``episode/*`` stepped by global timestep and ``eval
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -15,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.tasks.registry import DEFAULT_TASK
 from vlmrl_cli.tracking import schema
 
 EPISODE_METRICS = {
@@ -127,6 +129,19 @@ def _run_row(run: Any) -> dict[str, Any]:
     }
 
 
+def check_one_task(runs: Sequence[Any], experiment: str) -> None:
+    """``BadInput`` unless every run is of MountainCar-v0 (runs from before tasks carry no
+    ``vlmrl.task`` tag: they are). A report never mixes tasks; reports of other tasks (their
+    thresholds, success rule and diagnostics) are not built yet."""
+    tasks = sorted({r.data.tags.get(schema.TAG_TASK, DEFAULT_TASK) for r in runs})
+    if len(tasks) > 1:
+        raise BadInput(f"MLflow experiment '{experiment}' mixes tasks ({', '.join(tasks)}); a report compares runs "
+                       "of one task: train each task into its own --experiment.")
+    if tasks and tasks[0] != DEFAULT_TASK:
+        raise BadInput(f"MLflow experiment '{experiment}' holds runs of task '{tasks[0]}'; reports score "
+                       "MountainCar-v0 runs only so far (per-task reports are not built yet).")
+
+
 def load_experiment(client: Any, experiment: str) -> ExperimentData:
     """The finished training runs of ``experiment``, the latest per (arm, seed, config_hash).
 
@@ -140,6 +155,7 @@ def load_experiment(client: Any, experiment: str) -> ExperimentData:
                                                                           finished=True))
     if not found:
         raise BadInput(f"MLflow experiment '{experiment}' has no finished training runs; run `vlmrl run` first.")
+    check_one_task(found, experiment)
     tables = {r.info.run_id: r.data.tags.get(schema.TAG_EPISODES_TABLE) for r in found}
     runs = pd.DataFrame([_run_row(r) for r in found], columns=RUN_COLUMNS)
     runs = (runs.sort_values("end_time", ascending=False, kind="stable")

@@ -19,6 +19,7 @@ from typing import Any
 from vlmrl_cli.analysis.learning_profile import TargetProfile, paper_baseline
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
 from vlmrl_cli.core.errors import BadInput, did_you_mean
+from vlmrl_cli.tasks.registry import DEFAULT_TASK
 from vlmrl_cli.training.config import RunConfig, resolve
 from vlmrl_cli.training.overrides import nest, parse_assignment, parse_values
 
@@ -159,6 +160,10 @@ def resolve_regime(
         run = resolve([*layers, nest(point.items()) | dict(top)])
     except BadInput as exc:
         raise BadInput(f"regime {rid} ({_label(point)}): {exc}") from None
+    if run.task != DEFAULT_TASK:  # the scoring (target profile, thresholds) is MountainCar's
+        raise BadInput(f"task '{run.task}': calibrate and study score against MountainCar's paper profile and "
+                       "thresholds so far; train another task with `vlmrl run --task` (per-task calibration is "
+                       "not built yet).")
     return Regime(rid, tuple(point.items()), run)
 
 

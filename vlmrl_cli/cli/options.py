@@ -189,7 +189,12 @@ Seeds = Annotated[int, typer.Option("--seeds", help="Number of seeds: 0..N-1.")]
 SeedList = Annotated[str | None, typer.Option("--seed-list", help="Explicit seeds, e.g. 3,7,11.")]
 Timesteps = Annotated[int | None, typer.Option("--timesteps", help="Budget per run (= --set ppo.timesteps=N).")]
 Preset = Annotated[str, typer.Option("--preset", metavar=choices(list(PRESETS)),
-                                     help="PPO preset (the bottom layer of [ppo]).")]
+                                     help="PPO preset (the bottom layer of [ppo]); another task's presets "
+                                          "are its own (default: the task's, e.g. zoo).")]
+TaskOpt = Annotated[str | None, typer.Option(
+    "--task", metavar="mountain-car|mountain-car-continuous|acrobot|MODULE:NAME",
+    help="The environment (default mountain-car): a built-in task, or a Task in your code as "
+         "package.module:NAME (see the docs' 'Add a task').")]
 Workers = Annotated[int | None, typer.Option("--workers", help="Worker processes (default: cores).")]
 ExecutorOpt = Annotated[str | None, typer.Option(
     "--executor", metavar=choices(EXECUTORS),
@@ -209,9 +214,9 @@ Sets = Annotated[
 ]
 
 # CLI parameter -> dotted config key (seeds come from --seeds or --seed-list)
-_RUN_KEYS = {"arms": "arms", "preset": "preset", "timesteps": "ppo.timesteps", "eval_episodes": "ppo.eval_episodes",
-             "workers": "workers", "experiment": "experiment", "tracking_uri": "tracking_uri",
-             "executor": "executor", "ray_address": "ray_address"}
+_RUN_KEYS = {"arms": "arms", "task": "task", "preset": "preset", "timesteps": "ppo.timesteps",
+             "eval_episodes": "ppo.eval_episodes", "workers": "workers", "experiment": "experiment",
+             "tracking_uri": "tracking_uri", "executor": "executor", "ray_address": "ray_address"}
 
 
 def list_entries(text: str, flag: str) -> list[str]:

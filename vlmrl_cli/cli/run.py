@@ -19,6 +19,7 @@ from vlmrl_cli.cli.options import (
     SeedList,
     Seeds,
     Sets,
+    TaskOpt,
     Timesteps,
     TrackingUri,
     Workers,
@@ -40,6 +41,7 @@ def run(
     ctx: typer.Context,
     vlm_cfg: VLMConfig,
     arms: Arms = "baseline,hybrid",
+    task: TaskOpt = None,
     seeds: Seeds = 5,
     seed_list: SeedList = None,
     timesteps: Timesteps = None,
@@ -68,9 +70,9 @@ def run(
             typer.echo(dry_run_text(cfg), nl=False)
             return
         preflight(cfg)  # refuse before the header: the sweep checks again for callers of its API
-        console.print(f"[bold]vlmrl run[/]: arms {', '.join(cfg.arms)} x seeds {list(cfg.seeds)}, preset "
-                      f"{cfg.preset}, {cfg.budget:,} steps each, {cfg.workers} worker(s) ({cfg.executor}), "
-                      f"experiment '{cfg.experiment}'")
+        console.print(f"[bold]vlmrl run[/]: task {cfg.task}, arms {', '.join(cfg.arms)} x seeds "
+                      f"{list(cfg.seeds)}, preset {cfg.preset}, {cfg.budget:,} steps each, {cfg.workers} "
+                      f"worker(s) ({cfg.executor}), experiment '{cfg.experiment}'")
         overrides = cfg.jobs()[0].overrides()
         if overrides:
             console.print("overrides: " + " ".join(f"{k}={v}" for k, v in overrides.items()), markup=False)
@@ -107,11 +109,14 @@ def sweep_summary_line(summary: SweepSummary) -> str:
 def print_children(console: Console, cfg: RunConfig, experiment_id: str) -> None:
     """The sweep's training runs, one plain line each (readable at 80 columns and in a pipe): the ids
     `vlmrl evaluate` takes."""
-    from vlmrl_cli.report.children import HEADER, child_rows, format_rows
+    from vlmrl_cli.report.children import child_rows, format_rows, header
+    from vlmrl_cli.tasks.registry import get_task
     from vlmrl_cli.tracking import store
 
-    rows = [HEADER, *format_rows(child_rows(store.connect(cfg.tracking_uri), experiment_id, cfg.jobs()))]
-    widths = [max(len(r[i]) for r in rows) for i in range(len(HEADER))]
+    top = get_task(cfg.task).thresholds[-1]
+    client = store.connect(cfg.tracking_uri)
+    rows = [header(top), *format_rows(child_rows(client, experiment_id, cfg.jobs(), top), top)]
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     console.print("training runs (vlmrl evaluate RUN_ID):", markup=False)
     for r in rows:
         console.print("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip(), markup=False,
@@ -120,21 +125,23 @@ def print_children(console: Console, cfg: RunConfig, experiment_id: str) -> None
 
 def dry_run_text(cfg: RunConfig) -> str:
     """The resolved config as TOML, then the job list as TOML comments (with the run id, steps to
-    -130 and detached success of each job already FINISHED), so the whole text is a config file
-    that ``--config`` reads back."""
+    the task's top threshold (MountainCar's -130) and detached success of each job already
+    FINISHED), so the whole text is a config file that ``--config`` reads back."""
     from vlmrl_cli.report.children import child_rows, format_rows
     from vlmrl_cli.sweep.cost import estimate_sweeps
     from vlmrl_cli.sweep.runner import dry_plan
+    from vlmrl_cli.tasks.registry import get_task
     from vlmrl_cli.tracking import store
 
     plan = dry_plan(cfg)
+    top = get_task(cfg.task).thresholds[-1]
     done = {(j.arm.name, j.seed) for j in plan.done}
     found = {}
     if plan.done and plan.experiment_id is not None:
-        rows = child_rows(store.connect(cfg.tracking_uri), plan.experiment_id, plan.done)
-        found = {(r.arm, r.seed): cells for r, cells in zip(rows, format_rows(rows), strict=True)}
+        rows = child_rows(store.connect(cfg.tracking_uri), plan.experiment_id, plan.done, top)
+        found = {(r.arm, r.seed): cells for r, cells in zip(rows, format_rows(rows, top), strict=True)}
     lines = [f"# {plan.note}", "# arm        seed  config_hash   status    run id                            "
-             "steps to -130  detached success"]
+             f"{f'steps to {top:g}':>13}  detached success"]
     for job in cfg.jobs():
         status = "FINISHED" if (job.arm.name, job.seed) in done else "pending"
         line = f"# {job.arm.name:<10} {job.seed:>4}  {job.config_hash}  {status:<8}"

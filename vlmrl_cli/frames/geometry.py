@@ -58,9 +58,10 @@ def track_height(x: float | np.ndarray) -> float | np.ndarray:
     )
 
 
-def zone_of(x: float) -> Zone:
-    """The semantic zone (the MCQ's correct answer) of position ``x``."""
-    for edge, zone in zip(ZONE_EDGES, ZONES, strict=False):
+def zone_of(x: float, edges: tuple[float, ...] = ZONE_EDGES) -> Zone:
+    """The semantic zone (the MCQ's correct answer) of position ``x``; ``edges``: the zones'
+    upper edges (MountainCarContinuous-v0's GOAL starts at its flag, 0.45)."""
+    for edge, zone in zip(edges, ZONES, strict=False):
         if x < edge:
             return zone
     return ZONES[-1]

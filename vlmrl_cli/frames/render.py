@@ -30,6 +30,14 @@ class Frame:
         return cls(pixels=pixels, sha256=hashlib.sha256(pixels.tobytes()).hexdigest(),
                    frame_id=frame_id)
 
+    @classmethod
+    def drawn(cls, pixels: np.ndarray, frame_id: str | None = None, sha256: str | None = None) -> Frame:
+        """A frame a renderer just drew; ``sha256``: its digest when known from an earlier render of
+        the same state (a renderer draws it identically), so it is not hashed again."""
+        if sha256 is not None:
+            return cls(pixels=np.ascontiguousarray(pixels, dtype=np.uint8), sha256=sha256, frame_id=frame_id)
+        return cls.from_pixels(pixels, frame_id=frame_id)
+
     def png_bytes(self) -> bytes:
         """The frame encoded as PNG (what HTTP backends send)."""
         import io
@@ -42,7 +50,8 @@ class Frame:
 
 
 class FrameRenderer:
-    """Renders MountainCar-v0 at arbitrary (x, v) with ``render_mode="rgb_array"``.
+    """Renders MountainCar-v0 (or ``env_id``, another env of the same track) at arbitrary (x, v)
+    with ``render_mode="rgb_array"``.
 
     Holds one unwrapped gymnasium env; no display is needed.
 
@@ -53,11 +62,12 @@ class FrameRenderer:
         >>> renderer.close()
     """
 
-    def __init__(self) -> None:
+    def __init__(self, env_id: str = "MountainCar-v0") -> None:
         import gymnasium as gym
 
         os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # harmless for rgb_array, needed by some SDL builds
-        self._env: Any = gym.make("MountainCar-v0", render_mode="rgb_array").unwrapped
+        # env_id: MountainCar-v0 or MountainCarContinuous-v0 (same track and car, its flag at 0.45)
+        self._env: Any = gym.make(env_id, render_mode="rgb_array").unwrapped
         self._env.reset(seed=0)
 
     def render(self, x: float, velocity: float = 0.0, frame_id: str | None = None,
@@ -70,10 +80,7 @@ class FrameRenderer:
         if not MIN_POSITION <= x <= MAX_POSITION:
             raise ValueError(f"x={x} is outside the track [{MIN_POSITION}, {MAX_POSITION}]")
         self._env.state = np.array([x, np.clip(velocity, -MAX_SPEED, MAX_SPEED)], dtype=np.float64)
-        pixels = self._env.render()
-        if sha256 is not None:
-            return Frame(pixels=np.ascontiguousarray(pixels, dtype=np.uint8), sha256=sha256, frame_id=frame_id)
-        return Frame.from_pixels(pixels, frame_id=frame_id)
+        return Frame.drawn(self._env.render(), frame_id, sha256)
 
     def close(self) -> None:
         self._env.close()

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION, SCREEN_WIDTH, Zone
+from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION, SCREEN_WIDTH
 from vlmrl_cli.shaping.config import DEFAULT_LABEL_POTENTIALS
 from vlmrl_cli.vlm.parsers import Box, ParseStatus
 
@@ -111,7 +111,7 @@ def format_failure_rate(statuses: Iterable[ParseStatus]) -> float:
     return sum(s in FORMAT_FAILURES for s in answered) / len(answered)
 
 
-def mcq_accuracy(predicted: Sequence[Zone | None], truth: Sequence[Zone]) -> float:
+def mcq_accuracy(predicted: Sequence[str | None], truth: Sequence[str]) -> float:
     """Fraction of (n,) predictions equal to the (n,) true zones; None counts as wrong. NaN if n=0."""
     if len(predicted) != len(truth):
         raise ValueError(f"{len(predicted)} predictions for {len(truth)} true labels; pass one per frame.")
@@ -122,7 +122,7 @@ def mcq_accuracy(predicted: Sequence[Zone | None], truth: Sequence[Zone]) -> flo
 
 # --- the consequence on the potential ------------------------------------------------------
 
-def label_potential(label: Zone | None, mapping: Mapping[Zone, float] | None = None) -> float:
+def label_potential(label: str | None, mapping: Mapping[str, float] | None = None) -> float:
     """Raw potential Phi_raw of an MCQ label (``DEFAULT_LABEL_POTENTIALS``); NaN for None."""
     table = dict(DEFAULT_LABEL_POTENTIALS) if mapping is None else mapping
     return math.nan if label is None else float(table[label])

@@ -83,7 +83,7 @@ def _parsed(probe: FrameProbe, kind: PromptKind) -> str:
         status = b.status
     else:
         m = probe.mcq_result
-        value, status = (m.label.value if m.label is not None else "-"), m.status
+        value, status = (str(m.label) if m.label is not None else "-"), m.status
     return f"{value} [{'parsed' if status is ParseStatus.OK else 'not parsed: ' + status.value}]"
 
 
@@ -250,6 +250,6 @@ def probes_frame(probes: Sequence[FrameProbe]) -> pd.DataFrame:
             "box_raw": p.answers.get(PromptKind.BOX), "box_status": p.box_result.status.value,
             "box_value": list(p.box_result.box) if p.box_result.box is not None else None,
             "mcq_raw": p.answers.get(PromptKind.MCQ), "mcq_status": p.mcq_result.status.value,
-            "mcq_label": p.mcq_result.label.value if p.mcq_result.label is not None else None,
+            "mcq_label": str(p.mcq_result.label) if p.mcq_result.label is not None else None,
         })
     return pd.DataFrame(rows)

@@ -15,12 +15,15 @@ import math
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
 from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION
 from vlmrl_cli.frames.render import Frame, FrameRenderer
 from vlmrl_cli.shaping.features import darkness_counts
+
+Cell = TypeVar("Cell")  # a camera's grid cell: MountainCar's position index, Acrobot's pair of angle bins
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,7 +47,68 @@ class FrameView:
         return cls(key=frame.sha256, features=darkness_counts(frame.pixels), _load=lambda: frame)
 
 
-class Camera:
+class CellCamera(Generic[Cell]):
+    """What every camera shares: a state snapped to a grid ``Cell`` is rendered at most once per
+    cell, its ``FrameView`` (key, features) memoised for good, its pixels kept in an LRU of
+    ``pixel_cache`` frames and drawn again on demand (same pixels, same key). A subclass says how a
+    cell is drawn (``_draw``) and how its renderer is released (``_release``).
+
+    ``renders`` counts calls to the renderer; ``cells`` how many cells have been seen.
+    """
+
+    def __init__(self, pixel_cache: int = 256) -> None:
+        if pixel_cache < 1:
+            raise ValueError(f"pixel_cache must be >= 1 frame, got {pixel_cache}")
+        self.pixel_cache = int(pixel_cache)
+        self.renders = 0
+        self._views: dict[Cell, FrameView] = {}
+        self._frames: OrderedDict[Cell, Frame] = OrderedDict()
+
+    def _draw(self, cell: Cell, sha256: str | None) -> Frame:
+        raise NotImplementedError
+
+    def _release(self) -> None:
+        """Close the renderer (it reopens on demand)."""
+
+    def _render(self, cell: Cell) -> Frame:
+        self.renders += 1
+        known = self._views.get(cell)
+        # drawn again after the pixel cache dropped it: same pixels, same key (not hashed again)
+        return self._draw(cell, known.key if known is not None else None)
+
+    def _frame(self, cell: Cell) -> Frame:
+        frame = self._frames.get(cell)
+        if frame is None:
+            frame = self._render(cell)
+            self._frames[cell] = frame
+            if len(self._frames) > self.pixel_cache:
+                self._frames.popitem(last=False)
+        else:
+            self._frames.move_to_end(cell)
+        return frame
+
+    def _view_of(self, cell: Cell) -> FrameView:
+        """The memoised view of ``cell``: called every env step, so a known cell is a dict lookup."""
+        view = self._views.get(cell)
+        if view is None:
+            frame = self._frame(cell)
+            features = darkness_counts(frame.pixels)
+            features.setflags(write=False)
+            view = FrameView(key=frame.sha256, features=features, _load=functools.partial(self._frame, cell))
+            self._views[cell] = view
+        return view
+
+    @property
+    def cells(self) -> int:
+        """How many grid cells have been seen (memoised)."""
+        return len(self._views)
+
+    def close(self) -> None:
+        self._release()
+        self._frames.clear()
+
+
+class Camera(CellCamera[int]):
     """Renders MountainCar at a position snapped to ``render_quantum``; memoises per grid cell.
 
     ``renders`` counts calls to gymnasium's renderer; ``pixel_cache`` is how many frames'
@@ -60,19 +124,15 @@ class Camera:
         >>> cam.close()
     """
 
-    def __init__(self, render_quantum: float = 0.003, pixel_cache: int = 256) -> None:
+    def __init__(self, render_quantum: float = 0.003, pixel_cache: int = 256, env_id: str = "MountainCar-v0") -> None:
         if not (math.isfinite(render_quantum) and 0 < render_quantum <= MAX_POSITION - MIN_POSITION):
             raise ValueError(
                 f"render_quantum must be in (0, {MAX_POSITION - MIN_POSITION}] x units, got {render_quantum}"
             )
-        if pixel_cache < 1:
-            raise ValueError(f"pixel_cache must be >= 1 frame, got {pixel_cache}")
+        super().__init__(pixel_cache)
         self.render_quantum = float(render_quantum)
-        self.pixel_cache = int(pixel_cache)
-        self.renders = 0
+        self.env_id = env_id  # whose renderer draws the track (MountainCarContinuous-v0: flag at 0.45)
         self._renderer: FrameRenderer | None = None
-        self._views: dict[int, FrameView] = {}
-        self._frames: OrderedDict[int, Frame] = OrderedDict()
         self._last = round((MAX_POSITION - MIN_POSITION) / self.render_quantum)  # the last grid cell
 
     def _cell(self, x: float) -> int:
@@ -91,48 +151,20 @@ class Camera:
         """The position (x units) whose frame ``view(x)`` shows: ``x`` snapped to the grid."""
         return self._cell_position(self._cell(float(x)))
 
-    def _render(self, cell: int) -> Frame:
+    def _draw(self, cell: int, sha256: str | None) -> Frame:
         if self._renderer is None:
-            self._renderer = FrameRenderer()
-        self.renders += 1
-        known = self._views.get(cell)
-        if known is not None:  # drawn again after the pixel cache dropped it: same pixels, same key
-            return self._renderer.render(self._cell_position(cell), sha256=known.key)
-        return self._renderer.render(self._cell_position(cell))
+            self._renderer = FrameRenderer(self.env_id)
+        return self._renderer.render(self._cell_position(cell), sha256=sha256)
 
-    def _frame(self, cell: int) -> Frame:
-        frame = self._frames.get(cell)
-        if frame is None:
-            frame = self._render(cell)
-            self._frames[cell] = frame
-            if len(self._frames) > self.pixel_cache:
-                self._frames.popitem(last=False)
-        else:
-            self._frames.move_to_end(cell)
-        return frame
-
-    def view(self, x: float) -> FrameView:
-        """The view of the car at position ``x`` (x units), rendered at most once per grid cell.
-
-        Called every env step, so a known cell costs one dict lookup (the view is built once).
-        """
-        cell = self._cell(float(x))
-        view = self._views.get(cell)
-        if view is None:
-            frame = self._frame(cell)
-            features = darkness_counts(frame.pixels)
-            features.setflags(write=False)
-            view = FrameView(key=frame.sha256, features=features, _load=functools.partial(self._frame, cell))
-            self._views[cell] = view
-        return view
-
-    @property
-    def cells(self) -> int:
-        """How many grid cells have been seen (memoised)."""
-        return len(self._views)
-
-    def close(self) -> None:
+    def _release(self) -> None:
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
-        self._frames.clear()
+
+    def view(self, x: float) -> FrameView:
+        """The view of the car at position ``x`` (x units), rendered at most once per grid cell."""
+        return self._view_of(self._cell(float(x)))
+
+    def look(self, sim: Any) -> FrameView:
+        """The view of the simulator ``sim`` (the unwrapped env): its position ``state[0]``."""
+        return self.view(float(sim.state[0]))

@@ -43,7 +43,8 @@ FEATURE_UNIT = 255 * sum(LUMA_WEIGHTS) * BLOCK * BLOCK  # the darkness count of 
 
 
 def darkness_counts(pixels: np.ndarray) -> np.ndarray:
-    """Exact block darkness of an RGB frame: ``(400, 600, 3)`` uint8 -> ``(600,)`` int64.
+    """Exact block darkness of an RGB frame: ``(400, 600, 3)`` uint8 -> ``(600,)`` int64 (any
+    frame whose sides are multiples of ``BLOCK``: ``(H / BLOCK) * (W / BLOCK)`` blocks, row-major).
 
     Entry ``b`` is ``sum over the block's pixels of (255 * 1000 - (299 r + 587 g + 114 b))``,
     in ``[0, FEATURE_UNIT]``; ``frame_features`` is this divided by ``FEATURE_UNIT``. Integer
@@ -55,13 +56,14 @@ def darkness_counts(pixels: np.ndarray) -> np.ndarray:
         >>> c.dtype, bool((c == FEATURE_UNIT).all())
         (dtype('int64'), True)
     """
-    if pixels.shape != FRAME_SHAPE:
-        raise ValueError(f"expected a frame of shape {FRAME_SHAPE}, got {pixels.shape}")
-    h, w = FRAME_SHAPE[0] // BLOCK, FRAME_SHAPE[1] // BLOCK
+    if pixels.ndim != 3 or pixels.shape[2] != 3 or pixels.shape[0] % BLOCK or pixels.shape[1] % BLOCK:
+        raise ValueError(f"expected an RGB frame whose sides are multiples of {BLOCK} px (MountainCar: "
+                         f"{FRAME_SHAPE}), got {pixels.shape}")
+    h, w = pixels.shape[0] // BLOCK, pixels.shape[1] // BLOCK
     # Sum each channel over a block first (exact integers, so the order changes nothing), then
     # weight: sum(C - (wr r + wg g + wb b)) = BLOCK^2 C - (wr sum r + wg sum g + wb sum b).
     # Rows first (a contiguous reduction), then columns: a third faster than weighting every pixel.
-    rows = np.ascontiguousarray(pixels).reshape(h, BLOCK, FRAME_SHAPE[1] * 3).sum(axis=1, dtype=np.int32)
+    rows = np.ascontiguousarray(pixels).reshape(h, BLOCK, pixels.shape[1] * 3).sum(axis=1, dtype=np.int32)
     sums = rows.reshape(h, w, BLOCK, 3).sum(axis=2, dtype=np.int64)
     wr, wg, wb = LUMA_WEIGHTS
     weighted = sums[..., 0] * wr + sums[..., 1] * wg + sums[..., 2] * wb
@@ -80,3 +82,13 @@ def frame_features(pixels: np.ndarray) -> np.ndarray:
         ((600,), dtype('float64'), 0.0)
     """
     return darkness_counts(pixels) / FEATURE_UNIT
+
+
+def feature_dim(frame_shape: tuple[int, ...]) -> int:
+    """How many blocks ``darkness_counts`` gives a frame of ``frame_shape`` (H, W, 3).
+
+    Example:
+        >>> feature_dim((400, 600, 3)) == FEATURE_DIM, feature_dim((500, 500, 3))
+        (True, 625)
+    """
+    return (frame_shape[0] // BLOCK) * (frame_shape[1] // BLOCK)

@@ -19,11 +19,10 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 
-from vlmrl_cli.frames.geometry import Zone
 from vlmrl_cli.shaping.arms import ArmSpec
 from vlmrl_cli.shaping.config import ShapingConfig
 
-LabelMap = tuple[tuple[Zone, float], ...]
+LabelMap = tuple[tuple[str, float], ...]  # labels: MountainCar's Zone, or another task's names
 
 
 def permutation(n: int, seed: int, salt: str = "vlmrl-placebo") -> tuple[int, ...]:
@@ -67,7 +66,7 @@ def placebo_map(label_potentials: LabelMap, seed: int) -> LabelMap:
     The multiset of potentials is unchanged (dimensionless raw potentials, as the map's).
 
     Example:
-        >>> m = ((Zone.BOTTOM, 0.0), (Zone.LEFT_PEAK, 0.3), (Zone.GOAL, 1.0))
+        >>> m = (("BOTTOM", 0.0), ("LEFT_PEAK", 0.3), ("GOAL", 1.0))
         >>> shuffled = placebo_map(m, seed=0)
         >>> [z for z, _ in shuffled] == [z for z, _ in m], sorted(p for _, p in shuffled)
         (True, [0.0, 0.3, 1.0])
@@ -89,7 +88,7 @@ def describe_map(label_potentials: LabelMap) -> str:
     """``"LEFT_PEAK=0.3 LEFT_SLOPE=0.1 ..."``: a label map as one loggable line.
 
     Example:
-        >>> describe_map(((Zone.BOTTOM, 0.0), (Zone.GOAL, 1.0)))
+        >>> describe_map((("BOTTOM", 0.0), ("GOAL", 1.0)))
         'BOTTOM=0 GOAL=1'
     """
-    return " ".join(f"{zone.value}={p:g}" for zone, p in label_potentials)
+    return " ".join(f"{label}={p:g}" for label, p in label_potentials)

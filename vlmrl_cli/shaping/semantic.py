@@ -38,7 +38,7 @@ from vlmrl_cli.shaping.rbf import RBFField, squared_distances
 from vlmrl_cli.tracking import schema
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.parsers import parse_float, parse_mcq
-from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
+from vlmrl_cli.vlm.prompts import PROMPTS, ZONE_MILESTONES, Milestones, PromptKind
 
 STAT_KEYS: tuple[str, ...] = (
     schema.METRIC_VLM_QUERIES,
@@ -65,10 +65,12 @@ class SemanticOracle:
     ``source`` picks the prompt: ``MCQ`` (label -> ``cfg.potential_of(label)``) or ``FLOAT``
     (the parsed x through ``float_potential``). ``rbf`` says whether arms read the smoothed
     ``phi_rbf`` or the raw label potentials. Unparsed answers count as parse failures and add
-    no prototype.
+    no prototype. ``milestones``: the task's MCQ vocabulary and prompt; ``feature_dim``: the size
+    of its frames' features (``features.feature_dim``); MountainCar's by default.
     """
 
-    def __init__(self, client: VLMClient, cfg: ShapingConfig, source: PotentialSource, rbf: bool = True) -> None:
+    def __init__(self, client: VLMClient, cfg: ShapingConfig, source: PotentialSource, rbf: bool = True,
+                 milestones: Milestones = ZONE_MILESTONES, feature_dim: int = FEATURE_DIM) -> None:
         if source is PotentialSource.NONE:
             raise ValueError("a SemanticOracle needs a potential source (MCQ or FLOAT); arms without one need none.")
         if not (math.isfinite(cfg.bandwidth) and cfg.bandwidth > 0):
@@ -83,7 +85,14 @@ class SemanticOracle:
         self.cfg = cfg
         self.source = source
         self.rbf = rbf
-        self._prompt = PROMPTS[PromptKind.MCQ if source is PotentialSource.MCQ else PromptKind.FLOAT]
+        if source is PotentialSource.MCQ:
+            unknown = sorted(set(milestones.labels) ^ {label for label, _ in cfg.label_potentials})
+            if unknown:
+                raise ValueError(f"the label map and the task's labels differ in {', '.join(unknown)}; give a "
+                                 "potential for every label of the task, and for no other")
+        self._prompt = milestones.prompt if source is PotentialSource.MCQ else PROMPTS[PromptKind.FLOAT]
+        # MountainCar's zones parse with their own fixed patterns (labels come back as Zone)
+        self._labels = None if milestones == ZONE_MILESTONES else milestones.labels
         self._potential_of = dict(cfg.label_potentials)
         self._features = np.empty((0, 0), dtype=np.int64)
         self._potentials = np.empty(0, dtype=np.float64)
@@ -93,7 +102,7 @@ class SemanticOracle:
         # A stochastic VLM (a fresh draw per query) is asked every time: reusing a frame's label
         # would freeze its first draw, and its newest answer replaces the prototype's potential.
         self._stochastic = bool(getattr(client, "stochastic", False))
-        self._field = RBFField(cfg.bandwidth, FEATURE_DIM, unit=FEATURE_UNIT)
+        self._field = RBFField(cfg.bandwidth, feature_dim, unit=FEATURE_UNIT)
         self._queries = 0
         self._cache_hits = 0
         self._reuses = 0
@@ -145,7 +154,7 @@ class SemanticOracle:
         self._queries += 1
         self._cache_hits += int(answer.cached)
         if self.source is PotentialSource.MCQ:
-            mcq = parse_mcq(answer.text)
+            mcq = parse_mcq(answer.text, self._labels)
             if not mcq.ok or mcq.label is None:
                 return None
             return float(self._potential_of[mcq.label])

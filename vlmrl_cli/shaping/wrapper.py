@@ -3,37 +3,38 @@
 from __future__ import annotations
 
 import math
-from typing import Any, SupportsFloat, cast
+from typing import Any, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
-from gymnasium.envs.classic_control.mountain_car import MountainCarEnv
 
 from vlmrl_cli.shaping.arms import ArmSpec
-from vlmrl_cli.shaping.camera import Camera, FrameView
+from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
-from vlmrl_cli.shaping.kinematic import kinematic_reward
 from vlmrl_cli.shaping.pbrs import pbrs_term
+from vlmrl_cli.shaping.scene import MOUNTAIN_CAR, Scene, SceneCamera
 from vlmrl_cli.shaping.semantic import EpisodePotential, SemanticOracle
 
 
-class HybridReward(gym.Wrapper[np.ndarray, int, np.ndarray, int], gym.utils.RecordConstructorArgs):
+class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.RecordConstructorArgs):
     """``R_total = R_env [+ R_kin(x)] [+ alpha (gamma Phi(s') - Phi(s))]``, terms chosen by ``arm``.
 
-    Observations pass through unchanged: the policy sees MountainCar's native ``[x, v]``.
-    ``R_kin`` reads ``x`` from the observation (proprioception); the potential reads the
-    simulator only through ``camera`` (exteroception), whose ``FrameView`` is all the
+    Observations pass through unchanged: the policy sees the task's native observation
+    (MountainCar's ``[x, v]``). ``R_kin`` is the ``scene``'s dense term on the observation
+    (proprioception); the potential reads the simulator only through ``camera``
+    (exteroception), whose ``FrameView`` is all the
     ``oracle`` ever gets. Every step puts the env's own reward in ``info["native_reward"]``;
     the last step of an episode adds ``info["shaped_return"]`` (the sum of ``R_total``) and
     ``info["is_success"]`` (terminated at the goal, not truncated by the time limit). An arm
     without shaping (``baseline``) passes rewards through and still adds these keys.
 
     Args:
-        env: a MountainCar-v0 env (observation ``[x, v]``).
+        env: an env of ``scene``'s task (MountainCar-v0 by default: observation ``[x, v]``).
         arm: which terms to add.
         shaping: alpha, the kinematic coefficients and the label schedule.
         gamma: PBRS discount in (0, 1], normally the learner's.
         camera, oracle: required when ``arm.uses_vlm``; shared by the envs of one run.
+        scene: what the task's observation, dense term and simulator are (MountainCar's).
 
     Example:
         >>> import gymnasium as gym
@@ -48,20 +49,23 @@ class HybridReward(gym.Wrapper[np.ndarray, int, np.ndarray, int], gym.utils.Reco
 
     def __init__(
         self,
-        env: gym.Env[np.ndarray, int],
+        env: gym.Env[np.ndarray, Any],
         arm: ArmSpec,
         shaping: ShapingConfig,
         gamma: float,
-        camera: Camera | None = None,
+        camera: SceneCamera | None = None,
         oracle: SemanticOracle | None = None,
+        scene: Scene = MOUNTAIN_CAR,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
-            self, arm=arm, shaping=shaping, gamma=gamma, camera=camera, oracle=oracle
+            self, arm=arm, shaping=shaping, gamma=gamma, camera=camera, oracle=oracle, scene=scene
         )
         gym.Wrapper.__init__(self, env)
         shape = getattr(env.observation_space, "shape", None)
-        if shape != (2,):
-            raise ValueError(f"HybridReward wraps MountainCar (observation [x, v], shape (2,)), got shape {shape}.")
+        if shape != scene.obs_shape:
+            what = " (observation [x, v])" if scene is MOUNTAIN_CAR else ""
+            raise ValueError(f"HybridReward wraps {scene.name}{what}, observation shape {scene.obs_shape}; "
+                             f"got shape {shape}.")
         if not (math.isfinite(gamma) and 0.0 < gamma <= 1.0):
             raise ValueError(f"gamma must be in (0, 1], got {gamma}; pass the learner's discount.")
         if not (math.isfinite(shaping.alpha) and shaping.alpha >= 0):
@@ -74,13 +78,16 @@ class HybridReward(gym.Wrapper[np.ndarray, int, np.ndarray, int], gym.utils.Reco
                     f"the oracle ({oracle.source}, rbf={oracle.rbf}) does not match arm '{arm.name}' "
                     f"({arm.potential}, rbf={arm.rbf}); build it with the arm's potential and rbf."
                 )
-            if not isinstance(env.unwrapped, MountainCarEnv):
-                raise ValueError("the camera images MountainCar's simulator; wrap a MountainCar-v0 env.")
+            if not isinstance(env.unwrapped, scene.sim_type):
+                raise ValueError(f"the camera images {scene.name}'s simulator ({scene.sim_type.__name__}); "
+                                 f"wrap an env of that task.")
         self.arm = arm
         self.shaping = shaping
         self.gamma = float(gamma)
         self.camera = camera
-        self._sim = cast(MountainCarEnv, env.unwrapped)  # looked up once: this runs every step
+        self.scene = scene
+        self._dense = scene.dense
+        self._sim = env.unwrapped  # looked up once: this runs every step
         self._episode = EpisodePotential(oracle, arm.lock) if arm.uses_vlm and oracle is not None else None
         self._phi = 0.0
         self._return = 0.0
@@ -98,7 +105,7 @@ class HybridReward(gym.Wrapper[np.ndarray, int, np.ndarray, int], gym.utils.Reco
     def _view(self) -> FrameView:
         assert self.camera is not None
         # The camera images the simulator (as env.render() would), not the agent's observation.
-        return self.camera.view(float(self._sim.state[0]))
+        return self.camera.look(self._sim)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -108,15 +115,15 @@ class HybridReward(gym.Wrapper[np.ndarray, int, np.ndarray, int], gym.utils.Reco
         self._phi = self._episode.reset(self._view()) if self._episode is not None else 0.0
         return obs, info
 
-    def step(self, action: int) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, native, terminated, truncated, info = self.env.step(action)
         reward = float(native)
         if self.arm.kinematic:
-            reward += kinematic_reward(float(obs[0]), self.shaping.kin_scale, self.shaping.kin_offset)
+            reward += self._dense(obs, self.shaping.kin_scale, self.shaping.kin_offset)
         if self._episode is not None:
             assert self.camera is not None  # with the episode: checked in __init__
             # the camera images the simulator (as env.render() would), not the observation
-            phi_next = self._episode.step(self.camera.view(float(self._sim.state[0])))
+            phi_next = self._episode.step(self.camera.look(self._sim))
             reward += pbrs_term(self._phi, phi_next, self.gamma, self.shaping.alpha, terminated)
             self._phi = phi_next
         self._return += reward

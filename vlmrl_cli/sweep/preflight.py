@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from vlmrl_cli.shaping.arms import PotentialSource
 from vlmrl_cli.sweep.executors import check_executor
+from vlmrl_cli.tasks.registry import DEFAULT_TASK
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.vlm.preflight import check_coverage, check_vlm
 from vlmrl_cli.vlm.prompts import PromptKind
@@ -20,7 +21,7 @@ def preflight(cfg: RunConfig) -> None:
     if not shaped:
         return
     check_vlm(cfg.vlm)
-    if cfg.vlm.backend == "replay":
+    if cfg.vlm.backend == "replay" and cfg.task == DEFAULT_TASK:  # another task's frames: replay refuses at once
         from vlmrl_cli.frames.render import FrameRenderer
         from vlmrl_cli.shaping.camera import Camera
 

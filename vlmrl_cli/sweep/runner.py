@@ -61,10 +61,11 @@ def vlm_identity(cfg: RunConfig) -> tuple[str, bool]:
     (unreachable server, missing model: ``BadInput`` before anything trains)."""
     if not any(ARMS[name].uses_vlm for name in cfg.arms):
         return "none (no arm uses a VLM)", False
+    from vlmrl_cli.tasks.registry import get_task
     from vlmrl_cli.vlm.base import describe
     from vlmrl_cli.vlm.registry import build_backend
 
-    backend = build_backend(cfg.vlm)
+    backend = build_backend(cfg.vlm, reader=get_task(cfg.task).reader)
     try:
         return describe(backend), bool(backend.simulated)
     finally:
@@ -172,6 +173,7 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
                 schema.TAG_KIND: schema.KIND_SWEEP,
                 schema.TAG_CONFIG_HASH: config_hash(cfg),
                 schema.TAG_EXECUTOR: cfg.executor,
+            schema.TAG_TASK: cfg.task,
                 **({schema.TAG_REGIME: cfg.regime} if cfg.regime is not None else {}),
             })
         except BaseException:

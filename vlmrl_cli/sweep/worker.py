@@ -71,6 +71,7 @@ def run_tags(job: TrainJob, parent_run_id: str | None, vlm_label: str, simulated
         schema.TAG_SEED: str(job.seed),
         schema.TAG_CONFIG_HASH: job.config_hash,
         schema.TAG_PRESET: job.preset,
+        schema.TAG_TASK: job.task,
         schema.TAG_OVERRIDES: " ".join(f"{k}={v}" for k, v in job.overrides().items()) or "none",
     }
     if job.regime is not None:
@@ -150,6 +151,7 @@ def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> J
     (``run_claimed`` sets it). Raises on failure."""
     from stable_baselines3.common.logger import Logger
 
+    from vlmrl_cli.tasks.registry import get_task
     from vlmrl_cli.training.envs import make_train_env
     from vlmrl_cli.training.logger import MetricsOutputFormat
     from vlmrl_cli.training.model import make_model
@@ -172,9 +174,11 @@ def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> J
             store.log_params(client, run_id, {schema.PARAM_TIMESTEPS: str(job.timesteps), **flatten(job.params())})
             if stopped():
                 return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start)
+            task = get_task(job.task)
             if job.arm.uses_vlm:
-                vlm_client = build_client(job.vlm, transcript=out / "transcript.jsonl", stream=job.seed)
-            env, oracle = make_train_env(job.arm, job.ppo, job.shaping, vlm_client, job.seed)
+                vlm_client = build_client(job.vlm, transcript=out / "transcript.jsonl", stream=job.seed,
+                                          reader=task.reader)
+            env, oracle = make_train_env(job.arm, job.ppo, job.shaping, vlm_client, job.seed, task)
             model = make_model(job.ppo, env, job.seed)
             if stopped():
                 return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start)
@@ -192,7 +196,7 @@ def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> J
                 return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start)
             send(ProgressEvent(job.name, job.timesteps, job.timesteps, len(tracker.episodes),
                                float(np.mean(tracker.recent)) if tracker.recent else float("nan"), "eval"))
-            result = evaluate_detached(_policy(model, env), job.eval_episodes, EVAL_SEED)
+            result = evaluate_detached(_policy(model, env), job.eval_episodes, EVAL_SEED, task)
             _log_eval(metrics, result)
             metrics.log({schema.METRIC_WALL_S: time.perf_counter() - start}, step=job.timesteps)
             metrics.flush()

@@ -50,10 +50,11 @@ from vlmrl_cli.core.fields import one_of
 from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec, parse_arms
-from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.shaping.config import DEFAULT_LABEL_POTENTIALS, ShapingConfig
+from vlmrl_cli.tasks.registry import DEFAULT_TASK
 from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.overrides import nest, parse_assignment, parse_value, resolve_raw
-from vlmrl_cli.training.presets import DEFAULT_PRESET, PRESETS, PPOConfig, get_preset
+from vlmrl_cli.training.presets import DEFAULT_PRESET, PRESETS, PPOConfig, ppo_identity, preset_names, preset_of
 from vlmrl_cli.vlm.config import VLMConfig, sim_identity
 
 DEFAULT_EXPERIMENT = "vlmrl"
@@ -93,7 +94,27 @@ def _uri(value: str | None) -> str | None:
 
 
 def _known_preset(value: str) -> str:
+    # MountainCar's presets; another task's are checked against its plug-in when the layers are
+    # resolved (training/overrides.py) and in ``RunConfig.validate``
+    if value in PRESETS or value in _other_presets():
+        return value
     return one_of(PRESETS, "preset")(value)
+
+
+def _other_presets() -> set[str]:
+    from vlmrl_cli.tasks.registry import BUILTIN
+
+    return {name for task in BUILTIN for name in preset_names(task)}
+
+
+def _known_task(value: str) -> str:
+    from vlmrl_cli.tasks.registry import get_task
+
+    try:
+        get_task(value)
+    except BadInput as exc:
+        raise ValueError(str(exc).removesuffix(".")) from None
+    return value
 
 
 @dataclass(frozen=True)
@@ -106,6 +127,8 @@ class RunConfig:
                                                                       "help": "training seeds, each a run per arm"})
     preset: str = field(default=DEFAULT_PRESET, metadata={"rules": (AfterValidator(_known_preset),),
                                                           "help": "named PPO preset: the bottom layer of [ppo]"})
+    task: str = field(default=DEFAULT_TASK, metadata={"rules": (AfterValidator(_known_task),),
+        "help": "the environment: a built-in task (tasks/registry.py) or package.module:NAME"})
     workers: int = field(default_factory=lambda: os.cpu_count() or 1, metadata={"rules": (Ge(1),),
         "help": "worker processes (one torch thread each); default: the cores"})
     experiment: str = field(default=DEFAULT_EXPERIMENT, metadata={"rules": (AfterValidator(_name),),
@@ -150,14 +173,39 @@ class RunConfig:
         from vlmrl_cli.training.validation import validate_as
 
         validate_as(RunConfig, to_jsonable(self))
+        self._check_task()
         if self.stale_after_s < 2 * self.heartbeat_s:
             raise BadInput(f"stale_after_s ({self.stale_after_s:g}) must be at least twice heartbeat_s "
                            f"({self.heartbeat_s:g}), or live runs would be taken for dead ones.")
 
+    def _check_task(self) -> None:
+        """What only the task can say: its presets, its labels, the arms it supports."""
+        from vlmrl_cli.tasks.registry import get_task
+
+        task = get_task(self.task)
+        if self.ppo is None:
+            preset_of(self.task, self.preset)  # a BadInput naming the task's presets
+        problem = task.labels_problem(self.task_shaping.label_potentials)
+        if problem:
+            raise BadInput(f"shaping.label_potentials: {problem} (task {self.task}).")
+        floats = [a for a in self.arms if ARMS[a].potential.value == "float"]
+        if floats and not task.probes_floats:
+            raise BadInput(f"arm '{floats[0]}' asks the VLM for a number, which task {self.task} does not "
+                           "support; choose arms with MCQ milestones.")
+
+    @property
+    def task_shaping(self) -> ShapingConfig:
+        """``shaping`` with the task's label map when the map was left at MountainCar's default."""
+        if self.task == DEFAULT_TASK or self.shaping.label_potentials != DEFAULT_LABEL_POTENTIALS:
+            return self.shaping
+        from vlmrl_cli.tasks.registry import get_task
+
+        return dataclasses.replace(self.shaping, label_potentials=get_task(self.task).label_potentials)
+
     @property
     def ppo_config(self) -> PPOConfig:
         """The PPO knobs of every job: ``ppo``, or the preset's when that is None."""
-        return self.ppo if self.ppo is not None else get_preset(self.preset)
+        return self.ppo if self.ppo is not None else preset_of(self.task, self.preset)
 
     @property
     def budget(self) -> int:
@@ -165,10 +213,10 @@ class RunConfig:
 
     def jobs(self) -> list[TrainJob]:
         """One job per (arm, seed), arms in the given order, seeds inner."""
-        ppo = self.ppo_config
+        ppo, shaping = self.ppo_config, self.task_shaping
         return [
-            TrainJob(arm=ARMS[arm], seed=seed, preset=self.preset, ppo=ppo, vlm=self.vlm, shaping=self.shaping,
-                     regime=self.regime)
+            TrainJob(arm=ARMS[arm], seed=seed, preset=self.preset, ppo=ppo, vlm=self.vlm, shaping=shaping,
+                     regime=self.regime, task=self.task)
             for arm in self.arms
             for seed in self.seeds
         ]
@@ -185,6 +233,7 @@ class TrainJob:
     vlm: VLMConfig
     shaping: ShapingConfig
     regime: str | None = None
+    task: str = DEFAULT_TASK
 
     @property
     def name(self) -> str:
@@ -205,9 +254,11 @@ class TrainJob:
         VLM does not redo the baseline. Cache settings never count: they change speed, not answers."""
         ident: dict[str, Any] = {
             "arm": self.arm.identity(),
-            "ppo": to_jsonable(self.ppo),
+            "ppo": ppo_identity(self.ppo),
             "eval_seed": EVAL_SEED,
         }
+        if self.task != DEFAULT_TASK:  # MountainCar's runs predate tasks and keep their hashes
+            ident["task"] = self.task
         if self.arm.kinematic or self.arm.uses_vlm:
             ident["shaping"] = to_jsonable(self.shaping)
         if self.arm.uses_vlm:
@@ -232,7 +283,12 @@ class TrainJob:
     def overrides(self) -> dict[str, str]:
         """The knobs of this job that differ from its preset and the shaping/VLM defaults, as
         dotted keys (``{"ppo.n_envs": "1"}``); only knobs the job's identity depends on count."""
-        reference = dataclasses.replace(self, ppo=get_preset(self.preset), vlm=VLMConfig(), shaping=ShapingConfig())
+        from vlmrl_cli.tasks.registry import get_task
+
+        shaping = ShapingConfig()
+        if self.task != DEFAULT_TASK:
+            shaping = dataclasses.replace(shaping, label_potentials=get_task(self.task).label_potentials)
+        reference = dataclasses.replace(self, ppo=preset_of(self.task, self.preset), vlm=VLMConfig(), shaping=shaping)
         ref = flatten(reference.identity())
         return {k: v for k, v in flatten(self.identity()).items() if ref.get(k) != v}
 
@@ -245,6 +301,7 @@ def resolve(layers: Iterable[Mapping[str, Any]]) -> RunConfig:
     from vlmrl_cli.training.validation import validate_as
 
     cfg: RunConfig = validate_as(RunConfig, resolve_raw(layers))
+    cfg._check_task()
     return cfg
 
 

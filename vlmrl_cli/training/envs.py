@@ -9,15 +9,14 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecNormalize
 
 from vlmrl_cli.shaping.arms import ArmSpec
-from vlmrl_cli.shaping.camera import Camera
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.placebo import oracle_shaping
 from vlmrl_cli.shaping.semantic import SemanticOracle
 from vlmrl_cli.shaping.wrapper import HybridReward
+from vlmrl_cli.tasks.base import Task
+from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
 from vlmrl_cli.training.presets import PPOConfig
 from vlmrl_cli.vlm.client import VLMClient
-
-ENV_ID = "MountainCar-v0"
 
 
 def make_train_env(
@@ -26,10 +25,12 @@ def make_train_env(
     shaping: ShapingConfig,
     client: VLMClient | None,
     seed: int,
+    task: Task | None = None,
 ) -> tuple[VecEnv, SemanticOracle | None]:
-    """The training VecEnv of one run and its oracle (None for arms without a VLM).
+    """The training VecEnv of one run of ``task`` (MountainCar-v0 by default) and its oracle
+    (None for arms without a VLM).
 
-    Per env: ``gym.make(MountainCar-v0)`` -> ``Monitor`` (SB3's episode stats are the NATIVE
+    Per env: ``task.make_env()`` -> ``Monitor`` (SB3's episode stats are the NATIVE
     return and length) -> ``HybridReward`` (the arm's reward; a pass-through adding the info
     keys for ``baseline``). Then ``DummyVecEnv`` of ``preset.n_envs`` (one process, so the
     camera and oracle are shared by all envs) -> ``VecNormalize`` (observations if
@@ -42,15 +43,17 @@ def make_train_env(
         raise ValueError(f"arm '{arm.name}' queries a VLM; pass a VLMClient (e.g. the simulated one).")
     if ppo.n_envs < 1:
         raise ValueError(f"n_envs={ppo.n_envs}; a run needs at least one env.")
+    task = task if task is not None else get_task(DEFAULT_TASK)
     gamma = shaping.gamma if shaping.gamma is not None else ppo.gamma
-    camera = Camera(shaping.render_quantum) if arm.uses_vlm else None
-    oracle = (SemanticOracle(client, oracle_shaping(arm, shaping, seed), arm.potential, rbf=arm.rbf)
+    camera = task.make_camera(shaping) if arm.uses_vlm else None
+    oracle = (SemanticOracle(client, oracle_shaping(arm, shaping, seed), arm.potential, rbf=arm.rbf,
+                             milestones=task.milestones, feature_dim=task.feature_dim)
               if arm.uses_vlm and client else None)
 
     def make_one() -> gym.Env:
-        env: gym.Env = gym.make(ENV_ID)
+        env: gym.Env = task.make_env()
         env = Monitor(env)
-        return HybridReward(env, arm, shaping, gamma=gamma, camera=camera, oracle=oracle)
+        return HybridReward(env, arm, shaping, gamma=gamma, camera=camera, oracle=oracle, scene=task.scene)
 
     fns: list[Callable[[], gym.Env]] = [make_one] * ppo.n_envs
     venv: VecEnv = DummyVecEnv(fns)

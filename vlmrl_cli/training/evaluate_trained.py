@@ -1,15 +1,17 @@
 """`vlmrl evaluate`: re-evaluate a trained run from MLflow and watch one of its episodes.
 
-The policy plays native MountainCar-v0 (no shaping, no VLM in the loop), as in the detached
+The policy plays its task's native env (no shaping, no VLM in the loop), as in the detached
 evaluation of training. One episode is played again with ``render_mode="rgb_array"`` and
-written as an animated GIF whose captions give, per frame, the step, x, v, the action, R_kin
-of the step, the native return so far and, for arms that use a VLM, the label the run's VLM
-gives the frame (as the camera of training renders it) and that label's raw potential.
+written as an animated GIF whose captions give, per frame, the step, the observation
+(MountainCar's x and v), the action, the dense term R_kin of the step, the native return so far
+and, for arms that use a VLM, the label the run's VLM gives the frame (as the camera of
+training renders it) and that label's raw potential.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -19,10 +21,12 @@ import numpy as np
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.frames.gif import captioned, write_gif
-from vlmrl_cli.frames.render import FrameRenderer
 from vlmrl_cli.shaping.arms import PotentialSource
+from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
-from vlmrl_cli.shaping.kinematic import kinematic_reward
+from vlmrl_cli.shaping.scene import SceneCamera
+from vlmrl_cli.tasks.base import Task
+from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
 from vlmrl_cli.tracking import store
 from vlmrl_cli.training.config import EVAL_SEED
 from vlmrl_cli.training.evaluation import EvalResult, Policy, evaluate_detached
@@ -80,35 +84,40 @@ class PlayedStep:
     t: int
     x: float
     v: float
-    action: int | None
+    action: Any
     r_kin: float
     native_return: float
     terminated: bool = False
     pixels: np.ndarray | None = field(default=None, repr=False)
+    obs: tuple[float, ...] = ()  # the whole observation (x and v are MountainCar's obs[0], obs[1])
+    view: FrameView | None = field(default=None, repr=False)  # the training camera's view, when asked
 
 
-def play_episode(policy: Policy, seed: int, shaping: ShapingConfig, frame_every: int = 2) -> list[PlayedStep]:
-    """Play one native MountainCar-v0 episode reset with ``seed``, rendering every
-    ``frame_every``-th state (and the last one) with gymnasium's ``rgb_array`` renderer.
+def play_episode(policy: Policy, seed: int, shaping: ShapingConfig, frame_every: int = 2,
+                 task: Task | None = None, camera: SceneCamera | None = None) -> list[PlayedStep]:
+    """Play one native episode of ``task`` (MountainCar-v0 by default) reset with ``seed``,
+    rendering every ``frame_every``-th state (and the last one) with gymnasium's ``rgb_array``
+    renderer; with ``camera`` (the training camera) those states' views are kept too.
 
     Example:
         >>> steps = play_episode(lambda obs: 2 if obs[1] >= 0 else 0, seed=0, shaping=ShapingConfig(), frame_every=50)
         >>> steps[-1].terminated, [s.t for s in steps if s.pixels is not None][:2]
         (True, [0, 50])
     """
-    import gymnasium as gym
+    task = task if task is not None else get_task(DEFAULT_TASK)
+    env: Any = task.make_env(render_mode="rgb_array")  # gymnasium's rgb_array renderer, headless
 
-    from vlmrl_cli.training.envs import ENV_ID
-
-    env: Any = gym.make(ENV_ID)
-    renderer = FrameRenderer()  # gymnasium's rgb_array renderer, headless
-
-    def pixels(obs: np.ndarray) -> np.ndarray:
-        return renderer.render(float(obs[0]), float(obs[1])).pixels
+    def step_of(t: int, obs: np.ndarray, action: Any, r_kin: float, total: float, terminated: bool,
+                keep: bool) -> PlayedStep:
+        values = tuple(float(v) for v in np.asarray(obs, dtype=float).reshape(-1))
+        x, v = (*values, math.nan, math.nan)[:2]
+        return PlayedStep(t, x, v, _plain(action), r_kin, total, terminated,
+                          np.asarray(env.render()) if keep else None, values,
+                          camera.look(env.unwrapped) if keep and camera is not None else None)
 
     try:
         obs, _ = env.reset(seed=seed)
-        steps = [PlayedStep(0, float(obs[0]), float(obs[1]), None, 0.0, 0.0, pixels=pixels(obs))]
+        steps = [step_of(0, obs, None, 0.0, 0.0, False, True)]
         done, total, t = False, 0.0, 0
         while not done:
             action = policy(obs)
@@ -116,15 +125,21 @@ def play_episode(policy: Policy, seed: int, shaping: ShapingConfig, frame_every:
             t += 1
             total += float(reward)
             done = bool(terminated or truncated)
-            x = float(obs[0])
-            keep = done or t % frame_every == 0
-            steps.append(PlayedStep(t, x, float(obs[1]), int(action),
-                                    kinematic_reward(x, shaping.kin_scale, shaping.kin_offset), total,
-                                    bool(terminated), pixels(obs) if keep else None))
+            r_kin = task.scene.dense(obs, shaping.kin_scale, shaping.kin_offset)
+            steps.append(step_of(t, obs, action, r_kin, total, bool(terminated), done or t % frame_every == 0))
     finally:
-        renderer.close()
         env.close()
     return steps
+
+
+def _plain(action: Any) -> Any:
+    """An action as JSON writes it: an int (discrete), a float or a list of floats (continuous)."""
+    if action is None or isinstance(action, int):
+        return action
+    flat = np.asarray(action).reshape(-1)
+    if flat.dtype.kind in "iu" and flat.size == 1:
+        return int(flat[0])
+    return float(flat[0]) if flat.size == 1 else [float(a) for a in flat]
 
 
 @dataclass(frozen=True)
@@ -141,44 +156,49 @@ class FrameLabel:
         return f"VLM {self.answer}  Phi_raw {phi}"
 
 
-def label_frames(run: TrainedRun, positions: list[float], cfg: EvaluateConfig) -> list[FrameLabel]:
-    """Ask the run's VLM (its own config; cache as ``cfg`` says) about the frame of each
-    position, rendered by the training camera (snapped to ``render_quantum``)."""
-    from vlmrl_cli.shaping.camera import Camera
+def label_frames(run: TrainedRun, views: list[FrameView], cfg: EvaluateConfig) -> list[FrameLabel]:
+    """Ask the run's VLM (its own config; cache as ``cfg`` says) about each view of the training
+    camera (snapped to its grid, as in training)."""
     from vlmrl_cli.shaping.placebo import oracle_shaping
     from vlmrl_cli.shaping.semantic import float_potential
     from vlmrl_cli.vlm.parsers import parse_float, parse_mcq
     from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
     from vlmrl_cli.vlm.registry import build_client
 
+    task = get_task(run.task)
     mcq = run.arm.potential is PotentialSource.MCQ
     label_map = oracle_shaping(run.arm, run.shaping, run.seed)  # a placebo's shuffled map
-    prompt = PROMPTS[PromptKind.MCQ if mcq else PromptKind.FLOAT]
-    client = build_client(replace(run.vlm, use_cache=cfg.use_cache, cache_path=cfg.cache_path))
-    camera = Camera(run.shaping.render_quantum)
+    prompt = task.milestones.prompt if mcq else PROMPTS[PromptKind.FLOAT]
+    vocabulary = None if run.task == DEFAULT_TASK else task.milestones.labels
+    client = build_client(replace(run.vlm, use_cache=cfg.use_cache, cache_path=cfg.cache_path), reader=task.reader)
     labels = []
     try:
-        for x in positions:
-            text = client.ask(prompt, camera.view(x).frame()).text
+        for view in views:
+            text = client.ask(prompt, view.frame()).text
             if mcq:
-                label = parse_mcq(text)
-                labels.append(FrameLabel(label.label.value, label_map.potential_of(label.label))
+                label = parse_mcq(text, vocabulary)
+                labels.append(FrameLabel(str(label.label), label_map.potential_of(label.label))
                               if label.ok and label.label is not None else FrameLabel(f"({label.status})", None))
             else:
                 number = parse_float(text)
                 labels.append(FrameLabel(f"x={number.value:+.3f}", float_potential(number.value))
                               if number.ok and number.value is not None else FrameLabel(f"({number.status})", None))
     finally:
-        camera.close()
         client.close()
     return labels
 
 
 def _captions(run: TrainedRun, step: PlayedStep, last: int, index: int) -> list[str]:
-    action = ACTIONS.get(step.action, str(step.action)) if step.action is not None else "-"
+    if run.task == DEFAULT_TASK:
+        action = ACTIONS.get(step.action, str(step.action)) if step.action is not None else "-"
+        state = f"x {step.x:+.3f}  v {step.v:+.4f}  action {action}"
+    else:
+        shown = "-" if step.action is None else (f"{step.action:+.2f}" if isinstance(step.action, float)
+                                                 else str(step.action))
+        state = f"obs [{' '.join(f'{v:+.2f}' for v in step.obs[:6])}]  action {shown}"
     return [
         f"{run.name}  episode {index}  step {step.t}/{last}",
-        f"x {step.x:+.3f}  v {step.v:+.4f}  action {action}",
+        state,
         f"R_kin {step.r_kin:.2f}  native return {step.native_return:.0f}",
     ]
 
@@ -206,11 +226,18 @@ def evaluate_run(cfg: EvaluateConfig) -> EvaluateResult:
     client = store.connect_existing(cfg.tracking_uri)
     with tempfile.TemporaryDirectory(prefix="vlmrl-evaluate-") as tmp:
         run = load_trained_run(client, cfg.run_id, Path(tmp))
-    result = evaluate_detached(run.policy, cfg.episodes, EVAL_SEED)
+    task = get_task(run.task)
+    result = evaluate_detached(run.policy, cfg.episodes, EVAL_SEED, task)
     seed = EVAL_SEED + cfg.episode_index
-    steps = play_episode(run.policy, seed, run.shaping, cfg.frame_every)
-    shown = [s for s in steps if s.pixels is not None]
-    labels = label_frames(run, [s.x for s in shown], cfg) if run.arm.uses_vlm else None
+    camera = task.make_camera(run.shaping) if run.arm.uses_vlm else None
+    try:
+        steps = play_episode(run.policy, seed, run.shaping, cfg.frame_every, task, camera)
+        shown = [s for s in steps if s.pixels is not None]
+        labels = (label_frames(run, [s.view for s in shown if s.view is not None], cfg)
+                  if run.arm.uses_vlm else None)
+    finally:
+        if camera is not None:
+            camera.close()
     alert = SIMULATED_ALERT if run.arm.uses_vlm and run.simulated else None
     images = []
     for i, (step, pixels) in enumerate((s, s.pixels) for s in shown if s.pixels is not None):
@@ -244,13 +271,15 @@ def _summary(
 ) -> dict[str, Any]:
     frames = []
     for i, s in enumerate(shown):
-        frame: dict[str, Any] = {"step": s.t, "x": s.x, "v": s.v, "action": s.action, "r_kin": s.r_kin,
-                                 "native_return": s.native_return}
+        frame: dict[str, Any] = ({"step": s.t, "x": s.x, "v": s.v} if run.task == DEFAULT_TASK
+                                 else {"step": s.t, "obs": list(s.obs)})
+        frame.update({"action": s.action, "r_kin": s.r_kin, "native_return": s.native_return})
         if labels is not None:
             frame.update(vlm_answer=labels[i].answer, phi_raw=labels[i].potential)
         frames.append(frame)
     figures: dict[str, Any] = {
         "run_id": run.run_id, "run_name": run.name, "arm": run.arm.name, "run_status": run.status,
+        **({"task": run.task} if run.task != DEFAULT_TASK else {}),
         "vlm": run.vlm_label if run.arm.uses_vlm else "none (this arm queries no VLM)",
         "simulated": run.arm.uses_vlm and run.simulated,
     }

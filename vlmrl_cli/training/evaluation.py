@@ -4,14 +4,15 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 from vlmrl_cli.shaping.hacking import HoverSummary, summarize_hovering
-from vlmrl_cli.training.events import episode_success
+from vlmrl_cli.tasks.base import Task
+from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
 
-Policy = Callable[[np.ndarray], int]
+Policy = Callable[[np.ndarray], Any]  # an observation -> an action (an int for discrete actions)
 
 
 @dataclass(frozen=True)
@@ -46,18 +47,23 @@ class EvalResult:
             float("nan"), float("nan"), 0)
 
 
-def evaluate_detached(policy: Policy, episodes: int, seed: int) -> EvalResult:
-    """Run ``episodes`` native MountainCar-v0 episodes; episode ``i`` resets with ``seed + i``.
+def evaluate_detached(policy: Policy, episodes: int, seed: int, task: Task | None = None) -> EvalResult:
+    """Run ``episodes`` native episodes of ``task`` (MountainCar-v0 by default); episode ``i``
+    resets with ``seed + i``.
 
-    ``policy`` maps a raw observation [x, v] to an action (it applies any observation
-    normalisation itself). Success means the flag was reached before the 200-step limit.
+    ``policy`` maps a raw observation (MountainCar's [x, v]) to an action (it applies any
+    observation normalisation itself). Success is the task's rule (``Task.success``: terminated
+    at the goal within the time limit). ``positions`` records the task's hovering coordinate
+    (MountainCar's x) when it has one.
 
     Example:
         >>> r = evaluate_detached(lambda obs: 2 if obs[1] >= 0 else 0, episodes=3, seed=0)
         >>> r.success_rate, bool(r.mean_length < 200)
         (1.0, True)
     """
-    env = gym.make("MountainCar-v0")
+    task = task if task is not None else get_task(DEFAULT_TASK)
+    env = task.make_env()
+    position = task.position
     returns, lengths, successes, positions = [], [], [], []
     try:
         for i in range(episodes):
@@ -68,12 +74,14 @@ def evaluate_detached(policy: Policy, episodes: int, seed: int) -> EvalResult:
                 obs, reward, terminated, truncated, _ = env.step(policy(obs))
                 total += float(reward)
                 length += 1
-                xs.append(float(obs[0]))
+                if position is not None:
+                    xs.append(position(obs))
                 done = terminated or truncated
             returns.append(total)
             lengths.append(length)
-            successes.append(episode_success(terminated, length))
-            positions.append(np.asarray(xs))
+            successes.append(task.success(terminated, length))
+            if position is not None:
+                positions.append(np.asarray(xs))
     finally:
         env.close()
     return EvalResult(np.asarray(returns), np.asarray(lengths), np.asarray(successes, dtype=float), tuple(positions))

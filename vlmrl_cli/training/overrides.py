@@ -15,13 +15,14 @@ elsewhere: a bad value fails before any store, folder or run exists.
 
 from __future__ import annotations
 
+import contextlib
 import tomllib
 from collections.abc import Iterable, Mapping
 from typing import Any
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.provenance import to_jsonable
-from vlmrl_cli.training.presets import DEFAULT_PRESET, get_preset
+from vlmrl_cli.training.presets import DEFAULT_PRESET, preset_of
 from vlmrl_cli.vlm.config import resolve_sim_profile
 
 #: Top-level keys of older config files that now live in ``[ppo]``.
@@ -124,16 +125,33 @@ def _lift_moved(layer: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def resolve_raw(layers: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
-    """The merged raw configuration of ``layers`` (lowest first) over the named preset's ``[ppo]``."""
+    """The merged raw configuration of ``layers`` (lowest first) over the named preset's ``[ppo]``
+    (the task's: a task other than MountainCar starts from its own default preset)."""
+    from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
+
     lifted = [_lift_moved(layer) for layer in layers]
-    preset = DEFAULT_PRESET
+    task_name: Any = DEFAULT_TASK
+    preset: Any = None
     for layer in lifted:
+        task_name = layer.get("task", task_name)
         preset = layer.get("preset", preset)
+    task = None
+    if isinstance(task_name, str):
+        with contextlib.suppress(BadInput):  # the task field's own check says what is wrong with the name
+            task = get_task(task_name)
+    if preset is None:
+        preset = task.default_preset if task is not None else DEFAULT_PRESET
     raw: dict[str, Any] = {"preset": preset}
-    if isinstance(preset, str):  # else the schema says what is wrong with it
-        raw["ppo"] = to_jsonable(get_preset(preset))
+    if isinstance(preset, str) and task is not None:  # else the schema says what is wrong
+        raw["ppo"] = to_jsonable(preset_of(task_name, preset))
     for layer in lifted:
         raw = merge(raw, layer)
+    shaping = raw.get("shaping")
+    if (task is not None and task_name != DEFAULT_TASK and isinstance(shaping, Mapping)
+            and isinstance(shaping.get("label_potentials"), Mapping)):
+        # a table of the labels it changes: the task's other labels keep the task's default
+        table = {str(label): p for label, p in task.label_potentials} | dict(shaping["label_potentials"])
+        raw["shaping"] = {**shaping, "label_potentials": [[label, p] for label, p in table.items()]}
     vlm = raw.get("vlm")
     if isinstance(vlm, Mapping) and isinstance(vlm.get("sim"), Mapping):
         raw["vlm"] = {**vlm, "sim": resolve_sim_profile(vlm["sim"])}

@@ -53,6 +53,22 @@ class PPOConfig:
                                                                      "help": "value MLP hidden sizes"})
     timesteps: int = field(default=300_000, metadata={"rules": (Ge(1),), "help": "training budget, env steps"})
     eval_episodes: int = field(default=100, metadata={"rules": (Ge(1),), "help": "detached evaluation episodes"})
+    # Added with the continuous tasks (rl-baselines3-zoo's MountainCarContinuous-v0 uses them);
+    # ``ppo_identity`` leaves them out at these neutral values, so older runs keep their hashes.
+    use_sde: bool = field(default=False, metadata={"help": "generalised state-dependent exploration "
+                                                           "(continuous actions only)"})
+    log_std_init: float = field(default=0.0, metadata={"help": "initial log std of a continuous policy"})
+    ortho_init: bool = field(default=True, metadata={"help": "orthogonal initialisation of the networks"})
+
+    @property
+    def policy_kwargs(self) -> dict[str, object]:
+        """SB3's ``policy_kwargs``: the networks, and the knobs added later only off their defaults."""
+        kwargs: dict[str, object] = {"net_arch": {"pi": list(self.net_arch_pi), "vf": list(self.net_arch_vf)}}
+        if self.log_std_init != 0.0:
+            kwargs["log_std_init"] = self.log_std_init
+        if not self.ortho_init:
+            kwargs["ortho_init"] = False
+        return kwargs
 
     @property
     def vec_normalize(self) -> bool:
@@ -92,6 +108,53 @@ PRESETS: dict[str, PPOConfig] = {
     # seeds (40% [22%, 61%]), against 17/20 at lr 2e-4, 9/10 at 3e-4 and 0/10 at 1e-4.
     "paper-unreliable": replace(ZOO, timesteps=300_000, normalize_reward=False, learning_rate=1.5e-4),
 }
+
+
+#: Knobs added after runs existed, with the value that leaves training as it was.
+NEUTRAL_PPO_KNOBS: dict[str, object] = {"use_sde": False, "log_std_init": 0.0, "ortho_init": True}
+
+
+def ppo_identity(ppo: PPOConfig) -> dict[str, object]:
+    """The PPO knobs as they enter config hashes: every field, the later ones only off neutral.
+
+    Example:
+        >>> "use_sde" in ppo_identity(PPOConfig()), ppo_identity(PPOConfig(use_sde=True))["use_sde"]
+        (False, True)
+    """
+    from vlmrl_cli.core.provenance import to_jsonable
+
+    ident: dict[str, object] = to_jsonable(ppo)
+    for key, neutral in NEUTRAL_PPO_KNOBS.items():
+        if ident.get(key) == neutral:
+            del ident[key]
+    return ident
+
+
+def preset_names(task: str) -> list[str]:
+    """The presets of ``task`` (MountainCar's: ``PRESETS``)."""
+    from vlmrl_cli.tasks.registry import get_task
+
+    table = get_task(task).presets
+    return list(PRESETS) if table is None else list(table)
+
+
+def preset_of(task: str, name: str) -> PPOConfig:
+    """The PPO preset ``name`` of ``task``: MountainCar's from ``PRESETS``, another task's from
+    its plug-in (``Task.presets``); an unknown one is a ``BadInput`` naming the task's presets."""
+    from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
+
+    if task == DEFAULT_TASK:
+        return get_preset(name)
+    table = get_task(task).presets
+    if table is None:
+        return get_preset(name)
+    if name not in table:
+        raise BadInput(f"unknown preset '{name}' for task {task}{did_you_mean(name, table)}; "
+                       f"choose from {', '.join(table)}.")
+    from vlmrl_cli.training.validation import validate_as
+
+    ppo: PPOConfig = validate_as(PPOConfig, dict(table[name]))  # a plug-in's table is checked like a config file
+    return ppo
 
 
 def get_preset(name: str) -> PPOConfig:

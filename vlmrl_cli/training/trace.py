@@ -15,13 +15,15 @@ from vlmrl_cli.training.config import TrainJob
 
 def native_returns(job: TrainJob) -> list[float]:
     """Native (unshaped) returns of the episodes completed while training ``job``."""
+    from vlmrl_cli.tasks.registry import get_task
     from vlmrl_cli.training.envs import make_train_env
     from vlmrl_cli.training.model import make_model
     from vlmrl_cli.vlm.registry import build_client
 
-    client = build_client(job.vlm, stream=job.seed) if job.arm.uses_vlm else None
+    task = get_task(job.task)
+    client = build_client(job.vlm, stream=job.seed, reader=task.reader) if job.arm.uses_vlm else None
     try:
-        env, _ = make_train_env(job.arm, job.ppo, job.shaping, client, job.seed)
+        env, _ = make_train_env(job.arm, job.ppo, job.shaping, client, job.seed, task)
         model = make_model(job.ppo, env, job.seed)
         tracker = EpisodeTracker(job.name, job.timesteps)
         model.learn(total_timesteps=job.timesteps, callback=tracker)

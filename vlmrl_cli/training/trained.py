@@ -12,6 +12,8 @@ import numpy as np
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec
 from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.tasks.base import Task
+from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training.evaluation import Policy
 from vlmrl_cli.training.validation import validate_as
@@ -25,14 +27,19 @@ CONFIG = "config.json"
 def deterministic_policy(model: Any, env: Any) -> Policy:
     """The trained policy on raw observations, applying the training obs normalisation
     (when ``env`` is a ``VecNormalize``)."""
+    from gymnasium.spaces import Discrete
     from stable_baselines3.common.vec_env import VecNormalize
 
-    def act(obs: np.ndarray) -> int:
+    discrete = isinstance(model.action_space, Discrete)
+
+    def act(obs: np.ndarray) -> Any:
         x = np.asarray(obs, dtype=np.float32)[None, :]
         if isinstance(env, VecNormalize):
             x = np.asarray(env.normalize_obs(x), dtype=np.float32)
         action, _ = model.predict(x, deterministic=True)
-        return int(np.asarray(action).reshape(-1)[0])
+        if discrete:
+            return int(np.asarray(action).reshape(-1)[0])
+        return np.asarray(action)[0]  # a continuous action: the env's action shape
 
     return act
 
@@ -51,6 +58,7 @@ class TrainedRun:
     simulated: bool
     policy: Policy
     seed: int = 0  # the training seed (a placebo arm's label map depends on it)
+    task: str = "mountain-car"  # the run's task (config.json names it when not MountainCar)
 
 
 def load_trained_run(client: Any, run_id: str, workdir: Path) -> TrainedRun:
@@ -73,6 +81,7 @@ def load_trained_run(client: Any, run_id: str, workdir: Path) -> TrainedRun:
     store.download_artifacts(client, run_id, [n for n in (MODEL, CONFIG, NORMALIZER) if n in artifacts], workdir)
     config = json.loads((workdir / CONFIG).read_text(encoding="utf-8"))
     tags = run.data.tags
+    task = str(config.get("task", DEFAULT_TASK))
     return TrainedRun(
         run_id=run_id,
         name=tags.get(schema.MLFLOW_RUN_NAME, run_id),
@@ -82,8 +91,9 @@ def load_trained_run(client: Any, run_id: str, workdir: Path) -> TrainedRun:
         vlm=validate_as(VLMConfig, dict(config["vlm"])) if "vlm" in config else VLMConfig(),
         vlm_label=tags.get(schema.TAG_VLM, "unknown"),
         simulated=tags.get(schema.TAG_SIMULATED) == "true",
-        policy=_load_policy(workdir),
+        policy=_load_policy(workdir, get_task(task)),
         seed=int(config.get("seed", 0)),
+        task=task,
     )
 
 
@@ -96,17 +106,14 @@ def _shaping_config(data: dict[str, Any] | None) -> ShapingConfig:
     return result
 
 
-def _load_policy(workdir: Path) -> Policy:
-    import gymnasium as gym
+def _load_policy(workdir: Path, task: Task) -> Policy:
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
-
-    from vlmrl_cli.training.envs import ENV_ID
 
     model = PPO.load(workdir / MODEL, device="cpu")
     normalizer: Any = None
     if (workdir / NORMALIZER).exists():
-        normalizer = VecNormalize.load(str(workdir / NORMALIZER), DummyVecEnv([lambda: gym.make(ENV_ID)]))
+        normalizer = VecNormalize.load(str(workdir / NORMALIZER), DummyVecEnv([task.make_env]))
         normalizer.training = False
         normalizer.norm_reward = False
     return deterministic_policy(model, normalizer)

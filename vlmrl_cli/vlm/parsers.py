@@ -13,9 +13,11 @@ Each parser accepts the formats small VLMs actually emit (bare values, values in
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import math
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -68,7 +70,7 @@ class MCQResult:
     """A parsed zone label, set only for OK."""
 
     status: ParseStatus
-    label: Zone | None = None
+    label: str | None = None  # a ``Zone`` for MountainCar's vocabulary (a ``str`` enum)
 
     @property
     def ok(self) -> bool:
@@ -211,15 +213,26 @@ def parse_box(text: str | None) -> BoxResult:
         return BoxResult(ParseStatus.FORMAT_COLLAPSE)
 
 
+@functools.lru_cache(maxsize=16)
+def _label_patterns(labels: tuple[str, ...]) -> tuple[re.Pattern[str], re.Pattern[str]]:
+    """The (choice, label) patterns of a vocabulary, as ``_CHOICE`` and ``_LABEL`` for the zones;
+    longer labels first, so that ``NEAR GOAL`` is not read as ``GOAL``."""
+    words = sorted((re.escape(_normalise_label_text(label)) for label in labels), key=len, reverse=True)
+    alternatives = "|".join(words)
+    return (re.compile(rf"\b(?:CHOICE|ANSWER|LABEL|ZONE)\s*(?:=|:|IS)\s*({alternatives})\b"),
+            re.compile(rf"\b({alternatives})\b"))
+
+
 def _normalise_label_text(text: str) -> str:
     return re.sub(r"[\s_\-]+", " ", text.upper())
 
 
-def parse_mcq(text: str | None) -> MCQResult:
+def parse_mcq(text: str | None, labels: Sequence[str] | None = None) -> MCQResult:
     """The zone label in an MCQ answer, in any case, with ``_``, ``-`` or spaces inside.
 
     ``Choice = X`` / ``Answer: X`` wins; otherwise exactly one distinct label must appear
-    (a text naming two labels, e.g. an echo of the choices, is AMBIGUOUS).
+    (a text naming two labels, e.g. an echo of the choices, is AMBIGUOUS). ``labels``: another
+    task's vocabulary (upper-case, ``_`` between words); None is MountainCar's zones.
 
     Example:
         >>> parse_mcq("Choice = BOTTOM").label
@@ -228,6 +241,8 @@ def parse_mcq(text: str | None) -> MCQResult:
         <Zone.LEFT_SLOPE: 'LEFT_SLOPE'>
         >>> parse_mcq("BOTTOM or LEFT_SLOPE").status
         <ParseStatus.AMBIGUOUS: 'ambiguous'>
+        >>> parse_mcq("Answer: above bar", labels=("HANGING", "ABOVE_BAR")).label
+        'ABOVE_BAR'
     """
     try:
         if text is None:
@@ -235,11 +250,14 @@ def parse_mcq(text: str | None) -> MCQResult:
         if not text.strip():
             return MCQResult(ParseStatus.EMPTY)
         norm = _normalise_label_text(text)
-        chosen = list(dict.fromkeys(_CHOICE.findall(norm))) or list(dict.fromkeys(_LABEL.findall(norm)))
+        choice, label = (_CHOICE, _LABEL) if labels is None else _label_patterns(tuple(labels))
+        chosen = list(dict.fromkeys(choice.findall(norm))) or list(dict.fromkeys(label.findall(norm)))
         if not chosen:
             return MCQResult(ParseStatus.FORMAT_COLLAPSE)
         if len(chosen) > 1:
             return MCQResult(ParseStatus.AMBIGUOUS)
+        if labels is not None:
+            return MCQResult(ParseStatus.OK, chosen[0].replace(" ", "_"))
         return MCQResult(ParseStatus.OK, Zone(chosen[0].replace(" ", "_")))
     except Exception:  # a parser must never take the probe down; odd input is a collapse
         return MCQResult(ParseStatus.FORMAT_COLLAPSE)

@@ -45,3 +45,32 @@ PROMPTS: dict[PromptKind, Prompt] = {
         f"the car? Choose exactly one of: {ZONE_CHOICES}. Answer with the label only.",
     ),
 }
+
+
+@dataclass(frozen=True)
+class Milestones:
+    """A task's MCQ vocabulary: its ``labels`` in order (a flickering answer moves to a neighbour
+    in this order) and the ``prompt`` that asks for one of them. MountainCar's is ``ZONE_MILESTONES``.
+
+    Example:
+        >>> ZONE_MILESTONES.labels[:2], ZONE_MILESTONES.prompt.kind
+        (('LEFT_PEAK', 'LEFT_SLOPE'), <PromptKind.MCQ: 'mcq'>)
+    """
+
+    labels: tuple[str, ...]
+    prompt: Prompt
+
+    def __post_init__(self) -> None:
+        if len(self.labels) < 2 or len(set(self.labels)) != len(self.labels):
+            raise ValueError(f"a milestone vocabulary needs at least two distinct labels, got {self.labels}")
+        if self.prompt.kind is not PromptKind.MCQ:
+            raise ValueError("a milestone vocabulary is asked with an MCQ prompt")
+
+
+def mcq_prompt(scene: str, labels: tuple[str, ...]) -> Prompt:
+    """The MCQ prompt of a task: ``scene`` describes the picture and asks the question; the
+    choices and the answer format follow, as in MountainCar's prompt."""
+    return Prompt(PromptKind.MCQ, f"{scene} Choose exactly one of: {', '.join(labels)}. Answer with the label only.")
+
+
+ZONE_MILESTONES = Milestones(tuple(z.value for z in ZONES), PROMPTS[PromptKind.MCQ])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.vlm.base import Backend
@@ -10,14 +11,18 @@ from vlmrl_cli.vlm.cache import ResponseCache
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.config import BACKENDS, VLMConfig
 
+if TYPE_CHECKING:
+    from vlmrl_cli.vlm.sim import MilestoneReader
 
-def build_backend(cfg: VLMConfig, stream: int = 0) -> Backend:
+
+def build_backend(cfg: VLMConfig, stream: int = 0, reader: MilestoneReader | None = None) -> Backend:
     """Instantiate the backend ``cfg.backend``; unknown names are a ``BadInput``. ``stream`` seeds a
-    stochastic simulated VLM's per-query draws (the training run's seed); others ignore it."""
+    stochastic simulated VLM's per-query draws (the training run's seed); ``reader`` is a task's
+    pixel reader for the simulated VLM (None: MountainCar's). Real backends ignore both."""
     if cfg.backend == "sim":
         from vlmrl_cli.vlm.sim import SimulatedVLM
 
-        return SimulatedVLM(cfg.sim, stream=stream)
+        return SimulatedVLM(cfg.sim, stream=stream, reader=reader)
     if cfg.backend == "hf":
         from vlmrl_cli.vlm.hf import HFBackend
 
@@ -33,8 +38,9 @@ def build_backend(cfg: VLMConfig, stream: int = 0) -> Backend:
     raise BadInput(f"unknown VLM backend '{cfg.backend}'; choose one of {', '.join(BACKENDS)}.")
 
 
-def build_client(cfg: VLMConfig, transcript: Path | None = None, stream: int = 0) -> VLMClient:
+def build_client(cfg: VLMConfig, transcript: Path | None = None, stream: int = 0,
+                 reader: MilestoneReader | None = None) -> VLMClient:
     """The backend of ``cfg`` behind the shared response cache (unless disabled)."""
-    backend = build_backend(cfg, stream)
+    backend = build_backend(cfg, stream, reader)
     cache = ResponseCache(cfg.cache_path) if cfg.use_cache and cfg.cache_path is not None else None
     return VLMClient(backend, cache=cache, transcript=transcript)

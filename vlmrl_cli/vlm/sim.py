@@ -13,13 +13,14 @@ from __future__ import annotations
 
 import hashlib
 import time
+from typing import Protocol
 
 import numpy as np
 
 from vlmrl_cli.frames import geometry
 from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.vlm.config import NEUTRAL_SIM_KNOBS, SimKnobs, sim_identity
-from vlmrl_cli.vlm.prompts import Prompt, PromptKind
+from vlmrl_cli.vlm.prompts import Milestones, Prompt, PromptKind
 
 WHEEL_GREY = 128
 # Columns with at least this many wheel-grey pixels are wheel, not anti-aliasing strays.
@@ -36,6 +37,21 @@ _FLOAT_FORMATS: tuple[str, ...] = (
     "{x:.2f}",
 )
 _MCQ_FORMATS: tuple[str, ...] = ("{label}", "Choice = {label}", "{label}.", "The car is at {label}.")
+_TASK_MCQ_FORMATS: tuple[str, ...] = ("{label}", "Choice = {label}", "{label}.", "The image shows {label}.")
+
+
+class MilestoneReader(Protocol):
+    """Another task's pixel reader (a task plug-in supplies it): the milestone label a frame
+    shows, read from its pixels only, or None when the picture shows no agent. ``name`` goes into
+    the simulated model's name, so that cached answers of two tasks never mix."""
+
+    name: str
+    milestones: Milestones
+
+    def read(self, pixels: np.ndarray) -> str | None: ...
+
+
+NO_NUMBER = "I can only say which of the listed stages the image shows."
 
 
 def knobs_digest(knobs: SimKnobs) -> str:
@@ -87,8 +103,13 @@ def snap_to_patch(column: float, patch_px: int) -> float:
 
 def _neighbour(index: int, left: bool) -> int:
     """The zone index one step left (or right) of ``index``, turned back at the track's ends."""
+    return _step(index, len(geometry.ZONES), left)
+
+
+def _step(index: int, n: int, left: bool) -> int:
+    """The index one step left (or right) of ``index`` among ``n`` labels, turned back at the ends."""
     step = -1 if left else 1
-    if not 0 <= index + step < len(geometry.ZONES):
+    if not 0 <= index + step < n:
         step = -step
     return index + step
 
@@ -124,7 +145,7 @@ class SimulatedVLM:
     name = "sim"
     simulated = True
 
-    def __init__(self, knobs: SimKnobs | None = None, stream: int = 0) -> None:
+    def __init__(self, knobs: SimKnobs | None = None, stream: int = 0, reader: MilestoneReader | None = None) -> None:
         knobs = knobs or SimKnobs()
         for prob_name in ("flicker", "box_failure", "query_flicker"):
             value = getattr(knobs, prob_name)
@@ -139,7 +160,9 @@ class SimulatedVLM:
         self.knobs = knobs
         # The response cache keys on (backend, model, prompt, image): the knobs that shape the
         # answers go into the model name so that a cached answer never outlives its knobs.
-        self.model = f"{MODEL_BASE}/{knobs_digest(knobs)}"
+        self.reader = reader
+        base = MODEL_BASE if reader is None else f"{MODEL_BASE}-{reader.name}"
+        self.model = f"{base}/{knobs_digest(knobs)}"
         self.stochastic = knobs.query_flicker > 0
         self._draws = np.random.default_rng([knobs.seed, stream, 0x71F1])  # query_flicker only
 
@@ -158,6 +181,8 @@ class SimulatedVLM:
     def answer(self, prompt: Prompt, frame: Frame) -> str:
         if self.knobs.latency_s > 0:
             time.sleep(self.knobs.latency_s)
+        if self.reader is not None:
+            return self._task_answer(prompt, frame, self.reader)
         x_est = self.estimate_x(frame)
         if x_est is None:
             return REFUSAL
@@ -196,6 +221,24 @@ class SimulatedVLM:
             index = _neighbour(index, self._draws.random() < 0.5)
         template = _MCQ_FORMATS[int(rng.integers(len(_MCQ_FORMATS)))]
         return template.format(label=geometry.ZONES[index].value)
+
+    def _task_answer(self, prompt: Prompt, frame: Frame, reader: MilestoneReader) -> str:
+        """Another task's answers: MCQ from ``reader`` with the same flicker, format mix and
+        query flicker as MountainCar's; a float or box prompt gets no number (a format failure)."""
+        label = reader.read(frame.pixels)
+        if label is None:
+            return REFUSAL
+        if prompt.kind is not PromptKind.MCQ:
+            return NO_NUMBER
+        rng = self._rng(prompt, frame)
+        labels = reader.milestones.labels
+        index = labels.index(label)
+        if rng.random() < self.knobs.flicker:
+            index = _step(index, len(labels), rng.random() < 0.5)
+        if self.stochastic and self._draws.random() < self.knobs.query_flicker:
+            index = _step(index, len(labels), self._draws.random() < 0.5)
+        template = _TASK_MCQ_FORMATS[int(rng.integers(len(_TASK_MCQ_FORMATS)))]
+        return template.format(label=labels[index])
 
     def zone(self, x_est: float) -> geometry.Zone:
         """The label the simulated classifier gives an estimate before flicker: its true zone, or

@@ -1,0 +1,60 @@
+"""What the hybrid reward needs to know of a task: its observation, its dense term, its camera.
+
+A task plug-in (``vlmrl_cli.tasks``) fills a ``Scene``; ``HybridReward`` reads nothing else about
+the environment. ``MOUNTAIN_CAR`` is the paper's: observation ``[x, v]``, Eq. 1's kinematic term
+on ``x`` and a camera that images the position.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from gymnasium.envs.classic_control.mountain_car import MountainCarEnv
+
+from vlmrl_cli.shaping.camera import FrameView
+from vlmrl_cli.shaping.kinematic import kinematic_reward
+
+#: ``dense(obs, scale, offset)``: the dense "proprioceptive" term of one step, from the
+#: observation only (``ShapingConfig.kin_scale`` and ``kin_offset``).
+DenseTerm = Callable[[np.ndarray, float, float], float]
+
+
+class SceneCamera(Protocol):
+    """A run's camera: the one component that reads the simulator (``sim``, the unwrapped env)
+    and turns its state into a ``FrameView`` (quantised, so that distinct frames are bounded)."""
+
+    renders: int
+
+    def look(self, sim: Any) -> FrameView: ...
+
+    def close(self) -> None: ...
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A task as the reward wrapper sees it.
+
+    ``obs_shape``: the observation the dense term reads; ``dense``: that term; ``sim_type``: the
+    unwrapped env class the camera images (checked when an arm uses the VLM).
+    """
+
+    name: str
+    obs_shape: tuple[int, ...]
+    dense: DenseTerm
+    sim_type: type
+
+
+def mountain_car_dense(obs: np.ndarray, scale: float, offset: float) -> float:
+    """Paper Eq. 1 on the position ``obs[0]``: ``max(0, scale (x + offset))``.
+
+    Example:
+        >>> mountain_car_dense(np.array([0.1, 0.0]), 2.0, 0.4)
+        1.0
+    """
+    return kinematic_reward(float(obs[0]), scale, offset)
+
+
+MOUNTAIN_CAR = Scene("mountain-car", (2,), mountain_car_dense, MountainCarEnv)

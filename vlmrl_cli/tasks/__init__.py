@@ -1,0 +1,1 @@
+"""Task plug-ins: everything that knows one environment (its env, milestones, camera, reader)."""

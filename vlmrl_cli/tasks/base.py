@@ -1,0 +1,106 @@
+"""A ``Task``: everything the harness knows about one environment, in one object.
+
+Nothing outside ``vlmrl_cli.tasks`` names an environment: training builds its envs with
+``Task.make_env``, the reward wrapper reads the task's ``Scene`` (observation, dense term,
+simulator type), the camera comes from ``Task.make_camera``, the simulated VLM reads milestones
+with ``Task.reader``, and reports take their thresholds and success rule from here.
+
+A user's own task is a ``Task`` value in the user's code, loaded by ``--task package.module:NAME``
+(see ``tasks/registry.py`` and the docs' "Add a task" page).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from vlmrl_cli.shaping.config import ShapingConfig, label_problem
+from vlmrl_cli.shaping.scene import Scene, SceneCamera
+from vlmrl_cli.vlm.prompts import Milestones
+from vlmrl_cli.vlm.sim import MilestoneReader
+
+LabelMap = tuple[tuple[str, float], ...]
+
+#: A preset that only checks the plumbing (seconds per run), as MountainCar's ``smoke``: a task's
+#: ``presets["smoke"]`` may take it whole.
+SMOKE: Mapping[str, Any] = {"n_envs": 2, "n_steps": 64, "batch_size": 64, "gae_lambda": 0.95, "gamma": 0.99,
+                            "n_epochs": 1, "normalize_obs": True, "normalize_reward": True, "timesteps": 1_024,
+                            "eval_episodes": 3}
+
+
+@dataclass(frozen=True)
+class Task:
+    """One environment as the experiment sees it.
+
+    Attributes:
+        name: the ``--task`` name (``mountain-car``); runs are tagged ``vlmrl.task`` with it.
+        env_id: the gymnasium id ``make_env`` builds (``MountainCar-v0``).
+        summary: one line for ``--help`` and reports.
+        scene: the observation shape, the dense "proprioceptive" term and the simulator type.
+        milestones: the MCQ vocabulary (labels in order) and its prompt.
+        label_potentials: the default raw potential of every label.
+        truth: the true label of a simulator (the unwrapped env), for probes and diagnostics.
+        make_camera: the run's camera for a shaping config, quantised so that distinct frames
+            (and a real VLM's queries per run) are bounded.
+        reader: the simulated VLM's pixel reader; None for MountainCar's built-in one.
+        feature_dim: the size of the camera's frame features (``shaping.features.feature_dim``).
+        thresholds: reward thresholds of reports (rolling mean native return), lowest first.
+        max_steps: the time limit; an episode succeeds when it terminates (``success``).
+        presets: PPO presets as ``PPOConfig`` keyword arguments (None: MountainCar's table
+            in ``training/presets.py``); at least ``zoo`` and ``smoke``.
+        default_preset: the preset a run takes when none is named.
+        zoo_reference: rl-baselines3-zoo's published PPO result for the env, cited.
+        position: the coordinate of the hovering diagnostic, read from an observation (None:
+            no diagnostic), and ``hover_from``, where hovering starts.
+        probes_floats: whether the float and box probe (and the ``vision-float`` arm) exist.
+        env_kwargs: keyword arguments of ``gym.make``.
+    """
+
+    name: str
+    env_id: str
+    summary: str
+    scene: Scene
+    milestones: Milestones
+    label_potentials: LabelMap
+    truth: Callable[[Any], str]
+    make_camera: Callable[[ShapingConfig], SceneCamera]
+    reader: MilestoneReader | None
+    feature_dim: int
+    thresholds: tuple[float, ...]
+    max_steps: int
+    presets: Mapping[str, Mapping[str, Any]] | None
+    default_preset: str
+    zoo_reference: str
+    position: Callable[[np.ndarray], float] | None = None
+    hover_from: float | None = None
+    probes_floats: bool = False
+    env_kwargs: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        problem = label_problem(self.label_potentials, self.milestones.labels)
+        if problem:
+            raise ValueError(f"task '{self.name}': {problem}")
+        if list(self.thresholds) != sorted(self.thresholds) or not self.thresholds:
+            raise ValueError(f"task '{self.name}': give its reward thresholds lowest first")
+        if self.presets is not None and not {"zoo", "smoke"} <= set(self.presets):
+            raise ValueError(f"task '{self.name}': its presets must include 'zoo' and 'smoke'")
+
+    def make_env(self, render_mode: str | None = None) -> gym.Env[Any, Any]:
+        """A fresh env of this task (``gym.make(env_id)``, the time limit included); a rendering
+        one draws headless (SDL's dummy video driver unless one is set)."""
+        if render_mode is not None:
+            os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+        return gym.make(self.env_id, render_mode=render_mode, **dict(self.env_kwargs))
+
+    def success(self, terminated: bool, length: int) -> bool:
+        """The one success rule: the episode terminated (goal reached) within the time limit."""
+        return bool(terminated) and length <= self.max_steps
+
+    def labels_problem(self, label_potentials: LabelMap) -> str | None:
+        """Why a label map does not fit this task (None when it does)."""
+        return label_problem(label_potentials, self.milestones.labels)
