@@ -25,10 +25,10 @@ from vlmrl_cli.analysis.learning_profile import RegimeProfile, regime_profile
 from vlmrl_cli.analysis.load import load_experiment
 from vlmrl_cli.calibration.regimes import CalibrateConfig, Regime
 from vlmrl_cli.core import tables
+from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, flatten, git_commit, package_versions, to_jsonable
 from vlmrl_cli.report import figures
 from vlmrl_cli.report.table2 import threshold_key
-from vlmrl_cli.report.writer import ensure_writable
 from vlmrl_cli.sweep.runner import JobResult, SweepReporter, run_sweep
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
@@ -53,7 +53,7 @@ def calibrate(
 ) -> CalibrationResult:
     """Train what is missing (one sweep per regime, each with a fresh ``reporter_for(regime)``),
     then score and write. Failed runs stop before scoring; a rerun resumes."""
-    ensure_writable(cfg.out)  # before training: a bad --out must not cost a sweep, nor leave a store
+    check_out_folder(cfg.out)  # before training: a bad --out must not cost a sweep, nor leave a store
     start = time.perf_counter()
     result = CalibrationResult(pd.DataFrame())
     result.trained, result.failed = train_regimes(cfg.regimes, reporter_for)

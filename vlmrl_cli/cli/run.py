@@ -79,7 +79,7 @@ def run(
         if cfg.vlm.backend == "sim":
             console.print("[yellow]VLM: the SIMULATED VLM (a pixel-reading stand-in), not a real model.[/]")
         with RichSweepReporter(console) as reporter:
-            summary = run_sweep(cfg, reporter)
+            summary = run_sweep(cfg, reporter, checked=True)
         if summary.elsewhere:
             console.print(f"[yellow]{len(summary.elsewhere)} job(s) are being trained by another live sweep and "
                           f"were left to it: {', '.join(summary.elsewhere)}[/]")

@@ -50,3 +50,29 @@ def file_problem(path: Path) -> str | None:
             return f"{path} is a folder, not a file"
         return None if os.access(path, os.W_OK) else f"{path} is not writable"
     return folder_problem(path.parent)
+
+
+def out_folder_problem(out: Path) -> str | None:
+    """Why ``out`` cannot be a command's output folder (an existing folder written into, or one
+    made with its parents), or None; nothing is created.
+
+    Example:
+        >>> import tempfile, pathlib
+        >>> root = pathlib.Path(tempfile.mkdtemp())
+        >>> _ = (root / "f").write_text("x")
+        >>> out_folder_problem(root / "f"), out_folder_problem(root / "new") is None
+        ('it is a file', True)
+    """
+    if out.exists() and not out.is_dir():
+        return "it is a file"
+    return folder_problem(out)
+
+
+def check_out_folder(out: Path, flag: str = "--out") -> None:
+    """``BadInput`` (one line, naming ``flag``) unless ``out`` can be the output folder; the one
+    check every command runs on its output folder before it creates anything."""
+    from vlmrl_cli.core.errors import BadInput
+
+    problem = out_folder_problem(out)
+    if problem:
+        raise BadInput(f"cannot write to the output folder {out} ({problem}); pass {flag} to a writable folder.")

@@ -25,7 +25,7 @@ from typing import Any
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
-from vlmrl_cli.core.paths import folder_problem
+from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, flatten
 from vlmrl_cli.frames.render import FrameRenderer
 from vlmrl_cli.probe.scoring import (
@@ -117,13 +117,7 @@ def _figure_note(backend: Backend) -> str:
 
 def _staging_folder(out: Path) -> Path:
     """Check ``out`` can be written and make the temporary sibling the results are staged in."""
-    if out.exists() and not out.is_dir():
-        raise BadInput(f"--out {out} is a file; pass a folder.")
-    if out.exists() and not os.access(out, os.W_OK):
-        raise BadInput(f"--out {out} is not writable; pass a folder you can write to.")
-    problem = folder_problem(out)
-    if problem:
-        raise BadInput(f"cannot write the output folder {out} ({problem}); pass a writable --out.")
+    check_out_folder(out)
     parent = out.resolve().parent
     try:
         parent.mkdir(parents=True, exist_ok=True)
@@ -160,9 +154,7 @@ def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None) -> Tax
     from vlmrl_cli.probe.figure1 import save_figure1
     from vlmrl_cli.probe.table1 import write_tables
 
-    problem = folder_problem(cfg.out)
-    if problem:
-        raise BadInput(f"cannot write the output folder {cfg.out} ({problem}); pass a writable --out.")
+    check_out_folder(cfg.out)
     check_vlm(cfg.vlm)  # cache path, model, server, transcript: before the store and folders exist
     tracker = store.connect(cfg.tracking_uri)
     staging = _staging_folder(cfg.out)

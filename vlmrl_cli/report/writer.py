@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +22,7 @@ from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM
 from vlmrl_cli.core import tables
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
+from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
 from vlmrl_cli.report import attribution, figures, hacking
 from vlmrl_cli.report import claims as claims_mod
@@ -93,24 +93,6 @@ def _validate(cfg: ReportConfig) -> None:
         raise BadInput(f"use at least 10 rank-test permutations, got {cfg.n_perm}.")
     if not 0.0 < cfg.detached_cut <= 1.0:
         raise BadInput(f"the detached success cut must be in (0, 1], got {cfg.detached_cut}.")
-
-
-def ensure_writable(out: Path) -> None:
-    """Check that ``out`` exists as a writable folder or could be created; else ``BadInput``.
-
-    Creates nothing: a command that fails later must leave no empty folder behind. Callers
-    create ``out`` when they have something to write.
-    """
-    existing = out.absolute()
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
-    if existing != out.absolute() and not existing.is_dir():
-        raise BadInput(f"cannot write to the output folder {out} ({existing} is a file); pass --out to a folder.")
-    if out.exists() and not out.is_dir():
-        raise BadInput(f"cannot write to the output folder {out} (it is a file); pass --out to a folder.")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise BadInput(f"cannot write to the output folder {out} (no write permission on {existing}); "
-                       "pass --out to a writable folder.")
 
 
 def load_reported(path: Path | None) -> dict[str, Any]:
@@ -344,7 +326,7 @@ def write_report(cfg: ReportConfig) -> ReportResult:
         BadInput: bad settings, unwritable ``out``, unreachable store, missing or empty experiment.
     """
     _validate(cfg)
-    ensure_writable(cfg.out)  # before touching MLflow, so a bad --out fails fast
+    check_out_folder(cfg.out)  # before touching MLflow, so a bad --out fails fast
     reported = load_reported(cfg.reported)
     client = store.connect_existing(cfg.tracking_uri)
     data = load_experiment(client, cfg.experiment)

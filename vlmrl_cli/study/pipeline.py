@@ -31,12 +31,12 @@ from vlmrl_cli.calibration.pipeline import log_summary_run, runs_of, train_regim
 from vlmrl_cli.calibration.regimes import Regime
 from vlmrl_cli.core import tables
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, git_commit, package_versions
 from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
 from vlmrl_cli.report import hacking
 from vlmrl_cli.report.attribution import DEFAULT_AUC_DELTA
 from vlmrl_cli.report.table2 import per_seed_table
-from vlmrl_cli.report.writer import ensure_writable
 from vlmrl_cli.study import verdicts
 from vlmrl_cli.study.config import StudyConfig
 from vlmrl_cli.sweep import cost as cost_model
@@ -106,7 +106,7 @@ def run_study(
     def stage(name: str, start: float, **extra: Any) -> None:
         result.stages.append({"stage": name, "wall_s": round(time.perf_counter() - start, 1), **extra})
 
-    ensure_writable(cfg.out)
+    check_out_folder(cfg.out)
     start = time.perf_counter()
     if train:
         result.trained, result.failed = train_regimes(cfg.all_regimes(), reporter_for)

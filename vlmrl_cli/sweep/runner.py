@@ -57,10 +57,14 @@ class SilentReporter:
 
 
 def vlm_identity(cfg: RunConfig) -> tuple[str, bool]:
-    """The VLM label and simulated flag of the sweep, checking the backend answers at all
-    (unreachable server, missing model: ``BadInput`` before anything trains)."""
+    """The VLM label and simulated flag of the sweep, checking the backend starts at all
+    (unreachable server, unreadable transcript: ``BadInput`` before anything trains). An hf model
+    is not loaded for this: ``preflight`` (``vlm.preflight.check_vlm``) has found its files, and
+    each worker loads it once."""
     if not any(ARMS[name].uses_vlm for name in cfg.arms):
         return "none (no arm uses a VLM)", False
+    if cfg.vlm.backend == "hf":
+        return f"hf:{cfg.vlm.model or ''}", False
     from vlmrl_cli.tasks.registry import get_task
     from vlmrl_cli.vlm.base import describe
     from vlmrl_cli.vlm.registry import build_backend
@@ -138,11 +142,14 @@ def make_executor(cfg: RunConfig, n_jobs: int) -> Executor:
     return LocalExecutor(min(cfg.workers, n_jobs))
 
 
-def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job) -> SweepSummary:
+def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job,
+              checked: bool = False) -> SweepSummary:
     """Validate, plan, train the pending jobs through ``cfg.executor``, record the sweep.
-    ``job_fn`` is what each job runs (a benchmark passes a fake trainer)."""
+    ``job_fn`` is what each job runs (a benchmark passes a fake trainer); ``checked``: the caller
+    has just run ``preflight(cfg)`` itself (the CLI does, before its header), so it is not run twice."""
     start = time.perf_counter()
-    preflight(cfg)
+    if not checked:
+        preflight(cfg)
     client = store.connect(cfg.tracking_uri)
     tracking_uri = store.resolve_tracking_uri(cfg.tracking_uri)
     vlm_label, simulated = vlm_identity(cfg)

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.frames.gif import captioned, write_gif
 from vlmrl_cli.shaping.arms import PotentialSource
 from vlmrl_cli.shaping.camera import FrameView
@@ -68,8 +69,7 @@ class EvaluateConfig:
                            f"got {self.episode_index}.")
         if self.frame_every < 1 or self.width < 16:
             raise BadInput("the GIF needs frame_every >= 1 and a width of at least 16 pixels.")
-        if self.out_dir.exists() and not self.out_dir.is_dir():
-            raise BadInput(f"--out {self.out_dir} is a file; pass a folder.")
+        check_out_folder(self.out_dir)
 
 
 @dataclass(frozen=True)
