@@ -48,7 +48,8 @@ class ExperimentData:
     ``runs``: one row per kept run (columns ``RUN_COLUMNS``; ``end_time`` a UTC timestamp).
     ``episodes``: one row per training episode (``EPISODE_COLUMNS``; ``timestep`` = global step
     at the episode's end), sorted by run and timestep. ``eval_episodes``: one row per detached
-    evaluation episode when the runs logged ``eval/episode_length`` (else empty).
+    evaluation episode when the runs logged ``eval/episode_length`` (else empty). ``task``: the
+    runs' one task (``check_one_task``).
     """
 
     experiment_id: str
@@ -56,6 +57,7 @@ class ExperimentData:
     runs: pd.DataFrame
     episodes: pd.DataFrame
     eval_episodes: pd.DataFrame
+    task: str = DEFAULT_TASK
 
 
 def _history(client: Any, run_id: str, key: str) -> pd.DataFrame:
@@ -129,17 +131,14 @@ def _run_row(run: Any) -> dict[str, Any]:
     }
 
 
-def check_one_task(runs: Sequence[Any], experiment: str) -> None:
-    """``BadInput`` unless every run is of MountainCar-v0 (runs from before tasks carry no
-    ``vlmrl.task`` tag: they are). A report never mixes tasks; reports of other tasks (their
-    thresholds, success rule and diagnostics) are not built yet."""
+def check_one_task(runs: Sequence[Any], experiment: str) -> str:
+    """The one task of ``runs`` (runs from before tasks carry no ``vlmrl.task`` tag: they are
+    MountainCar-v0's); ``BadInput`` when they mix tasks, as a report never does."""
     tasks = sorted({r.data.tags.get(schema.TAG_TASK, DEFAULT_TASK) for r in runs})
     if len(tasks) > 1:
         raise BadInput(f"MLflow experiment '{experiment}' mixes tasks ({', '.join(tasks)}); a report compares runs "
                        "of one task: train each task into its own --experiment.")
-    if tasks and tasks[0] != DEFAULT_TASK:
-        raise BadInput(f"MLflow experiment '{experiment}' holds runs of task '{tasks[0]}'; reports score "
-                       "MountainCar-v0 runs only so far (per-task reports are not built yet).")
+    return tasks[0] if tasks else DEFAULT_TASK
 
 
 def load_experiment(client: Any, experiment: str) -> ExperimentData:
@@ -155,7 +154,7 @@ def load_experiment(client: Any, experiment: str) -> ExperimentData:
                                                                           finished=True))
     if not found:
         raise BadInput(f"MLflow experiment '{experiment}' has no finished training runs; run `vlmrl run` first.")
-    check_one_task(found, experiment)
+    task = check_one_task(found, experiment)
     tables = {r.info.run_id: r.data.tags.get(schema.TAG_EPISODES_TABLE) for r in found}
     runs = pd.DataFrame([_run_row(r) for r in found], columns=RUN_COLUMNS)
     runs = (runs.sort_values("end_time", ascending=False, kind="stable")
@@ -180,4 +179,4 @@ def load_experiment(client: Any, experiment: str) -> ExperimentData:
         columns=EPISODE_COLUMNS)
     evals_df = pd.concat(evals, ignore_index=True)[EVAL_EPISODE_COLUMNS] if evals else pd.DataFrame(
         columns=EVAL_EPISODE_COLUMNS)
-    return ExperimentData(str(exp.experiment_id), str(exp.name), runs, episodes_df, evals_df)
+    return ExperimentData(str(exp.experiment_id), str(exp.name), runs, episodes_df, evals_df, task)

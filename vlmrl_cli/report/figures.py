@@ -300,13 +300,14 @@ def plot_per_arm(values: Mapping[str, np.ndarray], ax: Axes | None = None, ylabe
 
 
 def figure_hacking(eval_lengths: Mapping[str, np.ndarray], hover: Mapping[str, np.ndarray],
-                   gap: Mapping[str, np.ndarray], vlm_note: str, hover_flag: float) -> Figure:
-    """Reward-hacking diagnostic: detached episode lengths, hover fraction per seed, shaped minus native return."""
+                   gap: Mapping[str, np.ndarray], vlm_note: str, hover_flag: float, timeout: int = 200) -> Figure:
+    """Reward-hacking diagnostic: detached episode lengths (``timeout``: the task's time limit),
+    hover fraction per seed, shaped minus native return."""
     fig = Figure(figsize=(WIDTH_IN, 3.0), layout="constrained")
     ax_len, ax_hover, ax_gap = fig.subplots(1, 3)
     plot_per_arm(eval_lengths, ax_len, "detached episode length (steps)", box=True)
-    ax_len.axhline(200, color="gray", linestyle="--", linewidth=0.7)
-    ax_len.set_title("detached episodes (200 = timeout)", fontsize=SMALL + 1)
+    ax_len.axhline(timeout, color="gray", linestyle="--", linewidth=0.7)
+    ax_len.set_title(f"detached episodes ({timeout} = timeout)", fontsize=SMALL + 1)
     plot_per_arm(hover, ax_hover, "hover fraction of detached steps")
     ax_hover.axhline(hover_flag, color="tab:red", linestyle="--", linewidth=0.7)
     ax_hover.set_title("per seed (dashed: flag)", fontsize=SMALL + 1)

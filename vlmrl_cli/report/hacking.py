@@ -34,10 +34,12 @@ def _finite(x: Any) -> np.ndarray:
     return a[np.isfinite(a)]
 
 
-def hacking_frame(per_seed: pd.DataFrame, eval_episodes: pd.DataFrame, ci: float = 0.95) -> pd.DataFrame:
+def hacking_frame(per_seed: pd.DataFrame, eval_episodes: pd.DataFrame, ci: float = 0.95,
+                  timeout: int = TIMEOUT) -> pd.DataFrame:
     """One row per arm: seeds, hover fraction (mean, max over seeds), flagged seeds with a Wilson CI,
     mean dwell, mean shaped-minus-native gap, and the detached episode lengths (episodes, median,
-    90th percentile, share of timeouts). NaN where the runs did not log a quantity."""
+    90th percentile, share of timeouts: episodes of ``timeout`` steps, the task's time limit). NaN
+    where the runs did not log a quantity."""
     rows = []
     for arm in order_arms(per_seed["arm"].unique().tolist()):
         d = per_seed[per_seed["arm"] == arm]
@@ -57,7 +59,7 @@ def hacking_frame(per_seed: pd.DataFrame, eval_episodes: pd.DataFrame, ci: float
             "eval_episodes": int(lengths.size),
             "eval_length_median": float(np.median(lengths)) if lengths.size else nan,
             "eval_length_p90": float(np.percentile(lengths, 90)) if lengths.size else nan,
-            "eval_timeout_share": float(np.mean(lengths >= TIMEOUT)) if lengths.size else nan,
+            "eval_timeout_share": float(np.mean(lengths >= timeout)) if lengths.size else nan,
         })
     return pd.DataFrame(rows)
 

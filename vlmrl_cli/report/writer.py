@@ -4,6 +4,7 @@ and ``report.md``, then log them as artifacts of a ``vlmrl.kind=report`` run."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from collections.abc import Sequence
@@ -37,10 +38,12 @@ from vlmrl_cli.report.table2 import (
     write_table2,
 )
 from vlmrl_cli.shaping.hacking import HOVER_FLAG
+from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
 
 DEFAULT_REPORTED = paper.REPORTED
+MOUNTAIN_CAR_THRESHOLDS = (-190.0, -160.0, -130.0)
 
 
 @dataclass(frozen=True)
@@ -50,7 +53,9 @@ class ReportConfig:
     experiment: str = "vlmrl"  # MLflow experiment holding the training runs
     tracking_uri: str | None = None  # MLflow store (None: $MLFLOW_TRACKING_URI or sqlite:///mlflow.db)
     out: Path = Path("results/report")  # output folder
-    thresholds: tuple[float, ...] = (-190.0, -160.0, -130.0)  # reward targets (rolling mean native return)
+    # reward targets (rolling mean native return); another task's runs take that task's thresholds
+    # unless others are given
+    thresholds: tuple[float, ...] = (-190.0, -160.0, -130.0)
     window: int = 100  # episodes in the rolling mean
     min_episodes: int = 1  # fewest completed episodes before a rolling mean counts
     ci: float = 0.95  # confidence level of every interval
@@ -225,10 +230,19 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
                per_seed: pd.DataFrame, note: str, warns: Sequence[str], comparisons: pd.DataFrame,
                hack: pd.DataFrame) -> str:
     simulated = bool(data.runs["simulated"].any())
-    parts = [f"# Reproduction report: experiment `{data.experiment_name}`", ""]
+    paper_task = data.task == DEFAULT_TASK
+    title = "Reproduction report" if paper_task else f"Report (task {data.task})"
+    parts = [f"# {title}: experiment `{data.experiment_name}`", ""]
     if simulated:
         parts += ["> **SIMULATED VLM.** These runs used a simulated VLM (a pixel-reading stand-in), not a real "
                   "vision-language model. The numbers test the training pipeline, not the paper's VLM.", ""]
+    if not paper_task:
+        task = get_task(data.task)
+        parts += [f"- Task: {task.summary}. The paper reports MountainCar-v0 only: no paper value or claim "
+                  f"stands beside these runs, and Table 2 keeps the paper's layout for ours alone. Reference: "
+                  f"{task.zoo_reference}.",
+                  f"- Thresholds: {', '.join(f'{t:g}' for t in table.thresholds)}; success: the episode terminated "
+                  f"(goal reached) within {task.max_steps} steps."]
     parts += [f"- {note}", f"- Arms: {', '.join(table.arms)}; seeds per arm: "
               + ", ".join(f"{a}={int((per_seed['arm'] == a).sum())}" for a in table.arms),
               f"- Steps to a threshold: first global timestep at which the mean native return of the last "
@@ -242,18 +256,20 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
               f"{cfg.seed}) for means and ratios; score intervals for proportions of seeds (see below).", ""]
     if warns:
         parts += ["## Warnings", "", *[f"- {w}" for w in warns], ""]
-    parts += ["## Table 2: ours vs the paper", "", to_markdown(table)]
+    parts += ["## Table 2: ours vs the paper" if paper_task else "## Table 2 (ours)", "", to_markdown(table)]
     if not table.has_baseline:
         parts += ["Speedups need the `baseline` arm, which this experiment does not have.", ""]
-    parts += ["Files: [table2.md](table2.md), [table2.csv](table2.csv), [table2.tex](table2.tex).", "",
-              "## Where ours and the paper disagree", ""]
-    dis = _disagreements(table, results)
-    parts += (dis or ["- No claim is contradicted by our intervals (see the verdicts below)."]) + [""]
-    parts += ["## Claims", "", "Verdict rule: " + claims_mod.VERDICT_RULE, "",
-              claims_mod.claims_markdown(list(results)),
-              "The paper credits its speedup and its detached success to the VLM; rows judged on hybrid vs kinematic "
-              "test that credit (the two arms share the dense kinematic term and differ only by the VLM potential).",
-              "", *_statistics_md(cfg), "## Attribution: what the VLM and the dense term each add", ""]
+    parts += ["Files: [table2.md](table2.md), [table2.csv](table2.csv), [table2.tex](table2.tex).", ""]
+    if paper_task:
+        parts += ["## Where ours and the paper disagree", ""]
+        dis = _disagreements(table, results)
+        parts += (dis or ["- No claim is contradicted by our intervals (see the verdicts below)."]) + [""]
+        parts += ["## Claims", "", "Verdict rule: " + claims_mod.VERDICT_RULE, "",
+                  claims_mod.claims_markdown(list(results)),
+                  "The paper credits its speedup and its detached success to the VLM; rows judged on hybrid vs "
+                  "kinematic test that credit (the two arms share the dense kinematic term and differ only by the "
+                  "VLM potential).", ""]
+    parts += [*_statistics_md(cfg), "## Attribution: what the VLM and the dense term each add", ""]
     if len(comparisons):
         parts += [attribution.attribution_markdown(comparisons, cfg.ci),
                   "Files: [attribution.md](attribution.md), [attribution.csv](attribution.csv).", ""]
@@ -330,8 +346,14 @@ def write_report(cfg: ReportConfig) -> ReportResult:
     reported = load_reported(cfg.reported)
     client = store.connect_existing(cfg.tracking_uri)
     data = load_experiment(client, cfg.experiment)
-    streams = stats.Streams(cfg.seed)
+    task = get_task(data.task)
     thresholds = tuple(float(t) for t in cfg.thresholds)
+    if data.task != DEFAULT_TASK:
+        reported = {}  # the paper's numbers and claims are MountainCar-v0's: none beside another task
+        if thresholds == MOUNTAIN_CAR_THRESHOLDS:  # left at the default: the task's own thresholds
+            thresholds = task.thresholds
+            cfg = dataclasses.replace(cfg, thresholds=thresholds)
+    streams = stats.Streams(cfg.seed)
 
     per_seed = per_seed_table(data, thresholds, cfg.window, cfg.min_episodes, cfg.detached_cut)
     table = build_table2(per_seed, data.eval_episodes, reported, thresholds, streams, cfg.window, cfg.ci, cfg.n_boot,
@@ -339,7 +361,7 @@ def write_report(cfg: ReportConfig) -> ReportResult:
     comparisons = attribution.compare_arms(per_seed, thresholds, streams, cfg.n_boot, cfg.ci, cfg.n_perm,
                                            alpha=1 - cfg.ci, margin=cfg.margin)
     results = claims_mod.evaluate_claims(table, per_seed, reported, streams, cfg.n_boot, cfg.ci, comparisons)
-    hack = hacking.hacking_frame(per_seed, data.eval_episodes, cfg.ci)
+    hack = hacking.hacking_frame(per_seed, data.eval_episodes, cfg.ci, task.max_steps)
     note = vlm_note(data.runs)
     warns = _warnings(data, table)
 
@@ -359,7 +381,7 @@ def write_report(cfg: ReportConfig) -> ReportResult:
             "hacking": figures.figure_hacking(hacking.per_arm(data.eval_episodes, "length", arms),
                                               hacking.per_arm(per_seed, "hover_fraction", arms),
                                               hacking.per_arm(per_seed, "shaped_gap", arms), fig_note,
-                                              HOVER_FLAG)}
+                                              HOVER_FLAG, task.max_steps)}
     for stem, fig in figs.items():
         files += figures.save_figure(fig, out, stem)
     files += claims_mod.write_claims(results, out, fig_note)
