@@ -12,7 +12,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from vlmrl_cli.cli.exit_codes import exit_codes
-from vlmrl_cli.cli.options import Experiment, OutDir, TrackingUri, with_vlm_options
+from vlmrl_cli.cli.options import Experiment, OutDir, TaskOpt, TrackingUri, with_vlm_options
 from vlmrl_cli.vlm.config import VLMConfig
 
 States = Annotated[
@@ -24,6 +24,7 @@ States = Annotated[
 @with_vlm_options
 def taxonomy(
     vlm_cfg: VLMConfig,
+    task: TaskOpt = None,
     states: States = None,
     out: OutDir = None,
     tracking_uri: TrackingUri = None,
@@ -35,6 +36,9 @@ def taxonomy(
     from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
 
     console = Console(stderr=True)
+    if task is not None and task != "mountain-car":
+        _other_task(task, vlm_cfg, states, out, tracking_uri, experiment, console)
+        return
     with exit_codes():
         resolved_states = states if states is not None or vlm_cfg.backend == "replay" else DEFAULT_STATES
         cfg = TaxonomyConfig(
@@ -46,10 +50,10 @@ def taxonomy(
         )
         with Progress(TextColumn("probing frames"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                       console=console, transient=True, disable=not sys.stderr.isatty()) as bar:
-            task = bar.add_task("probe", total=None)
+            probe_bar = bar.add_task("probe", total=None)
 
             def progress(done: int, total: int) -> None:
-                bar.update(task, completed=done, total=total)
+                bar.update(probe_bar, completed=done, total=total)
 
             result = run_taxonomy(cfg, progress=progress)
 
@@ -72,3 +76,35 @@ def taxonomy(
         typer.echo("sweep:     n/a (only the transcript's frames were probed)")
     typer.echo(f"outputs:   {result.out}/ ({', '.join(p.name for p in result.files)})")
     typer.echo(f"MLflow:    run {result.run_id}")
+
+
+def _other_task(name: str, vlm_cfg: VLMConfig, states: int | None, out: Path | None, tracking_uri: str | None,
+                experiment: str, console: Console) -> None:
+    """Table 1 and Figure 1 of another task: its milestone MCQ (``probe/milestones.py``)."""
+    from vlmrl_cli.probe.milestones import run_milestone_taxonomy
+    from vlmrl_cli.probe.scoring import DEFAULT_STATES
+    from vlmrl_cli.tasks.registry import get_task
+
+    with exit_codes():
+        task = get_task(name)
+        folder = out if out is not None else Path("results") / "taxonomy" / f"{task.name}-{vlm_cfg.backend}"
+        with Progress(TextColumn("probing frames"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      console=console, transient=True, disable=not sys.stderr.isatty()) as bar:
+            bar_task = bar.add_task("probe", total=None)
+
+            def progress(done: int, total: int) -> None:
+                bar.update(bar_task, completed=done, total=total)
+
+            result = run_milestone_taxonomy(task, vlm_cfg, states or DEFAULT_STATES, folder, tracking_uri,
+                                            experiment, progress)
+    if result["simulated"]:
+        typer.secho("WARNING: SIMULATED VLM (not a real model): the answers come from a pixel reader with "
+                    "noise.", fg=typer.colors.YELLOW, err=True)
+    typer.echo(f"task:      {task.name} ({task.env_id}); float and box prompts are not defined for it")
+    typer.echo(f"backend:   {result['label']}")
+    typer.echo(f"frames:    {result['frames']} probed")
+    typer.echo(f"MCQ:       accuracy {result['mcq.accuracy']:.2f} [{result['mcq.accuracy_low']:.2f}, "
+               f"{result['mcq.accuracy_high']:.2f}], format failures {result['mcq.format_failure_rate']:.2f}, "
+               f"mean |dPhi| {result['mcq.mean_abs_dphi']:.3f}")
+    typer.echo(f"outputs:   {folder}/ ({', '.join(p.name for p in result['files'])})")
+    typer.echo(f"MLflow:    run {result['run_id']}")

@@ -10,6 +10,7 @@ run shows at most 2,304 distinct frames (a real VLM's queries per run are bounde
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -53,6 +54,21 @@ def acrobot_dense(obs: np.ndarray, scale: float, offset: float) -> float:
     return max(0.0, scale * (tip_height_of_obs(obs) / 2.0 + offset))
 
 
+def probe_states(n: int) -> list[np.ndarray]:
+    """About ``n`` states for the taxonomy: a k x k grid of camera cells (k = ceil(sqrt(n)), evenly
+    spread over the 48 angle bins of each joint), at the cells' centres, velocities 0.
+
+    Example:
+        >>> len(probe_states(101)), probe_states(4)[0].shape
+        (121, (4,))
+    """
+    camera = AcrobotCamera(BINS_PER_JOINT)
+    centres = sorted({a for a, _ in camera.grid_states()})
+    k = min(max(2, math.ceil(math.sqrt(n))), len(centres))
+    picks = [centres[round(i * (len(centres) - 1) / (k - 1))] for i in range(k)]
+    return [np.array([a, b, 0.0, 0.0]) for a in picks for b in picks]
+
+
 def _truth(sim: Any) -> str:
     return label_of_state(np.asarray(sim.state))
 
@@ -89,4 +105,5 @@ ACROBOT = Task(
     },
     default_preset="zoo",
     zoo_reference="rl-baselines3-zoo benchmark.md, PPO Acrobot-v1: -73.506 +/- 18.201 (1M steps)",
+    probe_states=probe_states,
 )

@@ -58,6 +58,8 @@ class Task:
         position: the coordinate of the hovering diagnostic, read from an observation (None:
             no diagnostic), and ``hover_from``, where hovering starts.
         probes_floats: whether the float and box probe (and the ``vision-float`` arm) exist.
+        probe_states: about ``n`` simulator states for ``vlmrl taxonomy`` of this task (each drawn
+            by the task's camera; None: MountainCar's own probe).
         env_kwargs: keyword arguments of ``gym.make``.
     """
 
@@ -79,6 +81,7 @@ class Task:
     position: Callable[[np.ndarray], float] | None = None
     hover_from: float | None = None
     probes_floats: bool = False
+    probe_states: Callable[[int], list[np.ndarray]] | None = None
     env_kwargs: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:

@@ -67,6 +67,16 @@ class ContinuousZoneReader:
         return str(geometry.zone_of(x, CONTINUOUS_EDGES))
 
 
+def continuous_probe_states(n: int) -> list[np.ndarray]:
+    """``n`` positions evenly spaced over the track (velocity 0), for the taxonomy.
+
+    Example:
+        >>> [round(float(s[0]), 2) for s in continuous_probe_states(3)]
+        [-1.2, -0.3, 0.6]
+    """
+    return [np.array([x, 0.0]) for x in np.linspace(geometry.MIN_POSITION, geometry.MAX_POSITION, n)]
+
+
 def _camera(shaping: ShapingConfig) -> Camera:
     return Camera(shaping.render_quantum)
 
@@ -130,4 +140,5 @@ MOUNTAIN_CAR_CONTINUOUS = Task(
     zoo_reference="rl-baselines3-zoo benchmark.md, PPO MountainCarContinuous-v0: 88.343 +/- 2.572 (20k steps)",
     position=_position,
     hover_from=0.3,
+    probe_states=continuous_probe_states,
 )

@@ -1,0 +1,218 @@
+"""The taxonomy probe of a task other than MountainCar-v0: its milestone MCQ only.
+
+The float and box prompts of the paper's Table 1 ask for MountainCar's position and car box;
+another task has no such answer key, so its Table 1 has the MCQ row alone (and says so). Each
+probed state is drawn by the task's training camera (the frames a run's VLM sees), its true label
+comes from the task (``Task.truth``), the VLM's answer is parsed in the task's vocabulary, and the
+potential error ``|dPhi|`` uses the task's label map. One MLflow run is logged, tagged with the
+task; everything made with the simulated VLM says SIMULATED.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from vlmrl_cli.core import tables
+from vlmrl_cli.core.paths import check_out_folder
+from vlmrl_cli.core.provenance import config_hash, flatten
+from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.tasks.base import Task
+from vlmrl_cli.tracking import schema, store
+from vlmrl_cli.tracking.lifecycle import tracked_run
+from vlmrl_cli.vlm.parsers import ParseStatus, parse_mcq
+from vlmrl_cli.vlm.preflight import check_vlm
+from vlmrl_cli.vlm.registry import build_client
+
+ProgressFn = Callable[[int, int], None]
+NOT_DEFINED = "not defined for this task (no position or box answer key)"
+
+
+@dataclass(frozen=True)
+class MilestoneProbe:
+    """One probed state: its id, true label, the raw answer, the parsed label (None: unparsed)."""
+
+    frame_id: str
+    truth: str
+    answer: str | None
+    label: str | None
+    status: ParseStatus
+
+
+@dataclass(frozen=True)
+class MilestoneSummary:
+    """MCQ accuracy (with a Wilson interval over frames), format failures and the potential error."""
+
+    frames: int
+    correct: int
+    accuracy: float
+    accuracy_low: float
+    accuracy_high: float
+    format_failure_rate: float
+    mean_abs_dphi: float
+
+
+def summarize(probes: list[MilestoneProbe], potentials: dict[str, float], ci: float = 0.95) -> MilestoneSummary:
+    """The MCQ row of Table 1: accuracy (unparsed answers count wrong), its Wilson interval, the
+    share of unparsed answers and the mean ``|Phi(answer) - Phi(truth)|`` over parsed answers.
+
+    Example:
+        >>> ok = MilestoneProbe("a", "HIGH", "HIGH", "HIGH", ParseStatus.OK)
+        >>> bad = MilestoneProbe("b", "LOW", "?", None, ParseStatus.FORMAT_COLLAPSE)
+        >>> s = summarize([ok, bad], {"LOW": 0.0, "HIGH": 1.0})
+        >>> s.accuracy, s.format_failure_rate, s.mean_abs_dphi
+        (0.5, 0.5, 0.0)
+    """
+    n = len(probes)
+    correct = sum(p.label == p.truth for p in probes)
+    if n:
+        interval = stats.binomtest(correct, n).proportion_ci(confidence_level=ci, method="wilson")
+        low, high = float(interval.low), float(interval.high)
+    else:
+        low = high = math.nan
+    parsed = [p for p in probes if p.label is not None]
+    dphi = [abs(potentials[p.label] - potentials[p.truth]) for p in parsed if p.label in potentials]
+    return MilestoneSummary(n, correct, correct / n if n else math.nan, low, high,
+                            (n - len(parsed)) / n if n else math.nan,
+                            float(np.mean(dphi)) if dphi else math.nan)
+
+
+def run_milestone_taxonomy(task: Task, vlm: Any, states: int, out: Path, tracking_uri: str | None,
+                           experiment: str, progress: ProgressFn | None = None) -> dict[str, Any]:
+    """Probe ``task``'s milestone MCQ on about ``states`` states, write ``table1.md``/``.csv``,
+    ``probes.csv``, ``figure1.png`` and ``metrics.json`` into ``out``, log one MLflow run; return
+    the metrics. Nothing is created before the folder, the VLM and the store are checked."""
+    if task.probe_states is None:
+        from vlmrl_cli.core.errors import BadInput
+
+        raise BadInput(f"task '{task.name}' names no probe states; give its Task a probe_states function.")
+    check_out_folder(out)
+    check_vlm(vlm)
+    tracker = store.connect(tracking_uri)
+    client = build_client(vlm, reader=task.reader)
+    camera = task.make_camera(ShapingConfig(label_potentials=task.label_potentials))
+    potentials = {str(label): float(p) for label, p in task.label_potentials}
+    try:
+        experiment_id = store.ensure_experiment(tracker, experiment)
+        ident = {"task": task.name, "states": states, "vlm": vlm}
+        run = tracker.create_run(experiment_id, run_name=f"taxonomy-{task.name}-{client.backend.name}-{states}")
+        run_id = str(run.info.run_id)
+        with tracked_run(tracker, run_id):
+            store.set_tags(tracker, run_id, {
+                **store.provenance_tags(client.label, client.backend.simulated),
+                schema.TAG_COMMAND: schema.COMMAND_TAXONOMY, schema.TAG_TASK: task.name,
+                schema.TAG_CONFIG_HASH: config_hash(ident),
+            })
+            store.log_params(tracker, run_id, {**flatten(ident), "prompt.mcq": task.milestones.prompt.text})
+            probes, shown = [], []
+            planned = task.probe_states(states)
+            for i, state in enumerate(planned, start=1):
+                sim = SimpleNamespace(state=np.asarray(state, dtype=float))
+                view = camera.look(sim)
+                frame = view.frame()
+                answer = client.ask(task.milestones.prompt, frame).text
+                parsed = parse_mcq(answer, task.milestones.labels)
+                probe = MilestoneProbe(_frame_id(state), task.truth(sim), answer,
+                                       str(parsed.label) if parsed.ok and parsed.label is not None else None,
+                                       parsed.status)
+                probes.append(probe)
+                shown.append(frame)
+                if progress is not None:
+                    progress(i, len(planned))
+            summary = summarize(probes, potentials)
+            label = f"{client.backend.name}:{client.backend.model}"
+            simulated = bool(client.backend.simulated)
+            out.mkdir(parents=True, exist_ok=True)
+            files = _write(out, task, probes, summary, label, simulated)
+            files.append(_figure(out / "figure1.png", task, probes, shown, label, simulated))
+            metrics = {"task": task.name, "backend": client.backend.name, "model": client.backend.model,
+                       "simulated": simulated, "frames": summary.frames, "mcq.accuracy": summary.accuracy,
+                       "mcq.accuracy_low": summary.accuracy_low, "mcq.accuracy_high": summary.accuracy_high,
+                       "mcq.format_failure_rate": summary.format_failure_rate,
+                       "mcq.mean_abs_dphi": summary.mean_abs_dphi}
+            (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
+            files.append(out / "metrics.json")
+            batch = store.BatchLogger(tracker, run_id)
+            batch.log({f"taxonomy.{k}": float(v) for k, v in metrics.items()
+                       if isinstance(v, float) and math.isfinite(v)}, step=0)
+            batch.flush()
+            store.log_artifacts(tracker, run_id, files)
+        return {**metrics, "run_id": run_id, "files": files, "label": client.label}
+    except BaseException:
+        if out.exists() and not any(out.iterdir()):
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+    finally:
+        camera.close()
+        client.close()
+
+
+def _frame_id(state: Any) -> str:
+    values = np.asarray(state, dtype=float).reshape(-1)
+    return "state=[" + ", ".join(f"{v:+.3f}" for v in values) + "]"
+
+
+def _write(out: Path, task: Task, probes: list[MilestoneProbe], s: MilestoneSummary, label: str,
+           simulated: bool) -> list[Path]:
+    banner = "SIMULATED VLM (not a real model): answers from a pixel reader with noise." if simulated else ""
+    rows = [
+        {"prompt": "I float regression", "frames": 0, "result": NOT_DEFINED},
+        {"prompt": "II box grounding", "frames": 0, "result": NOT_DEFINED},
+        {"prompt": "III semantic MCQ", "frames": s.frames,
+         "result": f"accuracy {s.accuracy:.2f} [{s.accuracy_low:.2f}, {s.accuracy_high:.2f}] ({s.correct}/{s.frames}); "
+                   f"format failures {s.format_failure_rate:.2f}; mean |dPhi| {s.mean_abs_dphi:.3f}"},
+    ]
+    frame = pd.DataFrame(rows).assign(task=task.name, vlm=label, simulated=simulated)
+    csv, md = out / "table1.csv", out / "table1.md"
+    frame.to_csv(csv, index=False)
+    text = [f"# Table 1 for task {task.name}: the milestone MCQ of {label}", ""]
+    if banner:
+        text += [f"> **{banner}**", ""]
+    text += [f"{task.summary}. Labels (low to high): {', '.join(task.milestones.labels)}; potentials "
+             + ", ".join(f"{lab}={p:g}" for lab, p in task.label_potentials) + ".", "",
+             f"Prompt: \"{task.milestones.prompt.text}\"", "",
+             *tables.markdown_rows(["prompt", "frames", "result"], [[r["prompt"], r["frames"], r["result"]]
+                                                                   for r in rows]),
+             "", "Accuracy counts an unparsed answer as wrong; its interval is Wilson's over frames (95%).", ""]
+    confusion = pd.crosstab(pd.Series([p.truth for p in probes], name="truth"),
+                            pd.Series([p.label or "(unparsed)" for p in probes], name="answer"))
+    text += ["Confusion (rows: truth, columns: answer):", "",
+             *tables.markdown_rows(["truth", *confusion.columns],
+                                   [[i, *r] for i, r in zip(confusion.index, confusion.to_numpy(), strict=True)]),
+             ""]
+    md.write_text("\n".join(text), encoding="utf-8")
+    per_frame = out / "probes.csv"
+    pd.DataFrame([{"frame_id": p.frame_id, "truth": p.truth, "answer": p.answer, "label": p.label,
+                   "status": p.status.value} for p in probes]).assign(vlm=label).to_csv(per_frame, index=False)
+    return [md, csv, per_frame]
+
+
+def _figure(path: Path, task: Task, probes: list[MilestoneProbe], frames: list[Any], label: str,
+            simulated: bool) -> Path:
+    """Figure 1 of a task: one probed frame per true label (the first of each), with its answer."""
+    from matplotlib.figure import Figure
+
+    picks = [next(i for i, p in enumerate(probes) if p.truth == lab) for lab in task.milestones.labels
+             if any(p.truth == lab for p in probes)]
+    fig = Figure(figsize=(2.6 * max(len(picks), 1), 3.2), layout="constrained")
+    axes = fig.subplots(1, max(len(picks), 1), squeeze=False)[0]
+    for ax, i in zip(axes, picks, strict=False):
+        ax.imshow(frames[i].pixels)
+        ax.set_axis_off()
+        probe = probes[i]
+        ax.set_title(f"truth {probe.truth}\nVLM: {probe.label or '(' + probe.status.value + ')'}", fontsize=8)
+    title = f"Figure 1 ({task.name}): milestone MCQ, {label}"
+    fig.suptitle(title + ("\nSIMULATED VLM (not a real model)" if simulated else ""), fontsize=9,
+                 color="darkred" if simulated else "black")
+    fig.savefig(path, dpi=120)
+    return path
