@@ -13,7 +13,7 @@ from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.config import SimKnobs
 from vlmrl_cli.vlm.parsers import ParseStatus, parse_box, parse_float, parse_mcq
 from vlmrl_cli.vlm.prompts import PROMPTS, Milestones, PromptKind, mcq_prompt
-from vlmrl_cli.vlm.sim import REFUSAL, SimulatedVLM, wheel_column
+from vlmrl_cli.vlm.sim import REFUSAL, TASK_REFUSAL, SimulatedVLM, wheel_column
 
 EXACT = SimKnobs(flicker=0.0, float_noise=0.0, box_noise_px=0.0, box_failure=0.0)
 
@@ -203,7 +203,7 @@ def test_a_task_reader_answers_its_own_labels_with_flicker_and_no_numbers() -> N
     assert parse_mcq(steady.answer(prompt, right), reader.milestones.labels).label == "RIGHT"
     assert parse_float(steady.answer(PROMPTS[PromptKind.FLOAT], left)).value is None  # MCQ only
     blank = Frame.from_pixels(np.full((400, 600, 3), 255, dtype=np.uint8))
-    assert steady.answer(prompt, blank) == REFUSAL
+    assert steady.answer(prompt, blank) == TASK_REFUSAL
     noisy = SimulatedVLM(SimKnobs(flicker=1.0), reader=reader)  # every answer moves to the neighbour
     assert parse_mcq(noisy.answer(prompt, left), reader.milestones.labels).label == "RIGHT"
     assert SimulatedVLM(SimKnobs(), reader=None).model != steady.model  # cached answers never mix

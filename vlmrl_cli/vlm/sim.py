@@ -52,6 +52,7 @@ class MilestoneReader(Protocol):
 
 
 NO_NUMBER = "I can only say which of the listed stages the image shows."
+TASK_REFUSAL = "I'm sorry, but I cannot find what the question is about in this image."
 
 
 def knobs_digest(knobs: SimKnobs) -> str:
@@ -227,7 +228,7 @@ class SimulatedVLM:
         query flicker as MountainCar's; a float or box prompt gets no number (a format failure)."""
         label = reader.read(frame.pixels)
         if label is None:
-            return REFUSAL
+            return TASK_REFUSAL
         if prompt.kind is not PromptKind.MCQ:
             return NO_NUMBER
         rng = self._rng(prompt, frame)
