@@ -1,9 +1,11 @@
 """A ``Task``: everything the harness knows about one environment, in one object.
 
-Nothing outside ``vlmrl_cli.tasks`` names an environment: training builds its envs with
-``Task.make_env``, the reward wrapper reads the task's ``Scene`` (observation, dense term,
-simulator type), the camera comes from ``Task.make_camera``, the simulated VLM reads milestones
-with ``Task.reader``, and reports take their thresholds and success rule from here.
+Training builds its envs with ``Task.make_env``, the reward wrapper reads the task's ``Scene``
+(observation, dense term, simulator type), the camera comes from ``Task.make_camera``, the
+simulated VLM reads milestones with ``Task.reader``, and reports take their thresholds and
+success rule from here. The one exception: MountainCar-v0's pieces predate tasks and still live
+where they were (``frames/geometry.py``, ``shaping/camera.py``, the simulated VLM's built-in wheel
+reader); ``tasks/mountain_car.py`` assembles them, and their numbers are pinned by tests.
 
 A user's own task is a ``Task`` value in the user's code, loaded by ``--task package.module:NAME``
 (see ``tasks/registry.py`` and the docs' "Add a task" page).
