@@ -27,6 +27,7 @@ def test_the_summary_counts_unparsed_answers_wrong_and_gives_a_wilson_interval()
     assert s.mean_abs_dphi == pytest.approx(1 / 9)
 
 
+@pytest.mark.slow  # renders and probes a few dozen frames
 @pytest.mark.parametrize(("task", "states", "frames"), [("acrobot", 9, 9), ("mountain-car-continuous", 13, 13)])
 def test_taxonomy_of_a_task_writes_its_labels_table_and_figure(tmp_path: Path, task: str, states: int,
                                                                frames: int) -> None:
