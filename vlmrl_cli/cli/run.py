@@ -69,7 +69,7 @@ def run(
         if dry_run:
             typer.echo(dry_run_text(cfg), nl=False)
             return
-        preflight(cfg)  # refuse before the header: the sweep checks again for callers of its API
+        preflight(cfg)  # refuse before the header; run_sweep(checked=True) then does not check again
         console.print(f"[bold]vlmrl run[/]: task {cfg.task}, arms {', '.join(cfg.arms)} x seeds "
                       f"{list(cfg.seeds)}, preset {cfg.preset}, {cfg.budget:,} steps each, {cfg.workers} "
                       f"worker(s) ({cfg.executor}), experiment '{cfg.experiment}'")

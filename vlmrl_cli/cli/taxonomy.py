@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated
 
@@ -19,6 +21,19 @@ States = Annotated[
     int | None,
     typer.Option("--states", min=2, help="Sweep positions over the track (default 101; replay: its frames only)."),
 ]
+
+
+@contextmanager
+def _probe_progress(console: Console) -> Iterator[Callable[[int, int], None]]:
+    """A transient "probing frames" bar on stderr (off in a pipe); yields its ``progress(done, total)``."""
+    with Progress(TextColumn("probing frames"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  console=console, transient=True, disable=not sys.stderr.isatty()) as bar:
+        probe_bar = bar.add_task("probe", total=None)
+
+        def progress(done: int, total: int) -> None:
+            bar.update(probe_bar, completed=done, total=total)
+
+        yield progress
 
 
 @with_vlm_options
@@ -48,13 +63,7 @@ def taxonomy(
             tracking_uri=tracking_uri,
             experiment=experiment,
         )
-        with Progress(TextColumn("probing frames"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                      console=console, transient=True, disable=not sys.stderr.isatty()) as bar:
-            probe_bar = bar.add_task("probe", total=None)
-
-            def progress(done: int, total: int) -> None:
-                bar.update(probe_bar, completed=done, total=total)
-
+        with _probe_progress(console) as progress:
             result = run_taxonomy(cfg, progress=progress)
 
     if result.simulated:
@@ -88,13 +97,7 @@ def _other_task(name: str, vlm_cfg: VLMConfig, states: int | None, out: Path | N
     with exit_codes():
         task = get_task(name)
         folder = out if out is not None else Path("results") / "taxonomy" / f"{task.name}-{vlm_cfg.backend}"
-        with Progress(TextColumn("probing frames"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                      console=console, transient=True, disable=not sys.stderr.isatty()) as bar:
-            bar_task = bar.add_task("probe", total=None)
-
-            def progress(done: int, total: int) -> None:
-                bar.update(bar_task, completed=done, total=total)
-
+        with _probe_progress(console) as progress:
             result = run_milestone_taxonomy(task, vlm_cfg, states or DEFAULT_STATES, folder, tracking_uri,
                                             experiment, progress)
     if result["simulated"]:

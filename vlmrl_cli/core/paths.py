@@ -7,6 +7,8 @@ import os
 import tempfile
 from pathlib import Path
 
+from vlmrl_cli.core.errors import BadInput
+
 
 def _nearest_existing(path: Path) -> Path:
     current = path.absolute()
@@ -71,8 +73,6 @@ def out_folder_problem(out: Path) -> str | None:
 def check_out_folder(out: Path, flag: str = "--out") -> None:
     """``BadInput`` (one line, naming ``flag``) unless ``out`` can be the output folder; the one
     check every command runs on its output folder before it creates anything."""
-    from vlmrl_cli.core.errors import BadInput
-
     problem = out_folder_problem(out)
     if problem:
         raise BadInput(f"cannot write to the output folder {out} ({problem}); pass {flag} to a writable folder.")

@@ -26,6 +26,7 @@ from scipy import stats
 from vlmrl_cli.core import tables
 from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, flatten
+from vlmrl_cli.probe import metrics
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.tracking import schema, store
@@ -64,7 +65,8 @@ class MilestoneSummary:
 
 def summarize(probes: list[MilestoneProbe], potentials: dict[str, float], ci: float = 0.95) -> MilestoneSummary:
     """The MCQ row of Table 1: accuracy (unparsed answers count wrong), its Wilson interval, the
-    share of unparsed answers and the mean ``|Phi(answer) - Phi(truth)|`` over parsed answers.
+    format failure rate and the mean ``|Phi(answer) - Phi(truth)|`` over parsed answers; accuracy
+    and format failures by MountainCar's Table 1 rules (``probe.metrics``).
 
     Example:
         >>> ok = MilestoneProbe("a", "HIGH", "HIGH", "HIGH", ParseStatus.OK)
@@ -75,6 +77,7 @@ def summarize(probes: list[MilestoneProbe], potentials: dict[str, float], ci: fl
     """
     n = len(probes)
     correct = sum(p.label == p.truth for p in probes)
+    accuracy = metrics.mcq_accuracy([p.label for p in probes], [p.truth for p in probes])
     if n:
         interval = stats.binomtest(correct, n).proportion_ci(confidence_level=ci, method="wilson")
         low, high = float(interval.low), float(interval.high)
@@ -82,8 +85,7 @@ def summarize(probes: list[MilestoneProbe], potentials: dict[str, float], ci: fl
         low = high = math.nan
     parsed = [p for p in probes if p.label is not None]
     dphi = [abs(potentials[p.label] - potentials[p.truth]) for p in parsed if p.label in potentials]
-    return MilestoneSummary(n, correct, correct / n if n else math.nan, low, high,
-                            (n - len(parsed)) / n if n else math.nan,
+    return MilestoneSummary(n, correct, accuracy, low, high, metrics.format_failure_rate(p.status for p in probes),
                             float(np.mean(dphi)) if dphi else math.nan)
 
 
@@ -102,6 +104,7 @@ def run_milestone_taxonomy(task: Task, vlm: Any, states: int, out: Path, trackin
     client = build_client(vlm, reader=task.reader)
     camera = task.make_camera(ShapingConfig(label_potentials=task.label_potentials))
     potentials = {str(label): float(p) for label, p in task.label_potentials}
+    made_out = not out.exists()  # only a folder this probe made is removed when it fails
     try:
         experiment_id = store.ensure_experiment(tracker, experiment)
         ident = {"task": task.name, "states": states, "vlm": vlm}
@@ -149,7 +152,7 @@ def run_milestone_taxonomy(task: Task, vlm: Any, states: int, out: Path, trackin
             store.log_artifacts(tracker, run_id, files)
         return {**metrics, "run_id": run_id, "files": files, "label": client.label}
     except BaseException:
-        if out.exists() and not any(out.iterdir()):
+        if made_out and out.exists() and not any(out.iterdir()):
             shutil.rmtree(out, ignore_errors=True)
         raise
     finally:

@@ -87,9 +87,6 @@ def format_rows(rows: Sequence[ChildRow], threshold: float = TOP_THRESHOLD) -> l
              f"{r.detached_success:.0%}" if math.isfinite(r.detached_success) else "-"] for r in rows]
 
 
-HEADER = ["arm", "seed", "run id", "status", f"steps to {TOP_THRESHOLD:g}", "detached"]
-
-
 def header(threshold: float = TOP_THRESHOLD) -> list[str]:
     """The table's header for a task whose top reward threshold is ``threshold``."""
-    return [*HEADER[:4], f"steps to {threshold:g}", HEADER[5]]
+    return ["arm", "seed", "run id", "status", f"steps to {threshold:g}", "detached"]

@@ -55,7 +55,7 @@ class ReportConfig:
     out: Path = Path("results/report")  # output folder
     # reward targets (rolling mean native return); another task's runs take that task's thresholds
     # unless others are given
-    thresholds: tuple[float, ...] = (-190.0, -160.0, -130.0)
+    thresholds: tuple[float, ...] = MOUNTAIN_CAR_THRESHOLDS
     window: int = 100  # episodes in the rolling mean
     min_episodes: int = 1  # fewest completed episodes before a rolling mean counts
     ci: float = 0.95  # confidence level of every interval

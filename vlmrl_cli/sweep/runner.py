@@ -180,7 +180,7 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
                 schema.TAG_KIND: schema.KIND_SWEEP,
                 schema.TAG_CONFIG_HASH: config_hash(cfg),
                 schema.TAG_EXECUTOR: cfg.executor,
-            schema.TAG_TASK: cfg.task,
+                schema.TAG_TASK: cfg.task,
                 **({schema.TAG_REGIME: cfg.regime} if cfg.regime is not None else {}),
             })
         except BaseException:

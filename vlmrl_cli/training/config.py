@@ -49,7 +49,7 @@ from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.fields import one_of
 from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
-from vlmrl_cli.shaping.arms import ARMS, ArmSpec, parse_arms
+from vlmrl_cli.shaping.arms import ARMS, ArmSpec, PotentialSource, parse_arms
 from vlmrl_cli.shaping.config import DEFAULT_LABEL_POTENTIALS, ShapingConfig
 from vlmrl_cli.tasks.registry import DEFAULT_TASK
 from vlmrl_cli.training.events import EXECUTORS
@@ -115,6 +115,16 @@ def _known_task(value: str) -> str:
     except BadInput as exc:
         raise ValueError(str(exc).removesuffix(".")) from None
     return value
+
+
+def with_task_labels(shaping: ShapingConfig, task: str) -> ShapingConfig:
+    """``shaping`` with ``task``'s own label map when its map is MountainCar's default (the
+    field's default: another task's runs take that task's map unless one is given)."""
+    if task == DEFAULT_TASK or shaping.label_potentials != DEFAULT_LABEL_POTENTIALS:
+        return shaping
+    from vlmrl_cli.tasks.registry import get_task
+
+    return dataclasses.replace(shaping, label_potentials=get_task(task).label_potentials)
 
 
 @dataclass(frozen=True)
@@ -188,7 +198,7 @@ class RunConfig:
         problem = task.labels_problem(self.task_shaping.label_potentials)
         if problem:
             raise BadInput(f"shaping.label_potentials: {problem} (task {self.task}).")
-        floats = [a for a in self.arms if ARMS[a].potential.value == "float"]
+        floats = [a for a in self.arms if ARMS[a].potential is PotentialSource.FLOAT]
         if floats and not task.probes_floats:
             raise BadInput(f"arm '{floats[0]}' asks the VLM for a number, which task {self.task} does not "
                            "support; choose arms with MCQ milestones.")
@@ -196,11 +206,7 @@ class RunConfig:
     @property
     def task_shaping(self) -> ShapingConfig:
         """``shaping`` with the task's label map when the map was left at MountainCar's default."""
-        if self.task == DEFAULT_TASK or self.shaping.label_potentials != DEFAULT_LABEL_POTENTIALS:
-            return self.shaping
-        from vlmrl_cli.tasks.registry import get_task
-
-        return dataclasses.replace(self.shaping, label_potentials=get_task(self.task).label_potentials)
+        return with_task_labels(self.shaping, self.task)
 
     @property
     def ppo_config(self) -> PPOConfig:
@@ -283,12 +289,8 @@ class TrainJob:
     def overrides(self) -> dict[str, str]:
         """The knobs of this job that differ from its preset and the shaping/VLM defaults, as
         dotted keys (``{"ppo.n_envs": "1"}``); only knobs the job's identity depends on count."""
-        from vlmrl_cli.tasks.registry import get_task
-
-        shaping = ShapingConfig()
-        if self.task != DEFAULT_TASK:
-            shaping = dataclasses.replace(shaping, label_potentials=get_task(self.task).label_potentials)
-        reference = dataclasses.replace(self, ppo=preset_of(self.task, self.preset), vlm=VLMConfig(), shaping=shaping)
+        reference = dataclasses.replace(self, ppo=preset_of(self.task, self.preset), vlm=VLMConfig(),
+                                        shaping=with_task_labels(ShapingConfig(), self.task))
         ref = flatten(reference.identity())
         return {k: v for k, v in flatten(self.identity()).items() if ref.get(k) != v}
 

@@ -77,20 +77,29 @@ class PlayedStep:
     """The state after ``t`` steps of an episode and the step that led there.
 
     ``action`` and ``r_kin`` belong to step ``t`` (None and 0.0 at the reset state, t = 0);
-    ``native_return`` is the sum of native rewards so far. ``pixels`` is the rendered frame,
-    (400, 600, 3) uint8, kept only for the frames the GIF shows.
+    ``native_return`` is the sum of native rewards so far. ``obs`` is the whole observation;
+    ``pixels`` is the rendered frame (MountainCar's (400, 600, 3) uint8), kept only for the frames
+    the GIF shows, and ``view`` the training camera's view of them, when one was asked for.
     """
 
     t: int
-    x: float
-    v: float
+    obs: tuple[float, ...]
     action: Any
     r_kin: float
     native_return: float
     terminated: bool = False
     pixels: np.ndarray | None = field(default=None, repr=False)
-    obs: tuple[float, ...] = ()  # the whole observation (x and v are MountainCar's obs[0], obs[1])
-    view: FrameView | None = field(default=None, repr=False)  # the training camera's view, when asked
+    view: FrameView | None = field(default=None, repr=False)
+
+    @property
+    def x(self) -> float:
+        """MountainCar's position, ``obs[0]`` (NaN for an empty observation)."""
+        return self.obs[0] if self.obs else math.nan
+
+    @property
+    def v(self) -> float:
+        """MountainCar's velocity, ``obs[1]`` (NaN without one)."""
+        return self.obs[1] if len(self.obs) > 1 else math.nan
 
 
 def play_episode(policy: Policy, seed: int, shaping: ShapingConfig, frame_every: int = 2,
@@ -110,9 +119,8 @@ def play_episode(policy: Policy, seed: int, shaping: ShapingConfig, frame_every:
     def step_of(t: int, obs: np.ndarray, action: Any, r_kin: float, total: float, terminated: bool,
                 keep: bool) -> PlayedStep:
         values = tuple(float(v) for v in np.asarray(obs, dtype=float).reshape(-1))
-        x, v = (*values, math.nan, math.nan)[:2]
-        return PlayedStep(t, x, v, _plain(action), r_kin, total, terminated,
-                          np.asarray(env.render()) if keep else None, values,
+        return PlayedStep(t, values, _plain(action), r_kin, total, terminated,
+                          np.asarray(env.render()) if keep else None,
                           camera.look(env.unwrapped) if keep and camera is not None else None)
 
     try:

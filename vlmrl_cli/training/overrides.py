@@ -147,8 +147,7 @@ def resolve_raw(layers: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
     for layer in lifted:
         raw = merge(raw, layer)
     shaping = raw.get("shaping")
-    if (task is not None and task_name != DEFAULT_TASK and isinstance(shaping, Mapping)
-            and isinstance(shaping.get("label_potentials"), Mapping)):
+    if task is not None and isinstance(shaping, Mapping) and isinstance(shaping.get("label_potentials"), Mapping):
         # a table of the labels it changes: the task's other labels keep the task's default
         table = {str(label): p for label, p in task.label_potentials} | dict(shaping["label_potentials"])
         raw["shaping"] = {**shaping, "label_potentials": [[label, p] for label, p in table.items()]}

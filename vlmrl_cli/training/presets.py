@@ -141,10 +141,8 @@ def preset_names(task: str) -> list[str]:
 def preset_of(task: str, name: str) -> PPOConfig:
     """The PPO preset ``name`` of ``task``: MountainCar's from ``PRESETS``, another task's from
     its plug-in (``Task.presets``); an unknown one is a ``BadInput`` naming the task's presets."""
-    from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
+    from vlmrl_cli.tasks.registry import get_task
 
-    if task == DEFAULT_TASK:
-        return get_preset(name)
     table = get_task(task).presets
     if table is None:
         return get_preset(name)

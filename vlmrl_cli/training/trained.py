@@ -58,7 +58,7 @@ class TrainedRun:
     simulated: bool
     policy: Policy
     seed: int = 0  # the training seed (a placebo arm's label map depends on it)
-    task: str = "mountain-car"  # the run's task (config.json names it when not MountainCar)
+    task: str = DEFAULT_TASK  # the run's task (config.json names it when not MountainCar)
 
 
 def load_trained_run(client: Any, run_id: str, workdir: Path) -> TrainedRun:
