@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+from typing import Any
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -111,9 +113,9 @@ class SpyCamera(Camera):
         super().__init__(quantum)
         self.calls: list[tuple[float, str]] = []
 
-    def view(self, x: float) -> FrameView:
-        v = super().view(x)
-        self.calls.append((x, v.key))
+    def look(self, sim: Any) -> FrameView:
+        v = super().look(sim)
+        self.calls.append((float(sim.state[0]), v.key))
         return v
 
 

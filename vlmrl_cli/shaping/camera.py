@@ -36,10 +36,17 @@ class FrameView:
     key: str
     features: np.ndarray = field(repr=False)
     _load: Callable[[], Frame] = field(repr=False)
+    _release: Callable[[], None] = field(default=lambda: None, repr=False)
 
     def frame(self) -> Frame:
         """The full frame (rendered again if the camera's pixel cache dropped it)."""
         return self._load()
+
+    def release(self) -> None:
+        """Say that this frame's pixels are not needed again soon (a deterministic VLM has
+        answered about it): the camera drops them first, so its pixel cache keeps the frames
+        still waiting for their first label instead of drawing those again."""
+        self._release()
 
     @classmethod
     def of_frame(cls, frame: Frame) -> FrameView:
@@ -87,6 +94,9 @@ class CellCamera(Generic[Cell]):
             self._frames.move_to_end(cell)
         return frame
 
+    def _drop(self, cell: Cell) -> None:
+        self._frames.pop(cell, None)
+
     def _view_of(self, cell: Cell) -> FrameView:
         """The memoised view of ``cell``: called every env step, so a known cell is a dict lookup."""
         view = self._views.get(cell)
@@ -94,7 +104,8 @@ class CellCamera(Generic[Cell]):
             frame = self._frame(cell)
             features = darkness_counts(frame.pixels)
             features.setflags(write=False)
-            view = FrameView(key=frame.sha256, features=features, _load=functools.partial(self._frame, cell))
+            view = FrameView(key=frame.sha256, features=features, _load=functools.partial(self._frame, cell),
+                             _release=functools.partial(self._drop, cell))
             self._views[cell] = view
         return view
 
@@ -167,4 +178,6 @@ class Camera(CellCamera[int]):
 
     def look(self, sim: Any) -> FrameView:
         """The view of the simulator ``sim`` (the unwrapped env): its position ``state[0]``."""
-        return self.view(float(sim.state[0]))
+        cell = self._cell(float(sim.state[0]))
+        view = self._views.get(cell)  # every env step: a known cell is one dict lookup
+        return view if view is not None else self._view_of(cell)

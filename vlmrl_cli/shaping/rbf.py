@@ -32,7 +32,7 @@ def squared_distances(points: np.ndarray, feature: np.ndarray, unit: float = 1.0
         [0.0, 1.0]
     """
     if np.issubdtype(points.dtype, np.integer) and np.issubdtype(feature.dtype, np.integer):
-        diff = points.astype(np.int64) - feature.astype(np.int64)[None, :]
+        diff = points.astype(np.int64, copy=False) - feature.astype(np.int64, copy=False)[None, :]
         known_safe = spread is not None and spread**2 * diff.shape[1] <= _INT64_MAX
         if diff.size and not known_safe and int(np.abs(diff).max()) ** 2 * diff.shape[1] > _INT64_MAX:
             raise ValueError("integer features too large for an exact int64 squared distance")
@@ -120,13 +120,17 @@ class RBFField:
         self.unit = float(unit)
         self._scale = 1.0 / (2.0 * self.bandwidth * self.bandwidth)
         self._dim = dim
-        self._protos: np.ndarray | None = None  # (N, D), the dtype of the first feature
-        self._potentials = np.empty(0, dtype=np.float64)
+        # Rows grow into buffers of doubling capacity (no O(N^2) copying as prototypes and keys
+        # arrive one at a time); only the first ``_n`` prototype rows and ``_k`` key rows are live.
+        self._n = 0
+        self._k = 0
+        self._proto_buf: np.ndarray | None = None  # (capacity, D), the dtype of the first feature
+        self._pot_buf = np.empty(0, dtype=np.float64)
         self._index: dict[str, int] = {}
-        self._feats: np.ndarray | None = None  # (keys, D)
-        self._num = np.empty(0, dtype=np.float64)
-        self._den = np.empty(0, dtype=np.float64)
-        self._ref = np.empty(0, dtype=np.float64)  # squared distance the weights are relative to
+        self._feat_buf: np.ndarray | None = None  # (capacity, D)
+        self._num_buf = np.empty(0, dtype=np.float64)
+        self._den_buf = np.empty(0, dtype=np.float64)
+        self._ref_buf = np.empty(0, dtype=np.float64)  # squared distance the weights are relative to
         self._low, self._high = math.inf, -math.inf  # range of the prototype potentials
         # each key's value as ``value`` returns it, until the next prototype or potential change:
         # a plain dict lookup per env step instead of two numpy scalar reads
@@ -135,18 +139,39 @@ class RBFField:
 
     @property
     def prototypes(self) -> int:
-        return int(self._potentials.shape[0])
+        return self._n
+
+    @property
+    def _protos(self) -> np.ndarray | None:
+        return None if self._proto_buf is None else self._proto_buf[: self._n]
+
+    @property
+    def _potentials(self) -> np.ndarray:
+        return self._pot_buf[: self._n]
+
+    @property
+    def _feats(self) -> np.ndarray | None:
+        return None if self._feat_buf is None else self._feat_buf[: self._k]
+
+    @staticmethod
+    def _grown(buf: np.ndarray, used: int) -> np.ndarray:
+        """``buf`` with room for one more row (capacity doubled when full; rows kept)."""
+        if used < buf.shape[0]:
+            return buf
+        bigger = np.empty((max(64, 2 * used), *buf.shape[1:]), dtype=buf.dtype)
+        bigger[:used] = buf[:used]
+        return bigger
 
     def _row(self, feature: np.ndarray) -> np.ndarray:
         f = np.asarray(feature)
         if f.shape != (self._dim,):
             raise ValueError(f"expected a feature of shape ({self._dim},), got {f.shape}")
         integer = bool(np.issubdtype(f.dtype, np.integer))
-        if self._protos is not None and integer != bool(np.issubdtype(self._protos.dtype, np.integer)):
+        if self._proto_buf is not None and integer != bool(np.issubdtype(self._proto_buf.dtype, np.integer)):
             raise ValueError("features must all be integers (exact distances) or all floats, not a mix")
         row = f.astype(np.int64 if integer else np.float64)[None, :]
         if integer and row.size:
-            first = self._protos is None and self._feats is None
+            first = self._proto_buf is None and self._feat_buf is None
             low, high = int(row.min()), int(row.max())
             self._entry_low = low if first else min(self._entry_low, low)
             self._entry_high = high if first else max(self._entry_high, high)
@@ -154,30 +179,37 @@ class RBFField:
 
     def _spread(self) -> int | None:
         """The width of the range of every integer entry seen (None for float features)."""
-        if self._protos is not None and not np.issubdtype(self._protos.dtype, np.integer):
+        if self._proto_buf is not None and not np.issubdtype(self._proto_buf.dtype, np.integer):
             return None
         return self._entry_high - self._entry_low
 
     def add_prototype(self, feature: np.ndarray, potential: float) -> None:
         row = self._row(feature)
         self._values.clear()
-        self._protos = row if self._protos is None else np.vstack([self._protos, row])
-        self._potentials = np.append(self._potentials, float(potential))
+        if self._proto_buf is None:
+            self._proto_buf = np.empty((0, self._dim), dtype=row.dtype)
+        self._proto_buf = self._grown(self._proto_buf, self._n)
+        self._pot_buf = self._grown(self._pot_buf, self._n)
+        self._proto_buf[self._n] = row[0]
+        self._pot_buf[self._n] = float(potential)
+        self._n += 1
         self._low = min(self._low, float(potential))
         self._high = max(self._high, float(potential))
-        if self._feats is None:
+        if self._feat_buf is None:
             return
-        sq = squared_distances(self._feats, row[0], self.unit, self._spread())
-        closer = sq < self._ref
+        k = self._k
+        ref, num, den = self._ref_buf[:k], self._num_buf[:k], self._den_buf[:k]
+        sq = squared_distances(self._feat_buf[:k], row[0], self.unit, self._spread())
+        closer = sq < ref
         # rebase keys whose nearest prototype is the new one, so no weight underflows
         # (the others get exp(0) = 1; clipping first keeps exp from overflowing on them)
-        rescale = exp(-np.maximum(self._ref - sq, 0.0) * self._scale)
-        self._num *= rescale
-        self._den *= rescale
-        self._ref = np.where(closer, sq, self._ref)
-        w = exp(-(sq - self._ref) * self._scale)
-        self._num += w * float(potential)
-        self._den += w
+        rescale = exp(-np.maximum(ref - sq, 0.0) * self._scale)
+        num *= rescale
+        den *= rescale
+        ref[:] = np.where(closer, sq, ref)
+        w = exp(-(sq - ref) * self._scale)
+        num += w * float(potential)
+        den += w
 
     def set_potential(self, index: int, potential: float) -> None:
         """Give prototype ``index`` (insertion order) a new potential, updating every stored key:
@@ -190,39 +222,45 @@ class RBFField:
             0.5
             0.0
         """
-        if self._protos is None or not 0 <= index < self.prototypes:
+        if self._proto_buf is None or not 0 <= index < self._n:
             raise IndexError(f"no prototype {index}; the field holds {self.prototypes}")
-        old = float(self._potentials[index])
+        old = float(self._pot_buf[index])
         new = float(potential)
         if new == old:
             return
-        self._potentials[index] = new
+        self._pot_buf[index] = new
         self._values.clear()
         self._low, self._high = float(self._potentials.min()), float(self._potentials.max())
-        if self._feats is None:
+        if self._feat_buf is None:
             return
-        sq = squared_distances(self._feats, self._protos[index], self.unit, self._spread())
-        self._num += exp(-(sq - self._ref) * self._scale) * (new - old)
+        k = self._k
+        sq = squared_distances(self._feat_buf[:k], self._proto_buf[index], self.unit, self._spread())
+        self._num_buf[:k] += exp(-(sq - self._ref_buf[:k]) * self._scale) * (new - old)
 
     def value(self, key: str, feature: np.ndarray) -> float:
         known = self._values.get(key)
         if known is not None:
             return known
-        if self._protos is None:
+        if self._proto_buf is None:
             return 0.0
         row = self._index.get(key)
         if row is None:
             f = self._row(feature)
-            sq = squared_distances(self._protos, f[0], self.unit, self._spread())
+            sq = squared_distances(self._proto_buf[: self._n], f[0], self.unit, self._spread())
             ref = float(sq.min())
-            num, den = _weighted_mean(exp(-(sq - ref) * self._scale), self._potentials)
-            row = self._num.shape[0]
+            num, den = _weighted_mean(exp(-(sq - ref) * self._scale), self._pot_buf[: self._n])
+            row = self._k
             self._index[key] = row
-            self._feats = f if self._feats is None else np.vstack([self._feats, f])
-            self._num = np.append(self._num, num)
-            self._den = np.append(self._den, den)
-            self._ref = np.append(self._ref, ref)
+            if self._feat_buf is None:
+                self._feat_buf = np.empty((0, self._dim), dtype=f.dtype)
+            self._feat_buf = self._grown(self._feat_buf, row)
+            self._num_buf = self._grown(self._num_buf, row)
+            self._den_buf = self._grown(self._den_buf, row)
+            self._ref_buf = self._grown(self._ref_buf, row)
+            self._feat_buf[row] = f[0]
+            self._num_buf[row], self._den_buf[row], self._ref_buf[row] = num, den, ref
+            self._k += 1
         # called every env step: plain floats, and the documented bound kept exact
-        value = min(max(float(self._num[row]) / float(self._den[row]), self._low), self._high)
+        value = min(max(float(self._num_buf[row]) / float(self._den_buf[row]), self._low), self._high)
         self._values[key] = value
         return value

@@ -25,6 +25,7 @@ Nothing here sees the environment state: the only input is a ``FrameView``.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -146,6 +147,8 @@ class SemanticOracle:
         if potential is None:
             self._parse_failures += 1
             return None
+        if not self._stochastic:  # its label is known for good: its pixels are not asked for again
+            view.release()
         self._add(view, potential)
         return potential
 
@@ -188,6 +191,11 @@ class SemanticOracle:
         """RBF-smoothed potential of the view over the prototypes (0.0 before the first one)."""
         return self._field.value(view.key, view.features)
 
+    @property
+    def field_value(self) -> Callable[[str, np.ndarray], float]:
+        """``phi_rbf`` as a function of (key, features): the RBF field's own ``value``."""
+        return self._field.value
+
     def stats(self) -> dict[str, float]:
         """Counters since construction, under the keys of ``STAT_KEYS``."""
         return {
@@ -214,6 +222,8 @@ class EpisodePotential:
         self.lock_state = LockState.reset()
         self.held = 0.0  # the latest label's raw potential, held between labels
         self.steps_since_label = 0
+        # the oracle's RBF field's value(key, features), looked up once (None without the RBF)
+        self._rbf_value = oracle.field_value if oracle.rbf else None
 
     def reset(self, view: FrameView) -> float:
         self.lock_state = LockState.reset()
@@ -228,7 +238,7 @@ class EpisodePotential:
             self.steps_since_label = 0
             self._label(view)
         # _phi, inlined: this runs every env step
-        base = self.oracle.phi_rbf(view) if self.oracle.rbf else self.held
+        base = self._rbf_value(view.key, view.features) if self._rbf_value is not None else self.held
         return max(self.lock_state.level, base) if self.lock else base
 
     def _label(self, view: FrameView) -> None:
