@@ -16,6 +16,7 @@ from vlmrl_cli.analysis.learning_profile import (
     distance_ci,
     paper_baseline,
     regime_profile,
+    scaled_target,
     seed_steps,
 )
 
@@ -112,3 +113,13 @@ def test_the_default_target_is_the_papers_baseline() -> None:
 def test_a_target_needs_one_step_per_threshold() -> None:
     with pytest.raises(ValueError, match="one step count per threshold"):
         TargetProfile(THRESHOLDS, (1.0,), 0.5)
+
+
+@given(k=st.integers(1, 6), budget=st.integers(1_000, 10_000_000))
+def test_a_scaled_target_keeps_the_paper_profile_shape_within_the_budget(k: int, budget: int) -> None:
+    paper = paper_baseline()
+    t = scaled_target(tuple(float(i) for i in range(k)), budget)
+    assert len(t.steps) == k and t.reliability == paper.reliability
+    assert list(t.steps) == sorted(t.steps) and all(0 < s < budget for s in t.steps)
+    # the last threshold sits where the paper's last one does, as a fraction of the budget
+    assert t.steps[-1] / budget == pytest.approx(paper.steps[-1] / 300_000)

@@ -62,3 +62,22 @@ def test_file_regimes_and_variants() -> None:
 def test_bad_study_tables(raw: dict) -> None:  # type: ignore[type-arg]
     with pytest.raises(BadInput):
         study_section(raw)
+
+
+def test_a_study_of_another_task_takes_its_study_preset_thresholds_and_window() -> None:
+    from vlmrl_cli.study.config import task_of
+    from vlmrl_cli.tasks.registry import get_task
+
+    layers = [{"task": "acrobot"}]
+    assert task_of(layers) == "acrobot" and task_of([]) == "mountain-car"
+    task = get_task("acrobot")
+    chosen, notes = choose_regimes([], None, "acrobot")
+    preset = task.study_preset or task.default_preset
+    assert chosen == {preset: {"preset": preset}} and notes == []
+    cfg = build_study(layers, chosen, profiles=(), flickers=(), alphas=(), kin_scales=(), query_flickers=())
+    assert cfg.thresholds == task.thresholds and cfg.window == task.window
+    assert all(r.run.task == "acrobot" for r in cfg.all_regimes())
+    with pytest.raises(BadInput, match="VLM-quality variants"):
+        build_study(layers, chosen, profiles=("ideal",), flickers=())
+    with pytest.raises(BadInput, match="a study covers one task"):
+        build_study([], {"a": {"preset": "smoke"}, "b": {"preset": "smoke", "task": "acrobot"}})

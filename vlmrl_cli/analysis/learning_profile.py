@@ -79,6 +79,39 @@ def paper_baseline(path: Path = PAPER_REPORTED) -> TargetProfile:
         raise BadInput(f"cannot read the paper's baseline profile from {path}; check the file ({exc}).") from exc
 
 
+#: The paper's training budget (its Figure 2 runs to 300,000 steps), against which its baseline's
+#: steps are read as fractions of a budget by ``scaled_target``.
+PAPER_BUDGET = 300_000
+
+
+def scaled_target(thresholds: Sequence[float], budget: int, paper: TargetProfile | None = None,
+                  paper_budget: int = PAPER_BUDGET) -> TargetProfile:
+    """The paper's baseline profile carried to another task: the same *shape* (each threshold crossed
+    at the same fraction of the budget as the paper's baseline crossed its k-th, interpolated when the
+    task has another number of thresholds; the same reliability) on ``thresholds`` and ``budget``.
+    A regime close to it is slow and fails on some seeds, as the paper's baseline does.
+
+    Example:
+        >>> t = scaled_target((0.0, 50.0, 90.0), 100_000)
+        >>> [round(s) for s in t.steps], t.reliability
+        ([65572, 73226, 90816], 0.6)
+    """
+    paper = paper or paper_baseline()
+    fractions = np.asarray(paper.steps, dtype=float) / paper_budget
+    k = len(thresholds)
+    if k == 0:
+        raise BadInput("a scaled target needs at least one threshold.")
+    where = np.linspace(0, len(fractions) - 1, k) if k > 1 else np.asarray([len(fractions) - 1.0])
+    steps = np.interp(where, np.arange(len(fractions)), fractions) * budget
+    return TargetProfile(
+        thresholds=tuple(float(t) for t in thresholds),
+        steps=tuple(float(s) for s in steps),
+        reliability=paper.reliability,
+        source=f"the paper's baseline profile scaled to this task (each threshold at the paper's fraction of the "
+               f"budget, {', '.join(f'{f:.0%}' for f in fractions)}; reliability {paper.reliability:.0%})",
+    )
+
+
 def seed_steps(
     episodes: pd.DataFrame,
     thresholds: tuple[float, ...],

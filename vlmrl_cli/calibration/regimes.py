@@ -3,8 +3,12 @@
 A *regime* is a set of overrides (dotted keys, as ``--set`` takes them) laid over the base; each
 regime's baseline arm x seeds is an ordinary `vlmrl run` configuration, checked by the same
 schema. A grid is given as a list of values per key (``[calibrate.grid]`` in TOML, or repeatable
-``--grid ppo.n_envs=1,4,16``) and spans their product. Without one, ``DEFAULT_REGIMES`` spans
-"always solves quickly" (the zoo's tuned PPO) to "never solves" (SB3's defaults, one env).
+``--grid ppo.n_envs=1,4,16``) and spans their product. Without one, MountainCar's
+``DEFAULT_REGIMES`` spans "always solves quickly" (the zoo's tuned PPO) to "never solves" (SB3's
+defaults, one env); another task's default grid is its ``Task.calibration``.
+
+The target is the paper's baseline (Table 2) for MountainCar, and that profile's shape scaled to
+the task's thresholds and budget for another task (``analysis.learning_profile.scaled_target``).
 """
 
 from __future__ import annotations
@@ -16,10 +20,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from vlmrl_cli.analysis.learning_profile import TargetProfile, paper_baseline
+from vlmrl_cli.analysis.learning_profile import TargetProfile, paper_baseline, scaled_target
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
 from vlmrl_cli.core.errors import BadInput, did_you_mean
-from vlmrl_cli.tasks.registry import DEFAULT_TASK
+from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
 from vlmrl_cli.training.config import RunConfig, resolve
 from vlmrl_cli.training.overrides import nest, parse_assignment, parse_values
 
@@ -142,8 +146,8 @@ def build_regimes(layers: Sequence[Mapping[str, Any]], grid: Mapping[str, Sequen
     empty = [key for key, values in grid.items() if not values]
     if empty:
         raise BadInput(f"the grid of {empty[0]} lists no value; give at least one (e.g. --grid {empty[0]}=1,4).")
-    points = grid_product(grid) if grid else [dict(r) for r in DEFAULT_REGIMES]
     base = {"experiment": DEFAULT_EXPERIMENT, "seeds": list(range(DEFAULT_SEEDS))}
+    points = grid_product(grid) if grid else default_grid(resolve([base, *layers]).task)
     return tuple(
         resolve_regime(f"R{i}", point, [base, *layers], {"arms": [CALIBRATED_ARM], "regime": _label(point)})
         for i, point in enumerate(points, start=1)
@@ -160,11 +164,34 @@ def resolve_regime(
         run = resolve([*layers, nest(point.items()) | dict(top)])
     except BadInput as exc:
         raise BadInput(f"regime {rid} ({_label(point)}): {exc}") from None
-    if run.task != DEFAULT_TASK:  # the scoring (target profile, thresholds) is MountainCar's
-        raise BadInput(f"task '{run.task}': calibrate and study score against MountainCar's paper profile and "
-                       "thresholds so far; train another task with `vlmrl run --task` (per-task calibration is "
-                       "not built yet).")
     return Regime(rid, tuple(point.items()), run)
+
+
+def default_grid(task: str) -> list[dict[str, Any]]:
+    """The regimes `vlmrl calibrate` tries without a grid: MountainCar's ``DEFAULT_REGIMES``, another
+    task's ``Task.calibration`` (its default preset alone when that is empty)."""
+    regimes = DEFAULT_REGIMES if task == DEFAULT_TASK else get_task(task).calibration or ({},)
+    return [dict(r) for r in regimes]
+
+
+def calibrate_config(regimes: tuple[Regime, ...], **settings: Any) -> CalibrateConfig:
+    """The ``CalibrateConfig`` of ``regimes``, scored against their task's target on its window; a
+    grid that spans two tasks is ``BadInput`` (one target, one set of thresholds)."""
+    tasks = sorted({r.run.task for r in regimes})
+    if len(tasks) > 1:
+        raise BadInput(f"the regimes span tasks {', '.join(tasks)}; calibrate one task at a time (--task).")
+    base = regimes[0].run
+    settings.setdefault("target", calibration_target(base))
+    settings.setdefault("window", get_task(base.task).window)
+    return CalibrateConfig(regimes, **settings)
+
+
+def calibration_target(run: RunConfig) -> TargetProfile:
+    """What a regime's baseline is scored against: the paper's baseline for MountainCar, else its
+    shape on the task's thresholds and the run's budget (``scaled_target``)."""
+    if run.task == DEFAULT_TASK:
+        return paper_baseline()
+    return scaled_target(get_task(run.task).thresholds, run.budget)
 
 
 def _label(point: Mapping[str, Any]) -> str:

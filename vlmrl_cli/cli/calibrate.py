@@ -1,4 +1,5 @@
-"""`vlmrl calibrate`: find the PPO regime whose baseline learns most like the paper's baseline."""
+"""`vlmrl calibrate`: find the PPO regime whose baseline learns most like the paper's baseline
+(another task: like that profile scaled to the task, slow and failing on some seeds)."""
 
 from __future__ import annotations
 
@@ -34,6 +35,7 @@ def calibrate(
     vlm_cfg: VLMConfig,
     seeds: opt.Seeds = 10,
     seed_list: opt.SeedList = None,
+    task: opt.TaskOpt = None,
     timesteps: opt.Timesteps = None,
     preset: opt.Preset = "paper",
     workers: opt.Workers = None,
@@ -51,19 +53,21 @@ def calibrate(
     """Train the baseline arm under each PPO regime of a grid (resumable MLflow runs tagged vlmrl.regime)
     and rank the regimes by their distance to the paper's baseline learning profile."""
     from vlmrl_cli.calibration.pipeline import calibrate as run_calibration
-    from vlmrl_cli.calibration.regimes import CalibrateConfig, Regime, build_regimes, calibrate_section, grid_flags
+    from vlmrl_cli.calibration.regimes import Regime, build_regimes, calibrate_config, calibrate_section, grid_flags
     from vlmrl_cli.sweep.cost import estimate_sweeps
 
     console = Console()
     with exit_codes():
         file_layer, *upper = opt.config_layers(ctx, config, sets, vlm_cfg)
         file_grid = calibrate_section(file_layer.pop("calibrate", {}))
-        cfg = CalibrateConfig(build_regimes([file_layer, *upper], file_grid | grid_flags(grid or [])), out=out)
+        cfg = calibrate_config(build_regimes([file_layer, *upper], file_grid | grid_flags(grid or [])), out=out)
         base = cfg.base
         console.print(
             f"[bold]vlmrl calibrate[/]: {len(cfg.regimes)} regime(s) x seeds {list(base.seeds)} of the "
-            f"baseline, preset {base.preset}, {base.budget:,} steps each, experiment '{base.experiment}'"
+            f"baseline, task {base.task}, preset {base.preset}, {base.budget:,} steps each, experiment "
+            f"'{base.experiment}'"
         )
+        console.print(f"target: {cfg.target.source}", markup=False)
         console.print(f"cost estimate: {estimate_sweeps([r.run for r in cfg.regimes]).line()}", markup=False)
         if dry_run:
             for regime in cfg.regimes:

@@ -113,9 +113,10 @@ def print_children(console: Console, cfg: RunConfig, experiment_id: str) -> None
     from vlmrl_cli.tasks.registry import get_task
     from vlmrl_cli.tracking import store
 
-    top = get_task(cfg.task).thresholds[-1]
+    task = get_task(cfg.task)
+    top = task.thresholds[-1]
     client = store.connect(cfg.tracking_uri)
-    rows = [header(top), *format_rows(child_rows(client, experiment_id, cfg.jobs(), top), top)]
+    rows = [header(top), *format_rows(child_rows(client, experiment_id, cfg.jobs(), top, task.window), top)]
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     console.print("training runs (vlmrl evaluate RUN_ID):", markup=False)
     for r in rows:
@@ -134,11 +135,12 @@ def dry_run_text(cfg: RunConfig) -> str:
     from vlmrl_cli.tracking import store
 
     plan = dry_plan(cfg)
-    top = get_task(cfg.task).thresholds[-1]
+    task = get_task(cfg.task)
+    top = task.thresholds[-1]
     done = {(j.arm.name, j.seed) for j in plan.done}
     found = {}
     if plan.done and plan.experiment_id is not None:
-        rows = child_rows(store.connect(cfg.tracking_uri), plan.experiment_id, plan.done, top)
+        rows = child_rows(store.connect(cfg.tracking_uri), plan.experiment_id, plan.done, top, task.window)
         found = {(r.arm, r.seed): cells for r, cells in zip(rows, format_rows(rows, top), strict=True)}
     lines = [f"# {plan.note}", "# arm        seed  config_hash   status    run id                            "
              f"{f'steps to {top:g}':>13}  detached success"]

@@ -99,6 +99,7 @@ def study(
     vlm_cfg: VLMConfig,
     regime: RegimeFlag = None,
     arms: StudyArms = None,
+    task: opt.TaskOpt = None,
     seeds: opt.Seeds = 20,
     seed_list: opt.SeedList = None,
     timesteps: opt.Timesteps = None,
@@ -134,6 +135,7 @@ def study(
         build_study,
         choose_regimes,
         study_section,
+        task_of,
     )
     from vlmrl_cli.study.pipeline import estimate_cost, finished_per_seed, power_lines, run_study
 
@@ -141,7 +143,7 @@ def study(
     with exit_codes():
         file_layer, *upper = opt.config_layers(ctx, config, sets, vlm_cfg)
         section = study_section(file_layer.pop("study", {}))
-        chosen, notes = choose_regimes(regime or [], section.get("regimes"))
+        chosen, notes = choose_regimes(regime or [], section.get("regimes"), task_of([file_layer, *upper]))
         profile_list, flicker_list = _names(profiles, "--profiles"), _numbers(flickers)
         cfg = build_study(
             [file_layer, *upper], chosen,

@@ -46,6 +46,9 @@ DEFAULT_REPORTED = paper.REPORTED
 MOUNTAIN_CAR_THRESHOLDS = (-190.0, -160.0, -130.0)
 
 
+DEFAULT_WINDOW = 100
+
+
 @dataclass(frozen=True)
 class ReportConfig:
     """Everything one report depends on (logged whole as the report run's params)."""
@@ -56,7 +59,7 @@ class ReportConfig:
     # reward targets (rolling mean native return); another task's runs take that task's thresholds
     # unless others are given
     thresholds: tuple[float, ...] = MOUNTAIN_CAR_THRESHOLDS
-    window: int = 100  # episodes in the rolling mean
+    window: int = DEFAULT_WINDOW  # episodes in the rolling mean (another task's runs: that task's, unless given)
     min_episodes: int = 1  # fewest completed episodes before a rolling mean counts
     ci: float = 0.95  # confidence level of every interval
     n_boot: int = stats.DEFAULT_N_BOOT  # bootstrap resamples
@@ -353,6 +356,8 @@ def write_report(cfg: ReportConfig) -> ReportResult:
         if thresholds == MOUNTAIN_CAR_THRESHOLDS:  # left at the default: the task's own thresholds
             thresholds = task.thresholds
             cfg = dataclasses.replace(cfg, thresholds=thresholds)
+        if cfg.window == DEFAULT_WINDOW:  # likewise the task's window
+            cfg = dataclasses.replace(cfg, window=task.window, min_episodes=min(cfg.min_episodes, task.window))
     streams = stats.Streams(cfg.seed)
 
     per_seed = per_seed_table(data, thresholds, cfg.window, cfg.min_episodes, cfg.detached_cut)

@@ -30,7 +30,8 @@ from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
 from vlmrl_cli.calibration.regimes import Regime, resolve_regime
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.probe.scoring import DEFAULT_STATES
-from vlmrl_cli.training.config import RunConfig
+from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
+from vlmrl_cli.training.config import RunConfig, resolve
 from vlmrl_cli.training.overrides import parse_assignment, parse_value
 from vlmrl_cli.training.presets import PRESETS
 from vlmrl_cli.vlm.config import SIM_PROFILES
@@ -228,10 +229,24 @@ def _bad_regime(name: str) -> dict[str, Any]:
     raise BadInput(f"study.regimes.{name} must be a preset name or a table of overrides.")
 
 
-def choose_regimes(flags: Sequence[str], file_regimes: Mapping[str, Mapping[str, Any]] | None
-                   ) -> tuple[dict[str, dict[str, Any]], list[str]]:
+def task_of(layers: Sequence[Mapping[str, Any]]) -> str:
+    """The task the layers (file, ``--set``, flags) name: the ``task`` key, or MountainCar."""
+    return resolve([*layers]).task
+
+
+def task_regimes(task: str) -> dict[str, dict[str, Any]]:
+    """Another task's default regime: its study preset (calibrated: the baseline slow or unreliable),
+    else its default preset, under the preset's name."""
+    t = get_task(task)
+    preset = t.study_preset or t.default_preset
+    return {preset: {"preset": preset}}
+
+
+def choose_regimes(flags: Sequence[str], file_regimes: Mapping[str, Mapping[str, Any]] | None,
+                   task: str = DEFAULT_TASK) -> tuple[dict[str, dict[str, Any]], list[str]]:
     """The regimes to run (name -> overrides) and notes on the defaults left out: ``--regime``
-    flags, else the file's, else ``DEFAULT_REGIMES`` without those whose preset does not exist yet."""
+    flags, else the file's, else ``DEFAULT_REGIMES`` without those whose preset does not exist yet
+    (another task: ``task_regimes``)."""
     if flags:
         chosen = dict(parse_regime(f) for f in flags)
         if len(chosen) < len(flags):
@@ -239,6 +254,8 @@ def choose_regimes(flags: Sequence[str], file_regimes: Mapping[str, Mapping[str,
         return chosen, []
     if file_regimes:
         return {k: dict(v) for k, v in file_regimes.items()}, []
+    if task != DEFAULT_TASK:
+        return task_regimes(task), []
     chosen, notes = {}, []
     for name, point in DEFAULT_REGIMES.items():
         preset = point.get("preset")
@@ -278,6 +295,16 @@ def build_study(
                        f"choose from {', '.join(SIM_PROFILES)}.")
     base = {"experiment": DEFAULT_EXPERIMENT, "seeds": list(range(DEFAULT_SEEDS)), "arms": list(DEFAULT_ARMS)}
     built = tuple(resolve_regime(name, point, [base, *layers], {"regime": name}) for name, point in regimes.items())
+    tasks = sorted({r.run.task for r in built})
+    if len(tasks) > 1:
+        raise BadInput(f"the regimes span tasks {', '.join(tasks)}; a study covers one task (--task).")
+    if tasks[0] != DEFAULT_TASK:
+        if profiles or flickers:
+            raise BadInput(f"task {tasks[0]}: the VLM-quality variants (--profiles, --flickers) are MountainCar's "
+                           "(their accuracy comes from its taxonomy probe); pass --profiles none --flickers none.")
+        task = get_task(tasks[0])
+        settings.setdefault("thresholds", task.thresholds)
+        settings.setdefault("window", task.window)
     notes = list(notes)
     target = vlm_regime or (CALIBRATED if CALIBRATED in regimes else next(iter(regimes)))
     if target not in regimes:

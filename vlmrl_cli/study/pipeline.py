@@ -42,6 +42,7 @@ from vlmrl_cli.study.config import StudyConfig
 from vlmrl_cli.sweep import cost as cost_model
 from vlmrl_cli.sweep.cost import CostEstimate
 from vlmrl_cli.sweep.runner import JobResult, SweepReporter, vlm_identity
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.tracking import schema, store
 
 KIND = schema.KIND_STUDY
@@ -125,11 +126,12 @@ def run_study(
     for regime in cfg.regimes:
         sub = verdicts.subset(data, regime.run)
         row, per_seed = verdicts.regime_row(regime.id, sub, cfg.thresholds, streams, cfg.n_boot, cfg.ci, cfg.alpha,
-                                            cfg.margin)
+                                            cfg.margin, cfg.window)
         row["overrides"] = regime.label
         row["train_wall_s"] = sum(wall_s(client, r) for r in per_seed["run_id"])
         rows.append(row)
-        hack.append(hacking.hacking_frame(per_seed, sub.eval_episodes, cfg.ci).assign(regime=regime.id))
+        hack.append(hacking.hacking_frame(per_seed, sub.eval_episodes, cfg.ci, get_task(regime.run.task).max_steps)
+                    .assign(regime=regime.id))
         seeds.append(per_seed.assign(regime=regime.id, variant=""))
     seeds += _other_sweep_frames(cfg, data)
     result.per_seed = study_per_seed(seeds, cfg.thresholds)
@@ -137,7 +139,7 @@ def run_study(
     ready = [c for c in verdicts.controls(cfg.cells)
              if all(len(runs_of(data.runs, side.regime.run)) >= 2 for side in (c.a, c.b))]
     result.controls = pd.DataFrame([verdicts.control_row(c, data, cfg.thresholds, streams, cfg.n_boot, cfg.ci,
-                                                         cfg.alpha, cfg.margin) for c in ready])
+                                                         cfg.alpha, cfg.margin, cfg.window) for c in ready])
     result.power = power_lines(cfg, result.per_seed)
     reference = next(r for r in cfg.regimes if r.id == cfg.vlm_regime)
     points = [verdicts.vlm_point(v.id, verdicts.paired(data, reference.run, v.run), cfg.top, accuracy[v.id], streams,
@@ -162,7 +164,7 @@ def run_study(
 
 def _other_sweep_frames(cfg: StudyConfig, data: Any) -> list[pd.DataFrame]:
     """The per-seed tables of the VLM variants and control cells (in the VLM regime), by sweep id."""
-    return [per_seed_table(verdicts.subset(data, sweep.run), cfg.thresholds).assign(regime=cfg.vlm_regime,
+    return [per_seed_table(verdicts.subset(data, sweep.run), cfg.thresholds, cfg.window).assign(regime=cfg.vlm_regime,
                                                                                      variant=sweep.id)
             for sweep in (*cfg.variants, *(c.regime for c in cfg.cells))]
 
@@ -177,7 +179,7 @@ def finished_per_seed(cfg: StudyConfig) -> pd.DataFrame | None:
         data = load_experiment(found_exp[0], cfg.base.experiment)
     except BadInput:  # no finished training run yet
         return None
-    frames = [per_seed_table(verdicts.subset(data, r.run), cfg.thresholds).assign(regime=r.id, variant="")
+    frames = [per_seed_table(verdicts.subset(data, r.run), cfg.thresholds, cfg.window).assign(regime=r.id, variant="")
               for r in cfg.regimes]
     frames += _other_sweep_frames(cfg, data)
     table = study_per_seed([f for f in frames if len(f)], cfg.thresholds)

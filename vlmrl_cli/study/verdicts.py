@@ -94,13 +94,13 @@ def _pair_columns(key: str, comparisons: pd.DataFrame, a: str, b: str, top: floa
 
 def regime_row(name: str, data: ExperimentData, thresholds: Sequence[float], streams: stats.Streams,
                n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, alpha: float = 0.05,
-               margin: float = censored.DEFAULT_MARGIN) -> tuple[dict[str, Any], pd.DataFrame]:
+               margin: float = censored.DEFAULT_MARGIN, window: int = 100) -> tuple[dict[str, Any], pd.DataFrame]:
     """One regime's row of the map (per arm: reliability and restricted mean steps to the top
     threshold with CIs; per ``MAP_PAIRS`` pair: speedup, CI, rank-test p and verdict, reliability
     and learning-curve area differences) and its per-seed table."""
     top = max(thresholds)
-    per_seed = per_seed_table(data, thresholds)
-    table = build_table2(per_seed, data.eval_episodes, {}, thresholds, streams, n_boot=n_boot, ci=ci)
+    per_seed = per_seed_table(data, thresholds, window)
+    table = build_table2(per_seed, data.eval_episodes, {}, thresholds, streams, window=window, n_boot=n_boot, ci=ci)
     pairs = [attribution.Pair(a, b, meaning) for a, b, meaning in MAP_PAIRS
              if a in set(per_seed["arm"]) and b in set(per_seed["arm"])]
     comparisons = attribution.compare_arms(per_seed, thresholds, streams, n_boot, ci, alpha=alpha, margin=margin,
@@ -163,13 +163,13 @@ def controls(cells: Sequence[Cell]) -> list[Control]:
 
 def control_row(control: Control, data: ExperimentData, thresholds: Sequence[float], streams: stats.Streams,
                 n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, alpha: float = 0.05,
-                margin: float = censored.DEFAULT_MARGIN) -> dict[str, Any]:
+                margin: float = censored.DEFAULT_MARGIN, window: int = 100) -> dict[str, Any]:
     """One control comparison's row: each side's arm, knobs, seeds reaching the top threshold and
     restricted mean steps, then the comparison's columns (as the regime map's)."""
     top = max(thresholds)
     a_runs, b_runs = runs_of(data.runs, control.a.regime.run), runs_of(data.runs, control.b.regime.run)
     both = _restrict(data, pd.concat([a_runs, b_runs]).drop_duplicates("run_id"))
-    per_seed = per_seed_table(both, thresholds)
+    per_seed = per_seed_table(both, thresholds, window)
     a, b = control.a.arm, control.b.arm
     pair = attribution.Pair(a, b, control.question)
     comparisons = attribution.compare_arms(per_seed, thresholds, streams, n_boot, ci, alpha=alpha, margin=margin,

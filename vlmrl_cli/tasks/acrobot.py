@@ -84,6 +84,12 @@ _ZOO: dict[str, Any] = {
     "ent_coef": 0.0, "learning_rate": 3e-4, "normalize_obs": True, "normalize_reward": True, "timesteps": 1_000_000,
 }
 
+# SB3's PPO defaults (n_steps 2048, batch 64, 10 epochs, gae 0.95, lr 3e-4) on one env, unnormalised
+_SB3_DEFAULT: dict[str, Any] = {
+    "n_envs": 1, "n_steps": 2048, "batch_size": 64, "gae_lambda": 0.95, "gamma": 0.99, "n_epochs": 10,
+    "ent_coef": 0.0, "learning_rate": 3e-4, "normalize_obs": False, "normalize_reward": False, "timesteps": 100_000,
+}
+
 ACROBOT = Task(
     name="acrobot",
     env_id="Acrobot-v1",
@@ -101,9 +107,19 @@ ACROBOT = Task(
         "zoo": _ZOO,
         # zoo's knobs at a fifth of its budget: what two CPU cores can train for a 10-seed study
         "zoo-200k": {**_ZOO, "timesteps": 200_000},
+        # The candidates of `vlmrl calibrate --task acrobot` (Task.calibration), 100,000 steps each:
+        # zoo's knobs, then ways to slow them down (a third of the step size; no VecNormalize),
+        # then SB3's PPO defaults on one env (no normalisation, 2,048-step rollouts, 10 epochs).
+        "zoo-100k": {**_ZOO, "timesteps": 100_000},
+        "zoo-100k-lr1e-4": {**_ZOO, "timesteps": 100_000, "learning_rate": 1e-4},
+        "zoo-100k-raw": {**_ZOO, "timesteps": 100_000, "normalize_obs": False, "normalize_reward": False},
+        "sb3-default-100k": _SB3_DEFAULT,
         "smoke": SMOKE,
     },
     default_preset="zoo",
     zoo_reference="rl-baselines3-zoo benchmark.md, PPO Acrobot-v1: -73.506 +/- 18.201 (1M steps)",
     probe_states=probe_states,
+    # early episodes last 500 steps: 100 of them would be half a 100,000-step budget
+    window=20,
+    calibration=tuple({"preset": p} for p in ("zoo-100k", "zoo-100k-lr1e-4", "zoo-100k-raw", "sb3-default-100k")),
 )

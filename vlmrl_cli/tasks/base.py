@@ -63,6 +63,12 @@ class Task:
         probe_states: about ``n`` simulator states for ``vlmrl taxonomy`` of this task (each drawn
             by the task's camera; None: MountainCar's own probe).
         env_kwargs: keyword arguments of ``gym.make``.
+        window: episodes in the rolling mean return that thresholds are read on (100, as SB3's
+            ``ep_rew_mean``; fewer for a task whose episodes are long next to its budgets).
+        calibration: the default grid of ``vlmrl calibrate --task``: overrides (``--set`` keys)
+            over the task's default preset, one mapping per regime (empty: that preset alone).
+        study_preset: the preset of ``vlmrl study --task``'s default regime, one calibrated so that
+            the baseline is slow or unreliable (None: the default preset).
     """
 
     name: str
@@ -85,6 +91,9 @@ class Task:
     probes_floats: bool = False
     probe_states: Callable[[int], list[np.ndarray]] | None = None
     env_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    window: int = 100
+    calibration: tuple[Mapping[str, Any], ...] = ()
+    study_preset: str | None = None
 
     def __post_init__(self) -> None:
         problem = label_problem(self.label_potentials, self.milestones.labels)
@@ -94,6 +103,10 @@ class Task:
             raise ValueError(f"task '{self.name}': give its reward thresholds lowest first")
         if self.presets is not None and not {"zoo", "smoke"} <= set(self.presets):
             raise ValueError(f"task '{self.name}': its presets must include 'zoo' and 'smoke'")
+        if self.window < 1:
+            raise ValueError(f"task '{self.name}': its window must be at least 1 episode")
+        if self.presets is not None and self.study_preset is not None and self.study_preset not in self.presets:
+            raise ValueError(f"task '{self.name}': its study preset '{self.study_preset}' is not one of its presets")
 
     def make_env(self, render_mode: str | None = None) -> gym.Env[Any, Any]:
         """A fresh env of this task (``gym.make(env_id)``, the time limit included); a rendering

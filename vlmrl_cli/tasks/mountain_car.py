@@ -117,6 +117,12 @@ _CONTINUOUS_ZOO: dict[str, Any] = {
     "timesteps": 20_000,
 }
 
+# MountainCar-v0's zoo knobs (training/presets.ZOO) at 100,000 steps, for the continuous car
+_MC_KNOBS: dict[str, Any] = {
+    "n_envs": 16, "n_steps": 16, "batch_size": 64, "gae_lambda": 0.98, "gamma": 0.99, "n_epochs": 4,
+    "ent_coef": 0.0, "learning_rate": 3e-4, "normalize_obs": True, "normalize_reward": True, "timesteps": 100_000,
+}
+
 MOUNTAIN_CAR_CONTINUOUS = Task(
     name="mountain-car-continuous",
     env_id=CONTINUOUS_ENV_ID,
@@ -134,6 +140,16 @@ MOUNTAIN_CAR_CONTINUOUS = Task(
         "zoo": _CONTINUOUS_ZOO,
         # zoo's tuned knobs, a budget ten times zoo's: room to see a slow or stuck baseline
         "zoo-200k": {**_CONTINUOUS_ZOO, "timesteps": 200_000},
+        # The candidates of `vlmrl calibrate --task mountain-car-continuous` (Task.calibration),
+        # 100,000 steps each, all cheap to train on CPUs (zoo's tuned 8-step rollouts with 10
+        # epochs cost about ten times as much per step): MountainCar-v0's zoo knobs (16 envs x
+        # 16 steps, VecNormalize), the same without reward normalisation, and SB3's PPO defaults
+        # on one env (no normalisation). Untuned PPO is known to settle on standing still here.
+        "mc-zoo-100k": _MC_KNOBS,
+        "mc-zoo-100k-raw-reward": {**_MC_KNOBS, "normalize_reward": False},
+        "sb3-default-100k": {"n_envs": 1, "n_steps": 2048, "batch_size": 64, "gae_lambda": 0.95, "gamma": 0.99,
+                             "n_epochs": 10, "ent_coef": 0.0, "learning_rate": 3e-4, "normalize_obs": False,
+                             "normalize_reward": False, "timesteps": 100_000},
         "smoke": SMOKE,
     },
     default_preset="zoo",
@@ -141,4 +157,7 @@ MOUNTAIN_CAR_CONTINUOUS = Task(
     position=_position,
     hover_from=0.3,
     probe_states=continuous_probe_states,
+    # an episode that never reaches the flag lasts 999 steps: 100 of them would be a whole budget
+    window=10,
+    calibration=tuple({"preset": p} for p in ("mc-zoo-100k", "mc-zoo-100k-raw-reward", "sb3-default-100k")),
 )
