@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -30,3 +31,12 @@ def test_zero_left_of_minus_offset(x: float, scale: float, offset: float) -> Non
 def test_paper_defaults_eq1() -> None:
     assert kinematic_reward(-0.4) == 0.0
     assert kinematic_reward(0.5) == 2.0 * 0.9
+
+
+@given(st.floats(-1.2, 0.6), st.floats(0.0, 10.0), st.floats(-2.0, 2.0))
+def test_the_scene_dense_term_is_eq1_on_the_observed_position(x: float, scale: float, offset: float) -> None:
+    """MountainCar's scene term (inlined for speed) equals ``kinematic_reward`` on ``obs[0]``, bit for bit."""
+    from vlmrl_cli.shaping.scene import mountain_car_dense
+
+    obs = np.array([x, 0.01], dtype=np.float32)
+    assert mountain_car_dense(obs, scale, offset) == kinematic_reward(float(obs[0]), scale, offset)

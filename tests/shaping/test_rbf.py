@@ -213,3 +213,25 @@ def test_a_known_spread_skips_only_a_check_and_a_wide_one_still_refuses_overflow
     huge = np.array([[0, 2**40]], dtype=np.int64)
     with pytest.raises(ValueError, match="too large"):
         squared_distances(huge, np.array([2**40, 0], dtype=np.int64), spread=2**40)
+
+
+@given(st.lists(st.tuples(st.booleans(), st.integers(0, 5), st.floats(0.0, 1.0)), min_size=1, max_size=30),
+       st.sampled_from([3, 10**4, 10**9, 2**61]), st.integers(0, 2**32 - 1))
+def test_integer_field_equals_the_scalar_reference_bit_for_bit_at_any_magnitude(ops, high: int, seed: int) -> None:  # type: ignore[no-untyped-def]
+    """Integer features from tiny to near int64 overflow (where the norm shortcut must step aside):
+    the field equals the scalar reference exactly, or refuses the overflow as the reference's
+    exact arithmetic would not fit int64."""
+    rng = np.random.default_rng(seed)
+    dim = 4
+    field, ref = RBFField(0.7, dim, unit=float(high)), _ScalarField(0.7, float(high))
+    feats = {k: rng.integers(0, high, size=dim, endpoint=True).astype(np.int64) for k in range(6)}
+    try:
+        for add, key, potential in ops:
+            f = feats[key]
+            if add:
+                field.add_prototype(f, potential)
+                ref.add(f.tolist(), potential)
+            else:
+                assert field.value(str(key), f) == ref.value(str(key), f.tolist())
+    except ValueError as exc:
+        assert "too large" in str(exc) and high == 2**61

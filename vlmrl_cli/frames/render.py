@@ -27,7 +27,8 @@ class Frame:
     @classmethod
     def from_pixels(cls, pixels: np.ndarray, frame_id: str | None = None) -> Frame:
         pixels = np.ascontiguousarray(pixels, dtype=np.uint8)
-        return cls(pixels=pixels, sha256=hashlib.sha256(pixels.tobytes()).hexdigest(),
+        # the buffer itself (C-contiguous: the same bytes as tobytes(), without copying them)
+        return cls(pixels=pixels, sha256=hashlib.sha256(memoryview(pixels).cast("B")).hexdigest(),
                    frame_id=frame_id)
 
     @classmethod

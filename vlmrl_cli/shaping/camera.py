@@ -123,7 +123,8 @@ class Camera(CellCamera[int]):
     """Renders MountainCar at a position snapped to ``render_quantum``; memoises per grid cell.
 
     ``renders`` counts calls to gymnasium's renderer; ``pixel_cache`` is how many frames'
-    pixels are kept (about 0.7 MB each).
+    pixels are kept (about 0.7 MB each; frames a deterministic VLM has labelled leave first, so
+    the cache mostly holds frames still waiting for their first label).
 
     Example:
         >>> cam = Camera(render_quantum=0.001)
@@ -135,7 +136,7 @@ class Camera(CellCamera[int]):
         >>> cam.close()
     """
 
-    def __init__(self, render_quantum: float = 0.003, pixel_cache: int = 256, env_id: str = "MountainCar-v0") -> None:
+    def __init__(self, render_quantum: float = 0.003, pixel_cache: int = 384, env_id: str = "MountainCar-v0") -> None:
         if not (math.isfinite(render_quantum) and 0 < render_quantum <= MAX_POSITION - MIN_POSITION):
             raise ValueError(
                 f"render_quantum must be in (0, {MAX_POSITION - MIN_POSITION}] x units, got {render_quantum}"

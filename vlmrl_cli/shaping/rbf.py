@@ -128,6 +128,8 @@ class RBFField:
         self._pot_buf = np.empty(0, dtype=np.float64)
         self._index: dict[str, int] = {}
         self._feat_buf: np.ndarray | None = None  # (capacity, D)
+        self._knorm_buf = np.empty(0, dtype=np.int64)  # each key's squared norm (integer features)
+        self._pnorm_buf = np.empty(0, dtype=np.int64)  # each prototype's squared norm
         self._num_buf = np.empty(0, dtype=np.float64)
         self._den_buf = np.empty(0, dtype=np.float64)
         self._ref_buf = np.empty(0, dtype=np.float64)  # squared distance the weights are relative to
@@ -189,8 +191,10 @@ class RBFField:
         if self._proto_buf is None:
             self._proto_buf = np.empty((0, self._dim), dtype=row.dtype)
         self._proto_buf = self._grown(self._proto_buf, self._n)
+        self._pnorm_buf = self._grown(self._pnorm_buf, self._n)
         self._pot_buf = self._grown(self._pot_buf, self._n)
         self._proto_buf[self._n] = row[0]
+        self._pnorm_buf[self._n] = self._norm(row[0])
         self._pot_buf[self._n] = float(potential)
         self._n += 1
         self._low = min(self._low, float(potential))
@@ -199,7 +203,7 @@ class RBFField:
             return
         k = self._k
         ref, num, den = self._ref_buf[:k], self._num_buf[:k], self._den_buf[:k]
-        sq = squared_distances(self._feat_buf[:k], row[0], self.unit, self._spread())
+        sq = self._key_distances(row[0])
         closer = sq < ref
         # rebase keys whose nearest prototype is the new one, so no weight underflows
         # (the others get exp(0) = 1; clipping first keeps exp from overflowing on them)
@@ -210,6 +214,32 @@ class RBFField:
         w = exp(-(sq - ref) * self._scale)
         num += w * float(potential)
         den += w
+
+    def _key_distances(self, proto: np.ndarray) -> np.ndarray:
+        """``squared_distances(keys, proto)``: see ``_distances``."""
+        assert self._feat_buf is not None
+        return self._distances(self._feat_buf[: self._k], self._knorm_buf[: self._k], proto)
+
+    def _proto_distances(self, feature: np.ndarray) -> np.ndarray:
+        """``squared_distances(prototypes, feature)``: see ``_distances``."""
+        assert self._proto_buf is not None
+        return self._distances(self._proto_buf[: self._n], self._pnorm_buf[: self._n], feature)
+
+    def _distances(self, rows: np.ndarray, norms: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """``squared_distances(rows, f)``, the same numbers: for non-negative integer features small
+        enough that no int64 sum can overflow, as ``|r|^2 - 2 r.f + |f|^2`` from the rows' stored
+        squared ``norms`` (one product per entry instead of a difference and a product)."""
+        if (np.issubdtype(rows.dtype, np.integer) and self._entry_low >= 0
+                and 2 * self._dim * self._entry_high**2 <= _INT64_MAX):
+            g = f.astype(np.int64, copy=False)
+            exact = norms - 2 * np.einsum("ij,j->i", rows, g) + int(np.einsum("i,i->", g, g))
+            return exact.astype(np.float64) / (self.unit * self.unit)
+        return squared_distances(rows, f, self.unit, self._spread())
+
+    @staticmethod
+    def _norm(row: np.ndarray) -> int:
+        """The squared norm of an integer row (exact while ``_distances``' bound holds, else unused)."""
+        return int(np.einsum("i,i->", row, row)) if np.issubdtype(row.dtype, np.integer) else 0
 
     def set_potential(self, index: int, potential: float) -> None:
         """Give prototype ``index`` (insertion order) a new potential, updating every stored key:
@@ -234,7 +264,7 @@ class RBFField:
         if self._feat_buf is None:
             return
         k = self._k
-        sq = squared_distances(self._feat_buf[:k], self._proto_buf[index], self.unit, self._spread())
+        sq = self._key_distances(self._proto_buf[index])
         self._num_buf[:k] += exp(-(sq - self._ref_buf[:k]) * self._scale) * (new - old)
 
     def value(self, key: str, feature: np.ndarray) -> float:
@@ -246,7 +276,7 @@ class RBFField:
         row = self._index.get(key)
         if row is None:
             f = self._row(feature)
-            sq = squared_distances(self._proto_buf[: self._n], f[0], self.unit, self._spread())
+            sq = self._proto_distances(f[0])
             ref = float(sq.min())
             num, den = _weighted_mean(exp(-(sq - ref) * self._scale), self._pot_buf[: self._n])
             row = self._k
@@ -254,10 +284,12 @@ class RBFField:
             if self._feat_buf is None:
                 self._feat_buf = np.empty((0, self._dim), dtype=f.dtype)
             self._feat_buf = self._grown(self._feat_buf, row)
+            self._knorm_buf = self._grown(self._knorm_buf, row)
             self._num_buf = self._grown(self._num_buf, row)
             self._den_buf = self._grown(self._den_buf, row)
             self._ref_buf = self._grown(self._ref_buf, row)
             self._feat_buf[row] = f[0]
+            self._knorm_buf[row] = self._norm(f[0])
             self._num_buf[row], self._den_buf[row], self._ref_buf[row] = num, den, ref
             self._k += 1
         # called every env step: plain floats, and the documented bound kept exact

@@ -81,10 +81,11 @@ def wheel_column(pixels: np.ndarray) -> float | None:
     Only exact (128, 128, 128) pixels count, and only in columns holding several of them:
     anti-aliasing of the track and the flag leaves single stray pixels of that grey.
     """
-    red = pixels[:, :, 0]
-    rows, cols = np.nonzero(red == WHEEL_GREY)  # one channel first: ~4x faster than all three
-    grey = (pixels[rows, cols, 1] == WHEEL_GREY) & (pixels[rows, cols, 2] == WHEEL_GREY)
-    counts = np.bincount(cols[grey], minlength=pixels.shape[1])
+    flat = np.ascontiguousarray(pixels).reshape(-1, 3)
+    # one channel first (~4x faster than all three), on a contiguous copy of it
+    (hits,) = np.nonzero(np.ascontiguousarray(flat[:, 0]) == WHEEL_GREY)
+    grey = (flat[hits, 1] == WHEEL_GREY) & (flat[hits, 2] == WHEEL_GREY)
+    counts = np.bincount(hits[grey] % pixels.shape[1], minlength=pixels.shape[1])
     # a wheel disc's columns hold up to 2 * radius pixels; both discs lose the same sparse rims
     # to this cut, so the midpoint below is unchanged
     solid = np.nonzero(counts >= _MIN_COLUMN_PIXELS)[0]
