@@ -28,7 +28,7 @@ class Frame:
     def from_pixels(cls, pixels: np.ndarray, frame_id: str | None = None) -> Frame:
         pixels = np.ascontiguousarray(pixels, dtype=np.uint8)
         # the buffer itself (C-contiguous: the same bytes as tobytes(), without copying them)
-        return cls(pixels=pixels, sha256=hashlib.sha256(memoryview(pixels).cast("B")).hexdigest(),
+        return cls(pixels=pixels, sha256=hashlib.sha256(pixels.data.cast("B")).hexdigest(),
                    frame_id=frame_id)
 
     @classmethod
