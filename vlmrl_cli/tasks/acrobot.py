@@ -122,4 +122,9 @@ ACROBOT = Task(
     # early episodes last 500 steps: 100 of them would be half a 100,000-step budget
     window=20,
     calibration=tuple({"preset": p} for p in ("zoo-100k", "zoo-100k-lr1e-4", "zoo-100k-raw", "sb3-default-100k")),
+    # The closest regime of `vlmrl calibrate --task acrobot --seeds 5` (results/tasks/acrobot/
+    # calibration/, 2026-12-02): distance 0.889 [0.831, 0.985]. Its baseline is slow (-100 at
+    # 73,130 steps on average against the target's 90,816) but reaches -100 on 5/5 seeds: no
+    # candidate made plain PPO fail on Acrobot.
+    study_preset="zoo-100k-lr1e-4",
 )
