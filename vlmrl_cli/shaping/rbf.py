@@ -144,16 +144,8 @@ class RBFField:
         return self._n
 
     @property
-    def _protos(self) -> np.ndarray | None:
-        return None if self._proto_buf is None else self._proto_buf[: self._n]
-
-    @property
     def _potentials(self) -> np.ndarray:
         return self._pot_buf[: self._n]
-
-    @property
-    def _feats(self) -> np.ndarray | None:
-        return None if self._feat_buf is None else self._feat_buf[: self._k]
 
     @staticmethod
     def _grown(buf: np.ndarray, used: int) -> np.ndarray:

@@ -27,7 +27,7 @@ from vlmrl_cli.tasks.acrobot_scene import (
     AcrobotReader,
     label_of_state,
 )
-from vlmrl_cli.tasks.base import SMOKE, Task
+from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, Task
 
 BINS_PER_JOINT = 48
 
@@ -84,12 +84,6 @@ _ZOO: dict[str, Any] = {
     "ent_coef": 0.0, "learning_rate": 3e-4, "normalize_obs": True, "normalize_reward": True, "timesteps": 1_000_000,
 }
 
-# SB3's PPO defaults (n_steps 2048, batch 64, 10 epochs, gae 0.95, lr 3e-4) on one env, unnormalised
-_SB3_DEFAULT: dict[str, Any] = {
-    "n_envs": 1, "n_steps": 2048, "batch_size": 64, "gae_lambda": 0.95, "gamma": 0.99, "n_epochs": 10,
-    "ent_coef": 0.0, "learning_rate": 3e-4, "normalize_obs": False, "normalize_reward": False, "timesteps": 100_000,
-}
-
 ACROBOT = Task(
     name="acrobot",
     env_id="Acrobot-v1",
@@ -113,7 +107,7 @@ ACROBOT = Task(
         "zoo-100k": {**_ZOO, "timesteps": 100_000},
         "zoo-100k-lr1e-4": {**_ZOO, "timesteps": 100_000, "learning_rate": 1e-4},
         "zoo-100k-raw": {**_ZOO, "timesteps": 100_000, "normalize_obs": False, "normalize_reward": False},
-        "sb3-default-100k": _SB3_DEFAULT,
+        "sb3-default-100k": SB3_DEFAULT_100K,
         "smoke": SMOKE,
     },
     default_preset="zoo",

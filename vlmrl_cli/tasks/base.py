@@ -34,6 +34,13 @@ SMOKE: Mapping[str, Any] = {"n_envs": 2, "n_steps": 64, "batch_size": 64, "gae_l
                             "n_epochs": 1, "normalize_obs": True, "normalize_reward": True, "timesteps": 1_024,
                             "eval_episodes": 3}
 
+#: SB3's PPO defaults (n_steps 2048, batch 64, 10 epochs, gae 0.95, lr 3e-4) on one env, without
+#: normalisation, at 100,000 steps: a calibration candidate any task may take whole.
+SB3_DEFAULT_100K: Mapping[str, Any] = {
+    "n_envs": 1, "n_steps": 2048, "batch_size": 64, "gae_lambda": 0.95, "gamma": 0.99, "n_epochs": 10,
+    "ent_coef": 0.0, "learning_rate": 3e-4, "normalize_obs": False, "normalize_reward": False, "timesteps": 100_000,
+}
+
 
 @dataclass(frozen=True)
 class Task:

@@ -23,7 +23,7 @@ from vlmrl_cli.shaping.config import DEFAULT_LABEL_POTENTIALS, ShapingConfig
 from vlmrl_cli.shaping.features import FEATURE_DIM
 from vlmrl_cli.shaping.scene import MOUNTAIN_CAR as MOUNTAIN_CAR_SCENE
 from vlmrl_cli.shaping.scene import Scene, mountain_car_dense
-from vlmrl_cli.tasks.base import SMOKE, Task
+from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, Task
 from vlmrl_cli.vlm.prompts import ZONE_MILESTONES
 from vlmrl_cli.vlm.sim import wheel_column
 
@@ -147,9 +147,7 @@ MOUNTAIN_CAR_CONTINUOUS = Task(
         # on one env (no normalisation). Untuned PPO is known to settle on standing still here.
         "mc-zoo-100k": _MC_KNOBS,
         "mc-zoo-100k-raw-reward": {**_MC_KNOBS, "normalize_reward": False},
-        "sb3-default-100k": {"n_envs": 1, "n_steps": 2048, "batch_size": 64, "gae_lambda": 0.95, "gamma": 0.99,
-                             "n_epochs": 10, "ent_coef": 0.0, "learning_rate": 3e-4, "normalize_obs": False,
-                             "normalize_reward": False, "timesteps": 100_000},
+        "sb3-default-100k": SB3_DEFAULT_100K,
         "smoke": SMOKE,
     },
     default_preset="zoo",
