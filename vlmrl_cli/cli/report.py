@@ -16,7 +16,6 @@ if TYPE_CHECKING:  # the CLI imports no analysis code before a command runs (hel
     from vlmrl_cli.report.table2 import Table2
 
 DEFAULT_OUT = Path("results/report")
-DEFAULT_THR = "-190,-160,-130"
 
 
 def parse_thresholds(text: str) -> tuple[float, ...]:
@@ -56,8 +55,12 @@ def report(
     experiment: Experiment = "vlmrl",
     tracking_uri: TrackingUri = None,
     out: OutDir = None,
-    thresholds: Annotated[str, typer.Option("--thresholds", help="Reward targets, comma-separated.")] = DEFAULT_THR,
-    window: Annotated[int, typer.Option("--window", help="Episodes in the rolling mean return.")] = 100,
+    thresholds: Annotated[str | None, typer.Option(
+        "--thresholds", help="Reward targets, comma-separated [default: the task's; MountainCar's -190,-160,-130].",
+        show_default=False)] = None,
+    window: Annotated[int | None, typer.Option(
+        "--window", help="Episodes in the rolling mean return [default: the task's; MountainCar's 100].",
+        show_default=False)] = None,
     margin: Margin = 1.15,
 ) -> None:
     """Write Table 2, Figures 2-4, the claims table and report.md from finished runs in MLflow."""
@@ -65,7 +68,8 @@ def report(
 
     with exit_codes():
         cfg = ReportConfig(experiment=experiment, tracking_uri=tracking_uri, out=out or DEFAULT_OUT,
-                           thresholds=parse_thresholds(thresholds), window=window, margin=margin)
+                           thresholds=parse_thresholds(thresholds) if thresholds is not None else None,
+                           window=window, margin=margin)
         result = write_report(cfg)
         console = Console()
         for line in console_summary(result.table, experiment):

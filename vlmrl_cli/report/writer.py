@@ -38,15 +38,12 @@ from vlmrl_cli.report.table2 import (
     write_table2,
 )
 from vlmrl_cli.shaping.hacking import HOVER_FLAG
+from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
 
 DEFAULT_REPORTED = paper.REPORTED
-MOUNTAIN_CAR_THRESHOLDS = (-190.0, -160.0, -130.0)
-
-
-DEFAULT_WINDOW = 100
 
 
 @dataclass(frozen=True)
@@ -56,10 +53,10 @@ class ReportConfig:
     experiment: str = "vlmrl"  # MLflow experiment holding the training runs
     tracking_uri: str | None = None  # MLflow store (None: $MLFLOW_TRACKING_URI or sqlite:///mlflow.db)
     out: Path = Path("results/report")  # output folder
-    # reward targets (rolling mean native return); another task's runs take that task's thresholds
-    # unless others are given
-    thresholds: tuple[float, ...] = MOUNTAIN_CAR_THRESHOLDS
-    window: int = DEFAULT_WINDOW  # episodes in the rolling mean (another task's runs: that task's, unless given)
+    # reward targets (rolling mean native return); None: the runs' task's own (MountainCar's
+    # -190, -160, -130)
+    thresholds: tuple[float, ...] | None = None
+    window: int | None = None  # episodes in the rolling mean; None: the task's own (MountainCar's 100)
     min_episodes: int = 1  # fewest completed episodes before a rolling mean counts
     ci: float = 0.95  # confidence level of every interval
     n_boot: int = stats.DEFAULT_N_BOOT  # bootstrap resamples
@@ -87,11 +84,11 @@ def _validate(cfg: ReportConfig) -> None:
         raise BadInput(problem + ".")
     if not cfg.margin > 1 or not math.isfinite(cfg.margin):
         raise BadInput(f"the equivalence margin is a ratio above 1 (e.g. 1.15), got {cfg.margin}.")
-    if not cfg.thresholds:
+    if cfg.thresholds is not None and not cfg.thresholds:
         raise BadInput("no reward threshold given; pass --thresholds like -190,-160,-130.")
-    if cfg.window < 1:
+    if cfg.window is not None and cfg.window < 1:
         raise BadInput(f"--window must be at least 1, got {cfg.window}.")
-    if not 1 <= cfg.min_episodes <= cfg.window:
+    if cfg.min_episodes < 1 or (cfg.window is not None and cfg.min_episodes > cfg.window):
         raise BadInput(f"min_episodes must be between 1 and the window ({cfg.window}), got {cfg.min_episodes}.")
     if not 0.0 < cfg.ci < 1.0:
         raise BadInput(f"the confidence level must be between 0 and 1, got {cfg.ci}.")
@@ -229,9 +226,30 @@ def _statistics_md(cfg: ReportConfig) -> list[str]:
         "adding a metric changes no other interval.", ""]
 
 
+def for_task(cfg: ReportConfig, task: Task) -> ReportConfig:
+    """``cfg`` with the thresholds and window it leaves unset (None) taken from ``task``; given
+    ones are kept, whatever they are (``--window 100`` on Acrobot means 100). A window taken from
+    the task also caps ``min_episodes`` at it.
+
+    Example:
+        >>> from vlmrl_cli.tasks.registry import get_task
+        >>> acrobot = get_task("acrobot")
+        >>> for_task(ReportConfig(), acrobot).window, for_task(ReportConfig(window=100), acrobot).window
+        (20, 100)
+    """
+    window = cfg.window if cfg.window is not None else task.window
+    return dataclasses.replace(
+        cfg,
+        thresholds=tuple(float(t) for t in (cfg.thresholds if cfg.thresholds is not None else task.thresholds)),
+        window=window,
+        min_episodes=cfg.min_episodes if cfg.window is not None else min(cfg.min_episodes, window),
+    )
+
+
 def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: Sequence[claims_mod.ClaimResult],
                per_seed: pd.DataFrame, note: str, warns: Sequence[str], comparisons: pd.DataFrame,
                hack: pd.DataFrame) -> str:
+    assert cfg.window is not None  # resolved to the task's by write_report
     simulated = bool(data.runs["simulated"].any())
     paper_task = data.task == DEFAULT_TASK
     title = "Reproduction report" if paper_task else f"Report (task {data.task})"
@@ -350,14 +368,11 @@ def write_report(cfg: ReportConfig) -> ReportResult:
     client = store.connect_existing(cfg.tracking_uri)
     data = load_experiment(client, cfg.experiment)
     task = get_task(data.task)
-    thresholds = tuple(float(t) for t in cfg.thresholds)
     if data.task != DEFAULT_TASK:
         reported = {}  # the paper's numbers and claims are MountainCar-v0's: none beside another task
-        if thresholds == MOUNTAIN_CAR_THRESHOLDS:  # left at the default: the task's own thresholds
-            thresholds = task.thresholds
-            cfg = dataclasses.replace(cfg, thresholds=thresholds)
-        if cfg.window == DEFAULT_WINDOW:  # likewise the task's window
-            cfg = dataclasses.replace(cfg, window=task.window, min_episodes=min(cfg.min_episodes, task.window))
+    cfg = for_task(cfg, task)
+    thresholds = cfg.thresholds
+    assert thresholds is not None and cfg.window is not None
     streams = stats.Streams(cfg.seed)
 
     per_seed = per_seed_table(data, thresholds, cfg.window, cfg.min_episodes, cfg.detached_cut)
