@@ -27,6 +27,18 @@ DEFINITION = (
     "episode return (what the shaping paid on top of the task). Flagged seeds are counted per seed with a Wilson "
     "interval; detached lengths and timeouts are per episode, pooled over seeds."
 )
+NO_DIAGNOSTIC = (
+    "This task has no hovering diagnostic (its plug-in names no position to watch), so there is no hover "
+    "fraction, dwell or flagged seed. Shaped - native: mean over the last training window of the shaped minus the "
+    "native episode return (what the shaping paid on top of the task). Detached lengths and timeouts are per "
+    "episode, pooled over seeds."
+)
+
+
+def definition(hover: bool) -> str:
+    """What the section's columns mean: MountainCar's hovering diagnostic, or (``hover`` False, a
+    task whose plug-in names no position) only the columns that apply."""
+    return DEFINITION if hover else NO_DIAGNOSTIC
 
 
 def _finite(x: Any) -> np.ndarray:
@@ -73,11 +85,13 @@ def _num(x: float, fmt: str) -> str:
     return format(x, fmt) if np.isfinite(x) else "—"
 
 
-def hacking_markdown(frame: pd.DataFrame, ci: float = 0.95) -> str:
-    """Markdown of ``hacking_frame``."""
+def hacking_markdown(frame: pd.DataFrame, ci: float = 0.95, hover: bool = True) -> str:
+    """Markdown of ``hacking_frame``; ``hover`` False: the task has no hovering diagnostic."""
     rows = []
     for r in frame.itertuples(index=False):
-        if r.seeds_with_hover_metric:
+        if not hover:
+            flagged = "no diagnostic for this task"
+        elif r.seeds_with_hover_metric:
             flagged = (f"{r.flagged_seeds}/{r.seeds_with_hover_metric} "
                        f"[{100 * r.flagged_ci_low:.0f}%, {100 * r.flagged_ci_high:.0f}%]")
         else:

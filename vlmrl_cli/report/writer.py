@@ -226,6 +226,22 @@ def _statistics_md(cfg: ReportConfig) -> list[str]:
         "adding a metric changes no other interval.", ""]
 
 
+def _hover(task_name: str) -> bool:
+    """Whether the task's runs carry the hovering diagnostic (its plug-in names a position)."""
+    return get_task(task_name).position is not None
+
+
+def _hacking_intro(task_name: str) -> list[str]:
+    """The reward-hacking section's heading and definition for the runs' task."""
+    if task_name == DEFAULT_TASK:
+        return ["## Reward hacking: hovering short of the flag", "",
+                "R_kin = max(0, 2(x + 0.4)) pays up to +1.8 per step just left of the flag, more than the -1 step "
+                "cost, so parking near x = 0.45 can pay more than finishing. " + hacking.DEFINITION, ""]
+    return ["## Reward hacking", "",
+            "A dense term that pays more per step than finishing can keep an agent from finishing. "
+            + hacking.definition(_hover(task_name)), ""]
+
+
 def for_task(cfg: ReportConfig, task: Task) -> ReportConfig:
     """``cfg`` with the thresholds and window it leaves unset (None) taken from ``task``; given
     ones are kept, whatever they are (``--window 100`` on Acrobot means 100). A window taken from
@@ -302,10 +318,8 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
     parts += ["## Aggregates", "", "![Performance profile](performance_profile.png)", "",
               "Performance profile: share of seeds whose final return (last window) is at least tau, per arm, with a "
               "pointwise Wilson band; probabilities of improvement are the `P(final return higher)` rows above.", "",
-              "## Reward hacking: hovering short of the flag", "",
-              "R_kin = max(0, 2(x + 0.4)) pays up to +1.8 per step just left of the flag, more than the -1 step "
-              "cost, so parking near x = 0.45 can pay more than finishing. " + hacking.DEFINITION, "",
-              hacking.hacking_markdown(hack, cfg.ci), "![Reward hacking](hacking.png)", "",
+              *_hacking_intro(data.task),
+              hacking.hacking_markdown(hack, cfg.ci, _hover(data.task)), "![Reward hacking](hacking.png)", "",
               "Reward hacking: detached episode lengths per arm, hover fraction per seed, shaped minus native "
               "return per seed.", "",
               "## Figures", "",
@@ -409,8 +423,9 @@ def write_report(cfg: ReportConfig) -> ReportResult:
                           "# Attribution: pairwise comparisons of arms\n\n" + fig_note + ".\n\n"
                           + attribution.attribution_markdown(comparisons, cfg.ci))
     files += _write_frame(hack, out / "hacking", fig_note,
-                          "# Reward-hacking diagnostic\n\n" + fig_note + ".\n\n" + hacking.DEFINITION + "\n\n"
-                          + hacking.hacking_markdown(hack, cfg.ci))
+                          "# Reward-hacking diagnostic\n\n" + fig_note + ".\n\n"
+                          + hacking.definition(_hover(data.task)) + "\n\n"
+                          + hacking.hacking_markdown(hack, cfg.ci, _hover(data.task)))
     per_seed_path = out / "per_seed.csv"
     labelled = per_seed.merge(data.runs[["run_id", "vlm", "simulated"]], on="run_id", how="left")
     labelled.to_csv(per_seed_path, index=False)

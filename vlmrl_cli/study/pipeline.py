@@ -347,10 +347,12 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
               "`taxonomy/<variant>/`). The baseline is the regime's own.", "",
               _vlm_table(result.vlm_points, cfg.top) if len(result.vlm_points) else "No VLM variant was run.\n",
               "![VLM quality](vlm_quality.png)", ""]
-    lines += ["## Reward hacking", "", hacking.DEFINITION, ""]
+    hover = {regime.id: get_task(regime.run.task).position is not None for regime in cfg.regimes}
+    lines += ["## Reward hacking", "", hacking.definition(any(hover.values())), ""]
     for regime in cfg.regimes:
         part = hack_frame[hack_frame["regime"] == regime.id] if len(hack_frame) else hack_frame
-        lines += [f"### `{regime.id}`", "", hacking.hacking_markdown(part, cfg.ci) if len(part) else "no runs\n"]
+        lines += [f"### `{regime.id}`", "",
+                  hacking.hacking_markdown(part, cfg.ci, hover[regime.id]) if len(part) else "no runs\n"]
     lines += ["## Method", "",
               f"The DNF rule, everywhere: {RULE}. Reliability: the share of seeds that reached {cfg.top:g}, Wilson "
               f"interval; differences of reliability with a Newcombe interval and a Fisher exact p. Steps to "

@@ -1,0 +1,30 @@
+"""report.hacking: the hovering diagnostic is MountainCar's; other tasks' reports say it does not apply."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from vlmrl_cli.report import hacking
+from vlmrl_cli.tasks.registry import get_task
+
+
+def _frame() -> pd.DataFrame:
+    per_seed = pd.DataFrame({"arm": ["hybrid", "baseline"], "hover_fraction": [float("nan")] * 2,
+                             "dwell_right_steps": [float("nan")] * 2, "shaped_gap": [3.0, 0.0]})
+    episodes = pd.DataFrame({"arm": ["hybrid", "baseline"], "length": [80, 90]})
+    return hacking.hacking_frame(per_seed, episodes, timeout=500)
+
+
+def test_a_task_without_the_diagnostic_is_not_told_its_runs_predate_it() -> None:
+    text = hacking.hacking_markdown(_frame(), hover=False)
+    assert "no diagnostic for this task" in text and "predate" not in text
+
+
+def test_runs_of_a_task_with_the_diagnostic_that_lack_it_predate_it() -> None:
+    assert "predate the diagnostic" in hacking.hacking_markdown(_frame(), hover=True)
+
+
+def test_the_definition_names_mountain_cars_track_only_where_it_applies() -> None:
+    assert hacking.definition(True) == hacking.DEFINITION and "x = 0.3" in hacking.DEFINITION
+    assert "x = " not in hacking.definition(False)
+    assert get_task("acrobot").position is None and get_task("mountain-car").position is not None
