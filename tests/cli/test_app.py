@@ -48,3 +48,18 @@ def test_calibrate_and_study_take_the_vlm_options_run_takes(tmp_path, monkeypatc
     for command in ("study", "calibrate"):
         assert cli([command, *vlm, "--dry-run"]) == 0, capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []  # a dry run creates nothing
+
+
+def test_a_ctrl_c_in_a_finalizer_is_not_printed_and_other_unraisables_are(monkeypatch) -> None:
+    import sys
+    import types
+
+    from vlmrl_cli.cli.app import _unraisable
+
+    seen: list[object] = []
+    monkeypatch.setattr(sys, "__unraisablehook__", seen.append)
+    _unraisable(types.SimpleNamespace(exc_value=KeyboardInterrupt()))
+    assert seen == []
+    other = types.SimpleNamespace(exc_value=ValueError("x"))
+    _unraisable(other)
+    assert seen == [other]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import signal
 import sys
 from collections.abc import Sequence
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -92,7 +92,17 @@ def cli(args: Sequence[str] | None = None) -> int:
     return code if isinstance(code, int) else 0
 
 
+def _unraisable(info: Any) -> None:
+    """A Ctrl-C that lands in a finalizer (Ray's ``ActorHandle.__del__`` as a sweep closes) can
+    only be ignored there: Python would print it as a traceback. The sweep has handled the
+    interrupt or finished; anything else goes to the default hook."""
+    if isinstance(info.exc_value, KeyboardInterrupt):
+        return
+    sys.__unraisablehook__(info)
+
+
 def main() -> None:
+    sys.unraisablehook = _unraisable
     code = cli()
     # The command is over (its runs closed, its exit code known); interpreter exit now runs atexit
     # callbacks, such as Ray's shutdown, which sleeps. A Ctrl-C there would print a traceback from
