@@ -112,3 +112,13 @@ def test_cpu_paths_see_a_forced_blas_kernel() -> None:
 
     assert forced("Haswell") == "openblas Haswell"
     assert forced("Nehalem") not in ("openblas Haswell", "")
+
+
+def test_a_blas_kernel_loaded_twice_is_named_once() -> None:
+    # scipy ships its own copy of OpenBLAS: with both loaded, the tag must not depend on whether
+    # scipy was imported before the run was tagged
+    import scipy.linalg
+
+    scipy.linalg.svd([[1.0, 0.0], [0.0, 1.0]])
+    entries = provenance.cpu_paths()["blas"].split(";")
+    assert len(entries) == len(set(entries))

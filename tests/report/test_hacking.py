@@ -27,4 +27,4 @@ def test_runs_of_a_task_with_the_diagnostic_that_lack_it_predate_it() -> None:
 def test_the_definition_names_mountain_cars_track_only_where_it_applies() -> None:
     assert hacking.definition(True) == hacking.DEFINITION and "x = 0.3" in hacking.DEFINITION
     assert "x = " not in hacking.definition(False)
-    assert get_task("acrobot").position is None and get_task("mountain-car").position is not None
+    assert not get_task("acrobot").hover_diagnostic and get_task("mountain-car").hover_diagnostic

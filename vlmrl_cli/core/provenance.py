@@ -128,7 +128,9 @@ def cpu_paths() -> dict[str, str]:
         from threadpoolctl import threadpool_info
 
         blas = [i for i in threadpool_info() if i.get("user_api") == "blas"]
-        paths["blas"] = ";".join(f"{i.get('internal_api')} {i.get('architecture', '?')}" for i in blas) or "none loaded"
+        # each kernel once: scipy, once imported, loads a second copy of the same OpenBLAS
+        kernels = dict.fromkeys(f"{i.get('internal_api')} {i.get('architecture', '?')}" for i in blas)
+        paths["blas"] = ";".join(kernels) or "none loaded"
     except ImportError:
         paths["blas"] = "unknown"
     try:

@@ -89,7 +89,8 @@ def _validate(cfg: ReportConfig) -> None:
     if cfg.window is not None and cfg.window < 1:
         raise BadInput(f"--window must be at least 1, got {cfg.window}.")
     if cfg.min_episodes < 1 or (cfg.window is not None and cfg.min_episodes > cfg.window):
-        raise BadInput(f"min_episodes must be between 1 and the window ({cfg.window}), got {cfg.min_episodes}.")
+        window = cfg.window if cfg.window is not None else "the task's"
+        raise BadInput(f"min_episodes must be between 1 and the window ({window}), got {cfg.min_episodes}.")
     if not 0.0 < cfg.ci < 1.0:
         raise BadInput(f"the confidence level must be between 0 and 1, got {cfg.ci}.")
     if cfg.n_boot < 10:
@@ -226,20 +227,15 @@ def _statistics_md(cfg: ReportConfig) -> list[str]:
         "adding a metric changes no other interval.", ""]
 
 
-def _hover(task_name: str) -> bool:
-    """Whether the task's runs carry the hovering diagnostic (its plug-in names a position)."""
-    return get_task(task_name).position is not None
-
-
-def _hacking_intro(task_name: str) -> list[str]:
+def _hacking_intro(task: Task) -> list[str]:
     """The reward-hacking section's heading and definition for the runs' task."""
-    if task_name == DEFAULT_TASK:
+    if task.name == DEFAULT_TASK:
         return ["## Reward hacking: hovering short of the flag", "",
                 "R_kin = max(0, 2(x + 0.4)) pays up to +1.8 per step just left of the flag, more than the -1 step "
                 "cost, so parking near x = 0.45 can pay more than finishing. " + hacking.DEFINITION, ""]
     return ["## Reward hacking", "",
             "A dense term that pays more per step than finishing can keep an agent from finishing. "
-            + hacking.definition(_hover(task_name)), ""]
+            + hacking.definition(task.hover_diagnostic), ""]
 
 
 def for_task(cfg: ReportConfig, task: Task) -> ReportConfig:
@@ -267,6 +263,7 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
                hack: pd.DataFrame) -> str:
     assert cfg.window is not None  # resolved to the task's by write_report
     simulated = bool(data.runs["simulated"].any())
+    task = get_task(data.task)
     paper_task = data.task == DEFAULT_TASK
     title = "Reproduction report" if paper_task else f"Report (task {data.task})"
     parts = [f"# {title}: experiment `{data.experiment_name}`", ""]
@@ -274,7 +271,6 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
         parts += ["> **SIMULATED VLM.** These runs used a simulated VLM (a pixel-reading stand-in), not a real "
                   "vision-language model. The numbers test the training pipeline, not the paper's VLM.", ""]
     if not paper_task:
-        task = get_task(data.task)
         parts += [f"- Task: {task.summary}. The paper reports MountainCar-v0 only: no paper value or claim "
                   f"stands beside these runs, and Table 2 keeps the paper's layout for ours alone. Reference: "
                   f"{task.zoo_reference}.",
@@ -318,8 +314,8 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
     parts += ["## Aggregates", "", "![Performance profile](performance_profile.png)", "",
               "Performance profile: share of seeds whose final return (last window) is at least tau, per arm, with a "
               "pointwise Wilson band; probabilities of improvement are the `P(final return higher)` rows above.", "",
-              *_hacking_intro(data.task),
-              hacking.hacking_markdown(hack, cfg.ci, _hover(data.task)), "![Reward hacking](hacking.png)", "",
+              *_hacking_intro(task),
+              hacking.hacking_markdown(hack, cfg.ci, task.hover_diagnostic), "![Reward hacking](hacking.png)", "",
               "Reward hacking: detached episode lengths per arm, hover fraction per seed, shaped minus native "
               "return per seed.", "",
               "## Figures", "",
@@ -424,8 +420,8 @@ def write_report(cfg: ReportConfig) -> ReportResult:
                           + attribution.attribution_markdown(comparisons, cfg.ci))
     files += _write_frame(hack, out / "hacking", fig_note,
                           "# Reward-hacking diagnostic\n\n" + fig_note + ".\n\n"
-                          + hacking.definition(_hover(data.task)) + "\n\n"
-                          + hacking.hacking_markdown(hack, cfg.ci, _hover(data.task)))
+                          + hacking.definition(task.hover_diagnostic) + "\n\n"
+                          + hacking.hacking_markdown(hack, cfg.ci, task.hover_diagnostic))
     per_seed_path = out / "per_seed.csv"
     labelled = per_seed.merge(data.runs[["run_id", "vlm", "simulated"]], on="run_id", how="left")
     labelled.to_csv(per_seed_path, index=False)

@@ -347,7 +347,7 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
               "`taxonomy/<variant>/`). The baseline is the regime's own.", "",
               _vlm_table(result.vlm_points, cfg.top) if len(result.vlm_points) else "No VLM variant was run.\n",
               "![VLM quality](vlm_quality.png)", ""]
-    hover = {regime.id: get_task(regime.run.task).position is not None for regime in cfg.regimes}
+    hover = {regime.id: get_task(regime.run.task).hover_diagnostic for regime in cfg.regimes}
     lines += ["## Reward hacking", "", hacking.definition(any(hover.values())), ""]
     for regime in cfg.regimes:
         part = hack_frame[hack_frame["regime"] == regime.id] if len(hack_frame) else hack_frame

@@ -122,6 +122,11 @@ class Task:
             os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
         return gym.make(self.env_id, render_mode=render_mode, **dict(self.env_kwargs))
 
+    @property
+    def hover_diagnostic(self) -> bool:
+        """Whether its runs carry the hovering diagnostic (the plug-in names a ``position``)."""
+        return self.position is not None
+
     def success(self, terminated: bool, length: int) -> bool:
         """The one success rule: the episode terminated (goal reached) within the time limit."""
         return bool(terminated) and length <= self.max_steps
