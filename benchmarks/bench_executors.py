@@ -13,6 +13,10 @@ Usage: python benchmarks/bench_executors.py [--timesteps 5000] [--jobs 1000] [--
 
 from __future__ import annotations
 
+from vlmrl_cli.core.numeric_pin import apply as pin_numeric_path
+
+pin_numeric_path()  # before torch and numpy load: the kernels every run of vlmrl computes with
+
 import argparse
 import dataclasses
 import functools

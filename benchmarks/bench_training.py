@@ -21,6 +21,10 @@ Usage: python benchmarks/bench_training.py [--timesteps 300000] [--pairs 2] [--w
 
 from __future__ import annotations
 
+from vlmrl_cli.core.numeric_pin import apply as pin_numeric_path
+
+pin_numeric_path()  # before torch and numpy load: the kernels every run of vlmrl computes with
+
 import argparse
 import dataclasses
 import subprocess

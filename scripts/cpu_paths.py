@@ -41,6 +41,10 @@ features, a portable ``exp``, ``math.fsum``) every row above is identical for bo
 
 from __future__ import annotations
 
+from vlmrl_cli.core.numeric_pin import apply as pin_numeric_path
+
+pin_numeric_path()  # before torch and numpy load: the kernels every run of vlmrl computes with
+
 import argparse
 import functools
 import hashlib

@@ -4,6 +4,7 @@ Stages (each a real `vlmrl` command, resumable through the MLflow store):
   1. vlmrl taxonomy  -> results/taxonomy/
   2. vlmrl run       -> baseline, hybrid, kinematic, semantic x 5 seeds, preset `paper`
   3. vlmrl report    -> results/report/
+  4. vlmrl export    -> results/report/runs.jsonl.gz (what `vlmrl verify` retrains)
 and a manifest (results/manifest.json) with versions, commands, commit and wall times of every
 invocation (a rerun resumes: finished training runs are not redone).
 The MLflow database stays in results/_scratch/ (git-ignored), never committed.
@@ -12,6 +13,10 @@ Usage: python scripts/repro.py [--seeds N] [--arms a,b] [--timesteps T] [--worke
 """
 
 from __future__ import annotations
+
+from vlmrl_cli.core.numeric_pin import apply as pin_numeric_path
+
+pin_numeric_path()  # before torch and numpy load: the kernels every run of vlmrl computes with
 
 import argparse
 import json
@@ -22,6 +27,7 @@ import sys
 import time
 from pathlib import Path
 
+from vlmrl_cli.core.numeric_pin import pin_record
 from vlmrl_cli.core.provenance import cpu_paths, git_commit, package_versions
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -67,13 +73,16 @@ def main() -> None:
         run_args += ["--workers", str(opts.workers)]
     stage("run", run_args, log)
     stage("report", ["report", "--experiment", EXPERIMENT, "--tracking-uri", uri, "--out", "results/report"], log)
+    # the runs themselves, committed beside the report: `vlmrl verify results/report/runs.jsonl.gz`
+    stage("export", ["export", "--experiment", EXPERIMENT, "--tracking-uri", uri, "--out",
+                     "results/report/runs.jsonl.gz"], log)
     wall = time.perf_counter() - start
 
     invocation = {
         "commit": commit,
         "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpus": os.cpu_count(),
-                    "cpu_paths": cpu_paths()},
+                    "cpu_paths": cpu_paths(), "numeric_pin": pin_record()},
         "versions": package_versions(),
         "stages": log,
         "wall_s": round(wall, 1),

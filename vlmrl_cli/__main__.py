@@ -1,3 +1,3 @@
-from vlmrl_cli.cli.app import main
+from vlmrl_cli.cli.entry import main
 
 main()

@@ -46,7 +46,7 @@ def _root(
 
 
 def _register() -> None:
-    from vlmrl_cli.cli import calibrate, evaluate, report, run, study, taxonomy, transfer
+    from vlmrl_cli.cli import calibrate, evaluate, report, run, study, taxonomy, transfer, verify
 
     app.command("taxonomy")(taxonomy.taxonomy)
     app.command("run")(run.run)
@@ -56,6 +56,7 @@ def _register() -> None:
     app.command("study")(study.study)
     app.command("export")(transfer.export)
     app.command("import")(transfer.import_)
+    app.command("verify")(verify.verify)
 
 
 _register()

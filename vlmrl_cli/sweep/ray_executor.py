@@ -21,6 +21,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.core.numeric_pin import APPLIED_MARK, PIN, USER_MARK, pinned_environ
 from vlmrl_cli.sweep.executors import SHARED_STORE_NEEDED, JobFn, Polled, is_server_uri
 from vlmrl_cli.sweep.worker import init_worker
 from vlmrl_cli.training.config import TrainJob
@@ -80,6 +81,16 @@ def ray_job(job_fn: JobFn, job: TrainJob, ctx: JobContext, progress: Any, stop: 
 INIT_OPTIONS: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "logging_level": logging.WARNING}
 
 
+def init_options() -> dict[str, Any]:
+    """``ray.init``'s options: ``INIT_OPTIONS`` and a runtime_env that starts every worker on the
+    driver's numeric pin (``core.numeric_pin``), also on a cluster started elsewhere."""
+    import os
+
+    pinned = pinned_environ(os.environ)
+    keep = (*PIN, USER_MARK, APPLIED_MARK)
+    return {**INIT_OPTIONS, "runtime_env": {"env_vars": {k: pinned[k] for k in keep}}}
+
+
 def start_local(num_cpus: int) -> None:
     """Start a local Ray instance for this process. Its workers run at the driver's priority:
     Ray's default worker niceness (15) starves training jobs whenever anything else runs on the
@@ -87,7 +98,7 @@ def start_local(num_cpus: int) -> None:
     worker against 1.9 s). On a cluster started with ``ray start``, set ``RAY_worker_niceness=0``."""
     import ray
 
-    ray.init(num_cpus=num_cpus, _system_config={"worker_niceness": 0}, **INIT_OPTIONS)
+    ray.init(num_cpus=num_cpus, _system_config={"worker_niceness": 0}, **init_options())
 
 
 def connect(address: str | None, workers: int, tracking_uri: str | None) -> None:
@@ -98,12 +109,12 @@ def connect(address: str | None, workers: int, tracking_uri: str | None) -> None
     if not ray.is_initialized():
         if address is not None and address != "local":
             try:
-                ray.init(address=address, **INIT_OPTIONS)
+                ray.init(address=address, **init_options())
             except (ConnectionError, RuntimeError) as exc:
                 raise BadInput(f"cannot join the Ray cluster at '{address}': {exc}") from exc
         elif address is None:
             try:
-                ray.init(address="auto", **INIT_OPTIONS)
+                ray.init(address="auto", **init_options())
             except (ConnectionError, RuntimeError):
                 start_local(workers)
         else:

@@ -24,7 +24,10 @@ TAG_VLM = f"{TAG_PREFIX}vlm"
 TAG_SIMULATED = f"{TAG_PREFIX}simulated"  # "true" / "false"
 TAG_GIT_COMMIT = f"{TAG_PREFIX}git_commit"
 TAG_VERSION_PREFIX = f"{TAG_PREFIX}version."  # + package name
-TAG_CPU_PREFIX = f"{TAG_PREFIX}cpu."  # + numpy_simd / blas / torch
+TAG_CPU_PREFIX = f"{TAG_PREFIX}cpu."  # + numpy_simd / blas / torch / model
+TAG_PIN = f"{TAG_PREFIX}pin"  # core.numeric_pin.PIN_ID, or "unpinned"
+TAG_PIN_ENV = f"{TAG_PREFIX}pin.env"  # the pin variables' values in force
+TAG_PIN_USER = f"{TAG_PREFIX}pin.user"  # the ones the user set ("none")
 TAG_NOTE = f"{TAG_PREFIX}note"  # set only on runs of the simulated VLM
 
 # ---- what a run is -----------------------------------------------------------------------------

@@ -20,6 +20,7 @@ import filelock
 from tenacity import Retrying, retry_if_exception_type, stop_after_delay, wait_exponential, wait_fixed
 
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.core.numeric_pin import pin_record
 from vlmrl_cli.core.provenance import cpu_paths, git_commit, package_versions
 from vlmrl_cli.tracking import schema
 
@@ -159,7 +160,8 @@ def ensure_experiment(client: Any, name: str) -> str:
 
 
 def provenance_tags(vlm_label: str, simulated: bool) -> dict[str, str]:
-    """Tags every vlmrl run carries: VLM (simulated said plainly), commit, versions, CPU paths."""
+    """Tags every vlmrl run carries: VLM (simulated said plainly), commit, versions, CPU paths and
+    the numeric pin."""
     commit = git_commit()
     tags = {
         schema.TAG_VLM: vlm_label,
@@ -171,6 +173,8 @@ def provenance_tags(vlm_label: str, simulated: bool) -> dict[str, str]:
         tags[f"{schema.TAG_VERSION_PREFIX}{name}"] = version
     for name, path in cpu_paths().items():
         tags[f"{schema.TAG_CPU_PREFIX}{name}"] = path
+    for name, value in pin_record().items():  # the pinned kernels in force, and the CPU model
+        tags[f"{schema.TAG_PREFIX}{name}"] = value
     if simulated:
         tags[schema.TAG_NOTE] = (
             "Produced with the SIMULATED VLM (a pixel-reading stand-in), not a real "

@@ -1,0 +1,96 @@
+"""`vlmrl verify`: retrain recorded runs from their configs and compare their returns bit for bit."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from vlmrl_cli.cli.exit_codes import exit_codes
+from vlmrl_cli.cli.options import Experiment, TrackingUri
+from vlmrl_cli.core.errors import BadInput
+
+#: Exit code when a retrained run differs from its record.
+EXIT_DIFFERS = 1
+
+Source = Annotated[Path | None, typer.Argument(
+    help="An export file (`vlmrl export`); without it, the runs of --experiment in --tracking-uri.",
+    show_default=False)]
+Sample = Annotated[int | None, typer.Option("--sample", min=1, help="Verify this many runs, drawn at random.")]
+SampleSeed = Annotated[int, typer.Option("--sample-seed", help="Seed of --sample's draw (the same on every machine).")]
+RunIds = Annotated[list[str] | None, typer.Option("--run-id", help="A run to verify (repeatable; 8+ characters).")]
+SeedFilter = Annotated[list[int] | None, typer.Option("--seed", help="Only runs of this training seed (repeatable).")]
+ArmFilter = Annotated[list[str] | None, typer.Option("--arm", help="Only runs of this arm (repeatable).")]
+VerifyWorkers = Annotated[int, typer.Option("--workers", min=1, help="Worker processes (one torch thread each).")]
+DryRun = Annotated[bool, typer.Option("--dry-run", help="List the runs and the estimated cost; train nothing.")]
+
+
+def verify(
+    source: Source = None,
+    sample: Sample = None,
+    sample_seed: SampleSeed = 0,
+    run_id: RunIds = None,
+    seed: SeedFilter = None,
+    arm: ArmFilter = None,
+    workers: VerifyWorkers = 1,
+    dry_run: DryRun = False,
+    experiment: Experiment = "vlmrl",
+    tracking_uri: TrackingUri = None,
+) -> None:
+    """Retrain finished runs of an export file or a store from their recorded configs and compare
+    their per-episode native returns bit for bit: prints `identical` or `differs from episode k` per
+    run, with both sides' CPU and pin tags, and exits 1 when any run differs."""
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
+    from vlmrl_cli.tracking import schema
+    from vlmrl_cli.training import verify as lib
+
+    console = Console(highlight=False, soft_wrap=True)
+    with exit_codes():
+        if source is None:
+            problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
+            if problem:
+                raise BadInput(problem + ".")
+            from vlmrl_cli.tracking import store
+
+            runs = lib.runs_of_store(store.connect_existing(tracking_uri), experiment)
+            where = f"experiment '{experiment}'"
+        else:
+            runs = lib.runs_of_export(source)
+            where = str(source)
+        chosen = lib.choose(runs, run_ids=run_id or (), seeds=seed or (), arms=arm or (), sample=sample,
+                            sample_seed=sample_seed)
+        for run in chosen:  # every config is rebuilt before anything trains
+            lib.rebuild_job(run)
+        known = [r.wall_s for r in chosen if r.wall_s is not None]
+        estimate = sum(known) / max(1, min(workers, len(chosen))) if known else None
+        cost = (f"about {estimate / 60:.0f} min on {min(workers, len(chosen))} worker(s) (the recorded training "
+                "times; no evaluation is rerun)") if estimate is not None else "cost unknown (no wall time recorded)"
+        console.print(f"verifying {len(chosen)} of {len(runs)} run(s) of {where}: {cost}")
+        here = lib.describe_paths(lib.here_paths())
+        console.print(f"here: {here}")
+        for run in chosen:
+            console.print(f"  {run.run_id[:12]}  {run.name:<28} {len(run.native_returns)} episodes")
+        if dry_run:
+            return
+        differ = 0
+        with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                      TimeElapsedColumn(), console=console, transient=True) as bar:
+            task = bar.add_task("retraining", total=len(chosen))
+            for outcome in lib.verify_many(chosen, workers=workers):
+                bar.advance(task)
+                run = outcome.run
+                differ += not outcome.identical
+                console.print(f"{run.run_id[:12]}  {run.name}: {outcome.verdict()} in {outcome.wall_s:.0f} s")
+                if not outcome.identical or run.tags.get(schema.TAG_PIN) != lib.here_paths()[schema.TAG_PIN]:
+                    console.print(f"    recorded: {lib.describe_paths(run.tags)}")
+                    console.print(f"    here:     {here}")
+        console.print(f"{len(chosen) - differ} identical, {differ} differ")
+    if differ:
+        print(f"error: {differ} of {len(chosen)} run(s) did not reproduce here; the paths above say where each "
+              "was trained.", file=sys.stderr)
+        raise typer.Exit(EXIT_DIFFERS)

@@ -1,0 +1,264 @@
+"""Retrain recorded runs from their configs and compare their learning curves bit for bit.
+
+A committed result counts once it reproduces: ``recorded_runs`` reads the FINISHED training
+runs of an export file (``vlmrl export``) or of a tracking store, ``rebuild_job`` turns a run's
+``config.json`` back into the ``TrainJob`` that trained it (refusing when the rebuilt config
+hashes differently: this code would train another experiment), and ``verify_run`` retrains it
+in this process (``trace.native_returns``, the worker's own training path, no tracking) and
+compares the per-episode native returns with the recorded ones, float for float.
+"""
+
+from __future__ import annotations
+
+import json
+import random
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.core.numeric_pin import pin_record
+from vlmrl_cli.core.provenance import cpu_paths
+from vlmrl_cli.tracking import schema
+from vlmrl_cli.training.config import TrainJob
+
+#: The tags that say which numeric path a run computed on (printed beside each verdict).
+PATH_TAGS = (schema.TAG_PIN, schema.TAG_PIN_ENV, f"{schema.TAG_CPU_PREFIX}numpy_simd",
+             f"{schema.TAG_CPU_PREFIX}torch", f"{schema.TAG_CPU_PREFIX}model")
+
+
+@dataclass(frozen=True)
+class RecordedRun:
+    """What verifying a finished training run needs: its config, tags and native returns."""
+
+    run_id: str
+    name: str
+    config: dict[str, Any]
+    tags: dict[str, str]
+    native_returns: list[float]
+    wall_s: float | None = None
+
+    @property
+    def seed(self) -> int:
+        return int(self.config.get("seed", self.tags.get(schema.TAG_SEED, -1)))
+
+    @property
+    def arm(self) -> str:
+        return str(self.config.get("arm", {}).get("name", self.tags.get(schema.TAG_ARM, "?")))
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """One run's verdict: ``identical``, or the first episode (0-based) where the curves part."""
+
+    run: RecordedRun
+    returns: list[float]
+    wall_s: float
+    first_difference: int | None = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "first_difference", first_difference(self.run.native_returns, self.returns))
+
+    @property
+    def identical(self) -> bool:
+        return self.first_difference is None
+
+    def verdict(self) -> str:
+        k = self.first_difference
+        if k is None:
+            return f"identical ({len(self.returns)} episodes)"
+        recorded, here = self.run.native_returns, self.returns
+        both = f"recorded {recorded[k]!r}, here {here[k]!r}" if k < min(len(recorded), len(here)) else (
+            f"recorded {len(recorded)} episodes, here {len(here)}")
+        return f"differs from episode {k} ({both})"
+
+
+def first_difference(recorded: Sequence[float], here: Sequence[float]) -> int | None:
+    """The first index where two learning curves differ (a missing episode counts), or None.
+
+    Example:
+        >>> first_difference([1.0, 2.0], [1.0, 2.0]), first_difference([1.0, 2.0], [1.0, 3.0])
+        (None, 1)
+        >>> first_difference([1.0, 2.0], [1.0])
+        1
+    """
+    for i, (a, b) in enumerate(zip(recorded, here, strict=False)):
+        if a != b:
+            return i
+    return None if len(recorded) == len(here) else min(len(recorded), len(here))
+
+
+def _from_export(record: dict[str, Any]) -> RecordedRun | None:
+    text = record.get("artifacts", {}).get("config.json")
+    history = record.get("histories", {}).get(schema.METRIC_NATIVE_RETURN)
+    if text is None or history is None:
+        return None
+    # the export keeps each history sorted by (step, timestamp): the order the episodes ended in
+    wall = record.get("latest", {}).get(schema.METRIC_WALL_S)
+    return RecordedRun(run_id=str(record["source_run_id"]), name=str(record.get("run_name") or record["source_run_id"]),
+                       config=json.loads(text), tags=dict(record.get("tags", {})),
+                       native_returns=[float(v) for v in history["value"]],
+                       wall_s=float(wall[2]) if wall is not None else None)
+
+
+def runs_of_export(path: Path) -> list[RecordedRun]:
+    """The training runs of an export file that can be verified (config and returns recorded)."""
+    from vlmrl_cli.tracking.transfer import read_records
+
+    if not path.is_file():
+        raise BadInput(f"there is no export file {path}; write one with `vlmrl export --out FILE`.")
+    runs = [r for r in (_from_export(rec) for rec in read_records(path)) if r is not None]
+    if not runs:
+        raise BadInput(f"{path} holds no training run with a config.json and its episode returns to verify.")
+    return runs
+
+
+def runs_of_store(client: Any, experiment: str) -> list[RecordedRun]:
+    """The FINISHED training runs of ``experiment`` in a tracking store, with their configs."""
+    import tempfile
+
+    from vlmrl_cli.tracking import store
+
+    exp = client.get_experiment_by_name(experiment)
+    if exp is None or exp.lifecycle_stage == "deleted":
+        raise BadInput(f"MLflow experiment '{experiment}' does not exist in this store; pass --experiment NAME.")
+    found = schema.search_all(client, exp.experiment_id,
+                              schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN}, finished=True))
+    runs = []
+    for run in sorted(found, key=lambda r: (r.info.start_time or 0, r.info.run_id)):
+        run_id = run.info.run_id
+        with tempfile.TemporaryDirectory(prefix="vlmrl-verify-") as tmp:
+            if "config.json" not in {a.path for a in client.list_artifacts(run_id)}:
+                continue
+            store.download_artifacts(client, run_id, ["config.json"], Path(tmp))
+            config = json.loads((Path(tmp) / "config.json").read_text(encoding="utf-8"))
+        points = sorted(client.get_metric_history(run_id, schema.METRIC_NATIVE_RETURN),
+                        key=lambda p: (p.step, p.timestamp))
+        runs.append(RecordedRun(run_id=run_id, name=run.info.run_name or run_id, config=config,
+                                tags=dict(run.data.tags), native_returns=[float(p.value) for p in points],
+                                wall_s=run.data.metrics.get(schema.METRIC_WALL_S)))
+    if not runs:
+        raise BadInput(f"MLflow experiment '{experiment}' has no FINISHED training run to verify.")
+    return runs
+
+
+def choose(runs: Sequence[RecordedRun], *, run_ids: Iterable[str] = (), seeds: Iterable[int] = (),
+           arms: Iterable[str] = (), sample: int | None = None, sample_seed: int = 0) -> list[RecordedRun]:
+    """The runs to verify: those named by id (a prefix of 8 or more characters will do), else
+    those of the given seeds and arms; then ``sample`` of them drawn with ``sample_seed``
+    (the same draw on every machine), in their recorded order.
+
+    Example:
+        >>> rs = [RecordedRun(f"id{i}", f"r{i}", {"seed": i % 2, "arm": {"name": "a"}}, {}, []) for i in range(6)]
+        >>> [r.run_id for r in choose(rs, seeds=[1])]
+        ['id1', 'id3', 'id5']
+        >>> [r.run_id for r in choose(rs, sample=2)] == [r.run_id for r in choose(rs, sample=2)]
+        True
+    """
+    ids, wanted_seeds, wanted_arms = list(run_ids), set(seeds), set(arms)
+    if ids:
+        picked = []
+        for wanted in ids:
+            hits = [r for r in runs if r.run_id == wanted or (len(wanted) >= 8 and r.run_id.startswith(wanted))]
+            if len(hits) != 1:
+                raise BadInput(f"--run-id {wanted}: {'no run' if not hits else f'{len(hits)} runs'} of the source "
+                               "match it; copy an id from `vlmrl export`'s source or the MLflow UI.")
+            picked.append(hits[0])
+    else:
+        picked = [r for r in runs if (not wanted_seeds or r.seed in wanted_seeds)
+                  and (not wanted_arms or r.arm in wanted_arms)]
+    if not picked:
+        raise BadInput("no run of the source matches --seed/--arm; drop them to verify any run.")
+    if sample is not None and sample < len(picked):
+        keep = set(random.Random(sample_seed).sample(range(len(picked)), sample))
+        picked = [r for i, r in enumerate(picked) if i in keep]
+    return picked
+
+
+def rebuild_job(run: RecordedRun) -> TrainJob:
+    """The ``TrainJob`` that trained ``run``, from its ``config.json``; ``BadInput`` when this code
+    cannot rebuild it with the recorded config hash (another version changed what it means)."""
+    from vlmrl_cli.shaping.arms import ARMS
+    from vlmrl_cli.shaping.config import ShapingConfig
+    from vlmrl_cli.tasks.registry import DEFAULT_TASK
+    from vlmrl_cli.training.config import with_task_labels
+    from vlmrl_cli.training.presets import PPOConfig
+    from vlmrl_cli.training.validation import validate_as
+    from vlmrl_cli.vlm.config import VLMConfig
+
+    cfg = run.config
+    try:
+        arm = ARMS[cfg["arm"]["name"]]
+        task = str(cfg.get("task", DEFAULT_TASK))
+        ppo = validate_as(PPOConfig, dict(cfg["ppo"]))
+        shaping = (validate_as(ShapingConfig, dict(cfg["shaping"])) if "shaping" in cfg
+                   else with_task_labels(ShapingConfig(), task))
+        vlm = validate_as(VLMConfig, {**cfg["vlm"], "use_cache": False}) if "vlm" in cfg else VLMConfig(use_cache=False)
+        job = TrainJob(arm=arm, seed=int(cfg["seed"]), preset=str(cfg["preset"]), ppo=ppo, vlm=vlm,
+                       shaping=shaping, regime=run.tags.get(schema.TAG_REGIME), task=task)
+    except (KeyError, TypeError, ValueError, BadInput) as exc:
+        raise BadInput(f"run {run.run_id} ({run.name}): its config.json cannot be rebuilt here ({exc}).") from None
+    recorded = cfg.get("config_hash") or run.tags.get(schema.TAG_CONFIG_HASH)
+    if job.config_hash != recorded:
+        raise BadInput(f"run {run.run_id} ({run.name}): rebuilt here its config hashes {job.config_hash}, "
+                       f"not {recorded}: this version of vlmrl would train another experiment.")
+    return job
+
+
+def verify_run(run: RecordedRun) -> Outcome:
+    """Retrain ``run`` in this process and compare its native returns with the recorded ones."""
+    import time
+
+    from vlmrl_cli.training.trace import native_returns
+
+    job = rebuild_job(run)
+    start = time.perf_counter()
+    returns = native_returns(job)
+    return Outcome(run=run, returns=returns, wall_s=time.perf_counter() - start)
+
+
+def here_paths() -> dict[str, str]:
+    """This process's numeric path, keyed like ``PATH_TAGS``."""
+    record = pin_record()
+    paths = cpu_paths()
+    return {schema.TAG_PIN: record["pin"], schema.TAG_PIN_ENV: record["pin.env"],
+            f"{schema.TAG_CPU_PREFIX}numpy_simd": paths["numpy_simd"], f"{schema.TAG_CPU_PREFIX}torch": paths["torch"],
+            f"{schema.TAG_CPU_PREFIX}model": record["cpu.model"]}
+
+
+def describe_paths(tags: dict[str, str]) -> str:
+    """A run's numeric path in one line (``unrecorded`` for tags an older run lacks)."""
+    short = {schema.TAG_PIN: "pin", schema.TAG_PIN_ENV: "env", f"{schema.TAG_CPU_PREFIX}numpy_simd": "numpy",
+             f"{schema.TAG_CPU_PREFIX}torch": "torch", f"{schema.TAG_CPU_PREFIX}model": "cpu"}
+    return "; ".join(f"{short[t]} {tags.get(t, 'unrecorded')}" for t in PATH_TAGS)
+
+
+def verify_many(runs: Sequence[RecordedRun], workers: int = 1,
+                on_done: Callable[[Outcome], None] | None = None) -> Iterator[Outcome]:
+    """Verify ``runs`` in ``workers`` spawned processes (each inherits this process's numeric pin),
+    yielding each outcome as it finishes; ``on_done`` is called with it first."""
+    if workers <= 1:
+        for run in runs:
+            outcome = verify_run(run)
+            if on_done is not None:
+                on_done(outcome)
+            yield outcome
+        return
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
+                             initializer=_single_thread) as pool:
+        futures = [pool.submit(verify_run, run) for run in runs]
+        for fut in as_completed(futures):
+            outcome = fut.result()
+            if on_done is not None:
+                on_done(outcome)
+            yield outcome
+
+
+def _single_thread() -> None:
+    import torch
+
+    torch.set_num_threads(1)
