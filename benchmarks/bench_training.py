@@ -13,10 +13,13 @@
   3. throughput of the real sweep (`run_sweep`, worker processes, MLflow in a temporary sqlite
      store) with 1 and with 2 workers on two baseline jobs (target: >= 1.7x);
   0. first, the wall time of `vlmrl --help` and `vlmrl report --help` (median of 5 fresh
-     processes; target <= 0.5 s each).
+     processes; target <= 0.5 s each);
+  4. the numeric pin's cost (core.numeric_pin): a `baseline` run of --timesteps on the pinned
+     path against one with the pin removed, each in a fresh process (the libraries read the
+     variables once, at load), in ABBA pairs; the ratio of the CPU-time sums (target <= 1.05).
 
 Usage: python benchmarks/bench_training.py [--timesteps 300000] [--pairs 2] [--warmup 4096]
-                                          [--worker-timesteps 100000] [--parts 0123]
+                                          [--worker-timesteps 100000] [--parts 01234]
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ pin_numeric_path()  # before torch and numpy load: the kernels every run of vlmr
 
 import argparse
 import dataclasses
+import os
 import subprocess
 import sys
 import tempfile
@@ -112,6 +116,52 @@ def help_wall_time(args: list[str], runs: int = 5) -> float:
     return sorted(times)[runs // 2]
 
 
+_PIN_PROBE = """
+import os, sys, time
+if os.environ.get("BENCH_PIN") == "1":
+    from vlmrl_cli.core.numeric_pin import apply
+    apply(warn=False)
+import dataclasses, torch
+from vlmrl_cli.training.config import RunConfig
+from vlmrl_cli.training.presets import get_preset
+from vlmrl_cli.training.trace import native_returns
+cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="paper",
+                ppo=dataclasses.replace(get_preset("paper"), timesteps=int(sys.argv[1])), workers=1)
+job = cfg.jobs()[0]
+native_returns(dataclasses.replace(job, ppo=dataclasses.replace(job.ppo, timesteps=4096)))  # warm-up
+cpu, wall = time.process_time(), time.perf_counter()
+native_returns(job)
+print(time.process_time() - cpu, time.perf_counter() - wall, torch.backends.cpu.get_cpu_capability())
+"""
+
+
+def pin_cost(timesteps: int, pairs: int) -> None:
+    """[4]: pinned vs unpinned baseline runs, each in a fresh process, in ABBA pairs."""
+    from vlmrl_cli.core.numeric_pin import APPLIED_MARK, PIN, USER_MARK
+
+    clean = {k: v for k, v in os.environ.items() if k not in (*PIN, USER_MARK, APPLIED_MARK)}
+    print(f"[4] the numeric pin's cost: baseline, preset paper, {timesteps:,} steps, {pairs} ABBA pair(s), "
+          "one thread, a fresh process each", flush=True)
+    sums = {"pinned": 0.0, "unpinned": 0.0}
+    ratios = []
+    for i in range(pairs):
+        order = ("pinned", "unpinned") if i % 2 == 0 else ("unpinned", "pinned")
+        cpu: dict[str, float] = {}
+        for which in order:
+            env = clean | {"BENCH_PIN": "1" if which == "pinned" else "0", "OMP_NUM_THREADS": "1",
+                           "MKL_NUM_THREADS": "1"}
+            out = subprocess.run([sys.executable, "-c", _PIN_PROBE, str(timesteps)], env=env, check=True,
+                                 capture_output=True, text=True).stdout.split()
+            cpu[which] = float(out[0])
+            sums[which] += cpu[which]
+            print(f"    {which:<8} CPU {float(out[0]):.1f} s, wall {float(out[1]):.1f} s (torch {out[2]})", flush=True)
+        ratios.append(cpu["pinned"] / cpu["unpinned"])
+    ratio = sums["pinned"] / sums["unpinned"]
+    print(f"    pinned/unpinned CPU-time ratio of each pair: {', '.join(f'{r:.3f}' for r in ratios)}")
+    print(f"    pinned/unpinned CPU-time ratio of the sums: {ratio:.3f} (target <= 1.05: "
+          f"{'met' if ratio <= 1.05 else 'NOT met'})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--timesteps", type=int, default=300_000)
@@ -119,7 +169,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--pairs", type=int, default=2, help="baseline/hybrid pairs in [1], in ABBA order")
     parser.add_argument("--warmup", type=int, default=4_096, help="steps of the untimed warm-up run of each arm")
-    parser.add_argument("--parts", default="0123", help="which measurements to make, e.g. 12")
+    parser.add_argument("--parts", default="01234", help="which measurements to make, e.g. 12")
     opts = parser.parse_args()
     torch.set_num_threads(1)
     if "0" in opts.parts:
@@ -137,6 +187,8 @@ def main() -> None:
             print(f"    1 worker  {one:,.0f} steps/s")
             print(f"    2 workers {two:,.0f} steps/s")
             print(f"    2-worker speedup: {two / one:.2f}x (target >= 1.7)")
+    if "4" in opts.parts:
+        pin_cost(opts.timesteps, opts.pairs)
 
 
 def training_figures(opts: argparse.Namespace) -> None:

@@ -84,6 +84,12 @@ CASES: list[tuple[str, str]] = [
     ("export --out {tmp}/file/x.jsonl.gz --tracking-uri sqlite:///{tmp}/missing.db", "x.jsonl.gz"),
     ("import {tmp}/missing.jsonl.gz --tracking-uri sqlite:///{tmp}/store.db", "missing.jsonl.gz"),
     ("import {tmp}/file --tracking-uri sqlite:///{tmp}/store.db", "cannot read the run export"),
+    # verify
+    ("verify {tmp}/missing.jsonl.gz", "no export file"),
+    ("verify {tmp}/file", "cannot read the run export"),
+    ("verify --tracking-uri sqlite:///{tmp}/missing.db", "no tracking database"),
+    ("verify {tmp}/missing.jsonl.gz --sample 0", "--sample"),
+    ("verify {tmp}/missing.jsonl.gz --workers 0", "--workers"),
 ]
 
 

@@ -8,7 +8,7 @@ param ``timesteps``; metrics ``episode/*`` stepped by global timestep and ``eval
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,9 +34,12 @@ EVAL_METRICS = {
 }
 EVAL_EPISODE_METRIC = schema.METRIC_EVAL_EPISODE_LENGTH
 
-CPU_COLUMNS = {"numpy_simd": "cpu_numpy_simd", "blas": "cpu_blas", "torch": "cpu_torch"}  # tag suffix -> column
+CPU_COLUMNS = {"numpy_simd": "cpu_numpy_simd", "blas": "cpu_blas", "torch": "cpu_torch",
+               "model": "cpu_model"}  # tag suffix -> column
+#: A run computed before the numeric pin existed (core.numeric_pin) carries no vlmrl.pin tag.
+UNPINNED_BEFORE = "unpinned (run predates the numeric pin)"
 RUN_COLUMNS = ["run_id", "arm", "seed", "config_hash", "preset", "budget", "vlm", "simulated", "end_time",
-               *CPU_COLUMNS.values(), *EVAL_METRICS.values()]
+               *CPU_COLUMNS.values(), "numeric_path", *EVAL_METRICS.values()]
 EPISODE_COLUMNS = ["run_id", "arm", "seed", "timestep", *EPISODE_METRICS.values()]
 EVAL_EPISODE_COLUMNS = ["run_id", "arm", "seed", "episode", "length"]
 
@@ -127,8 +130,27 @@ def _run_row(run: Any) -> dict[str, Any]:
         "simulated": tags.get(schema.TAG_SIMULATED, "false").lower() == "true",
         "end_time": pd.Timestamp(run.info.end_time or 0, unit="ms", tz="UTC"),
         **{col: tags.get(f"{schema.TAG_CPU_PREFIX}{key}", "unrecorded") for key, col in CPU_COLUMNS.items()},
+        "numeric_path": numeric_path(tags),
         **{col: float(metrics.get(key, np.nan)) for key, col in EVAL_METRICS.items()},
     }
+
+
+def numeric_path(tags: Mapping[str, str]) -> str:
+    """The numeric path a run computed on, from its tags: the pin and its values in force, and
+    torch's CPU capability. Runs on one path train the same agent whatever CPU ran them; numpy's
+    SIMD level and the BLAS kernel are not part of it (no training path depends on them).
+
+    Example:
+        >>> numeric_path({"vlmrl.pin": "x86-64-v3/1", "vlmrl.pin.env": "MKL_CBWR=COMPATIBLE",
+        ...               "vlmrl.cpu.torch": "AVX2"})
+        'x86-64-v3/1 (MKL_CBWR=COMPATIBLE; torch AVX2)'
+        >>> numeric_path({"vlmrl.cpu.torch": "AVX512"})
+        'unpinned (run predates the numeric pin; torch AVX512)'
+    """
+    torch = tags.get(f"{schema.TAG_CPU_PREFIX}torch", "unrecorded")
+    if schema.TAG_PIN not in tags:
+        return f"{UNPINNED_BEFORE[:-1]}; torch {torch})"
+    return f"{tags[schema.TAG_PIN]} ({tags.get(schema.TAG_PIN_ENV, 'unrecorded')}; torch {torch})"
 
 
 def check_one_task(runs: Sequence[Any], experiment: str) -> str:

@@ -62,6 +62,9 @@ def report(
         "--window", help="Episodes in the rolling mean return [default: the task's; MountainCar's 100].",
         show_default=False)] = None,
     margin: Margin = 1.15,
+    allow_mixed_paths: Annotated[bool, typer.Option(
+        "--allow-mixed-paths", help="Compare runs computed on different numeric paths (vlmrl.pin tags) instead of "
+        "refusing.")] = False,
 ) -> None:
     """Write Table 2, Figures 2-4, the claims table and report.md from finished runs in MLflow."""
     from vlmrl_cli.report.writer import ReportConfig, write_report
@@ -69,7 +72,7 @@ def report(
     with exit_codes():
         cfg = ReportConfig(experiment=experiment, tracking_uri=tracking_uri, out=out or DEFAULT_OUT,
                            thresholds=parse_thresholds(thresholds) if thresholds is not None else None,
-                           window=window, margin=margin)
+                           window=window, margin=margin, allow_mixed_paths=allow_mixed_paths)
         result = write_report(cfg)
         console = Console()
         for line in console_summary(result.table, experiment):

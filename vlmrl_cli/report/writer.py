@@ -66,6 +66,8 @@ class ReportConfig:
     detached_cut: float = DETACHED_SUCCESS_CUT  # a seed succeeds detached when this share of its episodes do
     reported: Path | None = None  # the paper's numbers (default: the packaged vlmrl_cli/paper/reported.json)
     log_to_mlflow: bool = True  # log the outputs as artifacts of a vlmrl.kind=report run
+    # compare runs computed on different numeric paths (core.numeric_pin) instead of refusing
+    allow_mixed_paths: bool = False
 
 
 @dataclass(frozen=True)
@@ -137,31 +139,31 @@ def vlm_note(runs: pd.DataFrame) -> str:
     return text
 
 
-_CPU_EFFECT = {
-    "cpu_numpy_simd": "numpy's SIMD level (no arm's shaping depends on it since the features are exact integers)",
-    "cpu_blas": "the BLAS kernel (no arm's shaping depends on it since the features are exact integers)",
-    "cpu_torch": "torch's CPU kernels (these can change every arm's training, baseline included)",
-}
+def check_paths(runs: pd.DataFrame, allow_mixed: bool) -> list[str]:
+    """Runs computed on different numeric paths (``analysis.load.numeric_path``: the pin, its
+    values, torch's capability) train different agents from one config: ``BadInput`` naming
+    the paths, unless ``allow_mixed``, where it is a warning instead. Several CPU models on one
+    path are expected (the pin's purpose) and are only listed in per_seed.csv."""
+    if "numeric_path" not in runs or runs.empty:
+        return []
+    counts = runs["numeric_path"].astype(str).value_counts().sort_index()
+    if len(counts) <= 1:
+        return []
+    listed = "; ".join(f"{path}: {n} run(s)" for path, n in counts.items())
+    if not allow_mixed:
+        raise BadInput(f"the runs were computed on {len(counts)} numeric paths ({listed}), which train different "
+                       "agents from one config; report the runs of one path (retrain the others with the pin), or "
+                       "pass --allow-mixed-paths to compare them anyway.")
+    return [f"the runs come from {len(counts)} numeric paths ({listed}); they are compared as asked "
+            "(--allow-mixed-paths), though the same config trains different agents on each."]
 
 
-def _cpu_warnings(data: ExperimentData) -> list[str]:
-    """One warning per CPU code path on which the aggregated runs differ."""
-    out = []
-    for col, effect in _CPU_EFFECT.items():
-        values = sorted(set(data.runs[col].astype(str))) if col in data.runs else []
-        if len(values) > 1:
-            out.append(f"the runs come from different CPU code paths for {effect}: {'; '.join(values)}. "
-                       "Rerun them on one machine to compare like with like.")
-    return out
-
-
-def _warnings(data: ExperimentData, table: Table2) -> list[str]:
-    out = []
+def _warnings(data: ExperimentData, table: Table2, allow_mixed_paths: bool) -> list[str]:
+    out = check_paths(data.runs, allow_mixed_paths)
     for arm, hashes in data.runs.groupby("arm")["config_hash"].unique().items():
         if len(hashes) > 1:
             out.append(f"arm `{arm}` mixes {len(hashes)} configurations ({', '.join(map(str, hashes))}); "
                        "its statistics pool them.")
-    out += _cpu_warnings(data)
     if not table.has_baseline:
         out.append("No `baseline` arm in this experiment: speedups need the baseline arm and are not computed.")
     for arm, n in data.runs.groupby("arm").size().items():
@@ -377,6 +379,7 @@ def write_report(cfg: ReportConfig) -> ReportResult:
     reported = load_reported(cfg.reported)
     client = store.connect_existing(cfg.tracking_uri)
     data = load_experiment(client, cfg.experiment)
+    check_paths(data.runs, cfg.allow_mixed_paths)  # before anything is computed or written
     task = get_task(data.task)
     if data.task != DEFAULT_TASK:
         reported = {}  # the paper's numbers and claims are MountainCar-v0's: none beside another task
@@ -393,7 +396,7 @@ def write_report(cfg: ReportConfig) -> ReportResult:
     results = claims_mod.evaluate_claims(table, per_seed, reported, streams, cfg.n_boot, cfg.ci, comparisons)
     hack = hacking.hacking_frame(per_seed, data.eval_episodes, cfg.ci, task.max_steps)
     note = vlm_note(data.runs)
-    warns = _warnings(data, table)
+    warns = _warnings(data, table, cfg.allow_mixed_paths)
 
     out = cfg.out
     out.mkdir(parents=True, exist_ok=True)

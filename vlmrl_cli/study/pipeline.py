@@ -37,6 +37,7 @@ from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
 from vlmrl_cli.report import hacking
 from vlmrl_cli.report.attribution import DEFAULT_AUC_DELTA
 from vlmrl_cli.report.table2 import per_seed_table
+from vlmrl_cli.report.writer import check_paths
 from vlmrl_cli.study import verdicts
 from vlmrl_cli.study.config import StudyConfig
 from vlmrl_cli.sweep import cost as cost_model
@@ -121,6 +122,7 @@ def run_study(
     start = time.perf_counter()
     client = store.connect(cfg.base.tracking_uri)
     data = load_experiment(client, cfg.base.experiment)
+    check_paths(data.runs, allow_mixed=False)  # one numeric path, as a report needs (core.numeric_pin)
     streams = stats.Streams(cfg.seed)
     rows, hack, seeds = [], [], []
     for regime in cfg.regimes:

@@ -1,0 +1,70 @@
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+from vlmrl_cli.core import numeric_pin as pin
+
+_VALUES = st.dictionaries(st.sampled_from(sorted(pin.PIN)), st.sampled_from(["AVX512", "avx512", "AUTO", "SSE41"]))
+
+
+@given(_VALUES)
+def test_a_user_setting_wins_and_the_rest_take_the_pin(user: dict[str, str]) -> None:
+    env = pin.pinned_environ(user)
+    for key, value in pin.PIN.items():
+        assert env[key] == user.get(key, value)
+    assert set(pin.user_set(env)) == set(user)
+
+
+@given(_VALUES)
+def test_applying_twice_changes_nothing_and_keeps_the_users_list(user: dict[str, str]) -> None:
+    once = pin.pinned_environ(user)
+    assert pin.pinned_environ(once) == once  # a child process re-applying it keeps the parent's record
+
+
+def test_the_state_is_pinned_only_on_the_pins_values() -> None:
+    assert pin.pin_state(pin.pinned_environ({})).pinned
+    assert not pin.pin_state(pin.pinned_environ({"MKL_CBWR": "AVX2"})).pinned
+    # a user who sets a variable to the pin's own value stays on the path and is not warned
+    same = pin.pin_state(pin.pinned_environ({"MKL_CBWR": "COMPATIBLE"}))
+    assert same.pinned and same.warning() is None
+
+
+def test_a_user_override_is_warned_about_once_and_recorded() -> None:
+    env: dict[str, str] = {"MKL_CBWR": "AVX2"}
+    first = pin.apply(env)
+    message = first.warning()
+    assert message is not None and "MKL_CBWR=AVX2" in message and "MKL_CBWR=COMPATIBLE" in message
+    record = pin.pin_record(env)
+    assert record["pin"] == "unpinned" and record["pin.user"] == "MKL_CBWR=AVX2"
+    assert "MKL_CBWR=AVX2" in record["pin.env"]
+
+
+def test_a_library_loaded_before_the_pin_is_named_in_the_warning() -> None:
+    state = pin.PinState(values=dict(pin.PIN), user={}, loaded_before=("torch",))
+    assert not state.pinned
+    assert "torch loaded before" in str(state.warning())
+
+
+def test_the_cli_warns_once_on_stderr_and_its_workers_inherit_silently() -> None:
+    env = {k: v for k, v in os.environ.items() if k not in (*pin.PIN, pin.USER_MARK, pin.APPLIED_MARK)}
+    code = ("from vlmrl_cli.core.numeric_pin import apply; import subprocess, sys; apply(); "
+            "subprocess.run([sys.executable, '-c', 'from vlmrl_cli.core.numeric_pin import apply; apply()'])")
+    out = subprocess.run([sys.executable, "-c", code], env=env | {"ATEN_CPU_CAPABILITY": "default"},
+                         capture_output=True, text=True, check=True, timeout=60)
+    assert out.stderr.count("warning:") == 1 and "ATEN_CPU_CAPABILITY=default" in out.stderr
+
+
+def test_the_entry_point_pins_before_torch_loads() -> None:
+    env = {k: v for k, v in os.environ.items() if k not in (*pin.PIN, pin.USER_MARK, pin.APPLIED_MARK)}
+    code = ("import sys; sys.argv = ['vlmrl', '--help']\n"
+            "from vlmrl_cli.cli import entry\n"
+            "try:\n    entry.main()\nexcept SystemExit:\n    pass\n"
+            "import torch, os; print(torch.backends.cpu.get_cpu_capability(), os.environ['MKL_CBWR'])")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True,
+                         timeout=120)
+    assert out.stdout.strip().splitlines()[-1] == "AVX2 COMPATIBLE"
