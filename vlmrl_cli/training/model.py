@@ -29,8 +29,16 @@ def learning_rate(ppo: PPOConfig) -> float | Callable[[float], float]:
     return ppo.learning_rate
 
 
+#: Adam's multi-tensor implementation: one ``torch._foreach_*`` call per update step instead of a
+#: Python loop over the parameter tensors (on CPU torch's default is the loop). It is part of the
+#: numeric path (``core.numeric_pin.PIN_ID``), not a knob: it rounds differently from the loop
+#: (plain PPO, seed 0, 30,000 steps: 171 episodes against 192) and trained about 25% faster here.
+OPTIMIZER_KWARGS = {"foreach": True}
+
+
 def make_model(ppo: PPOConfig, env: Any, seed: int) -> Any:
-    """A ``PPO("MlpPolicy", env)`` with every knob of ``ppo``, on the CPU, seeded ``seed``."""
+    """A ``PPO("MlpPolicy", env)`` with every knob of ``ppo``, on the CPU, seeded ``seed``, with
+    Adam's multi-tensor update (``OPTIMIZER_KWARGS``)."""
     from stable_baselines3 import PPO
 
     return PPO(
@@ -47,7 +55,7 @@ def make_model(ppo: PPOConfig, env: Any, seed: int) -> Any:
         vf_coef=ppo.vf_coef,
         max_grad_norm=ppo.max_grad_norm,
         use_sde=ppo.use_sde,
-        policy_kwargs=ppo.policy_kwargs,
+        policy_kwargs={**ppo.policy_kwargs, "optimizer_kwargs": dict(OPTIMIZER_KWARGS)},
         seed=seed,
         device="cpu",
         verbose=0,
