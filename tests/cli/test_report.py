@@ -204,3 +204,41 @@ def test_the_console_summary_reads_at_80_columns_in_a_pipe_even_when_every_seed_
     assert max(len(line) for line in lines if not line.startswith(("Report written", "Logged as"))) <= 80
     assert "neither arm reached the threshold" in res.output and "1.00x" not in res.output
     assert "Warning" not in res.stderr and "warn(" not in res.stderr
+
+
+def _export_of(records: list[dict], path: Path) -> Path:  # type: ignore[type-arg]
+    import gzip
+    import json
+
+    with gzip.open(path, "wt", encoding="utf-8") as out:
+        out.write("".join(json.dumps(r) + "\n" for r in records))
+    return path
+
+
+@pytest.mark.slow  # imports runs into a store
+def test_runs_of_two_numeric_paths_are_refused_unless_allowed(tmp_path: Path) -> None:
+    """Committed Acrobot runs trained before the pin, two of them re-tagged as if trained on it."""
+    import gzip
+    import json
+
+    source = Path(__file__).resolve().parents[2] / "results" / "tasks" / "acrobot" / "runs-study.jsonl.gz"
+    with gzip.open(source, "rt", encoding="utf-8") as lines:
+        records = [r for r in map(json.loads, lines) if r["tags"].get("vlmrl.arm") in ("baseline", "hybrid")
+                   and r["tags"].get("vlmrl.seed") in ("0", "1")]
+    for r in records:
+        r["tags"].pop("vlmrl.pin", None)
+    for r in records[:2]:
+        r["tags"] |= {"vlmrl.pin": "x86-64-v3/1", "vlmrl.pin.env": "MKL_CBWR=COMPATIBLE", "vlmrl.cpu.torch": "AVX2"}
+    uri = f"sqlite:///{tmp_path / 'm.db'}"
+    result = runner.invoke(app, ["import", str(_export_of(records, tmp_path / "mixed.jsonl.gz")),
+                                 "--experiment", "mixed", "--tracking-uri", uri])
+    assert result.exit_code == 0, result.output
+    out = tmp_path / "report"
+    refused = runner.invoke(app, ["report", "--experiment", "mixed", "--tracking-uri", uri, "--out", str(out)])
+    lines = [line for line in refused.stderr.splitlines() if line.strip()]
+    assert refused.exit_code == 2 and len(lines) == 1 and "2 numeric paths" in lines[0], refused.stderr
+    assert "--allow-mixed-paths" in lines[0] and not out.exists()
+    allowed = runner.invoke(app, ["report", "--experiment", "mixed", "--tracking-uri", uri, "--out", str(out),
+                                  "--allow-mixed-paths"])
+    assert allowed.exit_code == 0, allowed.output + allowed.stderr
+    assert "numeric paths" in allowed.output and (out / "report.md").exists()
