@@ -48,6 +48,11 @@ def test_a_dnf_is_the_same_as_a_finish_past_the_budget(a: list[float], b: list[f
     assert one.statistic == pytest.approx(other.statistic, nan_ok=True)
 
 
+def test_every_seed_finishing_at_one_step_gives_no_evidence() -> None:
+    t = censored_logrank([5000.0] * 4, [5000.0] * 6, 300_000, 300_000)
+    assert (t.statistic, t.p_value, t.direction) == (0.0, 1.0, 0)
+
+
 def test_identical_arms_give_no_evidence() -> None:
     t = censored_logrank([100.0, 200.0, np.nan], [100.0, 200.0, np.nan], 1000, 1000)
     assert t.statistic == pytest.approx(0.0) and t.p_value == pytest.approx(1.0) and t.direction == 0
@@ -64,4 +69,4 @@ def test_a_dnf_of_a_shorter_budget_is_censored_at_its_own_budget() -> None:
     # arm a ran 500 steps and never finished; b finished at 600-900: a's seeds left the risk set at
     # 500, before any event, so nothing is known against a (the rank test would call a slower)
     t = censored_logrank([np.nan] * 4, [600.0, 700.0, 800.0, 900.0], 500, 1000)
-    assert math.isnan(t.p_value) or t.p_value == pytest.approx(1.0)
+    assert t.p_value == 1.0 and t.direction == 0 and "no variance" in t.note

@@ -49,7 +49,9 @@ class LogRank:
     def direction(self) -> int:
         """+1 when ``a`` finishes more than expected (faster), -1 when less, 0 when neither."""
         diff = self.observed_a - self.expected_a
-        return 0 if not math.isfinite(diff) or diff == 0 else (1 if diff > 0 else -1)
+        if not math.isfinite(diff) or abs(diff) <= 1e-9 * max(1.0, abs(self.expected_a)):  # rounding, not evidence
+            return 0
+        return 1 if diff > 0 else -1
 
 
 def logrank_test(durations_a: npt.ArrayLike, events_a: npt.ArrayLike, durations_b: npt.ArrayLike,
@@ -90,7 +92,9 @@ def logrank_test(durations_a: npt.ArrayLike, events_a: npt.ArrayLike, durations_
     variance = float(np.sum(d * (at_risk_a / n) * (at_risk_b / n) * ties))
     observed = float(d_a.sum())
     if not variance > 0:
-        return LogRank(math.nan, math.nan, observed, expected, variance, "no variance: every finish is shared")
+        # every finish happened with all the seeds at risk finishing together, or with one arm alone
+        # at risk: observed equals expected, so nothing tells the arms apart
+        return LogRank(0.0, 1.0, observed, expected, variance, "no variance: no finish tells the arms apart")
     stat = (observed - expected) ** 2 / variance
     return LogRank(float(stat), float(sps.chi2.sf(stat, 1)), observed, expected, variance)
 
