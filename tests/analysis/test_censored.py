@@ -117,3 +117,83 @@ def test_learning_curve_area_weighs_steps() -> None:
 def test_no_speedup_is_claimed_when_neither_arm_finishes() -> None:
     est = censored.speedup([np.nan] * 3, [np.nan] * 3, BUDGET, BUDGET, np.random.default_rng(0), 100)
     assert math.isnan(est.value) and est.note == "neither arm reached the threshold"
+
+
+# ---- the one verdict rule (judge_speedup) ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("p_adj", "direction", "ci95", "ci90", "expected"), [
+    (0.04, 1.0, (0.98, 1.13), (0.995, 1.16), censored.leans(censored.FASTER)),  # p < 0.05, interval holds 1
+    (0.04, 1.0, (0.98, 1.13), (1.00, 1.11), censored.equivalent(1.15)),  # ... and inside the margin
+    (0.001, 1.0, (1.09, 1.20), (1.10, 1.19), censored.FASTER),
+    (0.001, -1.0, (0.70, 0.90), (0.72, 0.88), censored.SLOWER),
+    (0.11, -1.0, (0.77, 0.97), (0.79, 0.95), censored.leans(censored.SLOWER)),  # intervals exclude 1, test does not
+    (0.001, -1.0, (1.09, 1.20), (1.10, 1.19), censored.INCONCLUSIVE),  # test and interval point opposite ways
+    (0.30, 0.5, (0.91, 1.26), (0.93, 1.22), censored.INCONCLUSIVE),
+    (math.nan, math.nan, (math.nan, math.nan), (math.nan, math.nan), censored.INCONCLUSIVE),
+])
+def test_judge_speedup_on_small_examples(p_adj: float, direction: float, ci95: tuple[float, float],
+                                         ci90: tuple[float, float], expected: str) -> None:
+    assert censored.judge_speedup(p_adj, direction, ci95, ci90, 1.15, 0.05) == expected
+
+
+def test_no_equivalence_when_too_few_seeds_finished() -> None:
+    assert censored.judge_speedup(0.9, 0.1, (0.95, 1.05), (0.97, 1.03), equivalence_allowed=False) == \
+        censored.INCONCLUSIVE
+
+
+INTERVAL = st.tuples(st.floats(0.2, 5.0), st.floats(0.0, 3.0)).map(lambda t: (t[0], t[0] + t[1]))
+
+
+@settings(max_examples=300)
+@given(st.floats(0.0, 1.0), st.floats(-1.0, 1.0), INTERVAL, INTERVAL, st.booleans())
+def test_a_verdict_never_says_faster_or_slower_while_the_interval_holds_1(
+        p: float, direction: float, ci95: tuple[float, float], ci90: tuple[float, float], allowed: bool) -> None:
+    text = censored.judge_speedup(p, direction, ci95, ci90, 1.15, 0.05, allowed)
+    if text == censored.FASTER:
+        assert ci95[0] > 1 and p < 0.05 and direction >= 0
+    elif text == censored.SLOWER:
+        assert ci95[1] < 1 and p < 0.05 and direction <= 0
+    elif text.startswith("equivalent"):
+        assert allowed and ci90[0] > 1 / 1.15 and ci90[1] < 1.15
+    else:
+        assert text.startswith(censored.INCONCLUSIVE)
+
+
+@given(st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(-1.0, 1.0), INTERVAL, INTERVAL)
+def test_a_larger_adjusted_p_never_turns_inconclusive_into_faster(
+        p: float, q: float, direction: float, ci95: tuple[float, float], ci90: tuple[float, float]) -> None:
+    low, high = sorted((p, q))
+    strict = censored.judge_speedup(high, direction, ci95, ci90)
+    if strict in (censored.FASTER, censored.SLOWER):
+        assert censored.judge_speedup(low, direction, ci95, ci90) == strict
+
+
+def test_rejudge_keeps_the_intervals_and_changes_only_the_text_and_p() -> None:
+    rng = np.random.default_rng(0)
+    fast = censored.steps_verdict([800.0, 820.0, 790.0] * 4, [400.0, 410.0, 395.0] * 4, BUDGET, BUDGET, 0.001, rng,
+                                  400, direction=0.5)
+    assert fast.text == censored.FASTER and fast.p_adjusted == 0.001
+    later = fast.rejudge(0.2)
+    assert later.text == censored.leans(censored.FASTER) and later.p_adjusted == 0.2 and later.p_value == 0.001
+    assert (later.speedup, later.tost_low, later.tost_high) == (fast.speedup, fast.tost_low, fast.tost_high)
+
+
+def test_judge_family_judges_on_the_adjusted_p_and_leaves_nan_out() -> None:
+    # 17 comparisons; one at raw p = 0.04 with an interval above 1: faster on its own, not after Holm
+    p = [0.04] + [0.5] * 15 + [math.nan]
+    ci95, ci90 = [[1.02, 1.30]] * 17, [[1.04, 1.25]] * 17
+    alone = censored.judge_family(p, p, [1.0] * 17, ci95, ci90, [True] * 17, "none")
+    family = censored.judge_family(p, p, [1.0] * 17, ci95, ci90, [True] * 17, "holm")
+    assert alone.verdicts[0] == censored.FASTER
+    assert family.verdicts[0] == censored.leans(censored.FASTER)
+    assert family.p_adjusted[0] == pytest.approx(16 * 0.04)  # 16 comparisons made, not 17
+    assert math.isnan(family.p_adjusted[-1]) and family.disagreement[-1] == ""
+
+
+def test_judge_family_says_where_the_two_tests_disagree() -> None:
+    f = censored.judge_family([0.001, 0.2, 0.001], [0.3, 0.001, 0.001], [1, 1, 1], [[1.1, 1.2]] * 3,
+                              [[1.11, 1.19]] * 3, [True] * 3, "none")
+    assert f.disagreement == ("rank test only", "log-rank only", "")
+    with pytest.raises(ValueError, match="one entry per comparison"):
+        censored.judge_family([0.1], [0.1, 0.2], [1], [[1, 2]], [[1, 2]], [True])

@@ -182,6 +182,7 @@ def test_every_table_names_the_simulated_vlm(store, tmp_path):
     (["--experiment", "E "], "starts or ends with a space"),
     (["--tracking-uri", " "], "the tracking URI is empty"),
     (["--margin", "1"], "equivalence margin"),
+    (["--adjust", "bonferroni"], "--adjust is one of holm, bh, none"),
 ])
 def test_bad_names_and_margins_exit_2_before_anything_exists(tmp_path, args, needle):
     res = runner.invoke(app, ["report", "--tracking-uri", f"sqlite:///{tmp_path / 's' / 'm.db'}",

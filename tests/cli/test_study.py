@@ -108,6 +108,7 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     (["--vlm-regime", "other"], "not a regime of this study"),
     (["--alphas", "-1"], "alphas must be finite and >= 0"),
     (["--margin", "0.9"], "--margin is a ratio above 1"),
+    (["--adjust", "bonferroni"], "--adjust is one of holm, bh, none"),
     (["--experiment", ""], "an experiment needs a name"),
     (["--kin-scales", "x"], "--kin-scales takes numbers"),
     (["--query-flickers", "2"], "vlm.sim.query_flicker"),

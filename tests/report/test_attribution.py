@@ -9,7 +9,7 @@ import pandas as pd
 
 from vlmrl_cli import paper
 from vlmrl_cli.analysis.stats import Streams
-from vlmrl_cli.report.attribution import attribution_markdown, compare_arms, lookup_verdict
+from vlmrl_cli.report.attribution import adjust_family, attribution_markdown, compare_arms, lookup, lookup_verdict
 from vlmrl_cli.report.claims import NOT_REPRODUCED, REPRODUCED, evaluate_claims
 from vlmrl_cli.report.table2 import build_table2, floor_thresholds
 
@@ -64,3 +64,31 @@ def test_a_vlm_claim_is_not_reproduced_when_the_arms_are_equivalent() -> None:
 
 def test_a_threshold_every_seed_crosses_at_its_first_window_is_a_floor() -> None:
     assert floor_thresholds(_data(), THRESHOLDS) == [-190.0]
+
+
+def test_the_speedups_are_one_family_adjusted_side_by_side_with_the_raw_p() -> None:
+    per_seed = _data()
+    holm = compare_arms(per_seed, THRESHOLDS, Streams(0), n_boot=200)
+    raw = compare_arms(per_seed, THRESHOLDS, Streams(0), n_boot=200, adjust="none")
+    steps = holm["metric"].str.startswith("speedup_") & np.isfinite(holm["value"])
+    assert (holm.loc[steps, "p_adj"] >= holm.loc[steps, "p_value"]).all()
+    np.testing.assert_array_equal(raw.loc[steps, "p_adj"], raw.loc[steps, "p_value"])
+    assert holm.loc[~steps, "p_adj"].isna().all()  # reliability, area: not in the family
+    assert holm.loc[steps, "logrank_p"].notna().all() and (holm.loc[steps, "logrank_p_adj"] >= 0).all()
+    md = attribution_markdown(holm, adjust="holm")
+    assert "| p | p adjusted (holm) | Log-rank p (holm-adjusted) |" in md
+
+
+def test_a_speedup_significant_alone_is_judged_on_its_adjusted_p() -> None:
+    comparisons = compare_arms(_data(), THRESHOLDS, Streams(0), n_boot=200, adjust="none")
+    row = (comparisons["pair"] == "hybrid vs baseline") & (comparisons["metric"] == "speedup_-130")
+    # pretend this one came out at p = 0.04 with its interval above 1; the other speedups at p = 0.5
+    steps = comparisons["metric"].str.startswith("speedup_") & np.isfinite(comparisons["value"])
+    edited = comparisons.assign(p_value=np.where(row, 0.04, np.where(steps, 0.5, comparisons["p_value"])),
+                                logrank_p=np.where(row, 0.001, comparisons["logrank_p"]))
+    alone, family = adjust_family(edited, "none"), adjust_family(edited, "holm")
+    assert lookup_verdict(alone, "hybrid", "baseline", "speedup_-130")[0] == "faster"
+    assert lookup_verdict(family, "hybrid", "baseline", "speedup_-130")[0] == "inconclusive, leans faster"
+    found = lookup(family, "hybrid", "baseline", "speedup_-130")
+    assert found is not None and found[1] == 0.04 and found[2] == 0.04 * int(steps.sum())
+    assert family.loc[row, "tests_disagree"].item() == "log-rank only"

@@ -12,10 +12,13 @@ seeds DNF; equivalence is therefore only claimed when each arm finished on at le
 return crossed it at a step no later than its budget. The paper's convention (the mean over the
 seeds that finished) survives only as a labelled column of Table 2, never as a verdict's basis.
 
-**Verdicts.** Arm ``a`` against reference ``b``: ``faster`` / ``slower`` when the censored rank
-test is significant at ``alpha``; otherwise ``equivalent within M x`` when the ``1 - 2 alpha``
-bootstrap interval of the speedup lies inside ``[1/M, M]`` (two one-sided tests, TOST, on the
-ratio of restricted means; default margin 1.15x); otherwise ``inconclusive``.
+**Verdicts** (``judge_speedup``, the one rule of the report and the study). Arm ``a`` against
+reference ``b``: ``faster`` / ``slower`` when the censored rank test, its p adjusted within its
+family (``multiplicity.py``), rejects at ``alpha`` *and* the ``ci`` (95%) bootstrap interval of the
+speedup excludes 1 on the test's side; otherwise ``equivalent within M x`` when the ``1 - 2 alpha``
+interval lies inside ``[1/M, M]`` (two one-sided tests, TOST, on the ratio of restricted means;
+default margin 1.15x); otherwise ``inconclusive``, or ``inconclusive, leans faster`` (``slower``)
+when the 95% interval excludes 1 or the adjusted test rejects, and all of that points one way.
 
 All functions are pure; shapes are ``(n_seeds,)`` arrays with NaN for a DNF; randomness comes in
 as an explicit generator.
@@ -23,6 +26,7 @@ as an explicit generator.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -30,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import stats as sps
 
+from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST, adjust
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, bootstrap_ci
 
 DEFAULT_MARGIN = 1.15
@@ -136,10 +141,69 @@ def tost_equivalent(interval: tuple[float, float], margin: float = DEFAULT_MARGI
     return bool(math.isfinite(low) and math.isfinite(high) and 1 / margin < low and high < margin)
 
 
+def leans(direction: str) -> str:
+    """The verdict text of an inconclusive comparison whose evidence points one way.
+
+    Example:
+        >>> leans(FASTER)
+        'inconclusive, leans faster'
+    """
+    return f"{INCONCLUSIVE}, leans {direction}"
+
+
+def _side(interval: tuple[float, float]) -> int:
+    """+1 when the interval lies above 1, -1 below, 0 when it holds 1 or is not finite."""
+    low, high = interval
+    if math.isfinite(low) and math.isfinite(high):
+        return 1 if low > 1 else (-1 if high < 1 else 0)
+    return 0
+
+
+def judge_speedup(p_adjusted: float, direction: float, interval: tuple[float, float],
+                  tost_interval: tuple[float, float], margin: float = DEFAULT_MARGIN, alpha: float = 0.05,
+                  equivalence_allowed: bool = True) -> str:
+    """The verdict on a speedup (reference over arm; above 1: the arm is faster), in one rule:
+    "faster"/"slower" needs the adjusted test to reject AND the 95% interval to exclude 1 on the
+    test's side; "equivalent" needs the 90% interval inside [1/margin, margin]; otherwise
+    "inconclusive", saying which way it leans when the interval or the test points one way.
+
+    Args:
+        p_adjusted: the verdict's test's p, adjusted within its family (NaN: no test).
+        direction: the side the test's statistic favours: > 0 the arm is faster, < 0 slower
+            (e.g. ``P(arm faster) - 0.5``); 0 or NaN: unknown, the interval's side decides.
+        interval: the speedup's ``ci`` (95%) interval.
+        tost_interval: its ``1 - 2 alpha`` (90%) interval, for the two one-sided tests.
+        equivalence_allowed: False when too few seeds finished for an equivalence to mean much.
+
+    Example:
+        >>> judge_speedup(0.04, 1.0, (0.98, 1.13), (1.00, 1.11))  # the test rejects, the interval holds 1
+        'equivalent within 1.15x'
+        >>> judge_speedup(0.04, 1.0, (0.98, 1.22), (0.99, 1.19))
+        'inconclusive, leans faster'
+        >>> judge_speedup(0.001, 1.0, (1.09, 1.20), (1.10, 1.19))
+        'faster'
+        >>> judge_speedup(0.11, -1.0, (0.77, 0.97), (0.79, 0.95))
+        'inconclusive, leans slower'
+    """
+    side = _side(interval)
+    rejects = math.isfinite(p_adjusted) and p_adjusted < alpha
+    test_side = int(np.sign(direction)) if math.isfinite(direction) else 0
+    if rejects and side != 0 and test_side in (0, side):
+        return FASTER if side > 0 else SLOWER
+    if equivalence_allowed and tost_equivalent(tost_interval, margin):
+        return equivalent(margin)
+    pointers = {side} - {0} | ({test_side} - {0} if rejects else set())
+    if len(pointers) == 1:
+        return leans(FASTER if pointers.pop() > 0 else SLOWER)
+    return INCONCLUSIVE
+
+
 @dataclass(frozen=True)
 class Verdict:
     """A comparison's verdict and what it rests on: the speedup (at the report's CI), the ``1 - 2 alpha``
-    interval the equivalence test used, the censored rank test's p, the margin."""
+    interval the equivalence test used, the censored rank test's p (raw, and as adjusted within its
+    family: the same until ``rejudge``), the test's direction, the margin and whether enough seeds
+    finished for an equivalence."""
 
     text: str
     speedup: Estimate
@@ -147,14 +211,32 @@ class Verdict:
     tost_high: float
     p_value: float
     margin: float
+    direction: float = math.nan
+    equivalence_allowed: bool = True
+    p_adjusted: float = math.nan
+    alpha: float = 0.05
+
+    def rejudge(self, p_adjusted: float) -> Verdict:
+        """The same comparison judged on ``p_adjusted`` (its p adjusted within its family).
+
+        Example:
+            >>> v = Verdict("faster", Estimate(1.1, 1.05, 1.2), 1.06, 1.18, 0.01, 1.15, 1.0, True, 0.01)
+            >>> v.rejudge(0.2).text
+            'inconclusive, leans faster'
+        """
+        text = judge_speedup(p_adjusted, self.direction, (self.speedup.low, self.speedup.high),
+                             (self.tost_low, self.tost_high), self.margin, self.alpha, self.equivalence_allowed)
+        return dataclasses.replace(self, text=text, p_adjusted=p_adjusted)
 
 
 def steps_verdict(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget: npt.ArrayLike,
                   arm_budget: npt.ArrayLike, p_value: float, rng: np.random.Generator,
                   n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95, alpha: float = 0.05,
-                  margin: float = DEFAULT_MARGIN) -> Verdict:
-    """The verdict of arm vs reference on steps to one threshold (module docstring), from their steps
-    (NaN = DNF), budgets and the censored rank test's ``p_value``.
+                  margin: float = DEFAULT_MARGIN, direction: float = math.nan) -> Verdict:
+    """The verdict of arm vs reference on steps to one threshold (``judge_speedup``), from their
+    steps (NaN = DNF), budgets and the censored rank test's ``p_value`` and ``direction`` (> 0: the
+    arm is faster), judged on ``p_value`` as given: a family's adjustment comes after, by
+    ``Verdict.rejudge``.
 
     Example:
         >>> rng = np.random.default_rng(0)
@@ -165,13 +247,62 @@ def steps_verdict(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget
     tost = speedup(ref_steps, arm_steps, ref_budget, arm_budget, rng, n_boot, 1 - 2 * alpha)
     finished = min(float(reached(ref_steps, ref_budget).mean()) if np.size(ref_steps) else 0.0,
                    float(reached(arm_steps, arm_budget).mean()) if np.size(arm_steps) else 0.0)
-    if math.isfinite(p_value) and p_value < alpha and math.isfinite(est.value) and est.value != 1:
-        text = FASTER if est.value > 1 else SLOWER
-    elif finished >= MIN_FINISHED_FOR_EQUIVALENCE and tost_equivalent((tost.low, tost.high), margin):
-        text = equivalent(margin)
-    else:
-        text = INCONCLUSIVE
-    return Verdict(text, est, tost.low, tost.high, p_value, margin)
+    allowed = finished >= MIN_FINISHED_FOR_EQUIVALENCE
+    text = judge_speedup(p_value, direction, (est.low, est.high), (tost.low, tost.high), margin, alpha, allowed)
+    return Verdict(text, est, tost.low, tost.high, p_value, margin, direction, allowed, p_value, alpha)
+
+
+@dataclass(frozen=True)
+class FamilyVerdicts:
+    """The verdicts of one family of speedups, each judged on its adjusted p (shapes ``(m,)``).
+
+    ``disagreement``: per comparison, "" when the rank test and the log-rank test agree about
+    significance after adjustment, else which one rejects (``"rank test only"``,
+    ``"log-rank only"``)."""
+
+    p_adjusted: np.ndarray
+    logrank_adjusted: np.ndarray
+    verdicts: tuple[str, ...]
+    disagreement: tuple[str, ...]
+
+
+def judge_family(p_values: npt.ArrayLike, logrank_p: npt.ArrayLike, directions: npt.ArrayLike,
+                 intervals: npt.ArrayLike, tost_intervals: npt.ArrayLike, equivalence_allowed: npt.ArrayLike,
+                 method: str = DEFAULT_ADJUST, alpha: float = 0.05, margin: float = DEFAULT_MARGIN
+                 ) -> FamilyVerdicts:
+    """Adjust a family's p-values (``multiplicity.adjust``; the rank test's and the log-rank's,
+    each within the family) and judge each comparison on its adjusted rank-test p (``judge_speedup``).
+
+    Args:
+        p_values, logrank_p: shape ``(m,)``, the raw p of the verdict's test and of the log-rank
+            test; NaN for a comparison not made (kept out of the family size).
+        directions: shape ``(m,)``, the side each test's statistic favours (> 0: the arm is faster).
+        intervals, tost_intervals: shape ``(m, 2)``, the speedups' 95% and 90% intervals.
+        equivalence_allowed: shape ``(m,)`` of bools.
+
+    Example:
+        >>> f = judge_family([0.001, 0.04], [0.002, 0.3], [1, 1], [[1.1, 1.3], [1.05, 1.4]],
+        ...                  [[1.12, 1.28], [1.08, 1.35]], [True, True])
+        >>> f.p_adjusted.tolist(), f.verdicts, f.disagreement
+        ([0.002, 0.04], ('faster', 'faster'), ('', 'rank test only'))
+    """
+    p = np.asarray(p_values, dtype=float).reshape(-1)
+    lr = np.asarray(logrank_p, dtype=float).reshape(-1)
+    d = np.asarray(directions, dtype=float).reshape(-1)
+    ci = np.asarray(intervals, dtype=float).reshape(-1, 2)
+    tost = np.asarray(tost_intervals, dtype=float).reshape(-1, 2)
+    allowed = np.asarray(equivalence_allowed, dtype=bool).reshape(-1)
+    if not (p.size == lr.size == d.size == len(ci) == len(tost) == allowed.size):
+        raise ValueError("every argument of judge_family needs one entry per comparison")
+    p_adj, lr_adj = adjust(p, method), adjust(lr, method)
+    verdicts = tuple(judge_speedup(float(p_adj[i]), float(d[i]), (float(ci[i, 0]), float(ci[i, 1])),
+                                   (float(tost[i, 0]), float(tost[i, 1])), margin, alpha, bool(allowed[i]))
+                     for i in range(p.size))
+    rank_rejects, lr_rejects = p_adj < alpha, lr_adj < alpha  # NaN compares False
+    both = np.isfinite(p_adj) & np.isfinite(lr_adj)
+    disagreement = tuple("" if not both[i] or rank_rejects[i] == lr_rejects[i]
+                         else ("rank test only" if rank_rejects[i] else "log-rank only") for i in range(p.size))
+    return FamilyVerdicts(p_adj, lr_adj, verdicts, disagreement)
 
 
 def difference_verdict(diff: Estimate, tost: tuple[float, float], p_value: float, alpha: float,

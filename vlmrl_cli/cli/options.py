@@ -12,6 +12,7 @@ from typing import Annotated, Any
 
 import typer
 
+from vlmrl_cli.analysis.multiplicity import METHODS
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.training.config import source_layers
@@ -32,6 +33,13 @@ def choices(names: Sequence[str]) -> str:
     """The metavar listing an option's choices in the help (``[a|b|c]``); the values are checked,
     with one-sentence errors, where the config is validated, before anything runs."""
     return "[" + "|".join(names) + "]"
+
+
+Adjust = Annotated[str, typer.Option(
+    "--adjust", metavar=choices(METHODS),
+    help="Multiplicity adjustment of the speedups' p-values within the command's family of comparisons: holm "
+         "(Holm's step-down, the family-wise error rate), bh (Benjamini-Hochberg, the false discovery rate) or none. "
+         "Verdicts use the adjusted p.")]
 
 
 Vlm = Annotated[str, typer.Option("--vlm", metavar=choices(BACKENDS),

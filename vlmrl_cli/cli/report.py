@@ -9,7 +9,7 @@ import typer
 from rich.console import Console
 
 from vlmrl_cli.cli.exit_codes import exit_codes
-from vlmrl_cli.cli.options import Experiment, Margin, OutDir, TrackingUri
+from vlmrl_cli.cli.options import Adjust, Experiment, Margin, OutDir, TrackingUri
 from vlmrl_cli.core.errors import BadInput
 
 if TYPE_CHECKING:  # the CLI imports no analysis code before a command runs (help stays fast)
@@ -62,6 +62,7 @@ def report(
         "--window", help="Episodes in the rolling mean return [default: the task's; MountainCar's 100].",
         show_default=False)] = None,
     margin: Margin = 1.15,
+    adjust: Adjust = "holm",
     allow_mixed_paths: Annotated[bool, typer.Option(
         "--allow-mixed-paths", help="Compare runs computed on different numeric paths (vlmrl.pin tags) instead of "
         "refusing.")] = False,
@@ -72,7 +73,8 @@ def report(
     with exit_codes():
         cfg = ReportConfig(experiment=experiment, tracking_uri=tracking_uri, out=out or DEFAULT_OUT,
                            thresholds=parse_thresholds(thresholds) if thresholds is not None else None,
-                           window=window, margin=margin, allow_mixed_paths=allow_mixed_paths)
+                           window=window, margin=margin, adjust=adjust,
+                           allow_mixed_paths=allow_mixed_paths)
         result = write_report(cfg)
         console = Console()
         for line in console_summary(result.table, experiment):

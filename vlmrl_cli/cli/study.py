@@ -119,6 +119,7 @@ def study(
     dry_run: DryRun = False,
     no_train: NoTrain = False,
     margin: opt.Margin = 1.15,
+    adjust: opt.Adjust = "holm",
     out: Out = Path("results/study"),
     experiment: opt.Experiment = "vlmrl-study",
     tracking_uri: opt.TrackingUri = None,
@@ -154,7 +155,7 @@ def study(
                              DEFAULT_KIN_SCALES),
             query_flickers=_pick(_numbers(query_flickers, "--query-flickers"), section,
                                  "query_flickers", DEFAULT_QUERY_FLICKERS),
-            vlm_regime=vlm_regime or section.get("vlm_regime"), notes=notes, out=out, margin=margin,
+            vlm_regime=vlm_regime or section.get("vlm_regime"), notes=notes, out=out, margin=margin, adjust=adjust,
             **({} if states is None else {"states": states}),
         )
         base = cfg.base

@@ -22,6 +22,7 @@ import pandas as pd
 from scipy import stats as sps
 
 from vlmrl_cli.analysis import censored, stats
+from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST
 from vlmrl_cli.analysis.proportions import compare_proportions
 from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM, probability_of_improvement
 from vlmrl_cli.core import tables
@@ -48,8 +49,14 @@ PAIRS = (
     Pair("kinematic", BASELINE, "what the dense kinematic term adds"),
     Pair("semantic", BASELINE, "the VLM potential alone"),
 )
-COLUMNS = ["pair", "meaning", "metric", "label", "unit", "value", "ci_low", "ci_high", "p_value", "test", "n_a", "n_b",
-           "note", "verdict", "tost_low", "tost_high"]
+#: ``p_value``: the raw p of the row's test; ``p_adj``: for speedups, adjusted within the family of
+#: every speedup of the table (NaN for other metrics, and for a speedup not measured);
+#: ``logrank_p``/``logrank_p_adj``: the log-rank test beside the rank test; ``tests_disagree``: which
+#: test alone rejects after adjustment ("" when they agree); ``direction``: P(a faster) - 0.5;
+#: ``equivalence_ok``: each arm finished on enough seeds for an equivalence verdict.
+COLUMNS = ["pair", "meaning", "metric", "label", "unit", "value", "ci_low", "ci_high", "p_value", "p_adj",
+           "logrank_p", "logrank_p_adj", "tests_disagree", "test", "n_a", "n_b", "note", "verdict", "tost_low",
+           "tost_high", "direction", "equivalence_ok"]
 #: Equivalence margin of the learning-curve area, in return units (a mean return within +-5 of the other arm's).
 DEFAULT_AUC_DELTA = 5.0
 
@@ -66,12 +73,13 @@ def present_pairs(arms: Sequence[str]) -> list[Pair]:
 
 
 def _row(pair: Pair, metric: str, label: str, unit: str, est: stats.Estimate, p_value: float, test: str,
-         n_a: int, n_b: int, note: str = "", verdict: str = "", tost: tuple[float, float] = (np.nan, np.nan)
-         ) -> dict[str, Any]:
+         n_a: int, n_b: int, note: str = "", verdict: str = "", tost: tuple[float, float] = (np.nan, np.nan),
+         **steps: Any) -> dict[str, Any]:
     return {"pair": pair.name, "meaning": pair.meaning, "metric": metric, "label": label, "unit": unit,
-            "value": est.value, "ci_low": est.low, "ci_high": est.high, "p_value": p_value, "test": test,
+            "value": est.value, "ci_low": est.low, "ci_high": est.high, "p_value": p_value, "p_adj": np.nan,
+            "logrank_p": np.nan, "logrank_p_adj": np.nan, "tests_disagree": "", "test": test,
             "n_a": n_a, "n_b": n_b, "note": "; ".join(filter(None, [est.note, note])), "verdict": verdict,
-            "tost_low": tost[0], "tost_high": tost[1]}
+            "tost_low": tost[0], "tost_high": tost[1], "direction": np.nan, "equivalence_ok": False} | steps
 
 
 def _proportion_verdict(diff: float, p_value: float, alpha: float) -> str:
@@ -97,9 +105,13 @@ def compare_arms(
     per_seed: pd.DataFrame, thresholds: Sequence[float], rng: np.random.Generator | stats.Streams,
     n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, n_perm: int = DEFAULT_N_PERM,
     alpha: float = 0.05, margin: float = censored.DEFAULT_MARGIN, auc_delta: float = DEFAULT_AUC_DELTA,
-    pairs: Sequence[Pair] | None = None,
+    pairs: Sequence[Pair] | None = None, adjust: str = DEFAULT_ADJUST,
 ) -> pd.DataFrame:
     """Every comparison of every present pair (columns ``COLUMNS``), from ``per_seed`` (see ``per_seed_table``).
+
+    The speedups form one family: their p-values are adjusted by ``adjust`` (``multiplicity.py``)
+    and each speedup's verdict uses its adjusted p (``adjust_family``); a caller whose family spans
+    several frames (the study) passes ``"none"`` and adjusts the whole family itself.
 
     Metrics: ``speedup_<t>`` (a over b, x), ``reliability_diff`` (seeds reaching the top threshold,
     a minus b), ``detached_success_diff`` (seeds succeeding detached, a minus b), ``poi_final_return``
@@ -112,12 +124,13 @@ def compare_arms(
     for pair in chosen:
         da, db = per_seed[per_seed["arm"] == pair.a], per_seed[per_seed["arm"] == pair.b]
         for t in thresholds:
-            judged, test = judge_steps(per_seed, pair.a, pair.b, t, rng, n_boot, ci, n_perm, alpha, margin)
+            judged, test, logrank = judge_steps(per_seed, pair.a, pair.b, t, rng, n_boot, ci, n_perm, alpha, margin)
             rows.append(_row(pair, f"speedup_{t:g}", f"Speedup to {t:g} ({pair.a} over {pair.b})", "x",
                              judged.speedup, test.p_value,
                              f"Mann-Whitney U on steps, DNF censored ({test.method} p)", test.n_a, test.n_b,
                              "; ".join(filter(None, [f"P({pair.a} faster) = {test.p_faster:.2f}", test.note])),
-                             judged.text, (judged.tost_low, judged.tost_high)))
+                             judged.text, (judged.tost_low, judged.tost_high), logrank_p=logrank.p_value,
+                             direction=judged.direction, equivalence_ok=judged.equivalence_allowed))
         key = threshold_key(top)
         rel = compare_proportions(censored.reached(da[key].to_numpy(dtype=float), da["budget"].to_numpy(dtype=float)),
                                   censored.reached(db[key].to_numpy(dtype=float), db["budget"].to_numpy(dtype=float)),
@@ -141,18 +154,45 @@ def compare_arms(
         rows.append(_row(pair, "poi_final_return", "P(final return higher)", "p", poi, float("nan"),
                          "bootstrap over seeds (descriptive)", int(da["final_return"].notna().sum()),
                          int(db["final_return"].notna().sum())))
-    return pd.DataFrame(rows, columns=COLUMNS)
+    return adjust_family(pd.DataFrame(rows, columns=COLUMNS), adjust, alpha, margin)
 
 
-def lookup(comparisons: pd.DataFrame, a: str, b: str, metric: str) -> tuple[stats.Estimate, float] | None:
-    """The estimate and p-value of one comparison, or None when that pair or metric is absent."""
+def is_family(comparisons: pd.DataFrame) -> pd.Series:
+    """The rows of the steps family: every speedup that was measured (a finite ratio)."""
+    return comparisons["metric"].str.startswith("speedup_") & np.isfinite(comparisons["value"].astype(float))
+
+
+def adjust_family(comparisons: pd.DataFrame, method: str = DEFAULT_ADJUST, alpha: float = 0.05,
+                  margin: float = censored.DEFAULT_MARGIN) -> pd.DataFrame:
+    """``comparisons`` with its speedups adjusted as one family and re-judged (``censored.judge_family``):
+    ``p_adj``, ``logrank_p_adj``, ``tests_disagree`` and their ``verdict``. Other metrics keep their
+    verdicts on their raw p; a speedup not measured stays out of the family."""
+    out = comparisons.copy()
+    fam = is_family(out).to_numpy()
+    if not fam.any():
+        return out
+    rows = out[fam]
+    judged = censored.judge_family(rows["p_value"], rows["logrank_p"], rows["direction"],
+                                   rows[["ci_low", "ci_high"]], rows[["tost_low", "tost_high"]],
+                                   rows["equivalence_ok"].astype(bool), method, alpha, margin)
+    out.loc[fam, "p_adj"] = judged.p_adjusted
+    out.loc[fam, "logrank_p_adj"] = judged.logrank_adjusted
+    out.loc[fam, "verdict"] = list(judged.verdicts)
+    out.loc[fam, "tests_disagree"] = list(judged.disagreement)
+    return out
+
+
+def lookup(comparisons: pd.DataFrame, a: str, b: str, metric: str) -> tuple[stats.Estimate, float, float] | None:
+    """The estimate, raw p-value and the p its verdict uses (adjusted within the family for a
+    speedup, the raw one otherwise) of one comparison, or None when that pair or metric is absent."""
     hit = comparisons[(comparisons["pair"] == f"{a} vs {b}") & (comparisons["metric"] == metric)]
     if hit.empty:
         return None
     r = hit.iloc[0]
     est = stats.Estimate(float(r["value"]), float(r["ci_low"]), float(r["ci_high"]),
                          int(min(r["n_a"], r["n_b"])), str(r["note"]))
-    return est, float(r["p_value"])
+    adjusted = float(r["p_adj"])
+    return est, float(r["p_value"]), adjusted if np.isfinite(adjusted) else float(r["p_value"])
 
 
 def lookup_verdict(comparisons: pd.DataFrame, a: str, b: str, metric: str) -> tuple[str, float, float]:
@@ -177,14 +217,37 @@ def _fmt(x: float, unit: str) -> str:
     return f"{x:.2f}"
 
 
-def attribution_markdown(comparisons: pd.DataFrame, ci: float = 0.95) -> str:
-    """Markdown table: pair (what it isolates), metric, value [CI], p-value and test, verdict, seeds."""
+def _p(x: float) -> str:
+    return censored.format_p(x).removeprefix("p = ") if np.isfinite(x) else "—"
+
+
+def logrank_cell(p_raw: float, p_adj: float, disagree: str) -> str:
+    """The log-rank column: raw p, adjusted p, and a warning when it and the rank test disagree.
+
+    Example:
+        >>> logrank_cell(0.003, 0.03, "log-rank only")
+        '0.003 (adj. 0.03); **disagrees**: only the log-rank rejects'
+    """
+    if not np.isfinite(p_raw):
+        return "—"
+    text = f"{_p(p_raw)} (adj. {_p(p_adj)})" if np.isfinite(p_adj) else _p(p_raw)
+    if disagree:
+        text += "; **disagrees**: only the " + ("log-rank" if disagree == "log-rank only" else "rank test") + \
+            " rejects"
+    return text
+
+
+def attribution_markdown(comparisons: pd.DataFrame, ci: float = 0.95, adjust: str = DEFAULT_ADJUST) -> str:
+    """Markdown table: pair (what it isolates), metric, value [CI], the raw p and (speedups) the p
+    adjusted within the family, the log-rank p beside the rank test's, test, verdict, seeds."""
     rows = []
     for r in comparisons.itertuples(index=False):
         value = _fmt(r.value, r.unit)
         if np.isfinite(r.ci_low) and np.isfinite(r.ci_high):
             value += f" [{_fmt(r.ci_low, r.unit)}, {_fmt(r.ci_high, r.unit)}]"
-        p = censored.format_p(r.p_value).removeprefix("p = ") if np.isfinite(r.p_value) else "—"
-        rows.append([r.pair, r.meaning, r.label, value, p, r.test, r.verdict or "—", f"{r.n_a}/{r.n_b}"])
-    header = ["Pair", "Isolates", "Metric", f"Ours [{100 * ci:g}% CI]", "p", "Test", "Verdict", "Seeds (a/b)"]
+        rows.append([r.pair, r.meaning, r.label, value, _p(r.p_value), _p(r.p_adj),
+                     logrank_cell(r.logrank_p, r.logrank_p_adj, r.tests_disagree), r.test, r.verdict or "—",
+                     f"{r.n_a}/{r.n_b}"])
+    header = ["Pair", "Isolates", "Metric", f"Ours [{100 * ci:g}% CI]", "p", f"p adjusted ({adjust})",
+              f"Log-rank p ({adjust}-adjusted)", "Test", "Verdict", "Seeds (a/b)"]
     return "\n".join(tables.markdown_rows(header, rows)) + "\n"

@@ -51,7 +51,9 @@ VERDICT_RULE = (
     f"it and our estimate is within {100 * APPROX_TOLERANCE:.0f}% of it (or of the '~' tolerance); otherwise "
     "inconclusive (the CI is too wide to tell). A comparative claim with a test p-value (Fisher exact for "
     "proportions of seeds, Mann-Whitney U with DNF censored for steps) is reproduced only if that p-value is also "
-    "below 1 - the CI level; otherwise inconclusive. Proportions of seeds get score intervals (Wilson for one arm, "
+    "below 1 - the CI level; otherwise inconclusive. For a speedup that p is the one adjusted within the report's "
+    "family of speedups (every pair and threshold of the attribution table; Holm unless --adjust says otherwise). "
+    "Proportions of seeds get score intervals (Wilson for one arm, "
     "Newcombe's hybrid score interval for a difference), never a bootstrap that collapses to a point. A claim that "
     "credits the VLM itself is judged on hybrid vs kinematic (same dense term, with and without the VLM); "
     "without the kinematic arm it is not tested. A speedup claim that would be inconclusive is not reproduced "
@@ -140,8 +142,9 @@ class ClaimResult:
     unit: str
     verdict: str
     reason: str
-    p_value: float = float("nan")
+    p_value: float = float("nan")  # the p the verdict used: for a speedup, adjusted within the report's family
     arms: str = ""  # the comparison judged, e.g. "hybrid vs kinematic"
+    p_raw: float = float("nan")  # the test's own p, before any adjustment
 
 
 def _est_from_cell(cell: dict[str, Any] | None) -> stats.Estimate:
@@ -177,7 +180,7 @@ def evaluate_claims(
         need: set[str] = set()
         est = stats.Estimate(float("nan"))
         null: float | None = None
-        direction, unit, n_seeds, p_value, pair = ">", "", None, float("nan"), ""
+        direction, unit, n_seeds, p_value, p_raw, pair = ">", "", None, float("nan"), float("nan"), ""
         comparison: tuple[str, str, str] | None = None  # (a, b, metric) of a comparative claim
         if "vs" in spec:
             comparison = ("hybrid", str(spec["vs"]), str(spec["metric"]))
@@ -196,7 +199,7 @@ def evaluate_claims(
                 continue
             found = lookup(comparisons, a, b, metric) if need <= arms else None
             if found is not None:
-                est, p_value = found
+                est, p_raw, p_value = found
             if metric.startswith("speedup_") and need <= arms:
                 t = float(metric.removeprefix("speedup_"))
                 n_seeds = min(_n_reached(table, t, a), _n_reached(table, t, b))
@@ -240,9 +243,12 @@ def evaluate_claims(
                                              f"speedup as large as the margin; {reason}")
         if cid == "narrower_variance":
             reason = "measure: std across seeds of the final return, hybrid minus baseline; " + reason
+        if math.isfinite(p_raw) and p_raw != p_value:
+            reason += f" (p adjusted within the report's family of speedups; raw p={p_raw:.2g})"
         if pair:
             reason = f"judged on {pair}; " + reason
-        results.append(ClaimResult(cid, spec["section"], spec["text"], paper_f, est, unit, v, reason, p_value, pair))
+        results.append(ClaimResult(cid, spec["section"], spec["text"], paper_f, est, unit, v, reason, p_value, pair,
+                                   p_raw))
     return results
 
 
@@ -265,7 +271,7 @@ def claims_frame(results: list[ClaimResult]) -> pd.DataFrame:
     """Numeric table (CSV): one row per claim."""
     return pd.DataFrame([{
         "id": r.id, "section": r.section, "claim": r.claim, "paper": r.paper, "ours": r.estimate.value,
-        "ci_low": r.estimate.low, "ci_high": r.estimate.high, "n": r.estimate.n, "p_value": r.p_value,
+        "ci_low": r.estimate.low, "ci_high": r.estimate.high, "n": r.estimate.n, "p_raw": r.p_raw, "p_value": r.p_value,
         "arms": r.arms, "verdict": r.verdict, "reason": r.reason, "note": r.estimate.note,
     } for r in results])
 
@@ -282,9 +288,11 @@ def claims_markdown(results: list[ClaimResult]) -> str:
             paper = f"> {_fmt(_NULLS[r.unit], r.unit)}"
         if r.id == "detached_length_hybrid" and r.paper is not None:
             paper = "~" + paper
-        p = f"{r.p_value:.2g}" if math.isfinite(r.p_value) else "—"
-        rows.append([r.claim, r.section, r.arms or "—", paper, ours, p, f"**{r.verdict}**", r.reason])
-    header = ["Claim", "Section", "Arms", "Paper", "Ours [95% CI]", "p", "Verdict", "Why"]
+        raw = f"{r.p_raw:.2g}" if math.isfinite(r.p_raw) else "—"
+        used = f"{r.p_value:.2g}" if math.isfinite(r.p_value) else "—"
+        rows.append([r.claim, r.section, r.arms or "—", paper, ours, raw, used, f"**{r.verdict}**", r.reason])
+    header = ["Claim", "Section", "Arms", "Paper", "Ours [95% CI]", "p", "p judged (speedups: adjusted)", "Verdict",
+              "Why"]
     return "\n".join(tables.markdown_rows(header, rows)) + "\n"
 
 

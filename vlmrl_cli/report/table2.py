@@ -22,6 +22,7 @@ from vlmrl_cli.analysis import censored, stats
 from vlmrl_cli.analysis.load import ExperimentData
 from vlmrl_cli.analysis.proportions import DETACHED_SUCCESS_CUT, detached_successes
 from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM, RankTest, censored_rank_test
+from vlmrl_cli.analysis.survival import LogRank, censored_logrank
 from vlmrl_cli.analysis.thresholds import full_window_steps_to_threshold, steps_to_threshold
 from vlmrl_cli.core import tables
 from vlmrl_cli.shaping.arms import ARMS
@@ -303,7 +304,7 @@ def compare_steps(
     """Speedup of ``arm`` over ``ref`` to ``threshold`` (ratio of restricted mean steps, DNF at the
     budget, ``analysis/censored.py``; bootstrap CI) and the censored rank test of ``arm`` vs ``ref``
     (DNF seeds kept, tied above every finish): ``judge_steps`` without its verdict."""
-    judged, test = judge_steps(per_seed, arm, ref, threshold, rng, n_boot, ci, n_perm)
+    judged, test, _ = judge_steps(per_seed, arm, ref, threshold, rng, n_boot, ci, n_perm)
     return judged.speedup, test
 
 
@@ -311,19 +312,21 @@ def judge_steps(
     per_seed: pd.DataFrame, arm: str, ref: str, threshold: float, rng: np.random.Generator | stats.Streams,
     n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, n_perm: int = DEFAULT_N_PERM, alpha: float = 0.05,
     margin: float = censored.DEFAULT_MARGIN,
-) -> tuple[censored.Verdict, RankTest]:
-    """``compare_steps`` and its verdict (``censored.steps_verdict``): the speedup is the same draw as
+) -> tuple[censored.Verdict, RankTest, LogRank]:
+    """``compare_steps``, its verdict on the raw rank-test p (``censored.steps_verdict``; a family's
+    adjustment re-judges it later) and the log-rank test beside it. The speedup is the same draw as
     ``compare_steps``' (one stream), then the ``1 - 2 alpha`` interval of the equivalence test."""
     key = threshold_key(threshold)
     mine, theirs = per_seed["arm"] == arm, per_seed["arm"] == ref
     a, r = per_seed.loc[mine, key].to_numpy(dtype=float), per_seed.loc[theirs, key].to_numpy(dtype=float)
+    budget_a = per_seed.loc[mine, "budget"].to_numpy(dtype=float)
+    budget_r = per_seed.loc[theirs, "budget"].to_numpy(dtype=float)
     skey = speedup_key(threshold, arm, ref)
     test = censored_rank_test(a, r, stats.stream(rng, skey + "/rank"), n_perm, arm_budget(per_seed, arm),
                               arm_budget(per_seed, ref))
-    judged = censored.steps_verdict(r, a, per_seed.loc[theirs, "budget"].to_numpy(dtype=float),
-                                    per_seed.loc[mine, "budget"].to_numpy(dtype=float), test.p_value,
-                                    stats.stream(rng, skey), n_boot, ci, alpha, margin)
-    return judged, test
+    judged = censored.steps_verdict(r, a, budget_r, budget_a, test.p_value, stats.stream(rng, skey), n_boot, ci,
+                                    alpha, margin, direction=test.p_faster - 0.5)
+    return judged, test, censored_logrank(a, r, budget_a, budget_r)
 
 
 # ---- formatting -----------------------------------------------------------------------------

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST, METHODS
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
 from vlmrl_cli.calibration.regimes import Regime, resolve_regime
 from vlmrl_cli.core.errors import BadInput, did_you_mean
@@ -144,6 +145,8 @@ class StudyConfig:
     ci: float = 0.95
     alpha: float = 0.05  # significance level of the verdicts
     margin: float = 1.15  # equivalence margin of a speedup (TOST: within [1/margin, margin])
+    # multiplicity adjustment of the speedups' p-values, the study's comparisons one family: holm | bh | none
+    adjust: str = DEFAULT_ADJUST
     n_boot: int = DEFAULT_N_BOOT
     seed: int = 0  # seed of the statistics' random streams
     extra: dict[str, Any] = field(default_factory=dict)  # free-form provenance (the command)
@@ -314,6 +317,9 @@ def build_study(
     margin = settings.get("margin", 1.15)
     if not (math.isfinite(margin) and margin > 1):
         raise BadInput(f"--margin is a ratio above 1 (e.g. 1.15), got {margin}.")
+    adjust = settings.get("adjust", DEFAULT_ADJUST)
+    if adjust not in METHODS:
+        raise BadInput(f"--adjust is one of {', '.join(METHODS)}, got '{adjust}'.")
     for name, values in (("alphas", alphas), ("kin_scales", kin_scales), ("query_flickers", query_flickers)):
         bad = [v for v in values if not (math.isfinite(v) and v >= 0)]
         if bad:

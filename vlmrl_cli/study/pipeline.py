@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from vlmrl_cli.analysis import stats
+from vlmrl_cli.analysis import multiplicity, stats
 from vlmrl_cli.analysis.censored import RULE, equivalent
 from vlmrl_cli.analysis.load import load_experiment
 from vlmrl_cli.calibration.pipeline import log_summary_run, runs_of, train_regimes, wall_s
@@ -140,8 +140,10 @@ def run_study(
     result.missing = missing_runs(cfg, result.per_seed)
     ready = [c for c in verdicts.controls(cfg.cells)
              if all(len(runs_of(data.runs, side.regime.run)) >= 2 for side in (c.a, c.b))]
-    result.controls = pd.DataFrame([verdicts.control_row(c, data, cfg.thresholds, streams, cfg.n_boot, cfg.ci,
-                                                         cfg.alpha, cfg.margin, cfg.window) for c in ready])
+    control_rows = [verdicts.control_row(c, data, cfg.thresholds, streams, cfg.n_boot, cfg.ci, cfg.alpha, cfg.margin,
+                                         cfg.window) for c in ready]
+    rows, control_rows = verdicts.adjust_family(rows, control_rows, cfg.adjust, cfg.alpha, cfg.margin)
+    result.controls = pd.DataFrame(control_rows)
     result.power = power_lines(cfg, result.per_seed)
     reference = next(r for r in cfg.regimes if r.id == cfg.vlm_regime)
     points = [verdicts.vlm_point(v.id, verdicts.paired(data, reference.run, v.run), cfg.top, accuracy[v.id], streams,
@@ -149,8 +151,8 @@ def run_study(
     result.regime_map = pd.DataFrame(rows)
     result.vlm_points = pd.DataFrame(points, columns=["variant", "mcq_accuracy", "speedup", "low", "high", "p",
                                                       "hybrid_seeds", "baseline_seeds"])
-    result.summary = verdicts.summary(rows, result.vlm_points, cfg.top, cfg.alpha, cfg.vlm_regime,
-                                      result.controls.to_dict("records"), cfg.margin)
+    result.summary = verdicts.summary(rows, result.vlm_points, cfg.top, cfg.alpha, cfg.vlm_regime, control_rows,
+                                      cfg.margin, cfg.adjust, cfg.ci)
     hack_frame = pd.concat(hack, ignore_index=True) if hack else pd.DataFrame()
     simulated = any(r.run.vlm.backend == "sim" for r in cfg.all_regimes())
     stage("analysis", start)
@@ -330,7 +332,7 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
                   + "; ".join(f"`{k}` {v}" for k, v in result.missing.items()) + ".", ""]
     lines += ["## Summary", "", *result.summary, ""]
     lines += ["## Regime map", "", verdicts.map_markdown(result.regime_map.to_dict("records"), cfg.top, cfg.ci,
-                                                       cfg.margin)]
+                                                       cfg.margin, cfg.adjust)]
     lines += ["Regimes (overrides over the study's defaults): "
               + "; ".join(f"`{r.id}` = {r.label}" for r in cfg.regimes) + ".", ""]
     lines += [f"- {n}" for n in cfg.notes] + ([""] if cfg.notes else [])
@@ -342,7 +344,8 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
                   "dense term alone at its kin_scale, and at the largest alpha with its placebo (the same labels "
                   "through a label map shuffled per seed). The lock: the hybrid against hybrid-no-lock when the "
                   "VLM's labels are drawn afresh at every query.", "",
-                  verdicts.controls_markdown(result.controls.to_dict("records"), cfg.top, cfg.margin, cfg.ci)]
+                  verdicts.controls_markdown(result.controls.to_dict("records"), cfg.top, cfg.margin, cfg.ci,
+                                             cfg.adjust)]
     lines += ["## VLM quality", "",
               f"The hybrid alone, in regime `{cfg.vlm_regime}`, with other simulated-VLM knobs; each variant's MCQ "
               f"accuracy is measured by `vlmrl taxonomy` on the same knobs ({cfg.states} sweep positions; "
@@ -355,20 +358,34 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
         part = hack_frame[hack_frame["regime"] == regime.id] if len(hack_frame) else hack_frame
         lines += [f"### `{regime.id}`", "",
                   hacking.hacking_markdown(part, cfg.ci, hover[regime.id]) if len(part) else "no runs\n"]
+    maps, controls = result.regime_map.to_dict("records"), result.controls.to_dict("records")
     lines += ["## Method", "",
               f"The DNF rule, everywhere: {RULE}. Reliability: the share of seeds that reached {cfg.top:g}, Wilson "
               f"interval; differences of reliability with a Newcombe interval and a Fisher exact p. Steps to "
               f"{cfg.top:g}: restricted mean over all seeds, bootstrap CI. Speedup: the ratio of restricted means, "
               "bootstrap CI; p: two-sided Mann-Whitney U on steps with DNF seeds tied above every finish (exact "
-              "when every split of the seeds can be enumerated, else the tie-corrected normal approximation). "
-              f"Verdict: faster/slower when p < {cfg.alpha:g}; {equivalent(cfg.margin)} when the "
+              "when every split of the seeds can be enumerated, else the tie-corrected normal approximation; with "
+              "one budget this is Gehan's censored rank test). Beside it, the log-rank test on the same steps, each "
+              "DNF censored at its own budget (chi-square, 1 df); where, after adjustment, one of the two rejects "
+              "and the other does not, the table says the tests disagree. The rank test drives the verdict: it is "
+              "the test this study declared before its runs, it is exact at these seed counts where the log-rank "
+              "is a large-sample chi-square, and it weighs the early finishes that a speedup is about, where the "
+              "log-rank weighs every finishing step alike. Multiplicity: "
+              f"{multiplicity.family_line(cfg.adjust, verdicts.family_size(maps, controls), verdicts.FAMILY_WHAT)}"
+              "; each table shows the raw p and the adjusted p side by side, and the verdict uses the adjusted "
+              "one. The VLM-quality points carry no verdict and are not in the family; the learning-curve area "
+              "and reliability differences are secondary measures, judged on their own raw p and not adjusted. "
+              f"Verdict: faster/slower when the adjusted p < {cfg.alpha:g} and the {100 * cfg.ci:g}% interval of the "
+              f"speedup excludes 1 on the same side; {equivalent(cfg.margin)} when the "
               f"{100 * (1 - 2 * cfg.alpha):g}% bootstrap interval of the speedup lies inside [1/{cfg.margin:g}, "
               f"{cfg.margin:g}] (two one-sided tests) and each arm finished on at least half its seeds; otherwise "
-              "inconclusive. A speedup of restricted means is a lower bound on the speedup of true means when the "
-              "slower arm DNFs. Learning-curve area: per seed, the mean native return over the budget (each step "
-              "weighs its episode's return); a difference of means with a bootstrap CI, a Mann-Whitney p, and "
-              f"equivalence within +-{DEFAULT_AUC_DELTA:g} return points. The unit is the seed. `per_seed.csv` "
-              "holds every run's figures, so every number here can be recomputed.", "", *result.power, ""]
+              "inconclusive, with 'leans faster' (or slower) when the interval excludes 1 or the adjusted test "
+              "rejects, and both point one way. A speedup of restricted means is a lower bound on the speedup of "
+              "true means when the slower arm DNFs. Learning-curve area: per seed, the mean native return over the "
+              "budget (each step weighs its episode's return); a difference of means with a bootstrap CI, a "
+              f"Mann-Whitney p, and equivalence within +-{DEFAULT_AUC_DELTA:g} return points. The unit is the seed. "
+              "`per_seed.csv` holds every run's figures, so every number here can be recomputed.", "",
+              *result.power, ""]
     train = sum(r.get("train_wall_s", 0.0) for r in result.regime_map.to_dict("records"))
     cost_line = (f" Estimated up front: {cost.pending} run(s) to train, {cost.total_s / 60:.0f} min ({cost.how})."
                  if cost else "")
@@ -425,7 +442,8 @@ def _write(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simu
     paths = [out / n for n in names]
     vlm_note = " SIMULATED VLM, not a real model." if simulated else ""
     paths[0].write_text(f"# Regime map{' (SIMULATED VLM)' if simulated else ''}\n\n"
-                        + verdicts.map_markdown(result.regime_map.to_dict("records"), cfg.top, cfg.ci, cfg.margin)
+                        + verdicts.map_markdown(result.regime_map.to_dict("records"), cfg.top, cfg.ci, cfg.margin,
+                                                cfg.adjust)
                         + "\n" + "\n".join(f"- {n}" for n in cfg.notes) + "\n", encoding="utf-8")
     result.regime_map.drop(columns=[c for c in result.regime_map if c.endswith("_text")]).assign(
         vlm=vlm_note.strip()).to_csv(paths[1], index=False)
@@ -436,7 +454,8 @@ def _write(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simu
     result.per_seed.assign(vlm=vlm_note.strip()).to_csv(paths[7], index=False)
     result.controls.assign(vlm=vlm_note.strip()).to_csv(paths[8], index=False)
     paths[9].write_text(f"# Controls{' (SIMULATED VLM)' if simulated else ''}\n\n"
-                        + (verdicts.controls_markdown(result.controls.to_dict("records"), cfg.top, cfg.margin, cfg.ci)
+                        + (verdicts.controls_markdown(result.controls.to_dict("records"), cfg.top, cfg.margin, cfg.ci,
+                                                      cfg.adjust)
                            if len(result.controls) else "No control cell was run.\n"), encoding="utf-8")
     manifest = {
         "what": "vlmrl study" + (" with the SIMULATED VLM, not a real model" if simulated else ""),
@@ -457,6 +476,7 @@ def _write(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simu
         "cells": [{"id": c.regime.id, "kind": c.kind, "arm": c.arm, "overrides": c.regime.label,
                    "config_hash": c.regime.run.jobs()[0].config_hash} for c in cfg.cells],
         "margin": cfg.margin,
+        "adjust": cfg.adjust,
         "vlm_regime": cfg.vlm_regime,
         "notes": list(cfg.notes),
         "written_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),

@@ -20,8 +20,9 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from vlmrl_cli.analysis import censored, stats
+from vlmrl_cli.analysis import censored, multiplicity, stats
 from vlmrl_cli.analysis.load import ExperimentData
+from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST
 from vlmrl_cli.calibration.pipeline import runs_of
 from vlmrl_cli.core import tables
 from vlmrl_cli.probe.metrics import spearman
@@ -41,6 +42,9 @@ from vlmrl_cli.training.config import RunConfig
 FASTER, SLOWER, INCONCLUSIVE = censored.FASTER, censored.SLOWER, censored.INCONCLUSIVE
 NOT_MEASURED = "not measurable"
 NEITHER = "neither arm reaches the threshold"
+#: The study's family of comparisons, as its Method text names it.
+FAMILY_WHAT = ("The study's comparisons of steps to the top threshold (each regime's map pairs and each "
+               "control)")
 #: The comparisons of the regime map: (arm a, arm b, what the difference isolates).
 MAP_PAIRS = (("hybrid", BASELINE, "the whole method"), ("hybrid", "kinematic", "what the VLM itself adds"),
              ("hybrid", PLACEBO_ARM, "the labels' content (placebo)"),
@@ -80,8 +84,11 @@ def _pair_columns(key: str, comparisons: pd.DataFrame, a: str, b: str, top: floa
         return {f"{key}.speedup": math.nan, f"{key}.low": math.nan, f"{key}.high": math.nan, f"{key}.p": math.nan,
                 f"{key}.verdict": NOT_MEASURED}
     out = {f"{key}.speedup": steps["value"], f"{key}.low": steps["ci_low"], f"{key}.high": steps["ci_high"],
-           f"{key}.p": steps["p_value"], f"{key}.test": steps["test"], f"{key}.tost_low": steps["tost_low"],
-           f"{key}.tost_high": steps["tost_high"], f"{key}.verdict": NEITHER if none_reach else steps["verdict"]}
+           f"{key}.p": steps["p_value"], f"{key}.p_adj": math.nan, f"{key}.logrank_p": steps["logrank_p"],
+           f"{key}.logrank_p_adj": math.nan, f"{key}.tests_disagree": "", f"{key}.test": steps["test"],
+           f"{key}.tost_low": steps["tost_low"], f"{key}.tost_high": steps["tost_high"],
+           f"{key}.direction": steps["direction"], f"{key}.equivalence_ok": bool(steps["equivalence_ok"]),
+           f"{key}.verdict": NEITHER if none_reach else steps["verdict"]}
     if rel is not None:
         out |= {f"{key}.reliability_diff": rel["value"], f"{key}.reliability_diff_low": rel["ci_low"],
                 f"{key}.reliability_diff_high": rel["ci_high"], f"{key}.reliability_p": rel["p_value"],
@@ -104,7 +111,7 @@ def regime_row(name: str, data: ExperimentData, thresholds: Sequence[float], str
     pairs = [attribution.Pair(a, b, meaning) for a, b, meaning in MAP_PAIRS
              if a in set(per_seed["arm"]) and b in set(per_seed["arm"])]
     comparisons = attribution.compare_arms(per_seed, thresholds, streams, n_boot, ci, alpha=alpha, margin=margin,
-                                           pairs=pairs)
+                                           pairs=pairs, adjust="none")  # the family spans regimes: adjust_family
     row: dict[str, Any] = {"regime": name, "seeds": int(per_seed.groupby("arm").size().max())}
     for arm in table.arms:
         rel, steps = table.cell("reliability", arm), table.cell(threshold_key(top), arm)
@@ -173,7 +180,7 @@ def control_row(control: Control, data: ExperimentData, thresholds: Sequence[flo
     a, b = control.a.arm, control.b.arm
     pair = attribution.Pair(a, b, control.question)
     comparisons = attribution.compare_arms(per_seed, thresholds, streams, n_boot, ci, alpha=alpha, margin=margin,
-                                           pairs=[pair])
+                                           pairs=[pair], adjust="none")  # the family spans controls: adjust_family
     row: dict[str, Any] = {"control": control.name, "question": control.question, "a": control.a.regime.id,
                            "b": control.b.regime.id, "a.arm": a, "b.arm": b}
     key = threshold_key(top)
@@ -187,15 +194,81 @@ def control_row(control: Control, data: ExperimentData, thresholds: Sequence[flo
     return row | _pair_columns("cmp", comparisons, a, b, top, none_reach)
 
 
+def family_keys(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[str, Any]]
+                ) -> list[tuple[str, int, str]]:
+    """Where the study's comparisons of steps to the top threshold sit: ``("map" | "control", row
+    index, column key)`` for each regime's ``MAP_PAIRS`` pair and each control, in table order."""
+    found = [("map", i, f"{a}_vs_{b}") for i, r in enumerate(map_rows) for a, b, _ in MAP_PAIRS
+             if f"{a}_vs_{b}.speedup" in r]
+    return found + [("control", i, "cmp") for i, r in enumerate(control_rows) if "cmp.speedup" in r]
+
+
+def _made(row: dict[str, Any], key: str) -> bool:
+    """A comparison was made: both sides ran and at least one reached the threshold (a finite speedup)."""
+    value = row.get(f"{key}.speedup", math.nan)
+    return row.get(f"{key}.verdict") not in (NOT_MEASURED, NEITHER) and isinstance(value, float) and math.isfinite(
+        value)
+
+
+def adjust_family(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[str, Any]],
+                  method: str = DEFAULT_ADJUST, alpha: float = 0.05, margin: float = censored.DEFAULT_MARGIN
+                  ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The study's comparisons of steps to the top threshold (every regime's map pairs and every
+    control) as one family: copies of the rows with ``.p_adj``, ``.logrank_p_adj``,
+    ``.tests_disagree`` and the ``.verdict`` judged on the adjusted p (``censored.judge_family``).
+    A comparison not made (a side absent, or neither arm reaching the threshold) stays out."""
+    rows = {"map": [dict(r) for r in map_rows], "control": [dict(r) for r in control_rows]}
+    keys = [(table, i, key) for table, i, key in family_keys(map_rows, control_rows) if _made(rows[table][i], key)]
+    if not keys:
+        return rows["map"], rows["control"]
+
+    def col(name: str) -> list[float]:
+        return [float(rows[t][i][f"{k}.{name}"]) for t, i, k in keys]
+
+    judged = censored.judge_family(col("p"), col("logrank_p"), col("direction"),
+                                   list(zip(col("low"), col("high"), strict=True)),
+                                   list(zip(col("tost_low"), col("tost_high"), strict=True)),
+                                   [bool(rows[t][i][f"{k}.equivalence_ok"]) for t, i, k in keys], method, alpha,
+                                   margin)
+    for n, (t, i, k) in enumerate(keys):
+        rows[t][i] |= {f"{k}.p_adj": float(judged.p_adjusted[n]),
+                       f"{k}.logrank_p_adj": float(judged.logrank_adjusted[n]),
+                       f"{k}.tests_disagree": judged.disagreement[n], f"{k}.verdict": judged.verdicts[n]}
+    return rows["map"], rows["control"]
+
+
+def family_size(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[str, Any]]) -> int:
+    """How many comparisons the study's family holds (those made)."""
+    tables_ = {"map": map_rows, "control": control_rows}
+    return sum(_made(tables_[t][i], k) for t, i, k in family_keys(map_rows, control_rows))
+
+
 def format_speedup(row: dict[str, Any], key: str) -> str:
-    """``1.40x [1.10, 1.80], p = 0.01 (faster)`` from a map row."""
+    """``1.40x [1.10, 1.80], p = 0.01 (adj. 0.05); log-rank p = 0.02 (adj. 0.08) (faster)`` from a
+    map row; a note where the rank test and the log-rank disagree after adjustment."""
     value = row.get(f"{key}.speedup", math.nan)
     text = f"{value:.2f}x" if math.isfinite(value) else "—"
     low, high = row.get(f"{key}.low", math.nan), row.get(f"{key}.high", math.nan)
     if math.isfinite(low) and math.isfinite(high):
         text += f" [{low:.2f}, {high:.2f}]"
     text += ", " + censored.format_p(row.get(f"{key}.p", math.nan))
+    adj = row.get(f"{key}.p_adj", math.nan)
+    if isinstance(adj, float) and math.isfinite(adj):
+        text += f" (adj. {adj:.2g})"
+    text += _logrank_text(row, key)
     return f"{text} ({row.get(f'{key}.verdict', NOT_MEASURED)})"
+
+
+def _logrank_text(row: dict[str, Any], key: str) -> str:
+    p, adj = row.get(f"{key}.logrank_p", math.nan), row.get(f"{key}.logrank_p_adj", math.nan)
+    if not (isinstance(p, float) and math.isfinite(p)):
+        return ""
+    text = f"; log-rank p = {p:.2g}" + (f" (adj. {adj:.2g})" if isinstance(adj, float) and math.isfinite(adj) else "")
+    disagree = row.get(f"{key}.tests_disagree", "")
+    if disagree:
+        text += "; **the tests disagree**: only the " + ("log-rank" if disagree == "log-rank only" else "rank test") \
+            + " rejects"
+    return text
 
 
 def format_difference(row: dict[str, Any], key: str, kind: str) -> str:
@@ -213,12 +286,14 @@ def format_difference(row: dict[str, Any], key: str, kind: str) -> str:
     return f"{text}, {censored.format_p(row.get(f'{key}.{kind}_p', math.nan))} ({row.get(f'{key}.{kind}_verdict')})"
 
 
-def controls_markdown(rows: Sequence[dict[str, Any]], top: float, margin: float, ci: float = 0.95) -> str:
+def controls_markdown(rows: Sequence[dict[str, Any]], top: float, margin: float, ci: float = 0.95,
+                      adjust: str = DEFAULT_ADJUST) -> str:
     """The control comparisons: each side's seeds reaching ``top`` and restricted mean steps, the
     speedup of a over b with its verdict, the learning-curve area difference with its verdict."""
     pct = f"{100 * ci:g}%"
     head = ["Comparison (a vs b)", "Question", f"a: reached {top:g}; steps", f"b: reached {top:g}; steps",
-            f"Speedup a / b [{pct} CI], p (verdict, margin {margin:g}x)", f"Area a - b [{pct} CI], p (verdict)"]
+            f"Speedup a / b [{pct} CI], rank p ({adjust}-adj.); log-rank p ({adjust}-adj.) (verdict, margin "
+            f"{margin:g}x)", f"Area a - b [{pct} CI], p, not adjusted (verdict)"]
     body = [[r["control"], r["question"], f"{r['a.reached']}/{r['a.n']}; {r['a.steps']:,.0f}",
              f"{r['b.reached']}/{r['b.n']}; {r['b.steps']:,.0f}", format_speedup(r, "cmp"),
              format_difference(r, "cmp", "auc")] for r in rows]
@@ -226,13 +301,14 @@ def controls_markdown(rows: Sequence[dict[str, Any]], top: float, margin: float,
 
 
 def map_markdown(rows: Sequence[dict[str, Any]], top: float, ci: float = 0.95,
-                 margin: float = censored.DEFAULT_MARGIN) -> str:
+                 margin: float = censored.DEFAULT_MARGIN, adjust: str = DEFAULT_ADJUST) -> str:
     """The regime map: one line per regime, each arm's reliability and steps to ``top``, both speedups."""
     arms = order_arms(sorted({k.split(".")[0] for r in rows for k in r if k.endswith(".reliability")}))
     pct = f"{100 * ci:g}%"
     head = ["Regime", "Seeds"] + [f"{a}: reliability [{pct} Wilson]; steps to {top:g} [{pct} CI]" for a in arms]
     pairs = [(a, b) for a, b, _ in MAP_PAIRS if any(f"{a}_vs_{b}.speedup" in r for r in rows)]
-    head += [f"Speedup {a} / {b} to {top:g} [{pct} CI], rank p (verdict, margin {margin:g}x)" for a, b in pairs]
+    head += [f"Speedup {a} / {b} to {top:g} [{pct} CI], rank p ({adjust}-adj.); log-rank p ({adjust}-adj.) "
+             f"(verdict, margin {margin:g}x)" for a, b in pairs]
     body = []
     for r in rows:
         cells = [f"`{r['regime']}`", str(r["seeds"])]
@@ -281,14 +357,19 @@ def _answer(row: dict[str, Any], key: str) -> str:
 
 
 def summary(rows: Sequence[dict[str, Any]], points: pd.DataFrame, top: float, alpha: float, vlm_regime: str,
-            control_rows: Sequence[dict[str, Any]] = (), margin: float = censored.DEFAULT_MARGIN) -> list[str]:
+            control_rows: Sequence[dict[str, Any]] = (), margin: float = censored.DEFAULT_MARGIN,
+            adjust: str = DEFAULT_ADJUST, ci: float = 0.95) -> list[str]:
     """The report's opening: the answers to the study's questions, in sentences made from the numbers.
-    Every verdict is one of faster / slower (censored rank test at ``alpha``), equivalent within
-    ``margin`` (TOST on the ratio of restricted means) or inconclusive (neither)."""
-    lines = [f"- Verdicts on steps to {top:g}: faster/slower when the censored rank test is significant at "
-             f"{alpha:g}; {censored.equivalent(margin)} when the {100 * (1 - 2 * alpha):g}% interval of the speedup "
-             f"lies inside [1/{margin:g}, {margin:g}] (TOST); otherwise inconclusive. {censored.RULE[0].upper()}"
-             f"{censored.RULE[1:]}."]
+    Every verdict follows ``censored.judge_speedup`` on the rank test's p adjusted within the study's
+    family (``adjust_family``): faster / slower, equivalent within ``margin``, or inconclusive
+    (saying which way it leans)."""
+    size = family_size(rows, control_rows)
+    lines = [f"- Verdicts on steps to {top:g}: {multiplicity.family_line(adjust, size, FAMILY_WHAT)}. Faster/slower "
+             f"when the adjusted censored rank test rejects at {alpha:g} and the {100 * ci:g}% interval of the "
+             f"speedup excludes 1 on the same side; {censored.equivalent(margin)} when the "
+             f"{100 * (1 - 2 * alpha):g}% interval of the speedup lies inside [1/{margin:g}, {margin:g}] (TOST); "
+             "otherwise inconclusive, saying which way it leans when the interval or the adjusted test points one "
+             f"way. {censored.RULE[0].upper()}{censored.RULE[1:]}."]
     for r in rows:
         rel = ", ".join(f"{a} {r[f'{a}.reached']}/{r[f'{a}.n']}" for a in order_arms(
             [k.split(".")[0] for k in r if k.endswith(".reliability")]))

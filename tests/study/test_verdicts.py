@@ -1,0 +1,96 @@
+"""The study's family of comparisons: one adjustment over the map and the controls, the verdicts on
+the adjusted p, both tests in the tables."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import pandas as pd
+import pytest
+
+from vlmrl_cli.study import pipeline, verdicts
+from vlmrl_cli.study.config import build_study
+from vlmrl_cli.study.pipeline import StudyResult
+
+
+def _cmp(key: str, p: float, low: float, high: float, logrank_p: float | None = None, verdict: str = "faster",
+         direction: float = 0.4) -> dict[str, Any]:
+    """The columns of one comparison as ``_pair_columns`` writes them (judged alone, on the raw p)."""
+    return {f"{key}.speedup": (low + high) / 2, f"{key}.low": low, f"{key}.high": high, f"{key}.p": p,
+            f"{key}.p_adj": math.nan, f"{key}.logrank_p": p if logrank_p is None else logrank_p,
+            f"{key}.logrank_p_adj": math.nan, f"{key}.tests_disagree": "", f"{key}.test": "Mann-Whitney",
+            f"{key}.tost_low": low + 0.01, f"{key}.tost_high": high - 0.01, f"{key}.direction": direction,
+            f"{key}.equivalence_ok": True, f"{key}.verdict": verdict}
+
+
+def _rows() -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    regime = {"regime": "paper", "seeds": 20} | _cmp("hybrid_vs_baseline", 4.5e-8, 1.60, 2.01) | _cmp(
+        "hybrid_vs_kinematic", 0.51, 0.91, 1.26, verdict="inconclusive") | _cmp(
+        "kinematic_vs_baseline", 0.11, 0.77, 0.97, verdict="inconclusive", direction=-0.3)
+    regime |= {"hybrid_vs_hybrid-shuffled.speedup": math.nan, "hybrid_vs_hybrid-shuffled.verdict": verdicts.NEITHER}
+    sides = {"question": "dose?", "a.n": 20, "b.n": 20, "a.reached": 19, "b.reached": 17, "a.steps": 243_229.0,
+             "b.steps": 256_562.0}
+    controls = [{"control": "alpha=100 kin=0.5 vs alpha=0"} | sides | _cmp("cmp", 0.04, 1.02, 1.30, logrank_p=1e-4),
+                {"control": "alpha=25 kin=2 vs alpha=0"} | sides | _cmp("cmp", 2.9e-5, 1.33, 1.71)]
+    return [regime], controls
+
+
+def test_the_map_and_the_controls_are_one_family() -> None:
+    rows, controls = _rows()
+    assert verdicts.family_size(rows, controls) == 5  # the pair where neither arm reached is not a test
+    new_rows, new_controls = verdicts.adjust_family(rows, controls, "holm")
+    assert new_rows[0]["hybrid_vs_baseline.p_adj"] == pytest.approx(5 * 4.5e-8)
+    assert new_rows[0]["hybrid_vs_baseline.verdict"] == "faster"
+    # faster on its own at p = 0.04; Holm over 5 comparisons: 3 x 0.04 = 0.12
+    assert new_controls[0]["cmp.p_adj"] == pytest.approx(0.12)
+    assert new_controls[0]["cmp.verdict"] == "inconclusive, leans faster"
+    assert new_controls[0]["cmp.tests_disagree"] == "log-rank only"
+    # interval [0.77, 0.97] with an adjusted p far above 0.05: inconclusive, leaning slower
+    assert new_rows[0]["kinematic_vs_baseline.verdict"] == "inconclusive, leans slower"
+    assert new_rows[0]["hybrid_vs_hybrid-shuffled.verdict"] == verdicts.NEITHER
+    assert "hybrid_vs_hybrid-shuffled.p_adj" not in new_rows[0]
+    assert rows[0]["hybrid_vs_baseline.p_adj"] != rows[0]["hybrid_vs_baseline.p_adj"]  # the inputs are not changed
+
+
+def test_without_adjustment_the_p_values_and_the_one_rule_stand_alone() -> None:
+    rows, controls = _rows()
+    _, alone = verdicts.adjust_family(rows, controls, "none")
+    assert alone[0]["cmp.p_adj"] == 0.04 and alone[0]["cmp.verdict"] == "faster"
+    bh_rows, _ = verdicts.adjust_family(rows, controls, "bh")
+    holm_rows, _ = verdicts.adjust_family(rows, controls, "holm")
+    assert bh_rows[0]["kinematic_vs_baseline.p_adj"] <= holm_rows[0]["kinematic_vs_baseline.p_adj"]
+
+
+def test_the_tables_show_raw_and_adjusted_p_and_both_tests() -> None:
+    rows, controls = verdicts.adjust_family(*_rows(), "holm")
+    text = verdicts.format_speedup(controls[0], "cmp")
+    assert text.startswith("1.16x [1.02, 1.30], p = 0.04 (adj. 0.12); log-rank p = 0.0001 (adj. 0.0003)")
+    assert "**the tests disagree**: only the log-rank rejects" in text
+    assert text.endswith("(inconclusive, leans faster)")
+    head = verdicts.map_markdown(rows, -130.0, adjust="holm").splitlines()[0]
+    assert "rank p (holm-adj.); log-rank p (holm-adj.)" in head
+    controls_head = verdicts.controls_markdown(controls, -130.0, 1.15, adjust="bh").splitlines()[0]
+    assert "rank p (bh-adj.)" in controls_head and "not adjusted" in controls_head
+
+
+def test_the_summary_and_the_method_state_the_family_and_the_adjustment() -> None:
+    rows, controls = verdicts.adjust_family(*_rows(), "holm")
+    first = verdicts.summary(rows, pd.DataFrame(), -130.0, 0.05, "paper", controls, 1.15, "holm")[0]
+    assert "one family of 5 tests, adjusted by Holm's step-down" in first
+    assert "excludes 1 on the same side" in first
+    cfg = build_study([], {"paper": {"preset": "smoke"}}, profiles=(), flickers=(), alphas=(), kin_scales=(),
+                      query_flickers=(), adjust="bh")
+    result = StudyResult(regime_map=pd.DataFrame(rows), controls=pd.DataFrame(controls))
+    md = pipeline.to_markdown(cfg, result, pd.DataFrame(columns=["regime"]), True, None)
+    method = md[md.index("## Method"):]
+    assert "one family of 5 tests, adjusted by Benjamini-Hochberg" in method
+    assert "The rank test drives the verdict" in method and "log-rank" in method
+
+
+def test_a_bad_adjustment_is_refused_when_the_study_is_built() -> None:
+    from vlmrl_cli.core.errors import BadInput
+
+    with pytest.raises(BadInput, match="--adjust is one of holm, bh, none"):
+        build_study([], {"paper": {"preset": "smoke"}}, profiles=(), flickers=(), alphas=(), kin_scales=(),
+                    query_flickers=(), adjust="bonferroni")
