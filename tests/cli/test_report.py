@@ -223,8 +223,8 @@ def test_runs_of_two_numeric_paths_are_refused_unless_allowed(tmp_path: Path) ->
     import json
 
     source = Path(__file__).resolve().parents[2] / "results" / "tasks" / "acrobot" / "runs-study.jsonl.gz"
-    with gzip.open(source, "rt", encoding="utf-8") as lines:
-        records = [r for r in map(json.loads, lines) if r["tags"].get("vlmrl.arm") in ("baseline", "hybrid")
+    with gzip.open(source, "rt", encoding="utf-8") as stream:
+        records = [r for r in map(json.loads, stream) if r["tags"].get("vlmrl.arm") in ("baseline", "hybrid")
                    and r["tags"].get("vlmrl.seed") in ("0", "1")]
     for r in records:
         r["tags"].pop("vlmrl.pin", None)
