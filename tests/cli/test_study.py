@@ -135,6 +135,9 @@ def test_a_dry_run_reads_a_missing_store_without_creating_it(tmp_path: Path) -> 
     result = _study(tmp_path, "--dry-run")
     assert result.exit_code == 0, result.output + result.stderr
     assert "cost estimate: 14 run(s) to train (0 already FINISHED)" in result.output
+    text = " ".join(result.output.split())
+    assert "simulated on censored steps" in text and "a DNF at the budget" in text  # not a t-approximation
+    assert "seeds per arm" in text
     assert not any(tmp_path.iterdir())  # a read-only step: no store, no folder, no cache, no output
 
 

@@ -253,31 +253,45 @@ def pooled_sd_log(per_seed: pd.DataFrame, top: float) -> float:
 
 
 def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None) -> list[str]:
-    """What the study can detect, at 80% power and ``cfg.alpha``: the smallest speedup per comparison
-    with its seeds, the seeds a 1.2x speedup needs, and the seeds that tell 100% from the baseline's
-    reliability. The spread comes from ``per_seed`` (finished runs) when given, else ``DEFAULT_SD_LOG``."""
-    from vlmrl_cli.analysis import censored
+    """What the study can detect at 80% power, simulated on censored data as the verdict sees it
+    (``analysis.power``): log-normal steps with the spread of ``per_seed``'s finished runs (else
+    ``DEFAULT_SD_LOG``), the baseline's observed reliability (else the paper's 60%) as the share of
+    seeds reaching the top threshold by the budget, a DNF at the budget, the rank test at Holm's
+    first step over the study's family (``alpha / m``; ``--adjust none``: ``alpha``) and the 95%
+    interval above 1; then the seeds that tell 100% from the baseline's reliability (Fisher exact)."""
+    from vlmrl_cli.analysis import censored, power
 
     sd = pooled_sd_log(per_seed, cfg.top) if per_seed is not None and len(per_seed) else math.nan
-    source = (f"the pooled sd of log steps to {cfg.top:g} over the finished runs ({sd:.3f})" if sd > 0
+    source = (f"sd of log steps {sd:.3f} pooled over the finished runs" if sd > 0
               else f"an assumed sd of log steps of {DEFAULT_SD_LOG} (no finished runs with any spread to measure)")
     sd = sd if sd > 0 else DEFAULT_SD_LOG
     n = len(cfg.base.seeds)
-    lines = [f"Power (80%, two-sided alpha {cfg.alpha:g}; normal approximation on log steps, from {source}):"]
-    comparisons = [f"{a} vs {b}" for a, b, _ in verdicts.MAP_PAIRS if a in cfg.base.arms and b in cfg.base.arms]
-    comparisons += [c.name for c in verdicts.controls(cfg.cells)]
-    mde = censored.detectable_speedup(sd, n, n, cfg.alpha)
-    if comparisons:
-        lines.append(f"- each of {len(comparisons)} comparison(s) at {n} seeds per arm detects a speedup of "
-                     f"{mde:.2f}x or more ({', '.join(comparisons[:4])}{', ...' if len(comparisons) > 4 else ''}).")
-    lines.append(f"- a 1.2x speedup needs {censored.seeds_for_speedup(1.2, sd, cfg.alpha)} seeds per arm; 1.3x needs "
-                 f"{censored.seeds_for_speedup(1.3, sd, cfg.alpha)}.")
     base = per_seed[(per_seed["arm"] == "baseline") & (per_seed["variant"] == "")] if per_seed is not None and len(
         per_seed) else None
     rate = float(base[f"reached_{cfg.top:g}"].mean()) if base is not None and len(base) else 0.6
     what = "the baseline's observed" if base is not None and len(base) else "the paper's baseline"
+    comparisons = [f"{a} vs {b}" for a, b, _ in verdicts.MAP_PAIRS if a in cfg.base.arms and b in cfg.base.arms]
+    comparisons += [c.name for c in verdicts.controls(cfg.cells)]
+    family = max(1, len(comparisons)) if cfg.adjust != "none" else 1
+    budget = float(cfg.base.budget)
+    level = f"alpha {cfg.alpha:g} / {family} (Holm's first step over {family} comparisons)" if family > 1 else (
+        f"alpha {cfg.alpha:g}")
+    lines = [f"Power (80%), simulated on censored steps to {cfg.top:g}: {source}; {what} reliability "
+             f"{100 * rate:.0f}% by the budget of {budget:,.0f} steps, a DNF at the budget; the rank test at {level} "
+             f"and the 95% interval above 1 ({power.DEFAULT_N_SIMS:,} simulated studies each):"]
+    mde = power.detectable_speedup(cfg.seed, n, sd, rate, budget, cfg.alpha, family)
+    if comparisons:
+        shown = f"{', '.join(comparisons[:4])}{', ...' if len(comparisons) > 4 else ''}"
+        lines.append(f"- each of {len(comparisons)} comparison(s) at {n} seeds per arm detects a speedup of "
+                     + (f"{mde:.2f}x or more ({shown})." if math.isfinite(mde) else
+                        f"none up to 4x: the budget censors too many seeds ({shown})."))
+    need = {s: power.seeds_for_speedup(cfg.seed, s, sd, rate, budget, cfg.alpha, family, n_sims=500, most=120)
+            for s in (1.2, 1.3)}
+    lines.append("- " + "; ".join(f"a {s:g}x speedup needs {v} seeds per arm" if v is not None
+                                  else f"a {s:g}x speedup needs more than 120 seeds per arm" for s, v in need.items())
+                 + " (500 simulated studies each).")
     needed = censored.seeds_for_reliability(1.0, rate, cfg.alpha) if rate < 1 else None
-    lines.append(f"- reliability, 100% against {what} {100 * rate:.0f}% (Fisher exact): power "
+    lines.append(f"- reliability, 100% against {what} {100 * rate:.0f}% (Fisher exact, alpha {cfg.alpha:g}): power "
                  f"{censored.fisher_power(1.0, rate, n, cfg.alpha):.2f} at {n} seeds per arm"
                  + (f"; {needed} seeds per arm give 80%." if needed else "."))
     return lines

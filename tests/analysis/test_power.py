@@ -1,0 +1,60 @@
+"""The simulated power of the censored verdict, checked against the verdict's own code run on each
+simulated study (a brute-force loop over ``ranks.censored_rank_test`` and ``censored.steps_verdict``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from vlmrl_cli.analysis import censored, power, ranks
+
+BUDGET = 300_000.0
+
+
+@given(st.floats(0.05, 0.95), st.floats(0.1, 1.0), st.integers(5, 40))
+def test_the_reference_median_puts_the_reliability_below_the_budget(reliability: float, sd: float, n: int) -> None:
+    median = power.reference_median(reliability, sd, BUDGET, n)
+    steps = power.simulate_steps(np.random.default_rng(1), 4_000, 1, median, sd, BUDGET)
+    expected = min(max(reliability, 0.5 / n), 1 - 0.5 / n)
+    assert abs(float(np.mean(~np.isnan(steps))) - expected) < 0.035
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.floats(1.0, 3.0), st.floats(1.0, 3.0))
+def test_power_grows_with_the_speedup_and_shrinks_with_the_family(a: float, b: float) -> None:
+    lo, hi = sorted((a, b))
+    p_lo = power.censored_power(np.random.default_rng(0), lo, 10, 0.3, 0.6, BUDGET, n_sims=200)
+    p_hi = power.censored_power(np.random.default_rng(0), hi, 10, 0.3, 0.6, BUDGET, n_sims=200)
+    assert p_lo <= p_hi + 1e-12  # the same noise: a larger speedup is called at least as often
+    family = power.censored_power(np.random.default_rng(0), hi, 10, 0.3, 0.6, BUDGET, family=17, n_sims=200)
+    assert family <= p_hi + 1e-12
+
+
+def test_no_speedup_is_called_faster_at_most_at_the_tests_level() -> None:
+    assert power.censored_power(np.random.default_rng(0), 1.0, 10, 0.3, 0.6, BUDGET, n_sims=1_000) <= 0.05
+
+
+def _brute_force(speedup: float, n: int, sd: float, reliability: float, sims: int) -> float:
+    """The verdict's own functions on each simulated study: the share called "faster"."""
+    rng = np.random.default_rng(7)
+    median = power.reference_median(reliability, sd, BUDGET, n)
+    budget = np.full(n, BUDGET)
+    faster = 0
+    for _ in range(sims):
+        ref = power.simulate_steps(rng, 1, n, median, sd, BUDGET)[0]
+        arm = power.simulate_steps(rng, 1, n, median / speedup, sd, BUDGET)[0]
+        test = ranks.censored_rank_test(arm, ref, rng)
+        verdict = censored.steps_verdict(ref, arm, budget, budget, test.p_value, rng, n_boot=400,
+                                         direction=test.p_faster - 0.5)
+        faster += verdict.text == censored.FASTER
+    return faster / sims
+
+
+@pytest.mark.parametrize(("speedup", "reliability"), [(1.3, 0.6), (1.6, 0.4)])
+def test_the_simulated_power_matches_the_verdict_run_on_each_simulated_study(speedup: float,
+                                                                             reliability: float) -> None:
+    fast = power.censored_power(np.random.default_rng(3), speedup, 10, 0.35, reliability, BUDGET, n_sims=2_000)
+    brute = _brute_force(speedup, 10, 0.35, reliability, sims=300)
+    assert abs(fast - brute) < 0.09, (fast, brute)  # about 2.5 Monte Carlo standard errors of the loop

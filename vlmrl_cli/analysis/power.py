@@ -1,0 +1,154 @@
+"""Power of the study's verdict on censored steps, by simulation rather than a t-approximation.
+
+A study's steps to a threshold are right-censored: a seed that never reaches it is a DNF at the
+budget, and the verdict's test (``ranks.censored_rank_test``: Mann-Whitney U with DNF censored)
+loses power as DNFs tie. The normal approximation on log steps (``censored.detectable_speedup``)
+ignores that. Here the data are simulated as the analysis sees them:
+
+* the reference arm's steps are log-normal with spread ``sd_log`` and a median placed so that a
+  fraction ``reliability`` of seeds reach the threshold by the ``budget`` (``reference_median``);
+* the other arm's steps are the same distribution divided by the ``speedup``;
+* a seed past the budget is a DNF (NaN);
+* "faster" needs what the verdict rule needs (``censored.judge_speedup``): the rank test rejects
+  at ``alpha / family`` (Holm's first step, so a lower bound on the power inside a family; Holm's
+  later steps are less strict) and, with ``interval=True``, the percentile bootstrap interval of the
+  ratio of restricted means (a DNF at the budget) lies above 1.
+
+All functions are pure; randomness comes in as an explicit generator; shapes are stated.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+from scipy import stats as sps
+
+#: Simulated studies per power figure (Monte Carlo standard error at 80% power: about 0.013).
+DEFAULT_N_SIMS = 1_000
+#: Bootstrap resamples of each simulated study's interval.
+DEFAULT_N_BOOT = 200
+
+
+def reference_median(reliability: float, sd_log: float, budget: float, n: int) -> float:
+    """The median steps of a log-normal whose fraction ``reliability`` lies below ``budget``.
+
+    A reliability of 1 (or 0) has no finite quantile: it is taken as ``1 - 0.5 / n`` (``0.5 / n``),
+    half a seed short of all (none), the closest a sample of ``n`` seeds can tell apart.
+
+    Example:
+        >>> round(reference_median(0.5, 0.3, 100_000, 20))
+        100000
+        >>> reference_median(1.0, 0.3, 100_000, 20) < reference_median(0.9, 0.3, 100_000, 20)
+        True
+    """
+    r = min(max(reliability, 0.5 / n), 1 - 0.5 / n)
+    return float(budget * math.exp(-sd_log * sps.norm.ppf(r)))
+
+
+def simulate_steps(rng: np.random.Generator, n_sims: int, n: int, median: float, sd_log: float,
+                   budget: float) -> np.ndarray:
+    """Steps to a threshold of ``n_sims`` simulated arms of ``n`` seeds: shape ``(n_sims, n)``,
+    log-normal around ``median`` with spread ``sd_log``, NaN (a DNF) past ``budget``."""
+    steps = median * np.exp(sd_log * rng.standard_normal((n_sims, n)))
+    return np.where(steps <= budget, steps, np.nan)
+
+
+def _rank_p(ref: np.ndarray, arm: np.ndarray) -> np.ndarray:
+    """Two-sided Mann-Whitney p per row (shapes ``(n_sims, n)``), a DNF ranked above every finish
+    and tied with the other DNFs, normal approximation with tie correction (as the verdict's test
+    beyond its exact range)."""
+    big = np.finfo(float).max
+    a, b = np.where(np.isnan(arm), big, arm), np.where(np.isnan(ref), big, ref)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # rows whose values all tie
+        p = sps.mannwhitneyu(a, b, axis=1, alternative="two-sided", method="asymptotic").pvalue
+    return np.where(np.isfinite(p), p, 1.0)
+
+
+def _interval_above_one(rng: np.random.Generator, ref: np.ndarray, arm: np.ndarray, budget: float, n_boot: int,
+                        ci: float) -> np.ndarray:
+    """Whether each row's percentile bootstrap interval of mean(ref) / mean(arm), DNF at the budget,
+    lies above 1 (shape ``(n_sims,)``)."""
+    r, a = np.nan_to_num(ref, nan=budget), np.nan_to_num(arm, nan=budget)
+    n_sims, n_ref = r.shape
+    n_arm = a.shape[1]
+    idx_r = rng.integers(0, n_ref, size=(n_sims, n_boot, n_ref))
+    idx_a = rng.integers(0, n_arm, size=(n_sims, n_boot, n_arm))
+    rows = np.arange(n_sims)[:, None, None]
+    ratio = r[rows, idx_r].mean(axis=2) / a[rows, idx_a].mean(axis=2)
+    low = np.quantile(ratio, (1 - ci) / 2, axis=1)
+    return np.asarray(low > 1.0)
+
+
+def censored_power(rng: np.random.Generator, speedup: float, n: int, sd_log: float, reliability: float,
+                   budget: float, alpha: float = 0.05, family: int = 1, interval: bool = True,
+                   n_sims: int = DEFAULT_N_SIMS, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95) -> float:
+    """The probability that a study of ``n`` seeds per arm calls an arm ``speedup`` times faster than
+    the reference "faster" (module docstring), by ``n_sims`` simulated studies.
+
+    Example:
+        >>> rng = np.random.default_rng(0)
+        >>> weak = censored_power(rng, 1.1, 10, 0.3, 0.6, 300_000, n_sims=300)
+        >>> strong = censored_power(np.random.default_rng(0), 2.0, 10, 0.3, 0.6, 300_000, n_sims=300)
+        >>> weak < 0.5 < strong
+        True
+    """
+    median = reference_median(reliability, sd_log, budget, n)
+    ref = simulate_steps(rng, n_sims, n, median, sd_log, budget)
+    arm = simulate_steps(rng, n_sims, n, median / speedup, sd_log, budget)
+    called = _rank_p(ref, arm) < alpha / max(1, family)
+    called &= np.nanmean(np.nan_to_num(ref, nan=budget), axis=1) > np.nanmean(np.nan_to_num(arm, nan=budget), axis=1)
+    if interval:
+        called &= _interval_above_one(rng, ref, arm, budget, n_boot, ci)
+    return float(called.mean())
+
+
+def detectable_speedup(seed: int, n: int, sd_log: float, reliability: float, budget: float, alpha: float = 0.05,
+                       family: int = 1, power: float = 0.8, n_sims: int = DEFAULT_N_SIMS,
+                       high: float = 4.0) -> float:
+    """The smallest speedup that ``n`` seeds per arm call "faster" with ``power``, by bisection over
+    ``[1, high]`` with the same simulated noise at every step (``seed``); ``inf`` when even ``high``
+    is not detected (the budget censors too much to tell).
+
+    Example:
+        >>> few = detectable_speedup(0, 5, 0.3, 0.6, 300_000, n_sims=300)
+        >>> many = detectable_speedup(0, 20, 0.3, 0.6, 300_000, n_sims=300)
+        >>> 1 < many < few
+        True
+    """
+    def power_at(s: float) -> float:
+        return censored_power(np.random.default_rng(seed), s, n, sd_log, reliability, budget, alpha, family,
+                              n_sims=n_sims)
+
+    if power_at(high) < power:
+        return math.inf
+    lo, hi = 1.0, high
+    while hi - lo > 0.01:
+        mid = (lo + hi) / 2
+        lo, hi = (lo, mid) if power_at(mid) >= power else (mid, hi)
+    return hi
+
+
+def seeds_for_speedup(seed: int, speedup: float, sd_log: float, reliability: float, budget: float,
+                      alpha: float = 0.05, family: int = 1, power: float = 0.8, n_sims: int = DEFAULT_N_SIMS,
+                      most: int = 200) -> int | None:
+    """The fewest seeds per arm that call ``speedup`` "faster" with ``power`` (None above ``most``).
+
+    Example:
+        >>> seeds_for_speedup(0, 2.0, 0.3, 0.6, 300_000, n_sims=300) < seeds_for_speedup(0, 1.3, 0.3, 0.6, 300_000,
+        ...                                                                             n_sims=300)
+        True
+    """
+    def enough(n: int) -> bool:
+        return censored_power(np.random.default_rng(seed), speedup, n, sd_log, reliability, budget, alpha, family,
+                              n_sims=n_sims) >= power
+
+    if not enough(most):
+        return None
+    lo, hi = 2, most  # enough(hi); search the smallest
+    while lo < hi:
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if enough(mid) else (mid + 1, hi)
+    return hi
