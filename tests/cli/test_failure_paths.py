@@ -41,6 +41,7 @@ CASES: list[tuple[str, str]] = [
     ("run --seeds 2 --seed-list 3", "--seeds and --seed-list both given"),
     ("run --seed-list 3,3", "lists a seed twice"),
     ("run --set shaping.alpha=-1", "shaping.alpha"),
+    ("run --set shaping.kin_scale=-2", "shaping.kin_scale"),
     ("run --set shaping.alpha=nan", "finite number"),
     ("run --set ppo.nenvs=1", "did you mean 'ppo.n_envs'"),
     ("run --set n_envs", "KEY=VALUE"),

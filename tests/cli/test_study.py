@@ -59,6 +59,7 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
         "## Reward hacking") < report.index("## Method")
     assert "restricted mean" in report and "equivalent within 1.15x" in report and "Power (80%" in report
     assert "SIMULATED VLM" in report and "`norm`" in report and "Hover fraction" in report
+    assert "the 14 run(s) this report reads took" in report  # the cost of every run, cells and variants too
     manifest = json.loads((out / "manifest.json").read_text())
     assert [s["stage"] for s in manifest["stages"]] == ["train", "taxonomy", "analysis"]
     assert manifest["git_commit"] and manifest["runs_trained_now"] == 14

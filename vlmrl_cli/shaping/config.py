@@ -94,7 +94,8 @@ class ShapingConfig:
         default=0.0, metadata={"rules": (Ge(0),),
                                "help": "also reuse a prototype's label within this feature distance (~0.075/px)"}
     )
-    kin_scale: float = field(default=2.0, metadata={"help": "R_kin = max(0, scale (x + offset))"})
+    # the same rule as alpha: a scale weighs a term, and a negative one would pay for the opposite
+    kin_scale: float = field(default=2.0, metadata={"rules": (Ge(0),), "help": "R_kin = max(0, scale (x + offset))"})
     kin_offset: float = field(default=0.4, metadata={"help": "see kin_scale (Eq. 1)"})
     # MountainCar's picture depends on x only; one pixel of car motion is 1.8 / 600 = 0.003 in x,
     # so at most 601 distinct frames exist and the VLM is asked at most 601 times per run.

@@ -77,6 +77,8 @@ class StudyResult:
     stages: list[dict[str, Any]] = field(default_factory=list)
     trained: int = 0
     failed: list[JobResult] = field(default_factory=list)
+    runs_wall_s: float = 0.0  # the own wall times of every run the study reads (each run once)
+    runs: int = 0  # how many runs that is
 
     @property
     def wall_s(self) -> float:
@@ -138,6 +140,10 @@ def run_study(
     seeds += _other_sweep_frames(cfg, data)
     result.per_seed = study_per_seed(seeds, cfg.thresholds)
     result.missing = missing_runs(cfg, result.per_seed)
+    # the cost of everything reported, not only of the regimes' runs (cells and variants too; a run that
+    # two cells share counts once)
+    every_run = result.per_seed["run_id"].drop_duplicates() if len(result.per_seed) else []
+    result.runs, result.runs_wall_s = len(every_run), float(sum(wall_s(client, r) for r in every_run))
     ready = [c for c in verdicts.controls(cfg.cells)
              if all(len(runs_of(data.runs, side.regime.run)) >= 2 for side in (c.a, c.b))]
     control_rows = [verdicts.control_row(c, data, cfg.thresholds, streams, cfg.n_boot, cfg.ci, cfg.alpha, cfg.margin,
@@ -404,7 +410,8 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
     cost_line = (f" Estimated up front: {cost.pending} run(s) to train, {cost.total_s / 60:.0f} min ({cost.how})."
                  if cost else "")
     lines += [f"Cost: {result.wall_s:,.0f} s of wall time in this invocation ({result.trained} run(s) trained now); "
-              f"the regimes' runs' own wall times sum to {train:,.0f} s.{cost_line}", ""]
+              f"the {result.runs} run(s) this report reads took {result.runs_wall_s:,.0f} s of worker time "
+              f"({result.runs_wall_s / 3600:.1f} h; the regimes' own runs {train:,.0f} s).{cost_line}", ""]
     if history:
         earlier = "; ".join(
             f"commit {str(h.get('git_commit', '?'))[:7]} on {str(h.get('written_at', '?'))[:10]}: "
