@@ -59,3 +59,18 @@ def test_rollout_end_logs_the_mean_native_return_of_the_last_100_episodes() -> N
     figures, step = sink.calls[-1]
     assert step == 249
     assert figures["rollout/return_100"] == sum(range(-150, -50)) / 100  # episodes 50..149 only
+
+
+def test_without_is_success_the_tasks_own_rule_decides() -> None:
+    from vlmrl_cli.tasks.registry import get_task
+
+    acrobot, car = get_task("acrobot"), get_task("mountain-car")
+    long_finish = [{"episode": {"r": -300.0, "l": 300}}]  # ended by the env after 300 steps
+    cut = [{"episode": {"r": -500.0, "l": 500}, "TimeLimit.truncated": True}]
+    on_acrobot = EpisodeTracker("baseline-s0", total=1_000, success=acrobot.success)
+    _step(on_acrobot, 300, long_finish)
+    _step(on_acrobot, 800, cut)
+    assert [e["episode/success"] for e in on_acrobot.episodes] == [1.0, 0.0]
+    on_car = EpisodeTracker("baseline-s0", total=1_000, success=car.success)
+    _step(on_car, 300, long_finish)  # past MountainCar-v0's 200-step limit: not a success there
+    assert on_car.episodes[0]["episode/success"] == 0.0

@@ -187,7 +187,7 @@ def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> J
             tracker = EpisodeTracker(
                 job.name, job.timesteps, metrics=metrics, progress=send,
                 should_stop=stopped if stop is not None else None,
-                vlm_stats=oracle.stats if oracle is not None else None,
+                vlm_stats=oracle.stats if oracle is not None else None, success=task.success,
             )
             model.learn(total_timesteps=job.timesteps, callback=tracker)
             model.logger.dump(step=model.num_timesteps)  # the last update's train/ figures

@@ -12,7 +12,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from vlmrl_cli.tracking import schema
 from vlmrl_cli.tracking.store import BatchLogger
-from vlmrl_cli.training.events import ProgressEvent, episode_success
+from vlmrl_cli.training.events import ProgressEvent
 
 
 class EpisodeTracker(BaseCallback):
@@ -20,7 +20,9 @@ class EpisodeTracker(BaseCallback):
     the global timestep; at each rollout end, the mean native return of the last 100 episodes
     (``rollout/return_100``), VLM and throughput figures; and sends progress.
 
-    ``should_stop`` is polled every step; when it returns True training ends cleanly.
+    ``should_stop`` is polled every step; when it returns True training ends cleanly. ``success`` is
+    the task's rule (``Task.success(terminated, length)``), used where the env stack reports no
+    ``is_success``; without it an episode succeeds when the env itself ended it.
     """
 
     def __init__(
@@ -32,6 +34,7 @@ class EpisodeTracker(BaseCallback):
         should_stop: Callable[[], bool] | None = None,
         vlm_stats: Callable[[], dict[str, float]] | None = None,
         interval_s: float = 0.5,
+        success: Callable[[bool, int], bool] | None = None,
     ) -> None:
         super().__init__(verbose=0)
         self.job = job
@@ -41,6 +44,7 @@ class EpisodeTracker(BaseCallback):
         self.should_stop = should_stop
         self.vlm_stats = vlm_stats
         self.interval_s = interval_s
+        self.success = success if success is not None else (lambda terminated, length: bool(terminated))
         self.episodes: list[dict[str, float]] = []
         self.recent: deque[float] = deque(maxlen=100)
         self.stopped = False
@@ -62,7 +66,7 @@ class EpisodeTracker(BaseCallback):
                 schema.METRIC_LENGTH: float(length),
                 # HybridReward reports is_success on every arm; without it, SB3's TimeLimit.truncated tells
                 # a time-limit cut from the env's own end
-                schema.METRIC_SUCCESS: float(info.get("is_success", episode_success(
+                schema.METRIC_SUCCESS: float(info.get("is_success", self.success(
                     not info.get("TimeLimit.truncated", False), length))),
                 schema.METRIC_SHAPED_RETURN: float(info.get("shaped_return", ep["r"])),
             }

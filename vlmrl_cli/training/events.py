@@ -8,19 +8,6 @@ from dataclasses import dataclass, field
 #: Where a sweep's jobs can run (``RunConfig.executor``): a local process pool, or Ray tasks.
 EXECUTORS = ("local", "ray")
 
-SUCCESS_LENGTH = 200  # MountainCar-v0's time limit
-
-
-def episode_success(terminated: bool, length: int) -> bool:
-    """The one success rule: the episode ended at the flag (terminated by the env itself, not cut by
-    the time limit) within ``SUCCESS_LENGTH`` steps.
-
-    Example:
-        >>> episode_success(True, 200), episode_success(False, 200), episode_success(True, 201)
-        (True, False, False)
-    """
-    return bool(terminated) and length <= SUCCESS_LENGTH
-
 
 @dataclass(frozen=True)
 class ProgressEvent:

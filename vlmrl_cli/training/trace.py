@@ -29,7 +29,7 @@ def native_returns(job: TrainJob) -> list[float]:
     try:
         env, _ = make_train_env(job.arm, job.ppo, job.shaping, client, job.seed, task)
         model = make_model(job.ppo, env, job.seed)
-        tracker = EpisodeTracker(job.name, job.timesteps)
+        tracker = EpisodeTracker(job.name, job.timesteps, success=task.success)
         model.learn(total_timesteps=job.timesteps, callback=tracker)
         return [e[schema.METRIC_NATIVE_RETURN] for e in tracker.episodes]
     finally:
