@@ -7,6 +7,7 @@ import functools
 import inspect
 import typing
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -42,103 +43,110 @@ Adjust = Annotated[str, typer.Option(
          "Verdicts use the adjusted p.")]
 
 
-Vlm = Annotated[str, typer.Option("--vlm", metavar=choices(BACKENDS),
-                                  help="VLM backend: sim (simulated, default), hf, openai, replay.")]
-VlmModel = Annotated[
-    str | None,
-    typer.Option("--model", help="hf: hub id or local path; openai: served model name; sim/replay: ignored."),
-]
-VlmBaseUrl = Annotated[str | None, typer.Option("--base-url", help="openai: server URL, e.g. http://localhost:11434/v1.")]
-VlmApiKeyEnv = Annotated[str, typer.Option("--api-key-env", help="openai: environment variable holding the API key.")]
-VlmDevice = Annotated[str | None, typer.Option("--device", help="hf: torch device (default: cuda if present).")]
-VlmDtype = Annotated[str, typer.Option("--dtype", help="hf: torch dtype (auto, float32, float16, bfloat16).")]
-VlmMaxNewTokens = Annotated[int, typer.Option("--max-new-tokens", min=1, help="hf/openai: answer length cap.")]
-VlmTimeout = Annotated[float, typer.Option("--timeout", min=0.1, help="openai: seconds per request.")]
-VlmRetries = Annotated[int, typer.Option("--retries", min=0, help="openai: retries with exponential backoff.")]
-VlmTranscript = Annotated[
-    Path | None, typer.Option("--transcript", help="replay: JSONL transcript (default: the paper's Table 1 outputs).")
-]
-NoCache = Annotated[bool, typer.Option("--no-cache", help="Bypass the on-disk VLM response cache.")]
-CachePath = Annotated[Path, typer.Option("--cache-path", help="sqlite file of the VLM response cache.")]
-#: The profiles as a choice typer validates and lists in the help.
-SimProfileName = enum.StrEnum("SimProfileName", [(name, name) for name in SIM_PROFILES])  # type: ignore[misc]
-SimProfile = Annotated[
-    SimProfileName,
-    typer.Option("--sim-profile",
-                 help="sim: named set of knobs: ideal (no noise), default (the results so far), llava-table1 "
-                      "(the paper's Table 1 failures). Explicit --sim-* knobs beat the profile's values."),
-]
-SimFlicker = Annotated[
-    float | None,
-    typer.Option("--sim-flicker", min=0.0, max=1.0, help="sim: P(neighbouring MCQ label) [default: the profile's]."),
-]
-SimFloatNoise = Annotated[
-    float | None,
-    typer.Option("--sim-float-noise", min=0.0, help="sim: std of float answers, x units [default: the profile's]."),
-]
-SimSeed = Annotated[int, typer.Option("--sim-seed", help="sim: seed of the simulated answers.")]
-SimLatency = Annotated[float, typer.Option("--sim-latency", min=0.0, help="sim: fixed seconds per query.")]
-
 _DEFAULT = VLMConfig()
 _SIM = SimKnobs()
+#: The profiles as a choice typer validates and lists in the help.
+SimProfileName = enum.StrEnum("SimProfileName", [(name, name) for name in SIM_PROFILES])  # type: ignore[misc]
 
 
-def vlm_config(
-    vlm: str,
-    model: str | None,
-    base_url: str | None,
-    api_key_env: str,
-    device: str | None,
-    dtype: str,
-    max_new_tokens: int,
-    timeout: float,
-    retries: int,
-    transcript: Path | None,
-    no_cache: bool,
-    cache_path: Path,
-    sim_profile: str | enum.Enum,
-    sim_flicker: float | None,
-    sim_float_noise: float | None,
-    sim_seed: int,
-    sim_latency: float,
-) -> VLMConfig:
-    """The ``VLMConfig`` of the shared VLM options: the profile's knobs, then the knobs given."""
-    given_knobs = {"flicker": sim_flicker, "float_noise": sim_float_noise}
-    profile = str(sim_profile.value if isinstance(sim_profile, enum.Enum) else sim_profile)
-    sim = SimKnobs.of_profile(profile, latency_s=sim_latency, seed=sim_seed,
-                              **{k: v for k, v in given_knobs.items() if v is not None})
-    return VLMConfig(
-        backend=vlm, model=model, base_url=base_url, api_key_env=api_key_env, device=device,
-        dtype=dtype, max_new_tokens=max_new_tokens, timeout_s=timeout, retries=retries,
-        transcript_in=transcript, cache_path=cache_path, use_cache=not no_cache, sim=sim,
-    )
+@dataclass(frozen=True)
+class VlmOption:
+    """One shared VLM option, declared once: its parameter, the ``VLMConfig`` field it sets (dotted
+    under ``sim.`` for a ``SimKnobs`` field), its type, flag, help and typer's extra checks. The
+    typer options, the config mapping and the help's defaults all derive from this table."""
+
+    param: str
+    target: str
+    kind: Any
+    flag: str
+    help: str
+    extra: dict[str, Any] = field(default_factory=dict)
+    # the option's default when it is not the field's own (None: "the profile's"; the inverted no-cache)
+    default: Any = "field"
+
+    @property
+    def annotation(self) -> Any:
+        return Annotated[self.kind, typer.Option(self.flag, help=self.help, **self.extra)]
+
+    @property
+    def default_value(self) -> Any:
+        if self.default != "field":
+            return self.default
+        holder: Any = _SIM if self.target.startswith("sim.") else _DEFAULT
+        return getattr(holder, self.target.removeprefix("sim."))
 
 
-_VLM_PARAMS: dict[str, tuple[object, object]] = {
-    "vlm": (Vlm, _DEFAULT.backend),
-    "model": (VlmModel, None),
-    "base_url": (VlmBaseUrl, None),
-    "api_key_env": (VlmApiKeyEnv, _DEFAULT.api_key_env),
-    "device": (VlmDevice, None),
-    "dtype": (VlmDtype, _DEFAULT.dtype),
-    "max_new_tokens": (VlmMaxNewTokens, _DEFAULT.max_new_tokens),
-    "timeout": (VlmTimeout, _DEFAULT.timeout_s),
-    "retries": (VlmRetries, _DEFAULT.retries),
-    "transcript": (VlmTranscript, None),
-    "no_cache": (NoCache, False),
-    "cache_path": (CachePath, _DEFAULT.cache_path),
-    "sim_profile": (SimProfile, SimProfileName(DEFAULT_SIM_PROFILE)),
-    "sim_flicker": (SimFlicker, None),
-    "sim_float_noise": (SimFloatNoise, None),
-    "sim_seed": (SimSeed, _SIM.seed),
-    "sim_latency": (SimLatency, _SIM.latency_s),
-}
+VLM_OPTIONS: tuple[VlmOption, ...] = (
+    VlmOption("vlm", "backend", str, "--vlm", "VLM backend: sim (simulated, default), hf, openai, replay.",
+              {"metavar": choices(BACKENDS)}),
+    VlmOption("model", "model", str | None, "--model",
+              "hf: hub id or local path; openai: served model name; sim/replay: ignored."),
+    VlmOption("base_url", "base_url", str | None, "--base-url", "openai: server URL, e.g. http://localhost:11434/v1."),
+    VlmOption("api_key_env", "api_key_env", str, "--api-key-env", "openai: environment variable holding the API key."),
+    VlmOption("device", "device", str | None, "--device", "hf: torch device (default: cuda if present)."),
+    VlmOption("dtype", "dtype", str, "--dtype", "hf: torch dtype (auto, float32, float16, bfloat16)."),
+    VlmOption("max_new_tokens", "max_new_tokens", int, "--max-new-tokens", "hf/openai: answer length cap.",
+              {"min": 1}),
+    VlmOption("timeout", "timeout_s", float, "--timeout", "openai: seconds per request.", {"min": 0.1}),
+    VlmOption("retries", "retries", int, "--retries", "openai: retries with exponential backoff.", {"min": 0}),
+    VlmOption("transcript", "transcript_in", Path | None, "--transcript",
+              "replay: JSONL transcript (default: the paper's Table 1 outputs)."),
+    VlmOption("no_cache", "use_cache", bool, "--no-cache", "Bypass the on-disk VLM response cache.", default=False),
+    VlmOption("cache_path", "cache_path", Path, "--cache-path", "sqlite file of the VLM response cache."),
+    VlmOption("sim_profile", "sim.profile", SimProfileName, "--sim-profile",
+              "sim: named set of knobs: ideal (no noise), default (the results so far), llava-table1 (the paper's "
+              "Table 1 failures). Explicit --sim-* knobs beat the profile's values.",
+              default=SimProfileName(DEFAULT_SIM_PROFILE)),
+    VlmOption("sim_flicker", "sim.flicker", float | None, "--sim-flicker",
+              "sim: P(neighbouring MCQ label) [default: the profile's].", {"min": 0.0, "max": 1.0}, default=None),
+    VlmOption("sim_float_noise", "sim.float_noise", float | None, "--sim-float-noise",
+              "sim: std of float answers, x units [default: the profile's].", {"min": 0.0}, default=None),
+    VlmOption("sim_seed", "sim.seed", int, "--sim-seed", "sim: seed of the simulated answers."),
+    VlmOption("sim_latency", "sim.latency_s", float, "--sim-latency", "sim: fixed seconds per query.", {"min": 0.0}),
+)
+_BY_PARAM = {o.param: o for o in VLM_OPTIONS}
+#: The cache options alone, for a command that takes no other VLM option (``evaluate``).
+NoCache = _BY_PARAM["no_cache"].annotation
+CachePath = _BY_PARAM["cache_path"].annotation
+_INVERTED = {"no_cache"}  # a flag that sets its field to the opposite
+# sim knobs that default to the profile's value: laid over the profile only when given
+_OVER_PROFILE = {"sim_flicker", "sim_float_noise"}
+
+
+def vlm_config(**values: Any) -> VLMConfig:
+    """The ``VLMConfig`` of the shared VLM options (``VLM_OPTIONS``, by parameter name): the
+    profile's knobs, then the knobs given.
+
+    Example:
+        >>> defaults = {o.param: o.default_value for o in VLM_OPTIONS}
+        >>> vlm_config(**defaults) == VLMConfig()
+        True
+        >>> vlm_config(**(defaults | {"sim_flicker": 0.3, "no_cache": True})).sim.flicker
+        0.3
+    """
+    top: dict[str, Any] = {}
+    sim: dict[str, Any] = {}
+    for option in VLM_OPTIONS:
+        value = values[option.param]
+        if option.param in _INVERTED:
+            value = not value
+        if isinstance(value, enum.Enum):
+            value = value.value
+        if option.param in _OVER_PROFILE and value is None:
+            continue
+        if option.target.startswith("sim."):
+            sim[option.target.removeprefix("sim.")] = value
+        else:
+            top[option.target] = value
+    profile = str(sim.pop("profile"))
+    return VLMConfig(**top, sim=SimKnobs.of_profile(profile, **sim))
 
 
 def with_vlm_options(command: Callable[..., None]) -> Callable[..., None]:
-    """Give ``command`` the shared VLM options; it receives them as one ``vlm_cfg: VLMConfig``.
+    """Give ``command`` the shared VLM options (``VLM_OPTIONS``); it receives them as one
+    ``vlm_cfg: VLMConfig``.
 
-    Declared once here so ``taxonomy`` and ``run`` cannot drift apart.
+    Declared once here so ``taxonomy``, ``run``, ``calibrate`` and ``study`` cannot drift apart.
     """
     hints = typing.get_type_hints(command, include_extras=True)
     own = [
@@ -147,13 +155,13 @@ def with_vlm_options(command: Callable[..., None]) -> Callable[..., None]:
         if p.name != "vlm_cfg"
     ]
     shared = [
-        inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, annotation=ann, default=default)
-        for name, (ann, default) in _VLM_PARAMS.items()
+        inspect.Parameter(o.param, inspect.Parameter.KEYWORD_ONLY, annotation=o.annotation, default=o.default_value)
+        for o in VLM_OPTIONS
     ]
 
     @functools.wraps(command)
     def wrapper(**kwargs: Any) -> None:
-        vlm_kwargs = {name: kwargs.pop(name) for name in _VLM_PARAMS}
+        vlm_kwargs = {o.param: kwargs.pop(o.param) for o in VLM_OPTIONS}
         command(vlm_cfg=vlm_config(**vlm_kwargs), **kwargs)
 
     params = [p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for p in own] + shared
@@ -161,17 +169,6 @@ def with_vlm_options(command: Callable[..., None]) -> Callable[..., None]:
     wrapper.__annotations__ = {p.name: p.annotation for p in params}
     del wrapper.__wrapped__  # typer must see the merged signature, not the original
     return wrapper
-
-
-# CLI parameter -> VLMConfig field (SimKnobs fields under "sim.").
-_VLM_FIELDS = {
-    "vlm": "backend", "model": "model", "base_url": "base_url", "api_key_env": "api_key_env", "device": "device",
-    "dtype": "dtype", "max_new_tokens": "max_new_tokens", "timeout": "timeout_s", "retries": "retries",
-    "transcript": "transcript_in", "no_cache": "use_cache", "cache_path": "cache_path",
-    "sim_profile": "sim.profile", "sim_flicker": "sim.flicker", "sim_float_noise": "sim.float_noise",
-    "sim_seed": "sim.seed",
-    "sim_latency": "sim.latency_s",
-}
 
 
 def given(ctx: typer.Context, name: str) -> bool:
@@ -183,7 +180,7 @@ def given(ctx: typer.Context, name: str) -> bool:
 def vlm_flags(ctx: typer.Context, flags: VLMConfig) -> dict[str, Any]:
     """The VLM options typed on the command line, as dotted config keys (``{"vlm.sim.flicker": 0.3}``)."""
     out: dict[str, Any] = {}
-    for param, target in _VLM_FIELDS.items():
+    for param, target in ((o.param, o.target) for o in VLM_OPTIONS):
         if given(ctx, param):
             obj: Any = flags.sim if target.startswith("sim.") else flags
             out[f"vlm.{target}"] = getattr(obj, target.removeprefix("sim."))
