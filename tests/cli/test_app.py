@@ -32,7 +32,7 @@ def test_help_imports_no_heavy_library() -> None:
         "from vlmrl_cli.cli.app import app\n"
         "for args in (['--help'], ['run', '--help'], ['report', '--help'], ['calibrate', '--help'],"
         " ['evaluate', '--help'], ['taxonomy', '--help'], ['study', '--help'], ['export', '--help'],"
-        " ['import', '--help']):\n"
+        " ['import', '--help'], ['compare', '--help']):\n"
         "    assert CliRunner().invoke(app, args).exit_code == 0, args\n"
         f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))\n"
     )

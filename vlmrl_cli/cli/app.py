@@ -46,11 +46,12 @@ def _root(
 
 
 def _register() -> None:
-    from vlmrl_cli.cli import calibrate, evaluate, report, run, study, taxonomy, transfer, verify
+    from vlmrl_cli.cli import calibrate, compare, evaluate, report, run, study, taxonomy, transfer, verify
 
     app.command("taxonomy")(taxonomy.taxonomy)
     app.command("run")(run.run)
     app.command("report")(report.report)
+    app.command("compare")(compare.compare)
     app.command("calibrate")(calibrate.calibrate)
     app.command("evaluate")(evaluate.evaluate)
     app.command("study")(study.study)

@@ -317,3 +317,19 @@ def figure_hacking(eval_lengths: Mapping[str, np.ndarray], hover: Mapping[str, n
         ax.tick_params(axis="x", labelrotation=30)
     _suptitle(fig, "Reward-hacking diagnostic: does the policy hover short of the flag?", vlm_note)
     return fig
+
+
+def plot_normalised_profile(taus: np.ndarray, profile: np.ndarray, low: np.ndarray, high: np.ndarray, arm: str,
+                            arms: Sequence[str], ax: Axes | None = None) -> Axes:
+    """One arm's performance profile across tasks (``vlmrl compare``): the fraction of runs whose
+    normalised score is above ``tau`` with its band; all arguments of shape ``(n_taus,)`` but
+    ``arm`` and ``arms`` (the arms of the figure, for a stable colour)."""
+    ax = ax if ax is not None else _new_ax()
+    color = arm_color(arm, arms)
+    ax.plot(taus, profile, color=color, linewidth=1.5, label=arm)
+    ax.fill_between(taus, low, high, color=color, alpha=0.15, linewidth=0)
+    ax.set_ylabel("fraction of runs > tau", fontsize=SMALL + 1)
+    ax.set_ylim(-0.02, 1.02)
+    ax.legend(fontsize=SMALL, loc="lower left")
+    _style(ax)
+    return ax

@@ -1,0 +1,128 @@
+"""`vlmrl compare` on small synthetic export files (the ``vlmrl-runs/1`` format of ``tracking.transfer``)."""
+
+from __future__ import annotations
+
+import gzip
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats as sps
+from typer.testing import CliRunner
+
+from vlmrl_cli.cli.app import app
+from vlmrl_cli.cli.compare import NORMALISE_CHOICES
+from vlmrl_cli.report.aggregate import NORMALISATIONS
+from vlmrl_cli.tracking.transfer import FORMAT
+
+runner = CliRunner()
+
+# task -> arm -> detached evaluation scores of its runs; kinematic is on mountain-car only
+SCORES = {
+    "mountain-car": {"baseline": [-150.0, -130.0], "hybrid": [-120.0, -100.0], "kinematic": [-125.0, -115.0]},
+    "acrobot": {"baseline": [-100.0, -90.0, -80.0], "hybrid": [-85.0, -75.0]},
+}
+
+
+def _record(task: str | None, arm: str, seed: int, score: float, config_hash: str = "") -> dict[str, object]:
+    tags = {"vlmrl.kind": "train", "vlmrl.arm": arm, "vlmrl.seed": str(seed),
+            "vlmrl.config_hash": config_hash or f"{task}-{arm}-hash",
+            "vlmrl.simulated": "true" if arm == "hybrid" else "false"}
+    if task is not None:  # runs from before tasks carry no task tag: mountain-car
+        tags["vlmrl.task"] = task
+    return {"format": FORMAT, "source_run_id": f"{task}-{arm}-{seed}-{config_hash}", "run_name": f"{arm}-s{seed}",
+            "start_time": 0, "end_time": 1, "tags": tags, "params": {},
+            "latest": {"eval/mean_return": [0, 1, score], "eval/success_rate": [0, 1, 1.0]},
+            "histories": {"episode/native_return": {"step": [1], "ts": [1], "value": [score]}}, "artifacts": {},
+            "binary": {}}
+
+
+def _write(path: Path, records: Sequence[dict[str, object]]) -> Path:
+    with gzip.open(path, "wt", encoding="utf-8") as out:
+        out.writelines(json.dumps(r) + "\n" for r in records)
+    return path
+
+
+def _files(tmp_path: Path, scores: dict[str, dict[str, list[float]]] = SCORES) -> list[str]:
+    # one file per task, as `vlmrl export` of one study per task writes them
+    return [str(_write(tmp_path / f"{task}.jsonl.gz",
+                       [_record(None if task == "mountain-car" else task, arm, seed, s)
+                        for arm, values in arms.items() for seed, s in enumerate(values)]))
+            for task, arms in scores.items()]
+
+
+def _compare(*args: str):
+    return runner.invoke(app, ["compare", *args, "--n-boot", "200"])
+
+
+def test_compare_writes_every_output_with_hand_computed_scores(tmp_path: Path) -> None:
+    out = tmp_path / "cmp"
+    res = _compare(*_files(tmp_path), "--out", str(out))
+    assert res.exit_code == 0, res.output
+    assert "left out: kinematic (missing on acrobot)" in res.output and "SIMULATED VLM" in res.output
+    per_task = pd.read_csv(out / "per_task.csv")
+    # baseline-best: mountain-car 0 at the baseline mean -140, 1 at hybrid's -110; acrobot -90 and -80
+    hybrid = per_task[per_task["arm"] == "hybrid"].sort_values(["task", "seed"])
+    assert hybrid["normalised"].tolist() == pytest.approx([0.5, 1.5, 2 / 3, 4 / 3])
+    assert set(per_task["arm"]) == {"baseline", "hybrid"} and (per_task["vlm"].str.contains("SIMULATED VLM")).all()
+    table = pd.read_csv(out / "aggregate.csv").set_index("arm")
+    assert table.loc["hybrid", "iqm"] == pytest.approx(float(sps.trim_mean([0.5, 1.5, 2 / 3, 4 / 3], 0.25)))
+    assert table.loc["hybrid", "mean"] == pytest.approx(np.mean([1.0, 1.0]))
+    assert table.loc["baseline", "mean"] == pytest.approx(0.0)
+    # mountain-car: every hybrid run beats every baseline run (1); acrobot: -85 beats 2 of 3, -75 all 3 (5/6)
+    poi = table.loc["hybrid", ["poi_over_baseline_low", "poi_over_baseline", "poi_over_baseline_high"]].tolist()
+    assert poi[1] == pytest.approx((1 + 5 / 6) / 2) and poi[0] <= poi[1] <= poi[2] <= 1.0
+    assert table.loc["hybrid", "iqm_low"] <= table.loc["hybrid", "iqm"] <= table.loc["hybrid", "iqm_high"]
+    assert table.loc["hybrid", "tasks"] == 2 and table.loc["hybrid", "runs"] == 4
+    assert (table["vlm"].str.contains("SIMULATED VLM")).all() and (table["normalisation"] == "baseline-best").all()
+    md = (out / "aggregate.md").read_text(encoding="utf-8")
+    assert "SIMULATED VLM" in md and "baseline-best" in md and "kinematic (missing on acrobot)" in md
+    assert (out / "performance_profile.png").stat().st_size > 0
+
+
+def test_zoo_normalisation_takes_the_published_ppo_score_as_the_top(tmp_path: Path) -> None:
+    out = tmp_path / "zoo"
+    res = _compare(*_files(tmp_path), "--out", str(out), "--normalise", "zoo")
+    assert res.exit_code == 0, res.output
+    per_task = pd.read_csv(out / "per_task.csv").drop_duplicates("task").set_index("task")
+    assert per_task.loc["mountain-car", ["lo", "hi"]].tolist() == [-140.0, -110.423]
+    assert per_task.loc["acrobot", ["lo", "hi"]].tolist() == [-90.0, -73.506]
+    assert "rl-baselines3-zoo" in (out / "aggregate.md").read_text(encoding="utf-8")
+
+
+def test_a_task_without_a_baseline_is_refused_in_one_line(tmp_path: Path) -> None:
+    scores = {**SCORES, "acrobot": {"hybrid": [-85.0, -75.0]}}
+    res = _compare(*_files(tmp_path, scores), "--out", str(tmp_path / "x"))
+    assert res.exit_code == 2
+    assert res.output.strip().splitlines() == [res.output.strip()] and "task acrobot has no baseline arm" in res.output
+    assert not (tmp_path / "x").exists()
+
+
+def test_tied_configurations_are_refused_until_one_is_named(tmp_path: Path) -> None:
+    files = _files(tmp_path)
+    other = _write(tmp_path / "other.jsonl.gz", [_record(None, "baseline", s, -199.0, "otherconfig1") for s in (0, 1)])
+    res = _compare(*files, str(other), "--out", str(tmp_path / "tie"))
+    assert res.exit_code == 2 and "--config-hash" in res.output and "otherconfig1" in res.output
+    res = _compare(*files, str(other), "--out", str(tmp_path / "named"), "--config-hash", "otherconf")
+    assert res.exit_code == 0, res.output
+    per_task = pd.read_csv(tmp_path / "named" / "per_task.csv")
+    assert set(per_task.loc[(per_task["task"] == "mountain-car") & (per_task["arm"] == "baseline"), "config_hash"]) \
+        == {"otherconfig1"}
+    res = _compare(*files, "--out", str(tmp_path / "typo"), "--config-hash", "nosuchhash")
+    assert res.exit_code == 2 and "matches no run" in res.output
+
+
+def test_a_file_that_is_not_an_export_is_refused(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.jsonl.gz"
+    _write(bad, [{"format": "something-else"}])
+    res = _compare(str(bad), "--out", str(tmp_path / "o"))
+    assert res.exit_code == 2 and "not a vlmrl run export" in res.output
+    res = _compare(str(tmp_path / "missing.jsonl.gz"), "--out", str(tmp_path / "o"))
+    assert res.exit_code == 2 and "no export file" in res.output
+
+
+def test_the_cli_lists_the_libraries_normalisations() -> None:
+    assert tuple(NORMALISATIONS) == NORMALISE_CHOICES

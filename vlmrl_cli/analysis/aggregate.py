@@ -1,0 +1,261 @@
+"""Aggregates across tasks, after rliable (Agarwal et al. 2021, "Deep RL at the edge of the
+statistical precipice"): small pure functions over the scores of one arm on several tasks.
+
+The scores of an arm are a matrix of shape ``(n_runs, n_tasks)`` (rliable's layout: column ``m``
+holds the runs of task ``m``) or, when tasks have different numbers of runs, a sequence of
+``n_tasks`` arrays of shape ``(n_runs_m,)``. Scores are finite (NaN is a ``ValueError``: say what
+a missing run means before aggregating) and, in practice, normalised per task so that tasks are
+comparable (``normalise``).
+
+Intervals are percentile intervals of a **stratified bootstrap**: each task's runs are resampled
+with replacement, independently of the other tasks (and, for two arms, of the other arm), the
+tasks themselves are kept. That is rliable's ``StratifiedBootstrap`` /
+``StratifiedIndependentBootstrap`` without task resampling; here it is ``scipy.stats.bootstrap``
+with one sample per task (scipy resamples each sample independently), and the randomness comes in
+as an explicit ``numpy.random.Generator``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Sequence
+
+import numpy as np
+import numpy.typing as npt
+from scipy import stats as sps
+
+from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate
+
+#: One arm's scores: a ``(n_runs, n_tasks)`` matrix, or one ``(n_runs_m,)`` array per task.
+TaskScores = npt.ArrayLike | Sequence[npt.ArrayLike]
+
+
+def per_task(scores: TaskScores) -> list[np.ndarray]:
+    """The scores as one float array per task, checked: at least one task, one run per task, all finite.
+
+    A 2-D input is read as ``(n_runs, n_tasks)``; anything else as a sequence of per-task arrays.
+
+    Example:
+        >>> [a.tolist() for a in per_task(np.array([[1, 2], [3, 4], [5, 6]]))]
+        [[1.0, 3.0, 5.0], [2.0, 4.0, 6.0]]
+        >>> [a.tolist() for a in per_task([[1.0], [2.0, 3.0]])]
+        [[1.0], [2.0, 3.0]]
+    """
+    if isinstance(scores, np.ndarray) and scores.ndim == 2:
+        tasks = [np.asarray(scores[:, m], dtype=float) for m in range(scores.shape[1])]
+    else:
+        tasks = [np.asarray(t, dtype=float).reshape(-1) for t in scores]  # type: ignore[union-attr]
+    if not tasks:
+        raise ValueError("no tasks: give scores of shape (n_runs, n_tasks) with n_tasks >= 1")
+    for m, t in enumerate(tasks):
+        if t.size == 0:
+            raise ValueError(f"task {m} has no runs")
+        if not np.all(np.isfinite(t)):
+            raise ValueError(f"task {m} has a NaN or infinite score; drop or fill it before aggregating")
+    return tasks
+
+
+def normalise(scores: TaskScores, lo: npt.ArrayLike, hi: npt.ArrayLike) -> list[np.ndarray]:
+    """Min-max normalised scores ``(x - lo_m) / (hi_m - lo_m)`` per task ``m`` (0 at ``lo``, 1 at ``hi``).
+
+    Args:
+        scores: one arm's scores (``TaskScores``), in the task's own units (e.g. mean return).
+        lo, hi: shape ``(n_tasks,)``, the reference pair of each task, ``hi != lo``.
+
+    Example:
+        >>> [a.tolist() for a in normalise([[-200.0, -150.0], [0.0, 100.0]], [-200.0, 0.0], [-100.0, 50.0])]
+        [[0.0, 0.5], [0.0, 2.0]]
+    """
+    tasks = per_task(scores)
+    low, high = np.asarray(lo, dtype=float).reshape(-1), np.asarray(hi, dtype=float).reshape(-1)
+    if low.size != len(tasks) or high.size != len(tasks):
+        raise ValueError(f"give one lo and one hi per task ({len(tasks)}), got {low.size} and {high.size}")
+    if np.any(high == low) or not np.all(np.isfinite(high - low)):
+        raise ValueError("every task needs a finite reference pair with hi != lo")
+    return [(t - a) / (b - a) for t, a, b in zip(tasks, low, high, strict=True)]
+
+
+# --- point estimates; the private forms take one array per task with resamples on axis 0 --------
+
+def _iqm_axis(*tasks: np.ndarray, axis: int = -1) -> np.ndarray:
+    return np.asarray(sps.trim_mean(np.concatenate(tasks, axis=axis), 0.25, axis=axis))
+
+
+def _mean_axis(*tasks: np.ndarray, axis: int = -1) -> np.ndarray:
+    return np.mean(np.stack([t.mean(axis=axis) for t in tasks]), axis=0)
+
+
+def iqm(scores: TaskScores) -> float:
+    """Interquartile mean over all runs of all tasks: ``scipy.stats.trim_mean(all, 0.25)``, as
+    rliable's ``aggregate_iqm`` on a ``(n_runs, n_tasks)`` matrix (each run counts once).
+
+    Example (rliable's ``metrics_test``):
+        >>> iqm(np.array([[1, 2], [2, 2], [1, 1], [2, 1]]))
+        1.5
+    """
+    return float(_iqm_axis(*per_task(scores)))
+
+
+def mean(scores: TaskScores) -> float:
+    """Mean over tasks of each task's mean score, as rliable's ``aggregate_mean``.
+
+    Example:
+        >>> mean([[0.0, 1.0], [3.0, 3.0, 3.0]])
+        1.75
+    """
+    return float(_mean_axis(*per_task(scores)))
+
+
+def stratified_bootstrap(
+    statistic: Callable[..., np.ndarray],
+    samples: Sequence[np.ndarray],
+    rng: np.random.Generator,
+    n_boot: int = DEFAULT_N_BOOT,
+    ci: float = 0.95,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Percentile interval of ``statistic(*samples)``, each sample resampled with replacement on its own.
+
+    Args:
+        statistic: vectorised: called as ``statistic(*resampled, axis=-1)`` with arrays of shape
+            ``(n_boot, n_i)``; returns shape ``(n_boot,)`` or ``(k, n_boot)`` (k values at once).
+        samples: the strata, e.g. one array of shape ``(n_runs_m,)`` per task, each ``n_runs_m >= 2``.
+        rng: the source of randomness.
+
+    Returns:
+        ``(low, high)``, each of shape ``()`` or ``(k,)``.
+    """
+    if any(s.size < 2 for s in samples):
+        raise ValueError("a stratified bootstrap needs at least 2 runs in every stratum (task)")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # degenerate strata (all runs equal) warn but are fine here
+        res = sps.bootstrap(tuple(samples), statistic, n_resamples=n_boot, confidence_level=ci,
+                            method="percentile", vectorized=True, paired=False, axis=-1, rng=rng)
+    return np.asarray(res.confidence_interval.low), np.asarray(res.confidence_interval.high)
+
+
+def _interval(statistic: Callable[..., np.ndarray], tasks: list[np.ndarray], rng: np.random.Generator,
+              n_boot: int, ci: float) -> Estimate:
+    value = float(statistic(*tasks))
+    n = sum(t.size for t in tasks)
+    if min(t.size for t in tasks) < 2:
+        return Estimate(value, n=n, note="a task has fewer than 2 runs: no interval")
+    low, high = stratified_bootstrap(statistic, tasks, rng, n_boot, ci)
+    return Estimate(value, float(low), float(high), n=n)
+
+
+def iqm_interval(scores: TaskScores, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
+                 ) -> Estimate:
+    """``iqm`` with its stratified bootstrap percentile interval (``n``: runs over all tasks).
+
+    Example:
+        >>> e = iqm_interval(np.arange(80.0).reshape(5, 16), np.random.default_rng(0), n_boot=200)
+        >>> e.value, e.low < e.value < e.high
+        (39.5, True)
+    """
+    return _interval(_iqm_axis, per_task(scores), rng, n_boot, ci)
+
+
+def mean_interval(scores: TaskScores, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
+                  ) -> Estimate:
+    """``mean`` with its stratified bootstrap percentile interval (``n``: runs over all tasks)."""
+    return _interval(_mean_axis, per_task(scores), rng, n_boot, ci)
+
+
+# --- probability of improvement ------------------------------------------------------------------
+
+def _p_greater(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
+    """P(X > Y) + P(X = Y)/2 over all pairs, i.e. the Mann-Whitney U of ``x`` over ``n_x n_y``."""
+    a, b = np.moveaxis(x, axis, -1)[..., :, None], np.moveaxis(y, axis, -1)[..., None, :]
+    return np.mean((a > b) + 0.5 * (a == b), axis=(-2, -1))
+
+
+def _poi_of(n_tasks: int) -> Callable[..., np.ndarray]:
+    def poi(*samples: np.ndarray, axis: int = -1) -> np.ndarray:
+        xs, ys = samples[:n_tasks], samples[n_tasks:]
+        return np.mean(np.stack([_p_greater(x, y, axis) for x, y in zip(xs, ys, strict=True)]), axis=0)
+
+    return poi
+
+
+def _pair(x: TaskScores, y: TaskScores) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    xs, ys = per_task(x), per_task(y)
+    if len(xs) != len(ys):
+        raise ValueError(f"X has {len(xs)} tasks and Y {len(ys)}: compare arms on the same tasks")
+    return xs, ys
+
+
+def probability_of_improvement(x: TaskScores, y: TaskScores) -> float:
+    """rliable's average probability of improvement of arm X over arm Y.
+
+    For each task ``m``, ``P(X_m > Y_m) + P(X_m = Y_m) / 2`` for a random run of each arm: the
+    Mann-Whitney U statistic of X's runs over ``n_x n_y``; then the mean over tasks. 0.5 = no
+    difference; 1 = every run of X beats every run of Y on every task.
+
+    Args:
+        x, y: the two arms' scores (``TaskScores``) on the same tasks, in the same order; the
+            numbers of runs may differ between arms and tasks.
+
+    Example (rliable's ``metrics_test``: 1/3):
+        >>> round(probability_of_improvement(np.array([[1, 2], [2, 2], [1, 1], [2, 1]]),
+        ...                                  np.array([[1, 1], [2, 2], [3, 3]])), 6)
+        0.333333
+    """
+    xs, ys = _pair(x, y)
+    return float(_poi_of(len(xs))(*xs, *ys))
+
+
+def probability_of_improvement_interval(x: TaskScores, y: TaskScores, rng: np.random.Generator,
+                                        n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95) -> Estimate:
+    """``probability_of_improvement`` with a stratified bootstrap interval: the runs of each task
+    are resampled independently for X and for Y (rliable's ``StratifiedIndependentBootstrap``).
+    ``n``: the runs of both arms over all tasks."""
+    xs, ys = _pair(x, y)
+    return _interval(_poi_of(len(xs)), [*xs, *ys], rng, n_boot, ci)
+
+
+# --- performance profile -------------------------------------------------------------------------
+
+def _profile_of(taus: np.ndarray) -> Callable[..., np.ndarray]:
+    def profile(*tasks: np.ndarray, axis: int = -1) -> np.ndarray:
+        # (n_taus, ...) per task: the fraction of its runs above each tau; then the mean over tasks
+        fractions = [np.mean(np.moveaxis(t, axis, -1)[None, ...] > taus.reshape(-1, *([1] * t.ndim)), axis=-1)
+                     for t in tasks]
+        return np.mean(np.stack(fractions), axis=0)
+
+    return profile
+
+
+def performance_profile(scores: TaskScores, taus: npt.ArrayLike) -> np.ndarray:
+    """rliable's score distribution: the fraction of runs whose score is strictly above each ``tau``.
+
+    Each task weighs the same: the mean over tasks of the fraction of that task's runs above
+    ``tau`` (with equal runs per task, rliable's ``np.mean(scores > tau)`` on the matrix).
+
+    Args:
+        scores: one arm's scores (``TaskScores``), normalised per task.
+        taus: shape ``(n_taus,)``, the thresholds.
+
+    Returns:
+        shape ``(n_taus,)``, values in [0, 1], non-increasing in ``tau``.
+
+    Example:
+        >>> performance_profile([[0.0, 0.5, 1.0], [1.0, 2.0]], [-1.0, 0.5, 1.0, 2.0]).tolist()
+        [1.0, 0.6666666666666666, 0.25, 0.0]
+    """
+    t = np.asarray(taus, dtype=float).reshape(-1)
+    return np.asarray(_profile_of(t)(*per_task(scores)), dtype=float)
+
+
+def performance_profile_band(scores: TaskScores, taus: npt.ArrayLike, rng: np.random.Generator,
+                             n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``performance_profile`` and its pointwise stratified bootstrap percentile band.
+
+    Returns:
+        ``(profile, low, high)``, each of shape ``(n_taus,)``.
+    """
+    t = np.asarray(taus, dtype=float).reshape(-1)
+    tasks = per_task(scores)
+    profile = np.asarray(_profile_of(t)(*tasks), dtype=float)
+    low, high = stratified_bootstrap(_profile_of(t), tasks, rng, n_boot, ci)
+    return profile, low.reshape(-1), high.reshape(-1)

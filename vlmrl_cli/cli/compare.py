@@ -1,0 +1,57 @@
+"""`vlmrl compare`: the arms across tasks (IQM, mean, probability of improvement, performance
+profile of normalised scores) from export files; trains nothing, needs no store."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from vlmrl_cli.cli.exit_codes import exit_codes
+from vlmrl_cli.cli.options import choices
+
+DEFAULT_OUT = Path("results/compare")
+#: ``report.aggregate.NORMALISATIONS``' names (that module is imported only when the command runs)
+NORMALISE_CHOICES = ("baseline-best", "zoo")
+
+Files = Annotated[list[Path], typer.Argument(help="Export files written by `vlmrl export` (any tasks).",
+                                             show_default=False)]
+Out = Annotated[Path, typer.Option("--out", help="Output folder.")]
+Normalise = Annotated[str, typer.Option(
+    "--normalise", metavar=choices(NORMALISE_CHOICES),
+    help="Per-task min-max normalisation of the scores: baseline-best (0 = the baseline arm's mean, 1 = the best "
+         "arm's mean) or zoo (0 = the baseline arm's mean, 1 = rl-baselines3-zoo's published PPO score).")]
+ConfigHashes = Annotated[list[str] | None, typer.Option(
+    "--config-hash", help="The configuration of a task's arm to compare, a hash or its prefix, repeatable "
+                          "(default per task and arm: the one with the most runs).")]
+Boot = Annotated[int, typer.Option("--n-boot", min=100, help="Bootstrap resamples.")]
+Seed = Annotated[int, typer.Option("--seed", help="Seed of the bootstrap.")]
+
+
+def compare(
+    files: Files,
+    out: Out = DEFAULT_OUT,
+    normalise: Normalise = "baseline-best",
+    config_hash: ConfigHashes = None,
+    n_boot: Boot = 2000,
+    seed: Seed = 0,
+) -> None:
+    """Aggregate the arms' detached evaluation scores across tasks: aggregate.md/.csv, per_task.csv and
+    performance_profile.png."""
+    from vlmrl_cli.report.aggregate import CompareConfig
+    from vlmrl_cli.report.aggregate import compare as run_compare
+
+    with exit_codes():
+        cfg = CompareConfig(files=tuple(files), out=out, normalise=normalise,
+                            config_hashes=tuple(config_hash or ()), n_boot=n_boot, seed=seed)
+        result = run_compare(cfg)
+        typer.echo(f"{len(result.arms)} arm(s) on {len(result.tasks)} task(s) ({', '.join(result.tasks)}); "
+                   f"normalisation {normalise}" + ("; SIMULATED VLM" if result.simulated else ""))
+        for r in result.table.itertuples(index=False):
+            poi = "" if r.arm == "baseline" else (f"; P(> baseline) {r.poi_over_baseline:.2f} "
+                                                   f"[{r.poi_over_baseline_low:.2f}, {r.poi_over_baseline_high:.2f}]")
+            typer.echo(f"  {r.arm:<16} IQM {r.iqm:.2f} [{r.iqm_low:.2f}, {r.iqm_high:.2f}]{poi}")
+        for arm, tasks in result.left_out.items():
+            typer.echo(f"left out: {arm} (missing on {', '.join(tasks)})")
+        typer.echo(f"written to {result.out}/ (aggregate.md, aggregate.csv, per_task.csv, performance_profile.png)")

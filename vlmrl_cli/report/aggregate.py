@@ -1,0 +1,328 @@
+"""`vlmrl compare`: one view across tasks of the arms' detached evaluation scores, read from export files.
+
+The score of a run is its detached evaluation's mean return (``eval/mean_return``). Scores are
+min-max normalised per task, ``(score - lo) / (hi - lo)``, with a stated pair (``NORMALISATIONS``):
+
+- ``baseline-best`` (default): ``lo`` = the baseline arm's mean score on the task, ``hi`` = the
+  best compared arm's mean score there: 0 is plain PPO, 1 the best arm of this comparison.
+- ``zoo``: ``lo`` = the baseline arm's mean score, ``hi`` = rl-baselines3-zoo's published PPO
+  score of the env (``tasks.zoo``): 1 is the zoo's tuned PPO.
+
+Which runs: the FINISHED training runs of the files (one run once, by its source run id), grouped
+by task (tag ``vlmrl.task``, absent = mountain-car), arm and config hash. For each task and arm
+one configuration is kept: the one named by ``--config-hash`` when one is named for that task
+and arm, else the one with the most runs (a tie is refused: name one). Every task must have the
+baseline arm; arms missing on some task are left out, and listed.
+
+Per arm, over all tasks: the IQM and the mean of the normalised scores, and the probability of
+improvement over the baseline, each with a 95% stratified bootstrap interval (runs resampled
+within each task, ``analysis.aggregate``), and the performance profile with its band.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+
+from vlmrl_cli.analysis import aggregate as agg
+from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, Streams
+from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.core.tables import markdown_rows
+from vlmrl_cli.report.figures import plot_normalised_profile
+from vlmrl_cli.report.table2 import BASELINE, order_arms
+from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
+from vlmrl_cli.tasks.zoo import SOURCE as ZOO_SOURCE
+from vlmrl_cli.tasks.zoo import ZOO_PPO
+from vlmrl_cli.tracking import schema
+from vlmrl_cli.tracking.transfer import read_records
+
+NORMALISATIONS: dict[str, str] = {
+    "baseline-best": "min-max per task from the baseline arm's mean score (0) to the best compared arm's mean "
+                     "score (1)",
+    "zoo": f"min-max per task from the baseline arm's mean score (0) to the published PPO score of {ZOO_SOURCE} (1)",
+}
+SIMULATED_NOTE = "SIMULATED VLM, not a real model."
+REAL_NOTE = "no run used the simulated VLM"
+RUN_COLUMNS = ["task", "arm", "seed", "config_hash", "run_id", "score", "simulated", "file"]
+
+
+@dataclass(frozen=True)
+class CompareConfig:
+    """Everything `vlmrl compare` does, in one object."""
+
+    files: tuple[Path, ...]
+    out: Path
+    normalise: str = "baseline-best"
+    config_hashes: tuple[str, ...] = ()
+    n_boot: int = DEFAULT_N_BOOT
+    ci: float = 0.95
+    seed: int = 0
+    n_taus: int = 201
+
+
+@dataclass(frozen=True)
+class CompareResult:
+    """What `vlmrl compare` wrote and found."""
+
+    out: Path
+    files: list[Path]
+    table: pd.DataFrame
+    arms: list[str]
+    tasks: list[str]
+    left_out: dict[str, list[str]] = field(default_factory=dict)
+    simulated: bool = False
+
+
+def _validate(cfg: CompareConfig) -> None:
+    if not cfg.files:
+        raise BadInput("name at least one export file (written by `vlmrl export --out FILE`).")
+    missing = [p for p in cfg.files if not p.is_file()]
+    if missing:
+        raise BadInput(f"there is no export file {missing[0]}; write one with `vlmrl export --out FILE`.")
+    if cfg.normalise not in NORMALISATIONS:
+        raise BadInput(f"--normalise must be one of {', '.join(NORMALISATIONS)}, got '{cfg.normalise}'.")
+    if cfg.n_boot < 100:
+        raise BadInput(f"the bootstrap needs at least 100 resamples, got {cfg.n_boot}.")
+    if not 0 < cfg.ci < 1:
+        raise BadInput(f"the interval's coverage must lie strictly between 0 and 1, got {cfg.ci}.")
+    if cfg.out.exists() and not cfg.out.is_dir():
+        raise BadInput(f"--out {cfg.out} is a file; name a folder.")
+
+
+def read_runs(files: Sequence[Path]) -> pd.DataFrame:
+    """One row per training run of the export ``files`` (``RUN_COLUMNS``), each source run once.
+
+    ``BadInput`` for a file that is not an export, or a run without a detached evaluation score.
+    """
+    rows: list[dict[str, object]] = []
+    seen: set[str] = set()
+    for path in files:
+        for record in read_records(path):
+            tags = record.get("tags", {})
+            if tags.get(schema.TAG_KIND, schema.KIND_TRAIN) != schema.KIND_TRAIN or record["source_run_id"] in seen:
+                continue
+            seen.add(record["source_run_id"])
+            latest = record.get("latest", {}).get(schema.METRIC_EVAL_MEAN_RETURN)
+            if latest is None or not np.isfinite(float(latest[2])):
+                raise BadInput(f"{path}: run {record['source_run_id']} has no {schema.METRIC_EVAL_MEAN_RETURN} (its "
+                               "detached evaluation); export runs that finished their evaluation.")
+            rows.append({"task": tags.get(schema.TAG_TASK, DEFAULT_TASK), "arm": tags.get(schema.TAG_ARM, ""),
+                         "seed": int(tags.get(schema.TAG_SEED, -1)),
+                         "config_hash": tags.get(schema.TAG_CONFIG_HASH, ""),
+                         "run_id": record["source_run_id"], "score": float(latest[2]),
+                         "simulated": tags.get(schema.TAG_SIMULATED) == "true", "file": str(path)})
+    if not rows:
+        raise BadInput(f"the export files hold no training run: {', '.join(str(p) for p in files)}.")
+    return pd.DataFrame(rows, columns=RUN_COLUMNS)
+
+
+def select_configs(runs: pd.DataFrame, config_hashes: Sequence[str] = ()) -> pd.DataFrame:
+    """The runs of one config hash per task and arm: the one ``config_hashes`` names (a full hash or
+    a prefix) for that task and arm, else the one with the most runs; ``BadInput`` for a tie, a
+    named hash that matches no run or several, or two named hashes for one task and arm.
+
+    Example:
+        >>> runs = pd.DataFrame({"task": ["t"] * 3, "arm": ["a"] * 3, "config_hash": ["x1", "x1", "y2"]})
+        >>> select_configs(runs)["config_hash"].tolist(), select_configs(runs, ["y"])["config_hash"].tolist()
+        (['x1', 'x1'], ['y2'])
+    """
+    hashes = sorted(set(runs["config_hash"]))
+    chosen: dict[tuple[str, str], str] = {}
+    for given in config_hashes:
+        matches = [h for h in hashes if h.startswith(given)]
+        if len(matches) != 1:
+            raise BadInput(f"--config-hash {given} matches {'no run' if not matches else 'several hashes'} in the "
+                           f"export files{'' if not matches else ' (' + ', '.join(matches) + ')'}; give more of it.")
+        named = runs.loc[runs["config_hash"] == matches[0], ["task", "arm"]].drop_duplicates()
+        for task, arm in named.itertuples(index=False):
+            cell = (str(task), str(arm))
+            if cell in chosen and chosen[cell] != matches[0]:
+                raise BadInput(f"--config-hash names two configurations of {cell[1]} on {cell[0]} ({chosen[cell]}, "
+                               f"{matches[0]}); name one.")
+            chosen[cell] = matches[0]
+    keep = []
+    for (task, arm), cell in runs.groupby(["task", "arm"], sort=True):
+        key = (str(task), str(arm))
+        if key not in chosen:
+            counts = Counter(cell["config_hash"]).most_common()
+            tied = [h for h, n in counts if n == counts[0][1]]
+            if len(tied) > 1:
+                raise BadInput(f"{arm} on {task} has {len(tied)} configurations with {counts[0][1]} runs each "
+                               f"({', '.join(sorted(tied))}); name the one to compare with --config-hash.")
+            chosen[key] = counts[0][0]
+        keep.append(cell[cell["config_hash"] == chosen[key]])
+    return pd.concat(keep, ignore_index=True)
+
+
+def compared_arms(runs: pd.DataFrame) -> tuple[list[str], dict[str, list[str]]]:
+    """The arms on every task (``order_arms`` order), and each left-out arm with the tasks that lack it.
+
+    ``BadInput`` when a task has no baseline arm, or no other arm is on every task.
+    """
+    tasks = sorted(set(runs["task"]))
+    arms_of = {t: set(runs.loc[runs["task"] == t, "arm"]) for t in tasks}
+    lacking = [t for t in tasks if BASELINE not in arms_of[t]]
+    if lacking:
+        raise BadInput(f"task {lacking[0]} has no {BASELINE} arm in the export files; every task needs one (the "
+                       "normalisation and the probability of improvement start from it).")
+    every = set.intersection(*arms_of.values())
+    left_out = {a: [t for t in tasks if a not in arms_of[t]] for a in order_arms(sorted(set.union(*arms_of.values())))
+                if a not in every}
+    if every == {BASELINE}:
+        raise BadInput(f"no arm besides {BASELINE} is on every task ({', '.join(tasks)}); left out: "
+                       + "; ".join(f"{a} (missing on {', '.join(ts)})" for a, ts in left_out.items()) + ".")
+    return order_arms(sorted(every)), left_out
+
+
+def normalisation_pairs(runs: pd.DataFrame, arms: Sequence[str], method: str) -> pd.DataFrame:
+    """Per task, the pair ``lo``/``hi`` of ``method`` and where each comes from.
+
+    ``BadInput`` when a task's pair is empty or reversed (``hi <= lo``).
+    """
+    rows = []
+    for task, cell in runs[runs["arm"].isin(arms)].groupby("task", sort=True):
+        means = cell.groupby("arm")["score"].mean()
+        lo = float(means[BASELINE])
+        if method == "zoo":
+            env_id = get_task(str(task)).env_id
+            if env_id not in ZOO_PPO:
+                raise BadInput(f"task {task} ({env_id}) has no published rl-baselines3-zoo PPO score in the package; "
+                               "use --normalise baseline-best.")
+            hi, hi_from = ZOO_PPO[env_id].mean, f"zoo PPO {env_id} ({ZOO_PPO[env_id].budget} steps)"
+        else:
+            best = str(means.idxmax())
+            hi, hi_from = float(means[best]), f"{best} mean"
+        if not hi > lo:
+            raise BadInput(f"on task {task} the {method} range is empty: baseline mean {lo:g}, top {hi:g} ({hi_from})"
+                           + ("; the baseline is the best arm there, try --normalise zoo." if method != "zoo" else
+                              "; the baseline scores at least the zoo's PPO there, use --normalise baseline-best."))
+        rows.append({"task": task, "lo": lo, "lo_from": f"{BASELINE} mean", "hi": hi, "hi_from": hi_from})
+    return pd.DataFrame(rows)
+
+
+def _cell(e: Estimate, digits: int = 3) -> str:
+    return f"{e.value:.{digits}f} [{e.low:.{digits}f}, {e.high:.{digits}f}]"
+
+
+def compare(cfg: CompareConfig) -> CompareResult:
+    """Read the export files, aggregate across tasks and write ``aggregate.md``, ``aggregate.csv``,
+    ``per_task.csv`` and ``performance_profile.png`` to ``cfg.out``."""
+    _validate(cfg)
+    runs = select_configs(read_runs(cfg.files), cfg.config_hashes)
+    arms, left_out = compared_arms(runs)
+    runs = runs[runs["arm"].isin(arms)].reset_index(drop=True)
+    tasks = sorted(set(runs["task"]))
+    short = runs.groupby(["task", "arm"]).size()
+    if short.min() < 2:
+        task, arm = short.idxmin()
+        raise BadInput(f"{arm} on {task} has {short.min()} run; the stratified bootstrap needs at least 2 per task.")
+    pairs = normalisation_pairs(runs, arms, cfg.normalise).set_index("task")
+    runs["lo"], runs["hi"] = runs["task"].map(pairs["lo"]), runs["task"].map(pairs["hi"])
+    runs["normalised"] = (runs["score"] - runs["lo"]) / (runs["hi"] - runs["lo"])
+    simulated = bool(runs["simulated"].any())
+    note = SIMULATED_NOTE if simulated else REAL_NOTE
+
+    scores = {a: [runs.loc[(runs["arm"] == a) & (runs["task"] == t), "normalised"].to_numpy() for t in tasks]
+              for a in arms}
+    streams = Streams(cfg.seed)
+    rows = []
+    for arm in arms:
+        est = {"iqm": agg.iqm_interval(scores[arm], streams(f"compare/iqm/{arm}"), cfg.n_boot, cfg.ci),
+               "mean": agg.mean_interval(scores[arm], streams(f"compare/mean/{arm}"), cfg.n_boot, cfg.ci)}
+        if arm != BASELINE:
+            est["poi"] = agg.probability_of_improvement_interval(scores[arm], scores[BASELINE],
+                                                                 streams(f"compare/poi/{arm}"), cfg.n_boot, cfg.ci)
+        row: dict[str, object] = {"arm": arm, "tasks": len(tasks), "runs": sum(s.size for s in scores[arm])}
+        for key in ("iqm", "mean", "poi"):
+            e = est.get(key, Estimate(float("nan")))
+            row |= {key: e.value, f"{key}_low": e.low, f"{key}_high": e.high}
+        rows.append(row)
+    table = pd.DataFrame(rows).rename(columns={"poi": "poi_over_baseline", "poi_low": "poi_over_baseline_low",
+                                               "poi_high": "poi_over_baseline_high"})
+    table["normalisation"], table["vlm"] = cfg.normalise, note
+
+    cfg.out.mkdir(parents=True, exist_ok=True)
+    files = [cfg.out / "aggregate.csv", cfg.out / "per_task.csv", cfg.out / "aggregate.md",
+             cfg.out / "performance_profile.png"]
+    table.to_csv(files[0], index=False)
+    per_task = runs[["task", "arm", "seed", "config_hash", "run_id", "score", "lo", "hi", "normalised"]].copy()
+    per_task["normalisation"], per_task["vlm"] = cfg.normalise, note
+    per_task.sort_values(["task", "arm", "seed"]).to_csv(files[1], index=False)
+    files[2].write_text(_markdown(cfg, table, runs, pairs, left_out, simulated) + "\n", encoding="utf-8")
+    fig = _profile_figure(scores, cfg, streams, note)
+    fig.savefig(files[3], dpi=200)
+    return CompareResult(cfg.out, files, table, arms, tasks, left_out, simulated)
+
+
+def profile_taus(scores: Mapping[str, Sequence[np.ndarray]], n: int) -> np.ndarray:
+    """``n`` thresholds from a little below the lowest normalised score to a little above the highest."""
+    every = np.concatenate([t for tasks in scores.values() for t in tasks])
+    pad = 0.05 * max(float(every.max() - every.min()), 1e-9)
+    return np.linspace(float(every.min()) - pad, float(every.max()) + pad, n)
+
+
+def _profile_figure(scores: Mapping[str, Sequence[np.ndarray]], cfg: CompareConfig, streams: Streams, note: str
+                    ) -> Figure:
+    taus = profile_taus(scores, cfg.n_taus)
+    fig = Figure(figsize=(7.0, 3.4), layout="constrained")
+    ax = fig.subplots()
+    for arm, tasks in scores.items():
+        curve, low, high = agg.performance_profile_band(tasks, taus, streams(f"compare/profile/{arm}"), cfg.n_boot,
+                                                        cfg.ci)
+        plot_normalised_profile(taus, curve, low, high, arm, list(scores), ax=ax)
+    ax.set_xlabel(f"normalised score tau ({cfg.normalise})", fontsize=9)
+    fig.suptitle(f"Performance profile across {len(next(iter(scores.values())))} task(s) "
+                 f"({100 * cfg.ci:g}% stratified bootstrap band)\n{note}", fontsize=9)
+    return fig
+
+
+def _markdown(cfg: CompareConfig, table: pd.DataFrame, runs: pd.DataFrame, pairs: pd.DataFrame,
+              left_out: Mapping[str, Sequence[str]], simulated: bool) -> str:
+    pct = f"{100 * cfg.ci:g}%"
+    lines = [f"# Across tasks{' (SIMULATED VLM)' if simulated else ''}", ""]
+    if simulated:
+        lines += ["> **SIMULATED VLM.** Some runs used the simulated VLM (a pixel-reading stand-in), not a real "
+                  "model: nothing here is evidence about a real VLM.", ""]
+    lines += [f"Score of a run: its detached evaluation's mean return (`{schema.METRIC_EVAL_MEAN_RETURN}`). "
+              f"Normalisation `{cfg.normalise}`: {NORMALISATIONS[cfg.normalise]}.", "",
+              *markdown_rows(["task", "lo", "from", "hi", "from"],
+                             [[t, f"{r.lo:.3f}", r.lo_from, f"{r.hi:.3f}", r.hi_from]
+                              for t, r in pairs.iterrows()]), "",
+              f"## Aggregates of the normalised scores ({pct} stratified bootstrap intervals)", ""]
+    body = []
+    for r in table.itertuples(index=False):
+        poi = ("—" if r.arm == BASELINE else
+               _cell(Estimate(float(r.poi_over_baseline), float(r.poi_over_baseline_low),
+                              float(r.poi_over_baseline_high))))
+        body.append([r.arm, r.tasks, r.runs, _cell(Estimate(float(r.iqm), float(r.iqm_low), float(r.iqm_high))),
+                     _cell(Estimate(float(r.mean), float(r.mean_low), float(r.mean_high))), poi])
+    lines += markdown_rows(["arm", "tasks", "runs", f"IQM [{pct}]", f"mean [{pct}]",
+                            f"P(arm > {BASELINE}) [{pct}]"], body)
+    lines += ["", "## Runs compared", ""]
+    cells = runs.groupby(["task", "arm", "config_hash"], sort=True).agg(runs=("run_id", "size"),
+                                                                       score=("score", "mean"))
+    lines += markdown_rows(["task", "arm", "config hash", "runs", "mean score"],
+                           [[t, a, h, int(c.runs), f"{c.score:.2f}"] for (t, a, h), c in cells.iterrows()])
+    lines += [""]
+    if left_out:
+        lines += ["Left out (not on every task): "
+                  + "; ".join(f"{a} (missing on {', '.join(ts)})" for a, ts in left_out.items()) + ".", ""]
+    lines += ["## Method", "",
+              "- IQM: the 25% trimmed mean of the normalised scores of all runs of all tasks (rliable's "
+              "`aggregate_iqm`); mean: the mean over tasks of each task's mean (`aggregate_mean`).",
+              f"- P(arm > {BASELINE}): per task, P(X > Y) + P(X = Y)/2 for a random run of each arm (the "
+              "Mann-Whitney U over n_x n_y), then the mean over tasks (rliable's `probability_of_improvement`).",
+              "- Performance profile (`performance_profile.png`): the fraction of runs whose normalised score is "
+              "above tau, each task weighing the same (rliable's run-score distribution).",
+              f"- Intervals: percentile intervals of a stratified bootstrap ({cfg.n_boot} resamples, seed "
+              f"{cfg.seed}): the runs of each task resampled with replacement, each arm on its own; the tasks "
+              "are fixed, so the interval is about the runs (seeds), not about a population of tasks.",
+              "- One configuration per task and arm: the one named by --config-hash, else the one with the most runs.",
+              f"- Files read: {', '.join(f'`{p}`' for p in cfg.files)}."]
+    return "\n".join(lines)
