@@ -65,8 +65,8 @@ def test_without_is_success_the_tasks_own_rule_decides() -> None:
     from vlmrl_cli.tasks.registry import get_task
 
     acrobot, car = get_task("acrobot"), get_task("mountain-car")
-    long_finish = [{"episode": {"r": -300.0, "l": 300}}]  # ended by the env after 300 steps
-    cut = [{"episode": {"r": -500.0, "l": 500}, "TimeLimit.truncated": True}]
+    long_finish: list[dict[str, object]] = [{"episode": {"r": -300.0, "l": 300}}]  # ended by the env after 300 steps
+    cut: list[dict[str, object]] = [{"episode": {"r": -500.0, "l": 500}, "TimeLimit.truncated": True}]
     on_acrobot = EpisodeTracker("baseline-s0", total=1_000, success=acrobot.success)
     _step(on_acrobot, 300, long_finish)
     _step(on_acrobot, 800, cut)

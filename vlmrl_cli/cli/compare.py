@@ -36,6 +36,9 @@ def compare(
     config_hash: ConfigHashes = None,
     n_boot: Boot = 2000,
     seed: Seed = 0,
+    allow_mixed_paths: Annotated[bool, typer.Option(
+        "--allow-mixed-paths", help="Compare runs computed on different numeric paths (vlmrl.pin tags) instead of "
+        "refusing.")] = False,
 ) -> None:
     """Aggregate the arms' detached evaluation scores across tasks: aggregate.md/.csv, per_task.csv and
     performance_profile.png."""
@@ -44,7 +47,8 @@ def compare(
 
     with exit_codes():
         cfg = CompareConfig(files=tuple(files), out=out, normalise=normalise,
-                            config_hashes=tuple(config_hash or ()), n_boot=n_boot, seed=seed)
+                            config_hashes=tuple(config_hash or ()), n_boot=n_boot, seed=seed,
+                            allow_mixed_paths=allow_mixed_paths)
         result = run_compare(cfg)
         typer.echo(f"{len(result.arms)} arm(s) on {len(result.tasks)} task(s) ({', '.join(result.tasks)}); "
                    f"normalisation {normalise}" + ("; SIMULATED VLM" if result.simulated else ""))

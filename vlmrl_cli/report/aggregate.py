@@ -31,11 +31,13 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from vlmrl_cli.analysis import aggregate as agg
+from vlmrl_cli.analysis.load import numeric_path
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, Streams
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.tables import markdown_rows
 from vlmrl_cli.report.figures import plot_normalised_profile
 from vlmrl_cli.report.table2 import BASELINE, order_arms
+from vlmrl_cli.report.writer import check_paths
 from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
 from vlmrl_cli.tasks.zoo import SOURCE as ZOO_SOURCE
 from vlmrl_cli.tasks.zoo import ZOO_PPO
@@ -49,7 +51,7 @@ NORMALISATIONS: dict[str, str] = {
 }
 SIMULATED_NOTE = "SIMULATED VLM, not a real model."
 REAL_NOTE = "no run used the simulated VLM"
-RUN_COLUMNS = ["task", "arm", "seed", "config_hash", "run_id", "score", "simulated", "file"]
+RUN_COLUMNS = ["task", "arm", "seed", "config_hash", "run_id", "score", "simulated", "numeric_path", "file"]
 
 
 @dataclass(frozen=True)
@@ -64,6 +66,8 @@ class CompareConfig:
     ci: float = 0.95
     seed: int = 0
     n_taus: int = 201
+    # compare runs computed on different numeric paths (core.numeric_pin) instead of refusing, as `report`
+    allow_mixed_paths: bool = False
 
 
 @dataclass(frozen=True)
@@ -116,7 +120,8 @@ def read_runs(files: Sequence[Path]) -> pd.DataFrame:
                          "seed": int(tags.get(schema.TAG_SEED, -1)),
                          "config_hash": tags.get(schema.TAG_CONFIG_HASH, ""),
                          "run_id": record["source_run_id"], "score": float(latest[2]),
-                         "simulated": tags.get(schema.TAG_SIMULATED) == "true", "file": str(path)})
+                         "simulated": tags.get(schema.TAG_SIMULATED) == "true",
+                         "numeric_path": numeric_path(tags), "file": str(path)})
     if not rows:
         raise BadInput(f"the export files hold no training run: {', '.join(str(p) for p in files)}.")
     return pd.DataFrame(rows, columns=RUN_COLUMNS)
@@ -215,6 +220,7 @@ def compare(cfg: CompareConfig) -> CompareResult:
     ``per_task.csv`` and ``performance_profile.png`` to ``cfg.out``."""
     _validate(cfg)
     runs = select_configs(read_runs(cfg.files), cfg.config_hashes)
+    check_paths(runs, cfg.allow_mixed_paths)  # one numeric path, as `vlmrl report` requires
     arms, left_out = compared_arms(runs)
     runs = runs[runs["arm"].isin(arms)].reset_index(drop=True)
     tasks = sorted(set(runs["task"]))
