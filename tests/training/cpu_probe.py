@@ -1,0 +1,47 @@
+"""Train a short run in a fresh process under forced CPU code paths (the libraries read the
+variables once, at load), for ``test_cpu_paths*.py``."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+from tests.training.test_pinned_returns import STEPS
+from vlmrl_cli.core.numeric_pin import APPLIED_MARK, PIN, USER_MARK
+
+_PROBE = """
+import os, sys
+if os.environ.get("PROBE_PIN") == "1":
+    from vlmrl_cli.core.numeric_pin import apply
+    apply(warn=False)
+import json, torch
+torch.set_num_threads(1)
+from tests.training.test_pinned_returns import digest, short_run
+from vlmrl_cli.core.provenance import cpu_paths
+print(json.dumps({"paths": cpu_paths(), "digest": digest(short_run(sys.argv[1], int(sys.argv[2])))}))
+"""
+_NUMERIC_VARS = (*PIN, USER_MARK, APPLIED_MARK, "NPY_DISABLE_CPU_FEATURES", "OPENBLAS_CORETYPE",
+                 "MKL_ENABLE_INSTRUCTIONS")
+
+
+def trace(arm: str, env: dict[str, str], pinned: bool) -> dict:  # type: ignore[type-arg]
+    """``arm``'s paths and digest (``STEPS`` steps) in a fresh process: the pin applied (``pinned``)
+    or removed, then ``env`` laid over the environment."""
+    clean = {k: v for k, v in os.environ.items() if k not in _NUMERIC_VARS}  # this process's pin removed
+    full = clean | env | {"PROBE_PIN": "1" if pinned else "0", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    out = subprocess.run([sys.executable, "-c", _PROBE, arm, str(STEPS)], env=full, capture_output=True, text=True,
+                         check=True, timeout=600, cwd=os.path.dirname(os.path.dirname(os.path.dirname(__file__))))
+    return json.loads(out.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
+
+
+ALL_NUMPY_TARGETS = "X86_V3 X86_V4 AVX512_ICL AVX512_SPR"
+OVERRIDES = {
+    "mkl-avx2": {"MKL_ENABLE_INSTRUCTIONS": "AVX2"},
+    "mkl-sse4_2": {"MKL_ENABLE_INSTRUCTIONS": "SSE4_2"},
+    "aten-avx512": {"ATEN_CPU_CAPABILITY": "avx512"},
+    "onednn-sse41": {"ONEDNN_MAX_CPU_ISA": "SSE41"},
+    "numpy-baseline": {"NPY_DISABLE_CPU_FEATURES": ALL_NUMPY_TARGETS},
+    "openblas-prescott": {"OPENBLAS_CORETYPE": "Prescott"},
+}
