@@ -50,8 +50,9 @@ PIN: Mapping[str, str] = {
 USER_MARK = "VLMRL_PIN_USER"
 #: Set by ``apply``: the pin's id, so that a child knows its parent applied it.
 APPLIED_MARK = "VLMRL_PIN"
-#: Libraries whose presence in ``sys.modules`` means the pin comes too late for this process.
-_NUMERIC_MODULES = ("torch", "numpy")
+#: Libraries whose presence in ``sys.modules`` means the pin may come too late for this process
+#: (numpy is not pinned, so an earlier numpy import does not matter).
+_NUMERIC_MODULES = ("torch",)
 
 
 @dataclass(frozen=True)
