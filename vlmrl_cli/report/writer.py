@@ -204,7 +204,7 @@ def _disagreements(table: Table2, results: Sequence[claims_mod.ClaimResult]) -> 
 FAMILY_WHAT = "The speedups of the attribution table (every pair and threshold measured)"
 
 
-def _statistics_md(cfg: ReportConfig, family_size: int = 0) -> list[str]:
+def _statistics_md(cfg: ReportConfig, family_size: int = 0, auc_margin: float = 5.0) -> list[str]:
     ci = f"{100 * cfg.ci:g}%"
     alpha = 1 - cfg.ci
     return [
@@ -240,7 +240,8 @@ def _statistics_md(cfg: ReportConfig, family_size: int = 0) -> list[str]:
         "at least half its seeds; otherwise inconclusive, with 'leans faster' (or slower) when the interval "
         "excludes 1 or the adjusted test rejects and both point one way. Learning-curve area (threshold-free): "
         "per seed the mean native return over the budget, compared by a difference of means and a Mann-Whitney "
-        "test.",
+        f"test, equivalent when the 90% interval lies within +-{auc_margin:g} return points (the task's margin, "
+        "Task.auc_margin).",
         f"- Full window: the 'full {cfg.window}-episode window' rows count a threshold only once {cfg.window} "
         "episodes have completed (no partial window at the start); the plain rows follow SB3's ep_rew_mean "
         f"(partial windows count once {cfg.min_episodes} episode(s) completed), the paper's reading.",
@@ -326,7 +327,8 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
                   "The paper credits its speedup and its detached success to the VLM; rows judged on hybrid vs "
                   "kinematic test that credit (the two arms share the dense kinematic term and differ only by the "
                   "VLM potential).", ""]
-    parts += [*_statistics_md(cfg, int(attribution.is_family(comparisons).sum()) if len(comparisons) else 0),
+    parts += [*_statistics_md(cfg, int(attribution.is_family(comparisons).sum()) if len(comparisons) else 0,
+                              get_task(data.task).auc_margin),
               "## Attribution: what the VLM and the dense term each add", ""]
     if len(comparisons):
         parts += [attribution.attribution_markdown(comparisons, cfg.ci, cfg.adjust),
@@ -415,7 +417,8 @@ def write_report(cfg: ReportConfig) -> ReportResult:
     table = build_table2(per_seed, data.eval_episodes, reported, thresholds, streams, cfg.window, cfg.ci, cfg.n_boot,
                          cfg.detached_cut, cfg.n_perm)
     comparisons = attribution.compare_arms(per_seed, thresholds, streams, cfg.n_boot, cfg.ci, cfg.n_perm,
-                                           alpha=1 - cfg.ci, margin=cfg.margin, adjust=cfg.adjust)
+                                           alpha=1 - cfg.ci, margin=cfg.margin, adjust=cfg.adjust,
+                                           auc_delta=task.auc_margin)
     results = claims_mod.evaluate_claims(table, per_seed, reported, streams, cfg.n_boot, cfg.ci, comparisons)
     hack = hacking.hacking_frame(per_seed, data.eval_episodes, cfg.ci, task.max_steps)
     note = vlm_note(data.runs)

@@ -35,7 +35,6 @@ from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, git_commit, package_versions
 from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
 from vlmrl_cli.report import hacking
-from vlmrl_cli.report.attribution import DEFAULT_AUC_DELTA
 from vlmrl_cli.report.table2 import per_seed_table
 from vlmrl_cli.report.writer import check_paths
 from vlmrl_cli.study import verdicts
@@ -85,6 +84,11 @@ class StudyResult:
         return float(sum(s["wall_s"] for s in self.stages))
 
 
+def auc_margin(cfg: StudyConfig) -> float:
+    """The equivalence margin of the study's learning-curve areas: its task's (``Task.auc_margin``)."""
+    return get_task(cfg.base.task).auc_margin
+
+
 def slug(name: str) -> str:
     """A folder name for a variant.
 
@@ -130,7 +134,7 @@ def run_study(
     for regime in cfg.regimes:
         sub = verdicts.subset(data, regime.run)
         row, per_seed = verdicts.regime_row(regime.id, sub, cfg.thresholds, streams, cfg.n_boot, cfg.ci, cfg.alpha,
-                                            cfg.margin, cfg.window)
+                                            cfg.margin, cfg.window, auc_margin(cfg))
         row["overrides"] = regime.label
         row["train_wall_s"] = sum(wall_s(client, r) for r in per_seed["run_id"])
         rows.append(row)
@@ -147,7 +151,7 @@ def run_study(
     ready = [c for c in verdicts.controls(cfg.cells)
              if all(len(runs_of(data.runs, side.regime.run)) >= 2 for side in (c.a, c.b))]
     control_rows = [verdicts.control_row(c, data, cfg.thresholds, streams, cfg.n_boot, cfg.ci, cfg.alpha, cfg.margin,
-                                         cfg.window) for c in ready]
+                                         cfg.window, auc_margin(cfg)) for c in ready]
     rows, control_rows = verdicts.adjust_family(rows, control_rows, cfg.adjust, cfg.alpha, cfg.margin)
     result.controls = pd.DataFrame(control_rows)
     result.power = power_lines(cfg, result.per_seed)
@@ -403,7 +407,8 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
               "rejects, and both point one way. A speedup of restricted means is a lower bound on the speedup of "
               "true means when the slower arm DNFs. Learning-curve area: per seed, the mean native return over the "
               "budget (each step weighs its episode's return); a difference of means with a bootstrap CI, a "
-              f"Mann-Whitney p, and equivalence within +-{DEFAULT_AUC_DELTA:g} return points. The unit is the seed. "
+              f"Mann-Whitney p, and equivalence within +-{auc_margin(cfg):g} return points (the task's margin). "
+              "The unit is the seed. "
               "`per_seed.csv` holds every run's figures, so every number here can be recomputed.", "",
               *result.power, ""]
     train = sum(r.get("train_wall_s", 0.0) for r in result.regime_map.to_dict("records"))

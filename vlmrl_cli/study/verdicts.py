@@ -101,7 +101,8 @@ def _pair_columns(key: str, comparisons: pd.DataFrame, a: str, b: str, top: floa
 
 def regime_row(name: str, data: ExperimentData, thresholds: Sequence[float], streams: stats.Streams,
                n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, alpha: float = 0.05,
-               margin: float = censored.DEFAULT_MARGIN, window: int = 100) -> tuple[dict[str, Any], pd.DataFrame]:
+               margin: float = censored.DEFAULT_MARGIN, window: int = 100,
+               auc_delta: float = attribution.DEFAULT_AUC_DELTA) -> tuple[dict[str, Any], pd.DataFrame]:
     """One regime's row of the map (per arm: reliability and restricted mean steps to the top
     threshold with CIs; per ``MAP_PAIRS`` pair: speedup, CI, rank-test p and verdict, reliability
     and learning-curve area differences) and its per-seed table."""
@@ -111,7 +112,8 @@ def regime_row(name: str, data: ExperimentData, thresholds: Sequence[float], str
     pairs = [attribution.Pair(a, b, meaning) for a, b, meaning in MAP_PAIRS
              if a in set(per_seed["arm"]) and b in set(per_seed["arm"])]
     comparisons = attribution.compare_arms(per_seed, thresholds, streams, n_boot, ci, alpha=alpha, margin=margin,
-                                           pairs=pairs, adjust="none")  # the family spans regimes: adjust_family
+                                           pairs=pairs, adjust="none",  # the family spans regimes: adjust_family
+                                           auc_delta=auc_delta)
     row: dict[str, Any] = {"regime": name, "seeds": int(per_seed.groupby("arm").size().max())}
     for arm in table.arms:
         rel, steps = table.cell("reliability", arm), table.cell(threshold_key(top), arm)
@@ -170,7 +172,8 @@ def controls(cells: Sequence[Cell]) -> list[Control]:
 
 def control_row(control: Control, data: ExperimentData, thresholds: Sequence[float], streams: stats.Streams,
                 n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, alpha: float = 0.05,
-                margin: float = censored.DEFAULT_MARGIN, window: int = 100) -> dict[str, Any]:
+                margin: float = censored.DEFAULT_MARGIN, window: int = 100,
+                auc_delta: float = attribution.DEFAULT_AUC_DELTA) -> dict[str, Any]:
     """One control comparison's row: each side's arm, knobs, seeds reaching the top threshold and
     restricted mean steps, then the comparison's columns (as the regime map's)."""
     top = max(thresholds)
@@ -180,7 +183,8 @@ def control_row(control: Control, data: ExperimentData, thresholds: Sequence[flo
     a, b = control.a.arm, control.b.arm
     pair = attribution.Pair(a, b, control.question)
     comparisons = attribution.compare_arms(per_seed, thresholds, streams, n_boot, ci, alpha=alpha, margin=margin,
-                                           pairs=[pair], adjust="none")  # the family spans controls: adjust_family
+                                           pairs=[pair], adjust="none",  # the family spans controls: adjust_family
+                                           auc_delta=auc_delta)
     row: dict[str, Any] = {"control": control.name, "question": control.question, "a": control.a.regime.id,
                            "b": control.b.regime.id, "a.arm": a, "b.arm": b}
     key = threshold_key(top)

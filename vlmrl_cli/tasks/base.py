@@ -76,6 +76,8 @@ class Task:
             over the task's default preset, one mapping per regime (empty: that preset alone).
         study_preset: the preset of ``vlmrl study --task``'s default regime, one calibrated so that
             the baseline is slow or unreliable (None: the default preset).
+        area_margin: the equivalence margin of a learning-curve area difference, in return units
+            (None: ``auc_margin``'s default, scaled to the task's return range).
     """
 
     name: str
@@ -101,6 +103,23 @@ class Task:
     window: int = 100
     calibration: tuple[Mapping[str, Any], ...] = ()
     study_preset: str | None = None
+    area_margin: float | None = None
+
+    @property
+    def auc_margin(self) -> float:
+        """The equivalence margin of a learning-curve area difference (return points): the task's
+        own, else a twelfth of the span of its thresholds, which is MountainCar-v0's +-5 return
+        points (-190 to -130); a task with one threshold takes a fortieth of its time limit.
+
+        Example:
+            >>> from vlmrl_cli.tasks.registry import get_task
+            >>> get_task("mountain-car").auc_margin, get_task("acrobot").auc_margin
+            (5.0, 25.0)
+        """
+        if self.area_margin is not None:
+            return self.area_margin
+        span = max(self.thresholds) - min(self.thresholds)
+        return span / 12 if span > 0 else self.max_steps / 40
 
     def __post_init__(self) -> None:
         problem = label_problem(self.label_potentials, self.milestones.labels)
