@@ -1,0 +1,75 @@
+#!/usr/bin/env bash
+# Retrain every committed result on the numeric pin (issue 27), resumably, from a git worktree at a
+# fixed commit, so that editing the main checkout cannot break the workers mid-run:
+#
+#   git worktree add /work/retrain <commit> && cd /work/retrain
+#   PY=/path/to/venv/bin/python STORE=/work/store-pinned bash scripts/retrain_pinned.sh
+#
+# Stages run in order and each is resumable (finished runs are never retrained). Before each
+# stage, the partial exports under results/resume/ (committed at the end of a session) are
+# imported into the stage's store, so a fresh machine picks up where the last one stopped.
+# Before a session stops: `bash scripts/retrain_pinned.sh export EXPERIMENT...` writes the partial
+# exports of the experiments named (of every one with a store when none is named).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PY:-python3}
+STORE=${STORE:-$PWD/results/_scratch/pinned}
+WORKERS=${WORKERS:-2}
+export PYTHONPATH=$PWD OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
+mkdir -p "$STORE" results/resume
+vlmrl() { "$PY" -m vlmrl_cli "$@"; }
+
+# experiment name -> store file
+declare -A DB=(
+  [tasks-acrobot-calibrate]=acrobot.db [tasks-acrobot-study]=acrobot.db
+  [tasks-mcc-calibrate]=mcc.db [tasks-mcc-study]=mcc.db
+  [vlmrl-calibrate]=calibration.db [vlmrl-study]=study.db
+)
+uri() { echo "sqlite:///$STORE/${DB[$1]}"; }
+
+resume() {  # import the partial export of experiment $1, if one was committed
+  local file="results/resume/$1.jsonl.gz"
+  if [[ -f $file ]]; then vlmrl import "$file" --experiment "$1" --tracking-uri "$(uri "$1")"; fi
+}
+
+if [[ ${1:-} == export ]]; then  # the finished runs of unfinished stages, for the next session
+  shift
+  names=("$@")
+  [[ ${#names[@]} -gt 0 ]] || names=("${!DB[@]}")
+  for exp in "${names[@]}"; do
+    [[ -f $STORE/${DB[$exp]} ]] || continue
+    vlmrl export --experiment "$exp" --tracking-uri "$(uri "$exp")" --out "results/resume/$exp.jsonl.gz" || true
+  done
+  exit 0
+fi
+
+task_stage() {  # $1 short name, $2 task, $3 study regime
+  resume "tasks-$1-calibrate"
+  vlmrl calibrate --task "$2" --seeds 5 --workers "$WORKERS" --experiment "tasks-$1-calibrate" \
+    --tracking-uri "$(uri "tasks-$1-calibrate")" --out "results/tasks/$2/calibration"
+  vlmrl export --experiment "tasks-$1-calibrate" --tracking-uri "$(uri "tasks-$1-calibrate")" \
+    --out "results/tasks/$2/runs-calibration.jsonl.gz"
+  resume "tasks-$1-study"
+  vlmrl study --task "$2" --regime "$3" --seeds 10 --alphas none --kin-scales none --query-flickers none \
+    --workers "$WORKERS" --experiment "tasks-$1-study" --tracking-uri "$(uri "tasks-$1-study")" \
+    --out "results/tasks/$2/study"
+  vlmrl export --experiment "tasks-$1-study" --tracking-uri "$(uri "tasks-$1-study")" \
+    --out "results/tasks/$2/runs-study.jsonl.gz"
+}
+
+task_stage acrobot acrobot zoo-100k-lr1e-4
+task_stage mcc mountain-car-continuous sb3-default-100k
+
+# MountainCar's calibration: the default grid and the 2x2 grid (results/calibration/)
+resume vlmrl-calibrate
+vlmrl calibrate --workers "$WORKERS" --experiment vlmrl-calibrate --tracking-uri "$(uri vlmrl-calibrate)" \
+  --out results/calibration
+vlmrl calibrate --workers "$WORKERS" --grid ppo.normalize_reward=true,false --grid ppo.learning_rate=0.0003,0.0001 \
+  --experiment vlmrl-calibrate --tracking-uri "$(uri vlmrl-calibrate)" --out results/calibration/grid-2x2
+
+# the study (its default grid, 20 seeds), then the learning-rate refinement on the same store
+resume vlmrl-study
+vlmrl study --out results/study --experiment vlmrl-study --tracking-uri "$(uri vlmrl-study)" --workers "$WORKERS"
+vlmrl calibrate --seeds 20 --set ppo.normalize_reward=false --grid ppo.learning_rate=0.00015,0.0002 \
+  --experiment vlmrl-study --tracking-uri "$(uri vlmrl-study)" --out results/calibration/refine-lr --workers "$WORKERS"
+vlmrl export --experiment vlmrl-study --tracking-uri "$(uri vlmrl-study)" --out results/study/runs/pinned.jsonl.gz
