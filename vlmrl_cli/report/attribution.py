@@ -13,7 +13,7 @@ probability of improvement on the final return. The unit of every comparison is 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,7 +26,9 @@ from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST
 from vlmrl_cli.analysis.proportions import compare_proportions
 from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM, probability_of_improvement
 from vlmrl_cli.core import tables
-from vlmrl_cli.report.table2 import BASELINE, judge_steps, threshold_key
+from vlmrl_cli.report.table2 import judge_steps, threshold_key
+from vlmrl_cli.shaping.arms import ARMS, ArmSpec
+from vlmrl_cli.shaping.arms import comparisons as registry_comparisons
 
 
 @dataclass(frozen=True)
@@ -42,13 +44,17 @@ class Pair:
         return f"{self.a} vs {self.b}"
 
 
-PAIRS = (
-    Pair("hybrid", BASELINE, "the whole method"),
-    Pair("hybrid", "kinematic", "what the VLM itself adds"),
-    Pair("hybrid", "hybrid-shuffled", "the labels' content (placebo: the same labels through a shuffled map)"),
-    Pair("kinematic", BASELINE, "what the dense kinematic term adds"),
-    Pair("semantic", BASELINE, "the VLM potential alone"),
-)
+def registry_pairs(registry: Mapping[str, ArmSpec] = ARMS) -> tuple[Pair, ...]:
+    """Every comparison of ``registry`` (each arm's ``compared_with``) as a pair, in the report's order.
+
+    Example:
+        >>> registry_pairs()[0]
+        Pair(a='hybrid', b='baseline', meaning='the whole method')
+    """
+    return tuple(Pair(a, b, meaning) for a, b, meaning in registry_comparisons(registry))
+
+
+PAIRS = registry_pairs()
 #: ``p_value``: the raw p of the row's test; ``p_adj``: for speedups, adjusted within the family of
 #: every speedup of the table (NaN for other metrics, and for a speedup not measured);
 #: ``logrank_p``/``logrank_p_adj``: the log-rank test beside the rank test; ``tests_disagree``: which
@@ -61,15 +67,15 @@ COLUMNS = ["pair", "meaning", "metric", "label", "unit", "value", "ci_low", "ci_
 DEFAULT_AUC_DELTA = 5.0
 
 
-def present_pairs(arms: Sequence[str]) -> list[Pair]:
-    """The pairs of ``PAIRS`` whose two arms both ran.
+def present_pairs(arms: Sequence[str], registry: Mapping[str, ArmSpec] = ARMS) -> list[Pair]:
+    """The pairs of ``registry`` whose two arms both ran.
 
     Example:
         >>> [p.name for p in present_pairs(["baseline", "hybrid", "kinematic"])]
         ['hybrid vs baseline', 'hybrid vs kinematic', 'kinematic vs baseline']
     """
     have = set(arms)
-    return [p for p in PAIRS if p.a in have and p.b in have]
+    return [p for p in registry_pairs(registry) if p.a in have and p.b in have]
 
 
 def _row(pair: Pair, metric: str, label: str, unit: str, est: stats.Estimate, p_value: float, test: str,
@@ -105,7 +111,7 @@ def compare_arms(
     per_seed: pd.DataFrame, thresholds: Sequence[float], rng: np.random.Generator | stats.Streams,
     n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, n_perm: int = DEFAULT_N_PERM,
     alpha: float = 0.05, margin: float = censored.DEFAULT_MARGIN, auc_delta: float = DEFAULT_AUC_DELTA,
-    pairs: Sequence[Pair] | None = None, adjust: str = DEFAULT_ADJUST,
+    pairs: Sequence[Pair] | None = None, adjust: str = DEFAULT_ADJUST, registry: Mapping[str, ArmSpec] = ARMS,
 ) -> pd.DataFrame:
     """Every comparison of every present pair (columns ``COLUMNS``), from ``per_seed`` (see ``per_seed_table``).
 
@@ -116,11 +122,12 @@ def compare_arms(
     Metrics: ``speedup_<t>`` (a over b, x), ``reliability_diff`` (seeds reaching the top threshold,
     a minus b), ``detached_success_diff`` (seeds succeeding detached, a minus b), ``poi_final_return``
     (P(final return of a seed of a > that of b), higher return is better), and ``auc_diff`` when
-    ``per_seed`` has an ``auc`` column. ``pairs``: the pairs to compare (default: ``PAIRS`` present).
+    ``per_seed`` has an ``auc`` column. ``pairs``: the pairs to compare (default: those of ``registry``
+    whose two arms are present).
     """
     rows: list[dict[str, Any]] = []
     top = max(thresholds)
-    chosen = present_pairs(per_seed["arm"].unique().tolist()) if pairs is None else pairs
+    chosen = present_pairs(per_seed["arm"].unique().tolist(), registry) if pairs is None else pairs
     for pair in chosen:
         da, db = per_seed[per_seed["arm"] == pair.a], per_seed[per_seed["arm"] == pair.b]
         for t in thresholds:

@@ -35,7 +35,8 @@ import pandas as pd
 from vlmrl_cli.analysis import stats
 from vlmrl_cli.core import tables
 from vlmrl_cli.report.attribution import compare_arms, lookup, lookup_verdict
-from vlmrl_cli.report.table2 import BASELINE, Table2, threshold_key
+from vlmrl_cli.report.table2 import Table2, threshold_key
+from vlmrl_cli.shaping.arms import BASELINE, METHOD, PURE_VISION
 
 MIN_SEEDS = 3
 APPROX_TOLERANCE = 0.10
@@ -183,11 +184,11 @@ def evaluate_claims(
         direction, unit, n_seeds, p_value, p_raw, pair = ">", "", None, float("nan"), float("nan"), ""
         comparison: tuple[str, str, str] | None = None  # (a, b, metric) of a comparative claim
         if "vs" in spec:
-            comparison = ("hybrid", str(spec["vs"]), str(spec["metric"]))
+            comparison = (METHOD, str(spec["vs"]), str(spec["metric"]))
         elif cid.startswith("speedup_"):
-            comparison = ("hybrid", BASELINE, cid)
+            comparison = (METHOD, BASELINE, cid)
         elif cid == "reliability_gap":
-            comparison = ("hybrid", BASELINE, "reliability_diff")
+            comparison = (METHOD, BASELINE, "reliability_diff")
         if comparison is not None:
             a, b, metric = comparison
             need, unit, pair = {a, b}, _comparison_unit(metric), f"{a} vs {b}"
@@ -212,18 +213,18 @@ def evaluate_claims(
             need, unit = {arm}, "%"
             est = _est_from_cell(table.cell("eval_success", arm))
         elif cid == "detached_length_hybrid":
-            need, unit = {"hybrid"}, " steps"
-            est = _est_from_cell(table.cell("eval_length", "hybrid"))
-            n_seeds = int((per_seed["arm"] == "hybrid").sum())
+            need, unit = {METHOD}, " steps"
+            est = _est_from_cell(table.cell("eval_length", METHOD))
+            n_seeds = int((per_seed["arm"] == METHOD).sum())
         elif cid == "narrower_variance":
-            need, null, direction, unit = {"hybrid", BASELINE}, 0.0, "<", ""
+            need, null, direction, unit = {METHOD, BASELINE}, 0.0, "<", ""
             if need <= arms:
-                a_ret = per_seed.loc[per_seed["arm"] == "hybrid", "final_return"].to_numpy(dtype=float)
+                a_ret = per_seed.loc[per_seed["arm"] == METHOD, "final_return"].to_numpy(dtype=float)
                 b_ret = per_seed.loc[per_seed["arm"] == BASELINE, "final_return"].to_numpy(dtype=float)
                 est = stats.std_difference(a_ret, b_ret, stats.stream(rng, "claims/narrower_variance"), n_boot, ci)
         elif cid == "zero_convergence":
-            need, unit = {"vision-float"}, "%"
-            est = _est_from_cell(table.cell("reliability", "vision-float"))
+            need, unit = {PURE_VISION}, "%"
+            est = _est_from_cell(table.cell("reliability", PURE_VISION))
         missing = need - arms
         if missing:
             reason = f"arm {', '.join(sorted(missing))} not in this experiment"

@@ -10,7 +10,7 @@ IQM and spread); ``to_markdown`` / ``to_latex`` / ``to_csv`` render it.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,20 +25,19 @@ from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM, RankTest, censored_rank_tes
 from vlmrl_cli.analysis.survival import LogRank, censored_logrank
 from vlmrl_cli.analysis.thresholds import full_window_steps_to_threshold, steps_to_threshold
 from vlmrl_cli.core import tables
-from vlmrl_cli.shaping.arms import ARMS
+from vlmrl_cli.shaping.arms import ARMS, BASELINE, METHOD, ArmSpec, report_order
 
-BASELINE = "baseline"
 NEEDS_BASELINE = "needs baseline arm"
 
 
-def order_arms(arms: Sequence[str]) -> list[str]:
-    """The paper's order (hybrid, baseline), then the registry's, then any others alphabetically.
+def order_arms(arms: Sequence[str], registry: Mapping[str, ArmSpec] = ARMS) -> list[str]:
+    """The registry's report order (the paper's hybrid, baseline first), then any others alphabetically.
 
     Example:
         >>> order_arms(["kinematic", "zeta", "baseline", "hybrid"])
         ['hybrid', 'baseline', 'kinematic', 'zeta']
     """
-    known = ["hybrid", "baseline", *[a for a in ARMS if a not in ("hybrid", "baseline")]]
+    known = report_order(registry)
     present = set(arms)
     return [a for a in known if a in present] + sorted(present - set(known))
 
@@ -189,6 +188,7 @@ def build_table2(
     n_boot: int = stats.DEFAULT_N_BOOT,
     detached_cut: float = DETACHED_SUCCESS_CUT,
     n_perm: int = DEFAULT_N_PERM,
+    registry: Mapping[str, ArmSpec] = ARMS,
 ) -> Table2:
     """Table 2 from ``per_seed`` (see ``per_seed_table``) and per-episode eval lengths (may be empty).
 
@@ -197,9 +197,9 @@ def build_table2(
     ``detached_cut``; both with Wilson intervals over seeds. Detached eval mean length uses the
     per-episode lengths when logged (pooled over seeds), else one value per seed. ``rng``: one
     shared generator, or ``Streams`` for one stream per (metric, arm) so that no cell's interval
-    depends on which other cells exist.
+    depends on which other cells exist. ``registry``: the arms whose report order the columns follow.
     """
-    arms = tuple(order_arms(per_seed["arm"].unique().tolist()))
+    arms = tuple(order_arms(per_seed["arm"].unique().tolist(), registry))
     top = max(thresholds)
     labels = {threshold_key(t): f"Steps to reach {t:g} (restricted mean, DNF at the budget)" for t in thresholds}
     labels |= {full_window_key(t): f"Steps to reach {t:g}, full {window}-episode window (restricted mean)"
@@ -277,7 +277,7 @@ def build_table2(
                 est, test = stats.Estimate(float("nan"), note=NEEDS_BASELINE), None
             speed_rows.append({"metric": threshold_key(t), "arm": arm, "value": est.value, "ci_low": est.low,
                                "ci_high": est.high, "n": est.n,
-                               "paper": float(paper) if paper is not None and arm == "hybrid" else float("nan"),
+                               "paper": float(paper) if paper is not None and arm == METHOD else float("nan"),
                                "note": est.note, "p_value": test.p_value if test else float("nan"),
                                "p_faster": test.p_faster if test else float("nan")})
     speed_cols = ["metric", "arm", "value", "ci_low", "ci_high", "n", "paper", "note", "p_value", "p_faster"]
@@ -392,13 +392,13 @@ def _paper_cell(metric: str, value: Any) -> str:
 def display_frame(table: Table2) -> pd.DataFrame:
     """The wide table as strings: metric rows; our arms, the paper's hybrid/baseline, speedups."""
     ci_pct = f"{100 * table.ci:g}% CI"
-    speed_arms = [a for a in table.arms if a != BASELINE] if table.has_baseline else ["hybrid"]
+    speed_arms = [a for a in table.arms if a != BASELINE] if table.has_baseline else [METHOD]
     records = []
     for metric, label in table.labels.items():
         rec: dict[str, str] = {"Metric": label}
         for arm in table.arms:
             rec[f"{arm} (ours [{ci_pct}])"] = format_cell(table.cell(metric, arm))
-        for arm in ("hybrid", BASELINE):
+        for arm in (METHOD, BASELINE):  # the paper's two arms
             rec[f"{arm} (paper)"] = _paper_cell(metric, table.paper.get(metric, {}).get(arm))
         partial = metric.startswith("steps_")  # speedups are shown beside the paper's (partial) window
         for arm in speed_arms:

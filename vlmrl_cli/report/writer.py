@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,6 +37,7 @@ from vlmrl_cli.report.table2 import (
     to_markdown,
     write_table2,
 )
+from vlmrl_cli.shaping.arms import ARMS, DENSE, METHOD, ArmSpec
 from vlmrl_cli.shaping.hacking import HOVER_FLAG
 from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
@@ -193,7 +194,7 @@ def _disagreements(table: Table2, results: Sequence[claims_mod.ClaimResult]) -> 
             paper = format_cell({**c, "value": c["paper"], "ci_low": np.nan, "ci_high": np.nan, "n_reached": c["n"]})
             lines.append(f"- {label}, {arm}: paper {paper}, ours {format_cell(c)} ({where}).")
     for t in table.thresholds:
-        s = table.speedup(t, "hybrid")
+        s = table.speedup(t, METHOD)
         if s is not None and np.isfinite(s["paper"]) and np.isfinite(s["value"]):
             lines.append(f"- Speedup to {t:g}: paper {s['paper']:.1f}x, ours {s['value']:.2f}x"
                          + (f" [{s['ci_low']:.2f}, {s['ci_high']:.2f}]" if np.isfinite(s["ci_low"]) else "") + ".")
@@ -335,7 +336,7 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
                   "Files: [attribution.md](attribution.md), [attribution.csv](attribution.csv).", ""]
     else:
         parts += ["No pair of arms to compare (needs two of hybrid, kinematic, semantic, baseline).", ""]
-    if "hybrid" in table.arms and "kinematic" not in table.arms:
+    if METHOD in table.arms and DENSE not in table.arms:
         parts += ["Without the `kinematic` arm nothing here separates the VLM from the dense term: claims that "
                   "credit the VLM are not tested.", ""]
     parts += ["## Aggregates", "", "![Performance profile](performance_profile.png)", "",
@@ -393,8 +394,9 @@ def _write_frame(frame: pd.DataFrame, stem: Path, vlm: str, markdown: str) -> li
     return [md, csv]
 
 
-def write_report(cfg: ReportConfig) -> ReportResult:
-    """Read the experiment's finished runs and write every report file under ``cfg.out``.
+def write_report(cfg: ReportConfig, registry: Mapping[str, ArmSpec] = ARMS) -> ReportResult:
+    """Read the experiment's finished runs and write every report file under ``cfg.out``; ``registry``:
+    the arms whose order and comparisons Table 2 and the attribution table follow.
 
     Raises:
         BadInput: bad settings, unwritable ``out``, unreachable store, missing or empty experiment.
@@ -415,10 +417,10 @@ def write_report(cfg: ReportConfig) -> ReportResult:
 
     per_seed = per_seed_table(data, thresholds, cfg.window, cfg.min_episodes, cfg.detached_cut)
     table = build_table2(per_seed, data.eval_episodes, reported, thresholds, streams, cfg.window, cfg.ci, cfg.n_boot,
-                         cfg.detached_cut, cfg.n_perm)
+                         cfg.detached_cut, cfg.n_perm, registry)
     comparisons = attribution.compare_arms(per_seed, thresholds, streams, cfg.n_boot, cfg.ci, cfg.n_perm,
                                            alpha=1 - cfg.ci, margin=cfg.margin, adjust=cfg.adjust,
-                                           auc_delta=task.auc_margin)
+                                           auc_delta=task.auc_margin, registry=registry)
     results = claims_mod.evaluate_claims(table, per_seed, reported, streams, cfg.n_boot, cfg.ci, comparisons)
     hack = hacking.hacking_frame(per_seed, data.eval_episodes, cfg.ci, task.max_steps)
     note = vlm_note(data.runs)

@@ -31,6 +31,7 @@ from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
 from vlmrl_cli.calibration.regimes import Regime, resolve_regime
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.probe.scoring import DEFAULT_STATES
+from vlmrl_cli.shaping.arms import BASELINE, DENSE, METHOD, NO_LOCK, PLACEBO_OF, POTENTIAL_ONLY
 from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
 from vlmrl_cli.training.config import RunConfig, resolve
 from vlmrl_cli.training.overrides import parse_assignment, parse_value
@@ -39,10 +40,10 @@ from vlmrl_cli.vlm.config import SIM_PROFILES
 
 DEFAULT_EXPERIMENT = "vlmrl-study"
 DEFAULT_SEEDS = 20
-PLACEBO_ARM = "hybrid-shuffled"
+PLACEBO_ARM = PLACEBO_OF[METHOD]
 # hybrid and its placebo first: a study stopped part-way has the comparison it exists for
-DEFAULT_ARMS = ("baseline", "hybrid", PLACEBO_ARM, "kinematic", "semantic")
-VARIANT_ARM = "hybrid"
+DEFAULT_ARMS = (BASELINE, METHOD, PLACEBO_ARM, DENSE, POTENTIAL_ONLY)
+VARIANT_ARM = METHOD
 CALIBRATED = "paper-unreliable"
 #: The dose-response grid (issue 18): PBRS scales x kinematic scales, in the VLM regime. alpha 0 is
 #: the dense term alone (the kinematic arm; with kin_scale 0 the baseline), kin_scale 0 the VLM's
@@ -53,7 +54,7 @@ DEFAULT_KIN_SCALES: tuple[float, ...] = (0.0, 0.5, 2.0)
 #: Per-query (temporal) flicker rates at which the hybrid and hybrid-no-lock are compared: what
 #: the hysteresis lock is for.
 DEFAULT_QUERY_FLICKERS: tuple[float, ...] = (0.3,)
-LOCK_ARMS: tuple[str, ...] = ("hybrid", "hybrid-no-lock")
+LOCK_ARMS: tuple[str, ...] = (METHOD, NO_LOCK)
 #: The default grid: the calibrated regime whose baseline fails on some seeds (reliability is
 #: testable there), where every arm, the placebo and the controls run. The study of 2026-11-29
 #: (results/study/2026-11-29/) ran `paper`, `paper-calibrated` and `hard` at 10 seeds; pass them
@@ -101,10 +102,10 @@ def dose_point(alpha: float, kin_scale: float, placebo: bool = False) -> tuple[s
     if placebo:  # there is no semantic placebo arm: the placebo with kin_scale 0 pays the same
         return PLACEBO_ARM, {"shaping.alpha": float(alpha), "shaping.kin_scale": float(kin_scale)}
     if alpha == 0:
-        return ("baseline", {}) if kin_scale == 0 else ("kinematic", {"shaping.kin_scale": float(kin_scale)})
+        return (BASELINE, {}) if kin_scale == 0 else (DENSE, {"shaping.kin_scale": float(kin_scale)})
     if kin_scale == 0:
-        return "semantic", {"shaping.alpha": float(alpha)}
-    return "hybrid", {"shaping.alpha": float(alpha), "shaping.kin_scale": float(kin_scale)}
+        return POTENTIAL_ONLY, {"shaping.alpha": float(alpha)}
+    return METHOD, {"shaping.alpha": float(alpha), "shaping.kin_scale": float(kin_scale)}
 
 
 def control_points(alphas: Sequence[float], kin_scales: Sequence[float], query_flickers: Sequence[float]

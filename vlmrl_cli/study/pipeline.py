@@ -37,6 +37,7 @@ from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
 from vlmrl_cli.report import hacking
 from vlmrl_cli.report.table2 import per_seed_table
 from vlmrl_cli.report.writer import check_paths
+from vlmrl_cli.shaping.arms import BASELINE
 from vlmrl_cli.study import verdicts
 from vlmrl_cli.study.config import StudyConfig
 from vlmrl_cli.sweep import cost as cost_model
@@ -276,7 +277,7 @@ def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None) -> list[
               else f"an assumed sd of log steps of {DEFAULT_SD_LOG} (no finished runs with any spread to measure)")
     sd = sd if sd > 0 else DEFAULT_SD_LOG
     n = len(cfg.base.seeds)
-    base = per_seed[(per_seed["arm"] == "baseline") & (per_seed["variant"] == "")] if per_seed is not None and len(
+    base = per_seed[(per_seed["arm"] == BASELINE) & (per_seed["variant"] == "")] if per_seed is not None and len(
         per_seed) else None
     rate = float(base[f"reached_{cfg.top:g}"].mean()) if base is not None and len(base) else 0.6
     what = "the baseline's observed" if base is not None and len(base) else "the paper's baseline"

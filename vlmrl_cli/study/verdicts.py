@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,7 +28,6 @@ from vlmrl_cli.core import tables
 from vlmrl_cli.probe.metrics import spearman
 from vlmrl_cli.report import attribution, figures
 from vlmrl_cli.report.table2 import (
-    BASELINE,
     build_table2,
     compare_steps,
     format_cell,
@@ -36,6 +35,7 @@ from vlmrl_cli.report.table2 import (
     per_seed_table,
     threshold_key,
 )
+from vlmrl_cli.shaping.arms import ARMS, BASELINE, DENSE, METHOD, NO_LOCK, ArmSpec, comparisons
 from vlmrl_cli.study.config import PLACEBO_ARM, Cell
 from vlmrl_cli.training.config import RunConfig
 
@@ -45,10 +45,20 @@ NEITHER = "neither arm reaches the threshold"
 #: The study's family of comparisons, as its Method text names it.
 FAMILY_WHAT = ("The study's comparisons of steps to the top threshold (each regime's map pairs and each "
                "control)")
-#: The comparisons of the regime map: (arm a, arm b, what the difference isolates).
-MAP_PAIRS = (("hybrid", BASELINE, "the whole method"), ("hybrid", "kinematic", "what the VLM itself adds"),
-             ("hybrid", PLACEBO_ARM, "the labels' content (placebo)"),
-             ("kinematic", BASELINE, "what the dense term adds"))
+
+
+def map_pairs(registry: Mapping[str, ArmSpec] = ARMS) -> tuple[tuple[str, str, str], ...]:
+    """The comparisons of the regime map: (arm a, arm b, what the difference isolates), those of
+    ``registry`` that the study makes (``Comparison.in_study``), in the report's order.
+
+    Example:
+        >>> [f"{a}_vs_{b}" for a, b, _ in map_pairs()][-1]
+        'kinematic_vs_baseline'
+    """
+    return tuple(comparisons(registry, study=True))
+
+
+MAP_PAIRS = map_pairs()
 
 
 def _restrict(data: ExperimentData, runs: pd.DataFrame) -> ExperimentData:
@@ -102,14 +112,16 @@ def _pair_columns(key: str, comparisons: pd.DataFrame, a: str, b: str, top: floa
 def regime_row(name: str, data: ExperimentData, thresholds: Sequence[float], streams: stats.Streams,
                n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, alpha: float = 0.05,
                margin: float = censored.DEFAULT_MARGIN, window: int = 100,
-               auc_delta: float = attribution.DEFAULT_AUC_DELTA) -> tuple[dict[str, Any], pd.DataFrame]:
+               auc_delta: float = attribution.DEFAULT_AUC_DELTA, registry: Mapping[str, ArmSpec] = ARMS
+               ) -> tuple[dict[str, Any], pd.DataFrame]:
     """One regime's row of the map (per arm: reliability and restricted mean steps to the top
-    threshold with CIs; per ``MAP_PAIRS`` pair: speedup, CI, rank-test p and verdict, reliability
-    and learning-curve area differences) and its per-seed table."""
+    threshold with CIs; per ``map_pairs(registry)`` pair: speedup, CI, rank-test p and verdict,
+    reliability and learning-curve area differences) and its per-seed table."""
     top = max(thresholds)
     per_seed = per_seed_table(data, thresholds, window)
-    table = build_table2(per_seed, data.eval_episodes, {}, thresholds, streams, window=window, n_boot=n_boot, ci=ci)
-    pairs = [attribution.Pair(a, b, meaning) for a, b, meaning in MAP_PAIRS
+    table = build_table2(per_seed, data.eval_episodes, {}, thresholds, streams, window=window, n_boot=n_boot, ci=ci,
+                         registry=registry)
+    pairs = [attribution.Pair(a, b, meaning) for a, b, meaning in map_pairs(registry)
              if a in set(per_seed["arm"]) and b in set(per_seed["arm"])]
     comparisons = attribution.compare_arms(per_seed, thresholds, streams, n_boot, ci, alpha=alpha, margin=margin,
                                            pairs=pairs, adjust="none",  # the family spans regimes: adjust_family
@@ -124,7 +136,7 @@ def regime_row(name: str, data: ExperimentData, thresholds: Sequence[float], str
                 f"{arm}.steps": steps["value"], f"{arm}.steps_low": steps["ci_low"],
                 f"{arm}.steps_high": steps["ci_high"], f"{arm}.reliability_text": format_cell(rel),
                 f"{arm}.steps_text": format_cell(steps)}
-    for a, b, _ in MAP_PAIRS:
+    for a, b, _ in map_pairs(registry):
         none_reach = row.get(f"{a}.reached", 0) == 0 and row.get(f"{b}.reached", 0) == 0
         row |= _pair_columns(f"{a}_vs_{b}", comparisons, a, b, top, none_reach)
     return row, per_seed
@@ -161,11 +173,11 @@ def controls(cells: Sequence[Cell]) -> list[Control]:
                                "is it the labels' content?", c, placebo))
     flicker = [c for c in cells if c.kind == "query-flicker"]
     for c in flicker:
-        if c.arm != "hybrid":
+        if c.arm != METHOD:
             continue
-        other = next((d for d in flicker if d.arm == "hybrid-no-lock" and d.query_flicker == c.query_flicker), None)
+        other = next((d for d in flicker if d.arm == NO_LOCK and d.query_flicker == c.query_flicker), None)
         if other is not None:
-            out.append(Control(f"query flicker {c.query_flicker:g}: hybrid vs hybrid-no-lock",
+            out.append(Control(f"query flicker {c.query_flicker:g}: {METHOD} vs {NO_LOCK}",
                                "what the hysteresis lock is for", c, other))
     return out
 
@@ -198,11 +210,11 @@ def control_row(control: Control, data: ExperimentData, thresholds: Sequence[flo
     return row | _pair_columns("cmp", comparisons, a, b, top, none_reach)
 
 
-def family_keys(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[str, Any]]
-                ) -> list[tuple[str, int, str]]:
+def family_keys(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[str, Any]],
+                registry: Mapping[str, ArmSpec] = ARMS) -> list[tuple[str, int, str]]:
     """Where the study's comparisons of steps to the top threshold sit: ``("map" | "control", row
-    index, column key)`` for each regime's ``MAP_PAIRS`` pair and each control, in table order."""
-    found = [("map", i, f"{a}_vs_{b}") for i, r in enumerate(map_rows) for a, b, _ in MAP_PAIRS
+    index, column key)`` for each regime's ``map_pairs(registry)`` pair and each control, in table order."""
+    found = [("map", i, f"{a}_vs_{b}") for i, r in enumerate(map_rows) for a, b, _ in map_pairs(registry)
              if f"{a}_vs_{b}.speedup" in r]
     return found + [("control", i, "cmp") for i, r in enumerate(control_rows) if "cmp.speedup" in r]
 
@@ -215,14 +227,15 @@ def _made(row: dict[str, Any], key: str) -> bool:
 
 
 def adjust_family(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[str, Any]],
-                  method: str = DEFAULT_ADJUST, alpha: float = 0.05, margin: float = censored.DEFAULT_MARGIN
-                  ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+                  method: str = DEFAULT_ADJUST, alpha: float = 0.05, margin: float = censored.DEFAULT_MARGIN,
+                  registry: Mapping[str, ArmSpec] = ARMS) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """The study's comparisons of steps to the top threshold (every regime's map pairs and every
     control) as one family: copies of the rows with ``.p_adj``, ``.logrank_p_adj``,
     ``.tests_disagree`` and the ``.verdict`` judged on the adjusted p (``censored.judge_family``).
     A comparison not made (a side absent, or neither arm reaching the threshold) stays out."""
     rows = {"map": [dict(r) for r in map_rows], "control": [dict(r) for r in control_rows]}
-    keys = [(table, i, key) for table, i, key in family_keys(map_rows, control_rows) if _made(rows[table][i], key)]
+    keys = [(table, i, key) for table, i, key in family_keys(map_rows, control_rows, registry)
+            if _made(rows[table][i], key)]
     if not keys:
         return rows["map"], rows["control"]
 
@@ -241,10 +254,11 @@ def adjust_family(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dic
     return rows["map"], rows["control"]
 
 
-def family_size(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[str, Any]]) -> int:
+def family_size(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[str, Any]],
+                registry: Mapping[str, ArmSpec] = ARMS) -> int:
     """How many comparisons the study's family holds (those made)."""
     tables_ = {"map": map_rows, "control": control_rows}
-    return sum(_made(tables_[t][i], k) for t, i, k in family_keys(map_rows, control_rows))
+    return sum(_made(tables_[t][i], k) for t, i, k in family_keys(map_rows, control_rows, registry))
 
 
 def format_speedup(row: dict[str, Any], key: str) -> str:
@@ -305,12 +319,13 @@ def controls_markdown(rows: Sequence[dict[str, Any]], top: float, margin: float,
 
 
 def map_markdown(rows: Sequence[dict[str, Any]], top: float, ci: float = 0.95,
-                 margin: float = censored.DEFAULT_MARGIN, adjust: str = DEFAULT_ADJUST) -> str:
+                 margin: float = censored.DEFAULT_MARGIN, adjust: str = DEFAULT_ADJUST,
+                 registry: Mapping[str, ArmSpec] = ARMS) -> str:
     """The regime map: one line per regime, each arm's reliability and steps to ``top``, both speedups."""
-    arms = order_arms(sorted({k.split(".")[0] for r in rows for k in r if k.endswith(".reliability")}))
+    arms = order_arms(sorted({k.split(".")[0] for r in rows for k in r if k.endswith(".reliability")}), registry)
     pct = f"{100 * ci:g}%"
     head = ["Regime", "Seeds"] + [f"{a}: reliability [{pct} Wilson]; steps to {top:g} [{pct} CI]" for a in arms]
-    pairs = [(a, b) for a, b, _ in MAP_PAIRS if any(f"{a}_vs_{b}.speedup" in r for r in rows)]
+    pairs = [(a, b) for a, b, _ in map_pairs(registry) if any(f"{a}_vs_{b}.speedup" in r for r in rows)]
     head += [f"Speedup {a} / {b} to {top:g} [{pct} CI], rank p ({adjust}-adj.); log-rank p ({adjust}-adj.) "
              f"(verdict, margin {margin:g}x)" for a, b in pairs]
     body = []
@@ -327,9 +342,9 @@ def vlm_point(name: str, data: ExperimentData, top: float, accuracy: float, stre
     """One VLM-quality point: the variant's measured MCQ accuracy and the hybrid's speedup over the
     baseline to ``top`` (``data``: the reference regime's baseline runs and the variant's hybrid runs)."""
     per_seed = per_seed_table(data, [top])
-    est, test = compare_steps(per_seed, "hybrid", BASELINE, top, streams, n_boot, ci)
+    est, test = compare_steps(per_seed, METHOD, BASELINE, top, streams, n_boot, ci)
     return {"variant": name, "mcq_accuracy": accuracy, "speedup": est.value, "low": est.low, "high": est.high,
-            "p": test.p_value, "hybrid_seeds": int((per_seed["arm"] == "hybrid").sum()),
+            "p": test.p_value, "hybrid_seeds": int((per_seed["arm"] == METHOD).sum()),
             "baseline_seeds": int((per_seed["arm"] == BASELINE).sum())}
 
 
@@ -362,12 +377,12 @@ def _answer(row: dict[str, Any], key: str) -> str:
 
 def summary(rows: Sequence[dict[str, Any]], points: pd.DataFrame, top: float, alpha: float, vlm_regime: str,
             control_rows: Sequence[dict[str, Any]] = (), margin: float = censored.DEFAULT_MARGIN,
-            adjust: str = DEFAULT_ADJUST, ci: float = 0.95) -> list[str]:
+            adjust: str = DEFAULT_ADJUST, ci: float = 0.95, registry: Mapping[str, ArmSpec] = ARMS) -> list[str]:
     """The report's opening: the answers to the study's questions, in sentences made from the numbers.
     Every verdict follows ``censored.judge_speedup`` on the rank test's p adjusted within the study's
     family (``adjust_family``): faster / slower, equivalent within ``margin``, or inconclusive
     (saying which way it leans)."""
-    size = family_size(rows, control_rows)
+    size = family_size(rows, control_rows, registry)
     lines = [f"- Verdicts on steps to {top:g}: {multiplicity.family_line(adjust, size, FAMILY_WHAT)}. Faster/slower "
              f"when the adjusted censored rank test rejects at {alpha:g} and the {100 * ci:g}% interval of the "
              f"speedup excludes 1 on the same side; {censored.equivalent(margin)} when the "
@@ -376,19 +391,19 @@ def summary(rows: Sequence[dict[str, Any]], points: pd.DataFrame, top: float, al
              f"way. {censored.RULE[0].upper()}{censored.RULE[1:]}."]
     for r in rows:
         rel = ", ".join(f"{a} {r[f'{a}.reached']}/{r[f'{a}.n']}" for a in order_arms(
-            [k.split(".")[0] for k in r if k.endswith(".reliability")]))
+            [k.split(".")[0] for k in r if k.endswith(".reliability")], registry))
         lines.append(f"- `{r['regime']}` ({r['seeds']} seeds per arm), seeds reaching {top:g}: {rel}.")
-        questions = (("hybrid_vs_baseline", "Is the hybrid faster than plain PPO?"),
-                     ("hybrid_vs_kinematic", "Does the VLM add speed beyond the dense term (hybrid vs kinematic)?"),
-                     (f"hybrid_vs_{PLACEBO_ARM}", "Does the VLM's content matter (hybrid vs the placebo)?"),
-                     ("kinematic_vs_baseline", "Does the dense term alone speed learning (kinematic vs baseline)?"))
+        questions = ((f"{METHOD}_vs_{BASELINE}", "Is the hybrid faster than plain PPO?"),
+                     (f"{METHOD}_vs_{DENSE}", "Does the VLM add speed beyond the dense term (hybrid vs kinematic)?"),
+                     (f"{METHOD}_vs_{PLACEBO_ARM}", "Does the VLM's content matter (hybrid vs the placebo)?"),
+                     (f"{DENSE}_vs_{BASELINE}", "Does the dense term alone speed learning (kinematic vs baseline)?"))
         for key, question in questions:
             if f"{key}.verdict" in r and r[f"{key}.verdict"] != NOT_MEASURED:
                 lines.append(f"  - {question} {_answer(r, key)}; learning-curve area "
                              f"{format_difference(r, key, 'auc')}.")
-        if "hybrid_vs_baseline.reliability_diff" in r:
+        if f"{METHOD}_vs_{BASELINE}.reliability_diff" in r:
             lines.append(f"  - Is the hybrid more reliable than plain PPO? hybrid minus baseline "
-                         f"{format_difference(r, 'hybrid_vs_baseline', 'reliability')} (Newcombe interval, Fisher "
+                         f"{format_difference(r, f'{METHOD}_vs_{BASELINE}', 'reliability')} (Newcombe interval, Fisher "
                          "exact p).")
     for c in control_rows:
         area = format_difference(c, "cmp", "auc")
