@@ -71,7 +71,8 @@ def verify(
         cost = (f"about {estimate / 60:.0f} min on {min(workers, len(chosen))} worker(s) (the recorded training "
                 "times; no evaluation is rerun)") if estimate is not None else "cost unknown (no wall time recorded)"
         console.print(f"verifying {len(chosen)} of {len(runs)} run(s) of {where}: {cost}")
-        here = lib.describe_paths(lib.here_paths())
+        here_tags = lib.here_paths()  # once: this process's path does not change while it runs
+        here = lib.describe_paths(here_tags)
         console.print(f"here: {here}")
         for run in chosen:
             console.print(f"  {run.run_id[:12]}  {run.name:<28} {len(run.native_returns)} episodes")
@@ -86,7 +87,7 @@ def verify(
                 run = outcome.run
                 differ += not outcome.identical
                 console.print(f"{run.run_id[:12]}  {run.name}: {outcome.verdict()} in {outcome.wall_s:.0f} s")
-                if not outcome.identical or run.tags.get(schema.TAG_PIN) != lib.here_paths()[schema.TAG_PIN]:
+                if not outcome.identical or run.tags.get(schema.TAG_PIN) != here_tags[schema.TAG_PIN]:
                     console.print(f"    recorded: {lib.describe_paths(run.tags)}")
                     console.print(f"    here:     {here}")
         console.print(f"{len(chosen) - differ} identical, {differ} differ")

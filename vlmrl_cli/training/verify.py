@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import random
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -234,31 +234,15 @@ def describe_paths(tags: dict[str, str]) -> str:
     return "; ".join(f"{short[t]} {tags.get(t, 'unrecorded')}" for t in PATH_TAGS)
 
 
-def verify_many(runs: Sequence[RecordedRun], workers: int = 1,
-                on_done: Callable[[Outcome], None] | None = None) -> Iterator[Outcome]:
-    """Verify ``runs`` in ``workers`` spawned processes (each inherits this process's numeric pin),
-    yielding each outcome as it finishes; ``on_done`` is called with it first."""
+def verify_many(runs: Sequence[RecordedRun], workers: int = 1) -> Iterator[Outcome]:
+    """Verify ``runs`` in ``workers`` spawned processes (each inherits this process's numeric pin;
+    ``verify_run`` trains on one torch thread), yielding each outcome as it finishes."""
     if workers <= 1:
-        for run in runs:
-            outcome = verify_run(run)
-            if on_done is not None:
-                on_done(outcome)
-            yield outcome
+        yield from map(verify_run, runs)
         return
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
-                             initializer=_single_thread) as pool:
-        futures = [pool.submit(verify_run, run) for run in runs]
-        for fut in as_completed(futures):
-            outcome = fut.result()
-            if on_done is not None:
-                on_done(outcome)
-            yield outcome
-
-
-def _single_thread() -> None:
-    import torch
-
-    torch.set_num_threads(1)
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
+        for fut in as_completed([pool.submit(verify_run, run) for run in runs]):
+            yield fut.result()
