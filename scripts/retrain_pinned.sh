@@ -10,11 +10,14 @@
 # imported into the stage's store, so a fresh machine picks up where the last one stopped.
 # Before a session stops: `bash scripts/retrain_pinned.sh export EXPERIMENT...` writes the partial
 # exports of the experiments named (of every one with a store when none is named).
+# STAGES (default: all of "acrobot mcc mc-calibrate study") names the stages to run, so a session
+# can skip those already committed on the pin, e.g. STAGES="mcc mc-calibrate study".
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PY:-python3}
 STORE=${STORE:-$PWD/results/_scratch/pinned}
 WORKERS=${WORKERS:-2}
+STAGES=${STAGES:-acrobot mcc mc-calibrate study}
 export PYTHONPATH=$PWD OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 mkdir -p "$STORE" results/resume
 vlmrl() { "$PY" -m vlmrl_cli "$@"; }
@@ -57,19 +60,26 @@ task_stage() {  # $1 short name, $2 task, $3 study regime
     --out "results/tasks/$2/runs-study.jsonl.gz"
 }
 
-task_stage acrobot acrobot zoo-100k-lr1e-4
-task_stage mcc mountain-car-continuous sb3-default-100k
+want() { [[ " $STAGES " == *" $1 "* ]]; }
+
+if want acrobot; then task_stage acrobot acrobot zoo-100k-lr1e-4; fi
+if want mcc; then task_stage mcc mountain-car-continuous sb3-default-100k; fi
 
 # MountainCar's calibration: the default grid and the 2x2 grid (results/calibration/)
+if want mc-calibrate; then
 resume vlmrl-calibrate
 vlmrl calibrate --workers "$WORKERS" --experiment vlmrl-calibrate --tracking-uri "$(uri vlmrl-calibrate)" \
   --out results/calibration
 vlmrl calibrate --workers "$WORKERS" --grid ppo.normalize_reward=true,false --grid ppo.learning_rate=0.0003,0.0001 \
   --experiment vlmrl-calibrate --tracking-uri "$(uri vlmrl-calibrate)" --out results/calibration/grid-2x2
+vlmrl export --experiment vlmrl-calibrate --tracking-uri "$(uri vlmrl-calibrate)" --out results/calibration/runs.jsonl.gz
+fi
 
 # the study (its default grid, 20 seeds), then the learning-rate refinement on the same store
+if want study; then
 resume vlmrl-study
 vlmrl study --out results/study --experiment vlmrl-study --tracking-uri "$(uri vlmrl-study)" --workers "$WORKERS"
 vlmrl calibrate --seeds 20 --set ppo.normalize_reward=false --grid ppo.learning_rate=0.00015,0.0002 \
   --experiment vlmrl-study --tracking-uri "$(uri vlmrl-study)" --out results/calibration/refine-lr --workers "$WORKERS"
 vlmrl export --experiment vlmrl-study --tracking-uri "$(uri vlmrl-study)" --out results/study/runs/pinned.jsonl.gz
+fi
