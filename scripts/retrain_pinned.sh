@@ -30,8 +30,19 @@ declare -A DB=(
 )
 uri() { echo "sqlite:///$STORE/${DB[$1]}"; }
 
-resume() {  # import the partial export of experiment $1, if one was committed
-  local file="results/resume/$1.jsonl.gz"
+on_pin() {  # true when every run in export $1 was trained on this package's numeric pin
+  "$PY" - "$1" <<'PYEOF'
+import gzip, json, sys
+from vlmrl_cli.core.numeric_pin import PIN_ID
+with gzip.open(sys.argv[1], "rt") as fh:
+    runs = [json.loads(line) for line in fh if line.strip()]
+sys.exit(0 if runs and all(r["tags"].get("vlmrl.pin") == PIN_ID for r in runs) else 1)
+PYEOF
+}
+
+resume() {  # import experiment $1's partial export if one was committed, else its final export $2
+  local file="results/resume/$1.jsonl.gz"    # when that is on the pin (a finished stage redraws)
+  if [[ ! -f $file && -n ${2:-} && -f $2 ]] && on_pin "$2"; then file=$2; fi
   if [[ -f $file ]]; then vlmrl import "$file" --experiment "$1" --tracking-uri "$(uri "$1")"; fi
 }
 
@@ -47,12 +58,12 @@ if [[ ${1:-} == export ]]; then  # the finished runs of unfinished stages, for t
 fi
 
 task_stage() {  # $1 short name, $2 task, $3 study regime
-  resume "tasks-$1-calibrate"
+  resume "tasks-$1-calibrate" "results/tasks/$2/runs-calibration.jsonl.gz"
   vlmrl calibrate --task "$2" --seeds 5 --workers "$WORKERS" --experiment "tasks-$1-calibrate" \
     --tracking-uri "$(uri "tasks-$1-calibrate")" --out "results/tasks/$2/calibration"
   vlmrl export --experiment "tasks-$1-calibrate" --tracking-uri "$(uri "tasks-$1-calibrate")" \
     --out "results/tasks/$2/runs-calibration.jsonl.gz"
-  resume "tasks-$1-study"
+  resume "tasks-$1-study" "results/tasks/$2/runs-study.jsonl.gz"
   vlmrl study --task "$2" --regime "$3" --seeds 10 --alphas none --kin-scales none --query-flickers none \
     --workers "$WORKERS" --experiment "tasks-$1-study" --tracking-uri "$(uri "tasks-$1-study")" \
     --out "results/tasks/$2/study"
@@ -67,7 +78,7 @@ if want mcc; then task_stage mcc mountain-car-continuous sb3-default-100k; fi
 
 # MountainCar's calibration: the default grid and the 2x2 grid (results/calibration/)
 if want mc-calibrate; then
-resume vlmrl-calibrate
+resume vlmrl-calibrate results/calibration/runs.jsonl.gz
 vlmrl calibrate --workers "$WORKERS" --experiment vlmrl-calibrate --tracking-uri "$(uri vlmrl-calibrate)" \
   --out results/calibration
 vlmrl calibrate --workers "$WORKERS" --grid ppo.normalize_reward=true,false --grid ppo.learning_rate=0.0003,0.0001 \
