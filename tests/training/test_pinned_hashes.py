@@ -39,3 +39,39 @@ def test_overridden_hashes_are_pinned() -> None:
 
 def test_every_arm_of_the_original_seven_is_pinned() -> None:
     assert set(PINNED["paper"]) <= set(ARMS)
+
+
+#: The other built-in tasks' hashes (their committed runs under results/tasks/), printed at c3927e8
+#: before the Task refactor of issue 28: moving MountainCar into its task must not move these either.
+TASK_PINNED: dict[tuple[str, str], dict[str, str]] = {
+    ("acrobot", "zoo-100k-lr1e-4"): {"baseline": "c7a057560711", "hybrid": "dc0dcccf4d32",
+                                     "kinematic": "2a2185d82909", "hybrid-shuffled": "0cc8547736e0",
+                                     "semantic": "925193c701c2"},
+    ("acrobot", "smoke"): {"baseline": "0634da9fafcc", "hybrid": "71280e51d8c2", "kinematic": "c90698aa83d2",
+                           "hybrid-shuffled": "f4a96e13db41", "semantic": "75cf6a079d77"},
+    ("mountain-car-continuous", "sb3-default-100k"): {"baseline": "2fbb126d2845", "hybrid": "c65b7cbf4d74",
+                                                      "kinematic": "5c1f93a8d245", "hybrid-shuffled": "ee924239aea8",
+                                                      "semantic": "af1523fe87a7"},
+    ("mountain-car-continuous", "smoke"): {"baseline": "2474d03a33a7", "hybrid": "49e90177566b",
+                                           "kinematic": "bd2c3110b39c", "hybrid-shuffled": "c8d76d0e1aef",
+                                           "semantic": "7ddfb9236310"},
+}
+
+
+@pytest.mark.parametrize(("task", "preset"), sorted(TASK_PINNED))
+def test_other_tasks_hashes_are_pinned(task: str, preset: str) -> None:
+    arms = list(TASK_PINNED[task, preset])
+    cfg = RunConfig.from_sources(None, {"arms": arms, "seeds": [0], "preset": preset, "task": task})
+    assert {j.arm.name: j.config_hash for j in cfg.jobs()} == TASK_PINNED[task, preset]
+
+
+def test_label_map_overrides_keep_their_hashes() -> None:
+    """A TOML table of some of MountainCar's labels (the rest keep their default), and another
+    task's whole map: both hashed as before the label map moved into the tasks."""
+    partial = RunConfig.from_sources(None, {"arms": ["hybrid"], "seeds": [0], "preset": "paper"},
+                                     ["shaping.label_potentials={GOAL=2.0}"])
+    assert partial.jobs()[0].config_hash == "9f70161ccb2b"
+    whole = RunConfig.from_sources(None, {"arms": ["hybrid"], "seeds": [0], "preset": "smoke", "task": "acrobot"},
+                                   ["shaping.label_potentials={HANGING=0.0, LOW_SWING=0.2, HIGH_SWING=0.5, "
+                                    "ABOVE_BAR=1.0}"])
+    assert whole.jobs()[0].config_hash == "f781e52f2c48"
