@@ -42,11 +42,13 @@ import torch
 
 from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
+from vlmrl_cli.tasks.mountain_car.prompts import PROMPTS, ZONE_MILESTONES
 from vlmrl_cli.training.config import RunConfig
-from vlmrl_cli.training.presets import get_preset
+from vlmrl_cli.training.presets import preset_of
 from vlmrl_cli.vlm.config import VLMConfig
 from vlmrl_cli.vlm.parsers import parse_mcq
-from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
+from vlmrl_cli.vlm.prompts import PromptKind
 from vlmrl_cli.vlm.registry import build_client
 
 
@@ -55,11 +57,11 @@ def train(arm: str, timesteps: int, seed: int, cache: Path) -> dict[str, Any]:
     from vlmrl_cli.training.envs import make_train_env
     from vlmrl_cli.training.model import make_model
 
-    preset = dataclasses.replace(get_preset("paper"), timesteps=timesteps)
+    preset = dataclasses.replace(preset_of("mountain-car", "paper"), timesteps=timesteps)
     spec = ARMS[arm]
-    client = build_client(VLMConfig(cache_path=cache)) if spec.uses_vlm else None
+    client = build_client(VLMConfig(cache_path=cache), reader=MOUNTAIN_CAR.reader) if spec.uses_vlm else None
     start, cpu_start = time.perf_counter(), time.process_time()
-    env, oracle = make_train_env(spec, preset, ShapingConfig(), client, seed)
+    env, oracle = make_train_env(spec, preset, ShapingConfig(), client, seed, MOUNTAIN_CAR)
     events: list[tuple[Any, float | None]] = []
     if oracle is not None:
         inner = oracle.label
@@ -81,13 +83,13 @@ def train(arm: str, timesteps: int, seed: int, cache: Path) -> dict[str, Any]:
 def label_agreement(run: dict[str, Any]) -> tuple[int, int, int]:
     """(events, events whose potential differs from asking the VLM directly, distinct frames)."""
     oracle = run["oracle"]
-    direct_client = build_client(VLMConfig(use_cache=False))
-    potential_of = dict(ShapingConfig().label_potentials)
+    direct_client = build_client(VLMConfig(use_cache=False), reader=MOUNTAIN_CAR.reader)
+    potential_of = dict(MOUNTAIN_CAR.label_potentials)
     direct: dict[str, float | None] = {}
     differ = 0
     for view, used in run["events"]:
         if view.key not in direct:
-            mcq = parse_mcq(direct_client.ask(PROMPTS[PromptKind.MCQ], view.frame()).text)
+            mcq = parse_mcq(direct_client.ask(PROMPTS[PromptKind.MCQ], view.frame()).text, ZONE_MILESTONES.labels)
             direct[view.key] = potential_of[mcq.label] if mcq.ok and mcq.label is not None else None
         differ += int(direct[view.key] != used)
     direct_client.close()
@@ -98,7 +100,7 @@ def label_agreement(run: dict[str, Any]) -> tuple[int, int, int]:
 def sweep_throughput(workers: int, timesteps: int, root: Path) -> float:
     from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
 
-    ppo = dataclasses.replace(get_preset("paper"), timesteps=timesteps, eval_episodes=1)
+    ppo = dataclasses.replace(preset_of("mountain-car", "paper"), timesteps=timesteps, eval_episodes=1)
     cfg = RunConfig(arms=("baseline",), seeds=(0, 1), preset="paper", ppo=ppo, workers=workers,
                     experiment=f"bench-{workers}", tracking_uri=f"sqlite:///{root / f'w{workers}.db'}")
     summary = run_sweep(cfg, SilentReporter())
@@ -123,10 +125,10 @@ if os.environ.get("BENCH_PIN") == "1":
     apply(warn=False)
 import dataclasses, torch
 from vlmrl_cli.training.config import RunConfig
-from vlmrl_cli.training.presets import get_preset
+from vlmrl_cli.training.presets import preset_of
 from vlmrl_cli.training.trace import native_returns
 cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="paper",
-                ppo=dataclasses.replace(get_preset("paper"), timesteps=int(sys.argv[1])), workers=1)
+                ppo=dataclasses.replace(preset_of("mountain-car", "paper"), timesteps=int(sys.argv[1])), workers=1)
 job = cfg.jobs()[0]
 native_returns(dataclasses.replace(job, ppo=dataclasses.replace(job.ppo, timesteps=4096)))  # warm-up
 cpu, wall = time.process_time(), time.perf_counter()

@@ -95,10 +95,10 @@ def main() -> int:
     import dataclasses
 
     from vlmrl_cli.training.config import RunConfig
-    from vlmrl_cli.training.presets import get_preset
+    from vlmrl_cli.training.presets import preset_of
     from vlmrl_cli.training.trace import native_returns
 
-    ppo = dataclasses.replace(get_preset(args.preset), timesteps=args.timesteps)
+    ppo = dataclasses.replace(preset_of("mountain-car", args.preset), timesteps=args.timesteps)
     cfg = RunConfig(arms=(args.arm,), seeds=(args.seed,), preset=args.preset, ppo=ppo, workers=1)
     history = native_returns(cfg.jobs()[0])
     digest = hashlib.sha256(json.dumps(history).encode()).hexdigest()[:12]

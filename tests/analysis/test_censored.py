@@ -33,7 +33,7 @@ def _data(crossings: list[int | None]) -> ExperimentData:
         "run_id": f"r{s}", "arm": "baseline", "seed": s, "config_hash": "h", "preset": "p", "budget": BUDGET,
         "vlm": "none", "simulated": False, "eval_success_rate": 1.0} for s in range(len(crossings))])
     return ExperimentData("0", "e", runs, episodes, pd.DataFrame(columns=["run_id", "arm", "seed", "episode",
-                                                                            "length"]))
+                                                                            "length"]), task="mountain-car")
 
 
 def test_report_study_and_calibrate_give_one_estimate_on_a_censored_example() -> None:

@@ -16,7 +16,7 @@ import pytest
 from vlmrl_cli.sweep.runner import plan
 from vlmrl_cli.tracking import store
 from vlmrl_cli.training.config import RunConfig
-from vlmrl_cli.training.presets import get_preset
+from vlmrl_cli.training.presets import preset_of
 
 pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
 
@@ -64,7 +64,7 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_resumes(tmp_path: Path, executor: li
     assert statuses == {"sweep": "KILLED", "train": "KILLED"}
 
     # the killed job is pending again: rerunning the same command trains it
-    ppo = dataclasses.replace(get_preset("smoke"), timesteps=2_000_000)
+    ppo = dataclasses.replace(preset_of("mountain-car", "smoke"), timesteps=2_000_000)
     cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="smoke", ppo=ppo, tracking_uri=uri)
     client = store.connect(uri)
     exp = client.get_experiment_by_name("vlmrl")

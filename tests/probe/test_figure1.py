@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from vlmrl_cli.frames.render import FrameRenderer
 from vlmrl_cli.probe.figure1 import figure1, save_figure1
 from vlmrl_cli.probe.scoring import PAPER_FRAMES, _Planned, probe_frame
+from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.config import VLMConfig
 from vlmrl_cli.vlm.replay import ReplayBackend

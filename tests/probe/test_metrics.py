@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vlmrl_cli.frames.geometry import Zone, zone_of
 from vlmrl_cli.probe import metrics
+from vlmrl_cli.tasks.mountain_car.geometry import Zone, zone_of
 from vlmrl_cli.vlm.parsers import ParseStatus
 
 _coord = st.floats(-50, 700, allow_nan=False)

@@ -7,15 +7,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vlmrl_cli.frames.geometry import SCALE, ZONE_EDGES, Zone
-from vlmrl_cli.frames.render import FrameRenderer
+from tests.mountain_car_helpers import parse_float, sim_vlm
 from vlmrl_cli.probe import metrics
 from vlmrl_cli.probe.scoring import DEFAULT_STATES, PAPER_FRAMES, sweep_positions
 from vlmrl_cli.probe.taxonomy import TaxonomyConfig, TaxonomyResult, run_taxonomy
+from vlmrl_cli.tasks.mountain_car.geometry import SCALE, ZONE_EDGES, Zone
+from vlmrl_cli.tasks.mountain_car.prompts import PROMPTS
+from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 from vlmrl_cli.vlm.config import SIM_PROFILES, SimKnobs, VLMConfig
-from vlmrl_cli.vlm.parsers import ParseStatus, parse_float
-from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
-from vlmrl_cli.vlm.sim import SimulatedVLM
+from vlmrl_cli.vlm.parsers import ParseStatus
+from vlmrl_cli.vlm.prompts import PromptKind
 
 # No sweep position of 12 falls on a zone edge, where a pixel reader off by a fraction of a pixel
 # gives the neighbouring label (25 positions put three frames on edges; the default 101 puts none).
@@ -56,7 +57,7 @@ def test_llava_table1_shows_the_papers_failures(results: dict[str, TaxonomyResul
     # MCQ: BOTTOM on both of Table 1's frames (the dead zone covers x = -0.69)
     for panel in ("a", "b"):
         probe = r.panel(panel)
-        assert probe is not None and probe.mcq_result.label is Zone.BOTTOM
+        assert probe is not None and probe.mcq_result.label == Zone.BOTTOM
     assert s["mcq.accuracy"] <= results["default"].sweep["mcq.accuracy"] - 0.15
     # boxes: collapse or land far from the car
     assert s["box.format_failure_rate"] >= 0.3 and s["box.mean_iou_all"] < 0.1
@@ -89,7 +90,7 @@ def test_llava_table1_float_answers_carry_no_rank_signal_on_the_default_sweep() 
         frames = [renderer.render(x) for x in xs]
     rhos, covered = [], 0
     for seed in range(20):
-        vlm = SimulatedVLM(SimKnobs.of_profile("llava-table1", seed=seed))
+        vlm = sim_vlm(SimKnobs.of_profile("llava-table1", seed=seed))
         values = [parse_float(vlm.answer(prompt, f)).value for f in frames]
         rho = metrics.spearman([np.nan if v is None else v for v in values], xs)
         lo, hi = metrics.spearman_ci(rho, len(xs))

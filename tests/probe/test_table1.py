@@ -8,9 +8,9 @@ import pytest
 
 from vlmrl_cli.core.tables import latex_escape
 from vlmrl_cli.core.tables import markdown as markdown_table
-from vlmrl_cli.frames.render import FrameRenderer
 from vlmrl_cli.probe.scoring import PAPER_FRAMES, FrameProbe, _Planned, empty_sweep_statistics, probe_frame
 from vlmrl_cli.probe.table1 import pair_consequence, taxonomy_frame, write_tables
+from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.config import VLMConfig
 from vlmrl_cli.vlm.prompts import PromptKind

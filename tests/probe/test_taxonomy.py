@@ -8,13 +8,13 @@ from pathlib import Path
 
 import pytest
 
+from tests.mountain_car_helpers import sim_vlm
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.probe.scoring import frame_id_of, plan_frames, sweep_statistics, x_of_frame_id
 from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
 from vlmrl_cli.vlm.config import SimKnobs, VLMConfig
 from vlmrl_cli.vlm.parsers import ParseStatus
 from vlmrl_cli.vlm.replay import ReplayBackend
-from vlmrl_cli.vlm.sim import SimulatedVLM
 
 
 @pytest.fixture(scope="module")
@@ -34,7 +34,7 @@ def test_frame_ids_round_trip() -> None:
 
 
 def test_plan_always_includes_the_paper_frames() -> None:
-    planned, is_sweep = plan_frames(5, SimulatedVLM())
+    planned, is_sweep = plan_frames(5, sim_vlm())
     assert is_sweep and len(planned) == 7
     assert [p.panel for p in planned if p.panel] == ["b", "a"]  # sorted by x: -0.69 first
     xs = [p.x for p in planned]

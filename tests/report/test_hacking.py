@@ -12,7 +12,7 @@ def _frame() -> pd.DataFrame:
     per_seed = pd.DataFrame({"arm": ["hybrid", "baseline"], "hover_fraction": [float("nan")] * 2,
                              "dwell_right_steps": [float("nan")] * 2, "shaped_gap": [3.0, 0.0]})
     episodes = pd.DataFrame({"arm": ["hybrid", "baseline"], "length": [80, 90]})
-    return hacking.hacking_frame(per_seed, episodes, timeout=500)
+    return hacking.hacking_frame(per_seed, episodes, 0.95, timeout=500)
 
 
 def test_a_task_without_the_diagnostic_is_not_told_its_runs_predate_it() -> None:
@@ -25,6 +25,6 @@ def test_runs_of_a_task_with_the_diagnostic_that_lack_it_predate_it() -> None:
 
 
 def test_the_definition_names_mountain_cars_track_only_where_it_applies() -> None:
-    assert hacking.definition(True) == hacking.DEFINITION and "x = 0.3" in hacking.DEFINITION
-    assert "x = " not in hacking.definition(False)
+    assert "x = 0.3" in hacking.definition(0.3) and "x = 0.45" in hacking.definition(0.45)
+    assert "x = " not in hacking.definition(None)
     assert not get_task("acrobot").hover_diagnostic and get_task("mountain-car").hover_diagnostic

@@ -5,9 +5,10 @@ import hashlib
 import numpy as np
 import pytest
 
-from vlmrl_cli.frames.render import FrameRenderer
-from vlmrl_cli.shaping.camera import Camera, FrameView
+from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.features import darkness_counts
+from vlmrl_cli.tasks.mountain_car.camera import Camera
+from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 
 
 @pytest.fixture

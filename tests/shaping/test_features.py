@@ -6,9 +6,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from vlmrl_cli.frames.geometry import SCALE
-from vlmrl_cli.frames.render import FrameRenderer
 from vlmrl_cli.shaping.features import BLOCK, FEATURE_DIM, FEATURE_UNIT, darkness_counts, feature_dim, frame_features
+from vlmrl_cli.tasks.mountain_car.geometry import SCALE
+from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 
 
 @pytest.fixture(scope="module")

@@ -9,11 +9,13 @@ from hypothesis import strategies as st
 
 from tests.shaping import sim_client
 from vlmrl_cli.shaping.arms import ARMS
-from vlmrl_cli.shaping.config import DEFAULT_LABEL_POTENTIALS, ShapingConfig
+from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.placebo import describe_map, latin_permutation, oracle_shaping, permutation, placebo_map
+from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
+from vlmrl_cli.tasks.mountain_car.task import ZONE_POTENTIALS as DEFAULT_LABEL_POTENTIALS
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.envs import make_train_env
-from vlmrl_cli.training.presets import get_preset
+from vlmrl_cli.training.presets import preset_of
 
 seeds = st.integers(0, 10_000)
 
@@ -61,7 +63,8 @@ def test_only_the_placebo_arm_changes_the_oracle_map() -> None:
 
 def test_the_placebo_run_builds_its_oracle_with_the_shuffled_map() -> None:
     arm = ARMS["hybrid-shuffled"]
-    env, oracle = make_train_env(arm, get_preset("smoke"), ShapingConfig(), sim_client(), seed=4)
+    env, oracle = make_train_env(arm, preset_of("mountain-car", "smoke"), ShapingConfig(), sim_client(), seed=4,
+                                 task=MOUNTAIN_CAR)
     try:
         assert oracle is not None
         assert tuple(oracle.cfg.label_potentials) == placebo_map(DEFAULT_LABEL_POTENTIALS, 4)

@@ -9,9 +9,9 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from vlmrl_cli.core.fp import exp_scalar
-from vlmrl_cli.shaping.camera import Camera
 from vlmrl_cli.shaping.features import FEATURE_DIM, FEATURE_UNIT
 from vlmrl_cli.shaping.rbf import RBFField, rbf_potential
+from vlmrl_cli.tasks.mountain_car.camera import Camera
 
 D = 4
 coords = st.floats(-5.0, 5.0)

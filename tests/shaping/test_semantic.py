@@ -4,15 +4,18 @@ import dataclasses
 
 import pytest
 
-from tests.shaping import ScriptedBackend, sim_client
-from vlmrl_cli.frames.geometry import Zone
+from tests.shaping import ScriptedBackend, mc_oracle, sim_client
 from vlmrl_cli.shaping.arms import PotentialSource
-from vlmrl_cli.shaping.camera import Camera
 from vlmrl_cli.shaping.config import ShapingConfig
-from vlmrl_cli.shaping.semantic import STAT_KEYS, EpisodePotential, SemanticOracle, float_potential
+from vlmrl_cli.shaping.semantic import STAT_KEYS, EpisodePotential
+from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
+from vlmrl_cli.tasks.mountain_car.camera import Camera
+from vlmrl_cli.tasks.mountain_car.geometry import Zone
+from vlmrl_cli.tasks.mountain_car.prompts import NUMBERS
 from vlmrl_cli.vlm.client import VLMClient
 
 MCQ, FLOAT = PotentialSource.MCQ, PotentialSource.FLOAT
+float_potential = NUMBERS.potential
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +31,7 @@ def scripted(*answers: str) -> tuple[VLMClient, ScriptedBackend]:
 
 
 def test_stats_have_exactly_the_documented_keys() -> None:
-    oracle = SemanticOracle(sim_client(), ShapingConfig(), MCQ)
+    oracle = mc_oracle(sim_client(), ShapingConfig(), MCQ)
     assert tuple(oracle.stats()) == STAT_KEYS == (
         "vlm/queries", "vlm/cache_hits", "vlm/prototypes", "vlm/label_reuses", "vlm/parse_failures")
     assert all(v == 0.0 for v in oracle.stats().values())
@@ -36,17 +39,17 @@ def test_stats_have_exactly_the_documented_keys() -> None:
 
 def test_near_frames_reuse_a_prototype_and_far_frames_ask(camera: Camera) -> None:
     cfg = ShapingConfig()
-    oracle = SemanticOracle(sim_client(flicker=0.0), cfg, MCQ)
-    assert oracle.label(camera.view(-0.52)) == cfg.potential_of(Zone.BOTTOM)
+    oracle = mc_oracle(sim_client(flicker=0.0), cfg, MCQ)
+    assert oracle.label(camera.view(-0.52)) == MOUNTAIN_CAR.shaping_for(cfg).potential_of(Zone.BOTTOM)
     assert oracle.label(camera.view(-0.5203)) == 0.0  # a third of a pixel away: reused
-    assert oracle.label(camera.view(-1.0)) == cfg.potential_of(Zone.LEFT_PEAK)  # far: asked
+    assert oracle.label(camera.view(-1.0)) == MOUNTAIN_CAR.shaping_for(cfg).potential_of(Zone.LEFT_PEAK)  # far: asked
     assert oracle.stats() == {"vlm/queries": 2.0, "vlm/cache_hits": 0.0, "vlm/prototypes": 2.0,
                               "vlm/label_reuses": 1.0, "vlm/parse_failures": 0.0}
 
 
 def test_an_identical_frame_is_asked_once_and_its_own_label_reused(camera: Camera) -> None:
     client, backend = scripted("BOTTOM", "GOAL")
-    oracle = SemanticOracle(client, ShapingConfig(reuse_radius=0.0), MCQ)
+    oracle = mc_oracle(client, ShapingConfig(reuse_radius=0.0), MCQ)
     assert [oracle.label(camera.view(-0.5)) for _ in range(3)] == [0.0, 0.0, 0.0]
     assert backend.calls == 1 and oracle.prototypes == 1 and oracle.stats()["vlm/label_reuses"] == 2.0
     assert oracle.label(camera.view(-0.49)) == 1.0  # another picture, even one pixel away, is asked
@@ -55,14 +58,14 @@ def test_an_identical_frame_is_asked_once_and_its_own_label_reused(camera: Camer
 
 def test_unparsed_answers_are_counted_and_add_no_prototype(camera: Camera) -> None:
     client, _ = scripted("I cannot tell.")
-    oracle = SemanticOracle(client, ShapingConfig(), MCQ)
+    oracle = mc_oracle(client, ShapingConfig(), MCQ)
     assert oracle.label(camera.view(-0.5)) is None
     assert oracle.stats()["vlm/parse_failures"] == 1.0 and oracle.prototypes == 0
 
 
 def test_float_answers_map_x_onto_zero_one(camera: Camera) -> None:
     client, _ = scripted("x = -0.3", "far away", "7.5")
-    oracle = SemanticOracle(client, ShapingConfig(reuse_radius=0.0), FLOAT, rbf=False)
+    oracle = mc_oracle(client, ShapingConfig(reuse_radius=0.0), FLOAT, rbf=False)
     assert oracle.label(camera.view(-0.5)) == pytest.approx(0.5)
     assert oracle.label(camera.view(-0.49)) is None
     assert oracle.label(camera.view(-0.48)) is None  # out of range is not a parsed answer
@@ -71,7 +74,7 @@ def test_float_answers_map_x_onto_zero_one(camera: Camera) -> None:
 
 
 def test_phi_rbf_follows_new_prototypes(camera: Camera) -> None:
-    oracle = SemanticOracle(sim_client(flicker=0.0), ShapingConfig(), MCQ)
+    oracle = mc_oracle(sim_client(flicker=0.0), ShapingConfig(), MCQ)
     view = camera.view(-1.0)
     assert oracle.phi_rbf(view) == 0.0  # no prototype yet
     oracle.label(camera.view(-1.0))
@@ -80,7 +83,7 @@ def test_phi_rbf_follows_new_prototypes(camera: Camera) -> None:
 
 def test_labels_every_query_every_steps_including_step_zero(camera: Camera) -> None:
     client, backend = scripted("BOTTOM")
-    oracle = SemanticOracle(client, ShapingConfig(reuse_radius=0.0, query_every=10), MCQ)
+    oracle = mc_oracle(client, ShapingConfig(reuse_radius=0.0, query_every=10), MCQ)
     episode = EpisodePotential(oracle, lock=True)
     views = [camera.view(-0.5 + 0.004 * t) for t in range(26)]  # a new picture every step
     episode.reset(views[0])
@@ -95,7 +98,7 @@ def test_labels_every_query_every_steps_including_step_zero(camera: Camera) -> N
 def test_lock_holds_within_an_episode_and_resets_at_the_start(camera: Camera) -> None:
     client, _ = scripted("GOAL", "GOAL", "BOTTOM", "LEFT_SLOPE", "BOTTOM")
     cfg = ShapingConfig(reuse_radius=0.0, query_every=1, confirm=2)
-    episode = EpisodePotential(SemanticOracle(client, cfg, MCQ, rbf=False), lock=True)
+    episode = EpisodePotential(mc_oracle(client, cfg, MCQ, rbf=False), lock=True)
     views = [camera.view(-0.5 + 0.004 * t) for t in range(5)]  # distinct pictures: each one is asked
     phis = [episode.reset(views[0])] + [episode.step(v) for v in views[1:4]]
     assert phis == [1.0, 1.0, 1.0, 1.0]  # held GOAL, then locked at GOAL despite BOTTOM / LEFT_SLOPE
@@ -106,7 +109,7 @@ def test_lock_holds_within_an_episode_and_resets_at_the_start(camera: Camera) ->
 def test_hybrid_is_the_max_of_lock_and_rbf_and_no_lock_is_rbf(camera: Camera) -> None:
     client, _ = scripted("NEAR_GOAL", "BOTTOM")
     cfg = ShapingConfig(reuse_radius=0.0, query_every=1, confirm=2)
-    oracle = SemanticOracle(client, cfg, MCQ, rbf=True)
+    oracle = mc_oracle(client, cfg, MCQ, rbf=True)
     locked, free = EpisodePotential(oracle, lock=True), EpisodePotential(oracle, lock=False)
     near_goal, bottom = camera.view(0.3), camera.view(-0.5)
     locked.reset(near_goal)
@@ -121,7 +124,7 @@ def test_hybrid_is_the_max_of_lock_and_rbf_and_no_lock_is_rbf(camera: Camera) ->
 def test_parse_failure_keeps_the_previous_potential(camera: Camera) -> None:
     client, _ = scripted("x = -0.3", "nothing", "nothing")
     cfg = ShapingConfig(reuse_radius=0.0, query_every=1)
-    episode = EpisodePotential(SemanticOracle(client, cfg, FLOAT, rbf=False), lock=False)
+    episode = EpisodePotential(mc_oracle(client, cfg, FLOAT, rbf=False), lock=False)
     a, b, c = camera.view(-0.5), camera.view(-0.49), camera.view(-0.48)
     assert [episode.reset(a), episode.step(b), episode.step(c)] == pytest.approx([0.5, 0.5, 0.5])
 
@@ -129,12 +132,12 @@ def test_parse_failure_keeps_the_previous_potential(camera: Camera) -> None:
 @pytest.mark.parametrize("change", [{"bandwidth": 0.0}, {"reuse_radius": -1.0}, {"query_every": 0}, {"confirm": 0}])
 def test_invalid_config_is_rejected(change: dict) -> None:
     with pytest.raises(ValueError):
-        SemanticOracle(sim_client(), dataclasses.replace(ShapingConfig(), **change), MCQ)
+        mc_oracle(sim_client(), dataclasses.replace(ShapingConfig(), **change), MCQ)
 
 
 def test_an_arm_without_potential_needs_no_oracle() -> None:
     with pytest.raises(ValueError, match="potential source"):
-        SemanticOracle(sim_client(), ShapingConfig(), PotentialSource.NONE)
+        mc_oracle(sim_client(), ShapingConfig(), PotentialSource.NONE)
 
 
 def test_deep_copies_of_an_env_share_the_oracle_and_its_cached_client(tmp_path) -> None:  # type: ignore[no-untyped-def]
@@ -144,12 +147,11 @@ def test_deep_copies_of_an_env_share_the_oracle_and_its_cached_client(tmp_path) 
 
     from vlmrl_cli.shaping.arms import PotentialSource
     from vlmrl_cli.shaping.config import ShapingConfig
-    from vlmrl_cli.shaping.semantic import SemanticOracle
     from vlmrl_cli.vlm.config import VLMConfig
     from vlmrl_cli.vlm.registry import build_client
 
-    client = build_client(VLMConfig(backend="sim", cache_path=tmp_path / "c.sqlite"))
-    oracle = SemanticOracle(client, ShapingConfig(), PotentialSource.MCQ)
+    client = build_client(VLMConfig(backend="sim", cache_path=tmp_path / "c.sqlite"), reader=MOUNTAIN_CAR.reader)
+    oracle = mc_oracle(client, ShapingConfig(), PotentialSource.MCQ)
     assert copy.deepcopy({"oracle": oracle})["oracle"] is oracle
     client.close()
 
@@ -161,13 +163,14 @@ class _Stochastic(ScriptedBackend):
 def test_a_stochastic_vlm_is_asked_every_time_and_its_newest_answer_wins(camera: Camera) -> None:
     cfg = ShapingConfig()
     backend = _Stochastic(["BOTTOM", "LEFT_PEAK", "BOTTOM"])
-    oracle = SemanticOracle(VLMClient(backend), cfg, MCQ)  # type: ignore[arg-type]
+    oracle = mc_oracle(VLMClient(backend), cfg, MCQ)  # type: ignore[arg-type]
     view = camera.view(-0.5)
-    assert oracle.label(view) == cfg.potential_of(Zone.BOTTOM)
-    assert oracle.phi_rbf(view) == cfg.potential_of(Zone.BOTTOM)
-    assert oracle.label(view) == cfg.potential_of(Zone.LEFT_PEAK)  # asked again, not reused
-    assert oracle.phi_rbf(view) == pytest.approx(cfg.potential_of(Zone.LEFT_PEAK))  # one prototype, updated
+    assert oracle.label(view) == MOUNTAIN_CAR.shaping_for(cfg).potential_of(Zone.BOTTOM)
+    assert oracle.phi_rbf(view) == MOUNTAIN_CAR.shaping_for(cfg).potential_of(Zone.BOTTOM)
+    assert oracle.label(view) == MOUNTAIN_CAR.shaping_for(cfg).potential_of(Zone.LEFT_PEAK)  # asked again, not reused
+    # one prototype, updated
+    assert oracle.phi_rbf(view) == pytest.approx(MOUNTAIN_CAR.shaping_for(cfg).potential_of(Zone.LEFT_PEAK))
     assert oracle.prototypes == 1 and backend.calls == 2
     assert oracle.stats()["vlm/label_reuses"] == 0.0
-    assert oracle.label(view) == cfg.potential_of(Zone.BOTTOM)
-    assert oracle.prototype_potentials().tolist() == [cfg.potential_of(Zone.BOTTOM)]
+    assert oracle.label(view) == MOUNTAIN_CAR.shaping_for(cfg).potential_of(Zone.BOTTOM)
+    assert oracle.prototype_potentials().tolist() == [MOUNTAIN_CAR.shaping_for(cfg).potential_of(Zone.BOTTOM)]

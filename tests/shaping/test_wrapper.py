@@ -8,14 +8,16 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 from stable_baselines3.common.monitor import Monitor
 
-from tests.shaping import ScriptedBackend, sim_client
-from vlmrl_cli.frames.render import FrameRenderer
+from tests.shaping import ScriptedBackend, mc_oracle, sim_client
+from tests.tasks.mountain_car.test_kinematic import kinematic_reward
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec
-from vlmrl_cli.shaping.camera import Camera, FrameView
+from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
-from vlmrl_cli.shaping.kinematic import kinematic_reward
-from vlmrl_cli.shaping.semantic import EpisodePotential, SemanticOracle
+from vlmrl_cli.shaping.semantic import EpisodePotential
 from vlmrl_cli.shaping.wrapper import HybridReward
+from vlmrl_cli.tasks.mountain_car.camera import Camera
+from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
+from vlmrl_cli.tasks.mountain_car.task import MOUNTAIN_CAR_SCENE as MC_SCENE
 from vlmrl_cli.vlm.client import VLMClient
 
 GAMMA = 0.99
@@ -27,8 +29,8 @@ def wrap(arm: ArmSpec, cfg: ShapingConfig | None = None, client: VLMClient | Non
     oracle = None
     if arm.uses_vlm:
         camera = camera or Camera(cfg.render_quantum)
-        oracle = SemanticOracle(client or sim_client(), cfg, arm.potential, rbf=arm.rbf)
-    return HybridReward(Monitor(gym.make("MountainCar-v0")), arm, cfg, gamma=GAMMA, camera=camera, oracle=oracle)
+        oracle = mc_oracle(client or sim_client(), cfg, arm.potential, rbf=arm.rbf)
+    return HybridReward(Monitor(gym.make("MountainCar-v0")), arm, cfg, GAMMA, MC_SCENE, camera=camera, oracle=oracle)
 
 
 def momentum_policy(obs: np.ndarray) -> int:
@@ -51,8 +53,8 @@ def rollout(env: gym.Env, seed: int, actions: list[int]) -> list[tuple]:
 def test_check_env_passes_for_every_arm(name: str) -> None:
     arm, cfg = ARMS[name], ShapingConfig()
     camera = Camera(cfg.render_quantum) if arm.uses_vlm else None
-    oracle = SemanticOracle(sim_client(), cfg, arm.potential, rbf=arm.rbf) if arm.uses_vlm else None
-    env = HybridReward(gym.make("MountainCar-v0"), arm, cfg, gamma=GAMMA, camera=camera, oracle=oracle)
+    oracle = mc_oracle(sim_client(), cfg, arm.potential, rbf=arm.rbf) if arm.uses_vlm else None
+    env = HybridReward(gym.make("MountainCar-v0"), arm, cfg, GAMMA, MC_SCENE, camera=camera, oracle=oracle)
     check_env(env)
     env.close()
 
@@ -136,7 +138,7 @@ def test_the_visual_pipeline_sees_only_frame_views() -> None:
     xs = [x for x, _ in camera.calls]
     assert len(xs) == len(potentials)
 
-    replay = EpisodePotential(SemanticOracle(sim_client(), cfg, ARMS["hybrid"].potential, rbf=True), lock=True)
+    replay = EpisodePotential(mc_oracle(sim_client(), cfg, ARMS["hybrid"].potential, rbf=True), lock=True)
     with FrameRenderer() as renderer:
         views = [FrameView.of_frame(renderer.render(camera.rendered_position(x))) for x in xs]
     assert [v.key for v in views] == [k for _, k in camera.calls]
@@ -168,14 +170,14 @@ def test_constructor_validates_its_arguments() -> None:
     cfg = ShapingConfig()
     base = gym.make("MountainCar-v0")
     with pytest.raises(ValueError, match="camera and oracle"):
-        HybridReward(base, ARMS["hybrid"], cfg, gamma=GAMMA)
+        HybridReward(base, ARMS["hybrid"], cfg, GAMMA, MC_SCENE)
     with pytest.raises(ValueError, match="gamma"):
-        HybridReward(base, ARMS["kinematic"], cfg, gamma=0.0)
+        HybridReward(base, ARMS["kinematic"], cfg, 0.0, MC_SCENE)
     with pytest.raises(ValueError, match="shape"):
-        HybridReward(gym.make("CartPole-v1"), ARMS["kinematic"], cfg, gamma=GAMMA)
-    oracle = SemanticOracle(sim_client(), cfg, ARMS["hybrid"].potential, rbf=True)
+        HybridReward(gym.make("CartPole-v1"), ARMS["kinematic"], cfg, GAMMA, MC_SCENE)
+    oracle = mc_oracle(sim_client(), cfg, ARMS["hybrid"].potential, rbf=True)
     with pytest.raises(ValueError, match="does not match"):
-        HybridReward(base, ARMS["hybrid-no-rbf"], cfg, gamma=GAMMA, camera=Camera(), oracle=oracle)
+        HybridReward(base, ARMS["hybrid-no-rbf"], cfg, GAMMA, MC_SCENE, camera=Camera(), oracle=oracle)
 
 
 def test_another_scene_brings_its_dense_term_observation_and_simulator() -> None:
@@ -193,11 +195,11 @@ def test_another_scene_brings_its_dense_term_observation_and_simulator() -> None
     obs, reward, *_, info = env.step(1)
     assert reward == pytest.approx(info["native_reward"] + bonus(obs, 0.5, 0.1))
     with pytest.raises(ValueError, match=r"wraps acrobot-test.*shape \(6,\); got shape \(2,\)"):
-        HybridReward(gym.make("MountainCar-v0"), ARMS["kinematic"], ShapingConfig(), gamma=0.99, scene=scene)
+        HybridReward(gym.make("MountainCar-v0"), ARMS["kinematic"], ShapingConfig(), 0.99, scene)
     moving = Scene("mc-wrong-sim", (2,), bonus, AcrobotEnv)
     client = sim_client()
-    oracle = SemanticOracle(client, ShapingConfig(), ARMS["hybrid"].potential)
+    oracle = mc_oracle(client, ShapingConfig(), ARMS["hybrid"].potential)
     with pytest.raises(ValueError, match="images mc-wrong-sim's simulator"):
-        HybridReward(gym.make("MountainCar-v0"), ARMS["hybrid"], ShapingConfig(), gamma=0.99, camera=Camera(),
-                     oracle=oracle, scene=moving)
+        HybridReward(gym.make("MountainCar-v0"), ARMS["hybrid"], ShapingConfig(), 0.99, moving, camera=Camera(),
+                     oracle=oracle)
     client.close()

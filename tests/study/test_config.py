@@ -9,21 +9,12 @@ from vlmrl_cli.study.config import build_study, choose_regimes, study_section
 
 
 def test_the_default_regime_is_the_unreliable_calibrated_one() -> None:
-    regimes, notes = choose_regimes([], None)
+    regimes, notes = choose_regimes([], None, "mountain-car")
     assert regimes == {"paper-unreliable": {"preset": "paper-unreliable"}} and notes == []
 
 
-def test_default_regimes_skip_a_missing_preset_with_a_note(monkeypatch: pytest.MonkeyPatch) -> None:
-    from vlmrl_cli.training import presets
-
-    monkeypatch.delitem(presets.PRESETS, "paper-unreliable")
-    regimes, notes = choose_regimes([], None)
-    assert list(regimes) == []
-    assert len(notes) == 1 and "paper-unreliable" in notes[0] and "vlmrl calibrate" in notes[0]
-
-
 def test_the_default_grid_has_the_placebo_the_dose_response_and_the_lock_test() -> None:
-    regimes, _ = choose_regimes([], None)
+    regimes, _ = choose_regimes([], None, "mountain-car")
     cfg = build_study([], regimes)
     assert cfg.base.seeds == tuple(range(20)) and "hybrid-shuffled" in cfg.base.arms
     doses = [c for c in cfg.cells if c.kind == "dose"]
@@ -46,7 +37,7 @@ def test_the_default_grid_has_the_placebo_the_dose_response_and_the_lock_test() 
 
 def test_file_regimes_and_variants() -> None:
     section = study_section({"regimes": {"a": "smoke", "b": {"preset": "smoke", "ppo": {"normalize_obs": False}}}})
-    regimes, _ = choose_regimes([], section["regimes"])
+    regimes, _ = choose_regimes([], section["regimes"], "mountain-car")
     cfg = build_study([], regimes, profiles=["ideal", "default"], flickers=[0.1, 0.5])
     assert [r.id for r in cfg.regimes] == ["a", "b"] and cfg.vlm_regime == "a"
     assert not cfg.regimes[1].run.ppo_config.normalize_obs

@@ -29,3 +29,24 @@ def test_anything_but_a_manifest_gives_no_history() -> None:
     previous: object
     for previous in (None, [], "text", 3):
         assert earlier_invocations(previous, "vlmrl-study", "sqlite:///s.db") == []
+
+
+def test_the_power_spread_pools_finished_seeds_only() -> None:
+    """An arm that never finished (every seed a DNF at the budget) says nothing of the spread: it
+    must not pull the pooled sd towards 0 (the MountainCarContinuous study of 2026-12-03 printed
+    0.010 and "detects 1.03x" before this)."""
+    import math
+
+    import numpy as np
+    import pandas as pd
+
+    from vlmrl_cli.study.pipeline import pooled_sd_log
+
+    finished = [1000.0, 2000.0, 4000.0]
+    rows = [{"run_id": f"a{i}", "variant": "", "arm": "hybrid", "steps_90": s, "budget": 10_000.0}
+            for i, s in enumerate(finished)]
+    rows += [{"run_id": f"b{i}", "variant": "", "arm": "baseline", "steps_90": math.nan, "budget": 10_000.0}
+             for i in range(10)]
+    sd = pooled_sd_log(pd.DataFrame(rows), 90.0)
+    assert sd == np.std(np.log(finished), ddof=1)
+    assert math.isnan(pooled_sd_log(pd.DataFrame(rows[3:]), 90.0))  # no arm with two finishes

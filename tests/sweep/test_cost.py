@@ -8,11 +8,11 @@ import pytest
 
 from vlmrl_cli.sweep.cost import FALLBACK_S_PER_STEP, Timings, contention, estimate, estimate_sweeps
 from vlmrl_cli.training.config import RunConfig
-from vlmrl_cli.training.presets import get_preset
+from vlmrl_cli.training.presets import preset_of
 
 
 def _jobs(arms: tuple[str, ...], seeds: int, steps: int = 100_000) -> list:  # type: ignore[type-arg]
-    ppo = dataclasses.replace(get_preset("smoke"), timesteps=steps)
+    ppo = dataclasses.replace(preset_of("mountain-car", "smoke"), timesteps=steps)
     return RunConfig(arms=arms, seeds=tuple(range(seeds)), preset="smoke", ppo=ppo).jobs()
 
 

@@ -8,6 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from tests.mountain_car_helpers import sim_vlm
 from vlmrl_cli.shaping.features import darkness_counts, feature_dim
 from vlmrl_cli.tasks.acrobot_scene import (
     DEFAULT_POTENTIALS,
@@ -27,7 +28,7 @@ from vlmrl_cli.tasks.acrobot_scene import (
     tip_pixel,
 )
 from vlmrl_cli.vlm.config import SimKnobs
-from vlmrl_cli.vlm.sim import MilestoneReader, SimulatedVLM
+from vlmrl_cli.vlm.sim import MilestoneReader
 
 # Reader accuracy, measured with gymnasium 1.x's renderer (max |height read - true height|, link
 # lengths; 1 link length = 113.6 px): 0.0114 on the 24 x 24 grid below, 0.0129 on 1500 uniform random
@@ -180,7 +181,7 @@ def test_no_elbow_or_no_second_link_reads_none(renderer: AcrobotRenderer) -> Non
 def test_reader_plugs_into_the_simulated_vlm(renderer: AcrobotRenderer) -> None:
     reader: MilestoneReader = AcrobotReader()
     assert reader.name == "acrobot" and reader.milestones is MILESTONES
-    vlm = SimulatedVLM(SimKnobs(flicker=0.0), reader=reader)
+    vlm = sim_vlm(SimKnobs(flicker=0.0), reader=reader)
     answer = vlm.answer(MILESTONES.prompt, renderer.render(math.pi - 0.1, 0.0))
     assert "ABOVE_BAR" in answer and "acrobot" in vlm.model
 

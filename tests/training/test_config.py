@@ -10,9 +10,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.frames.geometry import Zone
+from vlmrl_cli.tasks.mountain_car.geometry import Zone
 from vlmrl_cli.training.config import RunConfig, load_config_file, resolve, to_toml
-from vlmrl_cli.training.presets import get_preset
+from vlmrl_cli.training.presets import preset_of
 from vlmrl_cli.vlm.config import SimKnobs, VLMConfig
 
 
@@ -93,7 +93,7 @@ def test_missing_config_file_is_bad_input(tmp_path: Path) -> None:
         ({"preset": "huge"}, "unknown preset 'huge'"),
         ({"seeds": ()}, "no seed"),
         ({"seeds": (1, 1)}, "twice"),
-        ({"ppo": dataclasses.replace(get_preset("smoke"), timesteps=0)}, "ppo.timesteps"),
+        ({"ppo": dataclasses.replace(preset_of("mountain-car", "smoke"), timesteps=0)}, "ppo.timesteps"),
         ({"workers": 0}, "invalid workers"),
         ({"vlm": VLMConfig(backend="gpt9")}, "unknown VLM backend"),
     ],
@@ -121,17 +121,18 @@ def test_config_hash_ignores_the_seed_and_knobs_an_arm_does_not_use() -> None:
     assert oh0.config_hash != h0.config_hash  # the hybrid does
     no_cache = dataclasses.replace(base, vlm=VLMConfig(use_cache=False))
     assert no_cache.jobs()[2].config_hash == h0.config_hash  # the cache changes speed, not answers
-    longer = dataclasses.replace(base, ppo=dataclasses.replace(get_preset("smoke"), timesteps=2_048))
+    longer = dataclasses.replace(base, ppo=dataclasses.replace(preset_of("mountain-car", "smoke"), timesteps=2_048))
     assert longer.jobs()[0].config_hash != b0.config_hash
 
 
 def test_the_preset_name_is_a_label_the_resolved_values_are_the_identity() -> None:
     paper = RunConfig(arms=("baseline",), seeds=(0,), preset="paper")
-    zoo_cut = dataclasses.replace(paper, preset="zoo", ppo=get_preset("paper"))
+    zoo_cut = dataclasses.replace(paper, preset="zoo", ppo=preset_of("mountain-car", "paper"))
     assert paper.jobs()[0].config_hash == zoo_cut.jobs()[0].config_hash
     assert zoo_cut.jobs()[0].overrides() == {"ppo.timesteps": "300000"}
     assert paper.jobs()[0].overrides() == {}
-    one_env = dataclasses.replace(paper, ppo=dataclasses.replace(get_preset("paper"), n_envs=1, n_steps=256))
+    one_env = dataclasses.replace(paper, ppo=dataclasses.replace(preset_of("mountain-car", "paper"), n_envs=1,
+                                                                 n_steps=256))
     assert one_env.jobs()[0].config_hash != paper.jobs()[0].config_hash
     assert one_env.jobs()[0].overrides() == {"ppo.n_envs": "1", "ppo.n_steps": "256"}
 
@@ -194,7 +195,7 @@ def test_from_sources_lets_flags_beat_set_beat_the_file_beat_the_preset(
     sets = ["ppo.n_epochs=3"] if in_set else []
     flags = {"ppo.n_epochs": 4} if in_flag else {}
     cfg = RunConfig.from_sources(path, flags, sets)
-    smoke = get_preset("smoke")
+    smoke = preset_of("mountain-car", "smoke")
     expected = 4 if in_flag else 3 if in_set else 2 if in_file else smoke.n_epochs
     assert cfg.preset == "smoke" and cfg.ppo_config == dataclasses.replace(smoke, n_epochs=expected)
 
@@ -202,10 +203,11 @@ def test_from_sources_lets_flags_beat_set_beat_the_file_beat_the_preset(
 def test_from_sources_takes_the_preset_of_the_highest_source_that_names_one(tmp_path: Path) -> None:
     path = _write(tmp_path, 'preset = "smoke"\nseeds = [7]\n')
     by_set = RunConfig.from_sources(path, {}, ["preset=sb3-default"])
-    assert by_set.preset == "sb3-default" and by_set.ppo_config == get_preset("sb3-default")
+    assert by_set.preset == "sb3-default" and by_set.ppo_config == preset_of("mountain-car", "sb3-default")
     by_flag = RunConfig.from_sources(path, {"preset": "zoo", "arms": ["hybrid"]}, ["preset=sb3-default"])
-    assert by_flag.ppo_config == get_preset("zoo") and by_flag.arms == ("hybrid",) and by_flag.seeds == (7,)
-    assert RunConfig.from_sources(None).ppo_config == get_preset(RunConfig.preset)
+    assert by_flag.ppo_config == preset_of("mountain-car", "zoo")
+    assert by_flag.arms == ("hybrid",) and by_flag.seeds == (7,)
+    assert RunConfig.from_sources(None).ppo_config == preset_of("mountain-car", RunConfig.preset)
 
 
 @pytest.mark.parametrize(

@@ -12,10 +12,11 @@ from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.semantic import SemanticOracle
 from vlmrl_cli.shaping.wrapper import HybridReward
+from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
 from vlmrl_cli.training.envs import make_train_env
-from vlmrl_cli.training.presets import PRESETS
+from vlmrl_cli.training.presets import preset_of
 
-SMOKE = PRESETS["smoke"]  # 2 envs, VecNormalize on
+SMOKE = preset_of("mountain-car", "smoke")  # 2 envs, VecNormalize on
 
 
 def wrappers(venv: VecEnv) -> list[HybridReward]:
@@ -29,7 +30,8 @@ def wrappers(venv: VecEnv) -> list[HybridReward]:
 @pytest.mark.parametrize("name", list(ARMS))
 def test_every_arm_builds_steps_and_reports_native_episode_stats(name: str) -> None:
     arm = ARMS[name]
-    venv, oracle = make_train_env(arm, SMOKE, ShapingConfig(), sim_client() if arm.uses_vlm else None, seed=3)
+    client = sim_client() if arm.uses_vlm else None
+    venv, oracle = make_train_env(arm, SMOKE, ShapingConfig(), client, seed=3, task=MOUNTAIN_CAR)
     assert isinstance(venv, VecNormalize) and venv.num_envs == SMOKE.n_envs
     assert (oracle is not None) == arm.uses_vlm
     venv.reset()
@@ -51,7 +53,7 @@ def test_every_arm_builds_steps_and_reports_native_episode_stats(name: str) -> N
 
 def test_env_i_is_seeded_seed_plus_i() -> None:
     preset = dataclasses.replace(SMOKE, n_envs=3, normalize_obs=False, normalize_reward=False)
-    venv, _ = make_train_env(ARMS["kinematic"], preset, ShapingConfig(), None, seed=40)
+    venv, _ = make_train_env(ARMS["kinematic"], preset, ShapingConfig(), None, seed=40, task=MOUNTAIN_CAR)
     assert isinstance(venv, DummyVecEnv)
     obs = np.asarray(venv.reset())
     for i in range(3):
@@ -60,14 +62,14 @@ def test_env_i_is_seeded_seed_plus_i() -> None:
 
 
 def test_camera_and_oracle_are_shared_and_gamma_defaults_to_the_learner() -> None:
-    venv, oracle = make_train_env(ARMS["hybrid"], SMOKE, ShapingConfig(), sim_client(), seed=0)
+    venv, oracle = make_train_env(ARMS["hybrid"], SMOKE, ShapingConfig(), sim_client(), seed=0, task=MOUNTAIN_CAR)
     envs = wrappers(venv)
     assert envs[0].camera is envs[1].camera is not None
     assert all(env._episode is not None and env._episode.oracle is oracle for env in envs)
     assert isinstance(oracle, SemanticOracle)
     assert all(env.gamma == SMOKE.gamma for env in envs)
     venv.close()
-    venv, _ = make_train_env(ARMS["hybrid"], SMOKE, ShapingConfig(gamma=0.9), sim_client(), seed=0)
+    venv, _ = make_train_env(ARMS["hybrid"], SMOKE, ShapingConfig(gamma=0.9), sim_client(), seed=0, task=MOUNTAIN_CAR)
     assert all(env.gamma == 0.9 for env in wrappers(venv))
 
 
@@ -76,7 +78,7 @@ def test_same_seed_same_shaped_rewards() -> None:
     actions = np.random.default_rng(2).integers(0, 3, size=(300, preset.n_envs))
     runs = []
     for _ in range(2):
-        venv, _ = make_train_env(ARMS["hybrid"], preset, ShapingConfig(), sim_client(), seed=9)
+        venv, _ = make_train_env(ARMS["hybrid"], preset, ShapingConfig(), sim_client(), seed=9, task=MOUNTAIN_CAR)
         venv.reset()
         runs.append(np.array([venv.step(a)[1] for a in actions]))
     np.testing.assert_array_equal(runs[0], runs[1])
@@ -84,13 +86,13 @@ def test_same_seed_same_shaped_rewards() -> None:
 
 def test_a_vlm_arm_needs_a_client() -> None:
     with pytest.raises(ValueError, match="VLMClient"):
-        make_train_env(ARMS["hybrid"], SMOKE, ShapingConfig(), None, seed=0)
+        make_train_env(ARMS["hybrid"], SMOKE, ShapingConfig(), None, seed=0, task=MOUNTAIN_CAR)
 
 
 def test_ppo_trains_on_the_hybrid_env() -> None:
     from stable_baselines3 import PPO
 
-    venv, oracle = make_train_env(ARMS["hybrid"], SMOKE, ShapingConfig(), sim_client(), seed=0)
+    venv, oracle = make_train_env(ARMS["hybrid"], SMOKE, ShapingConfig(), sim_client(), seed=0, task=MOUNTAIN_CAR)
     model = PPO("MlpPolicy", venv, n_steps=SMOKE.n_steps, batch_size=SMOKE.batch_size, n_epochs=1, seed=0,
                 device="cpu")
     model.learn(total_timesteps=256)

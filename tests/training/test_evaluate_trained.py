@@ -5,12 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.tasks.mountain_car.test_kinematic import kinematic_reward
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.frames.geometry import Zone
 from vlmrl_cli.shaping.arms import ARMS
-from vlmrl_cli.shaping.camera import Camera, FrameView
+from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
-from vlmrl_cli.shaping.kinematic import kinematic_reward
+from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
+from vlmrl_cli.tasks.mountain_car.camera import Camera
+from vlmrl_cli.tasks.mountain_car.geometry import Zone
 from vlmrl_cli.training.evaluate_trained import EvaluateConfig, label_frames, play_episode
 from vlmrl_cli.training.trained import TrainedRun
 from vlmrl_cli.vlm.config import VLMConfig
@@ -26,7 +28,7 @@ def _energy(obs: np.ndarray) -> int:
 
 
 def test_played_steps_add_up_and_keep_every_kth_frame_and_the_last() -> None:
-    steps = play_episode(_energy, seed=3, shaping=ShapingConfig(), frame_every=4)
+    steps = play_episode(_energy, seed=3, shaping=ShapingConfig(), task=MOUNTAIN_CAR, frame_every=4)
     assert [s.t for s in steps] == list(range(len(steps)))
     assert steps[0].action is None and steps[0].native_return == 0.0
     assert all(s.native_return == -s.t for s in steps)  # native reward is -1 per step
@@ -40,13 +42,14 @@ def test_played_steps_add_up_and_keep_every_kth_frame_and_the_last() -> None:
 
 def _run(arm: str) -> TrainedRun:
     return TrainedRun(run_id="r", name=f"{arm}-s0", status="FINISHED", arm=ARMS[arm], shaping=ShapingConfig(),
-                      vlm=VLMConfig(), vlm_label="sim", simulated=True, policy=_energy)
+                      vlm=VLMConfig(), vlm_label="sim", simulated=True, policy=_energy,
+                      task="mountain-car")
 
 
 def test_mcq_labels_carry_the_label_potential() -> None:
     cfg = EvaluateConfig("r", use_cache=False)
     labels = label_frames(_run("hybrid"), _views([-1.15, -0.52, 0.55]), cfg)
-    potentials = dict(ShapingConfig().label_potentials)
+    potentials = dict(MOUNTAIN_CAR.label_potentials)
     assert len(labels) == 3
     for label in labels:
         assert label.answer in Zone.__members__ and label.potential == potentials[Zone(label.answer)]

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.training.config import resolve
 from vlmrl_cli.training.overrides import merge, nest, parse_assignment, parse_value, parse_values
-from vlmrl_cli.training.presets import PRESETS, PPOConfig
+from vlmrl_cli.training.presets import PPOConfig, preset_of
 
 KEYS = st.from_regex(r"[a-z][a-z_]{0,8}", fullmatch=True)
 SCALARS = st.one_of(
@@ -92,16 +92,17 @@ def test_precedence_is_preset_then_file_then_set_then_flags(
     ]
     cfg = resolve(layers)
     expected = next(
-        (v for v, on in zip(reversed(values), reversed(present), strict=True) if on), getattr(PRESETS["smoke"], key)
+        (v for v, on in zip(reversed(values), reversed(present), strict=True) if on),
+        getattr(preset_of("mountain-car", "smoke"), key)
     )
     assert getattr(cfg.ppo_config, key) == expected
-    assert cfg.ppo_config.n_envs == PRESETS["smoke"].n_envs  # untouched knobs keep the preset's value
+    assert cfg.ppo_config.n_envs == preset_of("mountain-car", "smoke").n_envs  # untouched knobs keep the preset's value
 
 
 def test_the_highest_layer_that_names_a_preset_chooses_the_base() -> None:
     cfg = resolve([{"preset": "sb3-default"}, {}, {"preset": "smoke", "ppo": {"n_envs": 1, "n_steps": 128}}])
     assert cfg.preset == "smoke"
-    assert cfg.ppo_config == dataclasses.replace(PRESETS["smoke"], n_envs=1, n_steps=128)
+    assert cfg.ppo_config == dataclasses.replace(preset_of("mountain-car", "smoke"), n_envs=1, n_steps=128)
 
 
 @pytest.mark.parametrize("text", ["ppo.n_envs", "=3", "ppo..n_envs=3", ""])

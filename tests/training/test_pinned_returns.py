@@ -21,7 +21,7 @@ import pytest
 from vlmrl_cli.core.numeric_pin import pin_record, pin_state
 from vlmrl_cli.core.provenance import cpu_paths
 from vlmrl_cli.training.config import RunConfig
-from vlmrl_cli.training.presets import get_preset
+from vlmrl_cli.training.presets import preset_of
 from vlmrl_cli.training.trace import native_returns
 from vlmrl_cli.vlm.config import VLMConfig
 
@@ -45,7 +45,7 @@ def digest(returns: list[float]) -> tuple[int, str]:
 
 
 def short_run(arm: str, steps: int = STEPS) -> list[float]:
-    ppo = dataclasses.replace(get_preset("paper"), timesteps=steps)
+    ppo = dataclasses.replace(preset_of("mountain-car", "paper"), timesteps=steps)
     cfg = RunConfig(arms=(arm,), seeds=(0,), preset="paper", ppo=ppo, workers=1, vlm=VLMConfig(use_cache=False))
     return native_returns(cfg.jobs()[0])
 

@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from tests.vlm.tiny_llava import build_tiny_llava
-from vlmrl_cli.frames.render import Frame, FrameRenderer
+from vlmrl_cli.frames.render import Frame
+from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 
 
 @pytest.fixture(scope="session")

@@ -16,7 +16,8 @@ from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 
-from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
+from vlmrl_cli.tasks.mountain_car.prompts import PROMPTS
+from vlmrl_cli.vlm.prompts import PromptKind
 
 Body = bytes | str | dict[str, Any]
 # (the request, its 0-based index among requests to the same route) -> (HTTP status, body)

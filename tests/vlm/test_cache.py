@@ -6,13 +6,14 @@ from pathlib import Path
 
 import pytest
 
+from tests.mountain_car_helpers import sim_vlm
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.frames.render import FrameRenderer
+from vlmrl_cli.tasks.mountain_car.prompts import PROMPTS
+from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 from vlmrl_cli.vlm.cache import ResponseCache, cache_key
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.config import SimKnobs
-from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
-from vlmrl_cli.vlm.sim import SimulatedVLM
+from vlmrl_cli.vlm.prompts import PromptKind
 
 
 def test_key_depends_on_every_part() -> None:
@@ -48,7 +49,7 @@ def test_unwritable_cache_is_bad_input(tmp_path: Path) -> None:
 def test_client_serves_the_second_query_from_the_cache(tmp_path: Path) -> None:
     with FrameRenderer() as renderer:
         frame = renderer.render(-0.5)
-    client = VLMClient(SimulatedVLM(SimKnobs()), cache=ResponseCache(tmp_path / "c.sqlite"))
+    client = VLMClient(sim_vlm(SimKnobs()), cache=ResponseCache(tmp_path / "c.sqlite"))
     first = client.ask(PROMPTS[PromptKind.FLOAT], frame)
     second = client.ask(PROMPTS[PromptKind.FLOAT], frame)
     assert first.text == second.text and not first.cached and second.cached

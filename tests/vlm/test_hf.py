@@ -11,14 +11,16 @@ from typing import Any
 import pytest
 import torch
 
+from tests.mountain_car_helpers import parse_box, parse_float, parse_mcq
 from tests.vlm.tiny_llava import folder_size_bytes
 from vlmrl_cli.core.errors import BackendUnavailable, BadInput
 from vlmrl_cli.frames.render import Frame
+from vlmrl_cli.tasks.mountain_car.prompts import PROMPTS
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.config import VLMConfig
 from vlmrl_cli.vlm.hf import HFBackend, _looks_like_path, resolve_dtype
-from vlmrl_cli.vlm.parsers import ParseStatus, parse_box, parse_float, parse_mcq
-from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
+from vlmrl_cli.vlm.parsers import ParseStatus
+from vlmrl_cli.vlm.prompts import PromptKind
 from vlmrl_cli.vlm.registry import build_backend
 
 pytestmark = pytest.mark.usefixtures("single_thread_torch")

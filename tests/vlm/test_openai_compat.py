@@ -25,10 +25,10 @@ from tests.vlm.fake_openai import (
 )
 from vlmrl_cli.core.errors import BackendUnavailable, BadInput
 from vlmrl_cli.frames.render import Frame
+from vlmrl_cli.tasks.mountain_car.prompts import PROMPTS, Prompt, PromptKind
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.config import VLMConfig
 from vlmrl_cli.vlm.openai_compat import OpenAIBackend
-from vlmrl_cli.vlm.prompts import PROMPTS, Prompt, PromptKind
 from vlmrl_cli.vlm.registry import build_backend
 
 KEY_ENV = "VLMRL_TEST_API_KEY"

@@ -6,8 +6,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vlmrl_cli.frames.geometry import Zone
-from vlmrl_cli.vlm.parsers import ParseStatus, parse_box, parse_float, parse_mcq
+from tests.mountain_car_helpers import parse_box, parse_float, parse_mcq
+from vlmrl_cli.tasks.mountain_car.geometry import Zone
+from vlmrl_cli.vlm.parsers import ParseStatus
 
 PARSERS = (parse_float, parse_box, parse_mcq)
 
@@ -85,7 +86,7 @@ def test_normalised_boxes_are_flagged() -> None:
 def test_parse_mcq_examples(text: str | None, status: ParseStatus, label: Zone | None) -> None:
     result = parse_mcq(text)
     assert result.status is status
-    assert result.label is label
+    assert result.label == label
 
 
 _number = st.one_of(st.integers(-2000, 2000).map(str), st.floats(allow_nan=True, allow_infinity=True).map(repr))
@@ -134,7 +135,7 @@ def test_in_frame_pixel_boxes_round_trip(x0: int, y0: int, w: int, h: int) -> No
        st.booleans())
 def test_every_label_parses_in_every_form(zone: Zone, template: str, lower: bool) -> None:
     text = template.format(zone.value.lower() if lower else zone.value)
-    assert parse_mcq(text).label is zone
+    assert parse_mcq(text).label == zone
 
 
 @pytest.mark.parametrize(("text", "label"), [

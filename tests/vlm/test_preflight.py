@@ -7,7 +7,8 @@ from pathlib import Path
 import pytest
 
 from vlmrl_cli.core.errors import BackendUnavailable, BadInput
-from vlmrl_cli.frames.render import FrameRenderer
+from vlmrl_cli.tasks.mountain_car.prompts import PROMPTS
+from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 from vlmrl_cli.vlm.config import VLMConfig
 from vlmrl_cli.vlm.preflight import check_coverage, check_vlm
 from vlmrl_cli.vlm.prompts import PromptKind
@@ -50,7 +51,7 @@ def test_coverage_counts_the_frames_a_transcript_cannot_answer(tmp_path: Path) -
                                   cached=False, frame_id=None))
     writer.close()
     cfg = VLMConfig(backend="replay", transcript_in=path, use_cache=False)
-    check_coverage(cfg, [PromptKind.MCQ], frames[:1])  # covered
+    check_coverage(cfg, [PROMPTS[PromptKind.MCQ]], frames[:1])  # covered
     with pytest.raises(BadInput, match="cannot answer 2 of the 3"):
-        check_coverage(cfg, [PromptKind.MCQ], frames)
-    check_coverage(VLMConfig(use_cache=False), [PromptKind.MCQ], frames)  # the simulated VLM answers anything
+        check_coverage(cfg, [PROMPTS[PromptKind.MCQ]], frames)
+    check_coverage(VLMConfig(use_cache=False), [PROMPTS[PromptKind.MCQ]], frames)  # the simulated VLM answers anything

@@ -7,9 +7,10 @@ from pathlib import Path
 import pytest
 
 from vlmrl_cli.core.errors import BadInput, MissingAnswer
-from vlmrl_cli.frames.render import FrameRenderer
+from vlmrl_cli.tasks.mountain_car.prompts import PROMPTS
+from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 from vlmrl_cli.vlm.config import PAPER_MODEL, PAPER_TRANSCRIPT, VLMConfig
-from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
+from vlmrl_cli.vlm.prompts import PromptKind
 from vlmrl_cli.vlm.replay import ReplayBackend
 from vlmrl_cli.vlm.transcript import TranscriptRecord, read_transcript
 

@@ -9,14 +9,14 @@ param ``timesteps``; metrics ``episode/*`` stepped by global timestep and ``eval
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.tasks.registry import DEFAULT_TASK
+from vlmrl_cli.tasks.registry import recorded_task
 from vlmrl_cli.tracking import schema
 
 EPISODE_METRICS = {
@@ -60,7 +60,7 @@ class ExperimentData:
     runs: pd.DataFrame
     episodes: pd.DataFrame
     eval_episodes: pd.DataFrame
-    task: str = DEFAULT_TASK
+    task: str = field(kw_only=True)
 
 
 def _history(client: Any, run_id: str, key: str) -> pd.DataFrame:
@@ -156,11 +156,11 @@ def numeric_path(tags: Mapping[str, str]) -> str:
 def check_one_task(runs: Sequence[Any], experiment: str) -> str:
     """The one task of ``runs`` (runs from before tasks carry no ``vlmrl.task`` tag: they are
     MountainCar-v0's); ``BadInput`` when they mix tasks, as a report never does."""
-    tasks = sorted({r.data.tags.get(schema.TAG_TASK, DEFAULT_TASK) for r in runs})
+    tasks = sorted({recorded_task(r.data.tags.get(schema.TAG_TASK)) for r in runs})
     if len(tasks) > 1:
         raise BadInput(f"MLflow experiment '{experiment}' mixes tasks ({', '.join(tasks)}); a report compares runs "
                        "of one task: train each task into its own --experiment.")
-    return tasks[0] if tasks else DEFAULT_TASK
+    return tasks[0] if tasks else recorded_task(None)
 
 
 def load_experiment(client: Any, experiment: str) -> ExperimentData:
@@ -201,4 +201,4 @@ def load_experiment(client: Any, experiment: str) -> ExperimentData:
         columns=EPISODE_COLUMNS)
     evals_df = pd.concat(evals, ignore_index=True)[EVAL_EPISODE_COLUMNS] if evals else pd.DataFrame(
         columns=EVAL_EPISODE_COLUMNS)
-    return ExperimentData(str(exp.experiment_id), str(exp.name), runs, episodes_df, evals_df, task)
+    return ExperimentData(str(exp.experiment_id), str(exp.name), runs, episodes_df, evals_df, task=task)

@@ -3,12 +3,13 @@
 A *regime* is a set of overrides (dotted keys, as ``--set`` takes them) laid over the base; each
 regime's baseline arm x seeds is an ordinary `vlmrl run` configuration, checked by the same
 schema. A grid is given as a list of values per key (``[calibrate.grid]`` in TOML, or repeatable
-``--grid ppo.n_envs=1,4,16``) and spans their product. Without one, MountainCar's
-``DEFAULT_REGIMES`` spans "always solves quickly" (the zoo's tuned PPO) to "never solves" (SB3's
-defaults, one env); another task's default grid is its ``Task.calibration``.
+``--grid ppo.n_envs=1,4,16``) and spans their product. Without one, the task's default grid is its
+``Task.calibration`` (MountainCar's spans "always solves quickly", the zoo's tuned PPO, to "never
+solves", SB3's defaults on one env).
 
-The target is the paper's baseline (Table 2) for MountainCar, and that profile's shape scaled to
-the task's thresholds and budget for another task (``analysis.learning_profile.scaled_target``).
+The target is the paper's baseline (Table 2) for the task the paper reports
+(``Task.reported_in_paper``), and that profile's shape scaled to the task's thresholds and budget
+for another task (``analysis.learning_profile.scaled_target``).
 """
 
 from __future__ import annotations
@@ -23,29 +24,13 @@ from typing import Any
 from vlmrl_cli.analysis.learning_profile import TargetProfile, paper_baseline, scaled_target
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
 from vlmrl_cli.core.errors import BadInput, did_you_mean
-from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig, resolve
 from vlmrl_cli.training.overrides import nest, parse_assignment, parse_values
 
 DEFAULT_EXPERIMENT = "vlmrl-calibrate"
 DEFAULT_SEEDS = 10
 CALIBRATED_ARM = "baseline"
-
-_NO_VECNORMALIZE = {"ppo.normalize_obs": False, "ppo.normalize_reward": False}
-#: The default grid, relative to the base preset (`paper`: the zoo's PPO, 16 envs x 16 steps,
-#: VecNormalize, 300,000 steps). Cost on 2 cores, 10 seeds each: about 85 minutes.
-DEFAULT_REGIMES: tuple[Mapping[str, Any], ...] = (
-    {},  # the zoo's tuned PPO: solves every seed quickly
-    {"ppo.learning_rate": 1e-4},  # a third of the step size
-    {"ppo.normalize_reward": False},  # observations normalised, raw rewards
-    _NO_VECNORMALIZE,  # raw observations and rewards
-    {**_NO_VECNORMALIZE, "ppo.ent_coef": 0.01},  # ... with an entropy bonus to explore
-    {"ppo.n_envs": 4, "ppo.n_steps": 64},  # fewer envs, the same 256-step rollouts
-    {"ppo.n_envs": 1, "ppo.n_steps": 256},  # one env, the same 256-step rollouts
-    # SB3's PPO defaults on one env: long rollouts, no normalisation (rarely solves in budget)
-    {**_NO_VECNORMALIZE, "ppo.n_envs": 1, "ppo.n_steps": 2048, "ppo.n_epochs": 10, "ppo.gae_lambda": 0.95},
-)
-
 
 @dataclass(frozen=True)
 class Regime:
@@ -168,9 +153,9 @@ def resolve_regime(
 
 
 def default_grid(task: str) -> list[dict[str, Any]]:
-    """The regimes `vlmrl calibrate` tries without a grid: MountainCar's ``DEFAULT_REGIMES``, another
-    task's ``Task.calibration`` (its default preset alone when that is empty)."""
-    regimes = DEFAULT_REGIMES if task == DEFAULT_TASK else get_task(task).calibration or ({},)
+    """The regimes `vlmrl calibrate` tries without a grid: the task's ``Task.calibration`` (its
+    default preset alone when that is empty)."""
+    regimes = get_task(task).calibration or ({},)
     return [dict(r) for r in regimes]
 
 
@@ -187,11 +172,12 @@ def calibrate_config(regimes: tuple[Regime, ...], **settings: Any) -> CalibrateC
 
 
 def calibration_target(run: RunConfig) -> TargetProfile:
-    """What a regime's baseline is scored against: the paper's baseline for MountainCar, else its
-    shape on the task's thresholds and the run's budget (``scaled_target``)."""
-    if run.task == DEFAULT_TASK:
+    """What a regime's baseline is scored against: the paper's baseline for the task it reports,
+    else its shape on the task's thresholds and the run's budget (``scaled_target``)."""
+    task = get_task(run.task)
+    if task.reported_in_paper:
         return paper_baseline()
-    return scaled_target(get_task(run.task).thresholds, run.budget)
+    return scaled_target(task.thresholds, run.budget)
 
 
 def _label(point: Mapping[str, Any]) -> str:

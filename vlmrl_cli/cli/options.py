@@ -16,9 +16,10 @@ import typer
 from vlmrl_cli.analysis.multiplicity import METHODS
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.shaping.arms import ARMS
+from vlmrl_cli.tasks.registry import DEFAULT_TASK
 from vlmrl_cli.training.config import source_layers
 from vlmrl_cli.training.events import EXECUTORS
-from vlmrl_cli.training.presets import PRESETS
+from vlmrl_cli.training.presets import preset_names
 from vlmrl_cli.vlm.config import BACKENDS, DEFAULT_SIM_PROFILE, SIM_PROFILES, SimKnobs, VLMConfig
 
 TrackingUri = Annotated[
@@ -193,7 +194,7 @@ Arms = Annotated[str, typer.Option("--arms", help=f"Comma-separated arms, any of
 Seeds = Annotated[int, typer.Option("--seeds", help="Number of seeds: 0..N-1.")]
 SeedList = Annotated[str | None, typer.Option("--seed-list", help="Explicit seeds, e.g. 3,7,11.")]
 Timesteps = Annotated[int | None, typer.Option("--timesteps", help="Budget per run (= --set ppo.timesteps=N).")]
-Preset = Annotated[str, typer.Option("--preset", metavar=choices(list(PRESETS)),
+Preset = Annotated[str, typer.Option("--preset", metavar=choices(preset_names(DEFAULT_TASK)),
                                      help="PPO preset (the bottom layer of [ppo]); another task's presets "
                                           "are its own (default: the task's, e.g. zoo).")]
 TaskOpt = Annotated[str | None, typer.Option(

@@ -36,6 +36,14 @@ def _probe_progress(console: Console) -> Iterator[Callable[[int, int], None]]:
         yield progress
 
 
+def _is_papers_task(name: str) -> bool:
+    from vlmrl_cli.tasks.registry import get_task
+
+    with exit_codes():
+        return get_task(name).reported_in_paper
+    return False  # exit_codes() has exited
+
+
 @with_vlm_options
 def taxonomy(
     vlm_cfg: VLMConfig,
@@ -51,7 +59,7 @@ def taxonomy(
     from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
 
     console = Console(stderr=True)
-    if task is not None and task != "mountain-car":
+    if task is not None and not _is_papers_task(task):  # the paper's Table 1 is MountainCar's probe
         _other_task(task, vlm_cfg, states, out, tracking_uri, experiment, console)
         return
     with exit_codes():

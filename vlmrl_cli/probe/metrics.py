@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION, SCREEN_WIDTH
-from vlmrl_cli.shaping.config import DEFAULT_LABEL_POTENTIALS
+from vlmrl_cli.tasks.mountain_car.geometry import MAX_POSITION, MIN_POSITION, SCREEN_WIDTH
+from vlmrl_cli.tasks.mountain_car.task import ZONE_POTENTIALS
 from vlmrl_cli.vlm.parsers import Box, ParseStatus
 
 # Statuses where the model's text itself failed (NO_ANSWER is the transcript's gap, not the model's).
@@ -123,8 +123,9 @@ def mcq_accuracy(predicted: Sequence[str | None], truth: Sequence[str]) -> float
 # --- the consequence on the potential ------------------------------------------------------
 
 def label_potential(label: str | None, mapping: Mapping[str, float] | None = None) -> float:
-    """Raw potential Phi_raw of an MCQ label (``DEFAULT_LABEL_POTENTIALS``); NaN for None."""
-    table = dict(DEFAULT_LABEL_POTENTIALS) if mapping is None else mapping
+    """Raw potential Phi_raw of an MCQ label (MountainCar's ``ZONE_POTENTIALS`` unless ``mapping``);
+    NaN for None."""
+    table = dict(ZONE_POTENTIALS) if mapping is None else mapping
     return math.nan if label is None else float(table[label])
 
 

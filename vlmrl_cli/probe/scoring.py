@@ -14,9 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from vlmrl_cli.core.errors import MissingAnswer
-from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION, GroundTruth
-from vlmrl_cli.frames.render import Frame, FrameRenderer
+from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.probe import metrics
+from vlmrl_cli.tasks.mountain_car.geometry import MAX_POSITION, MIN_POSITION, GroundTruth
+from vlmrl_cli.tasks.mountain_car.prompts import NUMBERS, PROMPTS, ZONE_MILESTONES
+from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.parsers import (
@@ -28,7 +30,7 @@ from vlmrl_cli.vlm.parsers import (
     parse_float,
     parse_mcq,
 )
-from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
+from vlmrl_cli.vlm.prompts import PromptKind
 
 # 101 sweep positions (+ the paper's two frames): a rank correlation of 0 over 103 frames has a 95%
 # interval of about +-0.2 (25 positions gave +-0.4, too wide to tell "no rank signal" from a weak
@@ -139,9 +141,9 @@ def probe_frame(client: VLMClient, renderer: FrameRenderer, planned: _Planned) -
         frame_id=planned.frame_id,
         truth=GroundTruth.of(planned.x),
         answers=answers,
-        float_result=parse_float(answers[PromptKind.FLOAT]),
-        box_result=parse_box(answers[PromptKind.BOX]),
-        mcq_result=parse_mcq(answers[PromptKind.MCQ]),
+        float_result=parse_float(answers[PromptKind.FLOAT], NUMBERS.low, NUMBERS.high),
+        box_result=parse_box(answers[PromptKind.BOX], NUMBERS.width, NUMBERS.height),
+        mcq_result=parse_mcq(answers[PromptKind.MCQ], ZONE_MILESTONES.labels),
         panel=planned.panel,
         caption=planned.caption,
         frame=frame if planned.panel is not None else None,

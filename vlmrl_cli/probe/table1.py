@@ -217,7 +217,7 @@ def write_tables(
     main, stats = taxonomy_frame(a, b), sweep_frame(sweep)
     cap_main, cap_sweep = captions(label, provenance, simulated)
     notes = [PAPER_TRUE_CENTRES_NOTE, MCQ_TRUTH_NOTE,
-             "Φ mappings: MCQ label -> raw potential (shaping.config.DEFAULT_LABEL_POTENTIALS); float: x "
+             "Φ mappings: MCQ label -> raw potential (tasks/mountain_car ZONE_POTENTIALS); float: x "
              "normalised to [0, 1] over the track; box: box centre column / 600. The truth applies the same "
              "mapping to the ground truth."]
     md = [f"**{cap_main}**", "", tables.markdown(main), "", *(f"- {n}" for n in notes), "",

@@ -27,7 +27,6 @@ from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, flatten
-from vlmrl_cli.frames.render import FrameRenderer
 from vlmrl_cli.probe.scoring import (
     DEFAULT_STATES,
     FrameProbe,
@@ -37,13 +36,15 @@ from vlmrl_cli.probe.scoring import (
     probe_frame,
     sweep_statistics,
 )
+from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
+from vlmrl_cli.tasks.mountain_car.prompts import PROMPTS
+from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.config import VLMConfig
 from vlmrl_cli.vlm.preflight import check_vlm
-from vlmrl_cli.vlm.prompts import PROMPTS
 from vlmrl_cli.vlm.registry import build_client
 
 ProgressFn = Callable[[int, int], None]
@@ -160,7 +161,7 @@ def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None) -> Tax
     staging = _staging_folder(cfg.out)
     client: VLMClient | None = None
     try:
-        client = build_client(cfg.vlm, transcript=staging / "transcript.jsonl")
+        client = build_client(cfg.vlm, transcript=staging / "transcript.jsonl", reader=MOUNTAIN_CAR.reader)
         backend = client.backend
         experiment_id = store.ensure_experiment(tracker, cfg.experiment)
         planned, is_sweep = plan_frames(cfg.states, backend)

@@ -38,7 +38,7 @@ from vlmrl_cli.core.tables import markdown_rows
 from vlmrl_cli.report.figures import plot_normalised_profile
 from vlmrl_cli.report.table2 import BASELINE, order_arms
 from vlmrl_cli.report.writer import check_paths
-from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
+from vlmrl_cli.tasks.registry import get_task, recorded_task
 from vlmrl_cli.tasks.zoo import SOURCE as ZOO_SOURCE
 from vlmrl_cli.tasks.zoo import ZOO_PPO
 from vlmrl_cli.tracking import schema
@@ -116,7 +116,7 @@ def read_runs(files: Sequence[Path]) -> pd.DataFrame:
             if latest is None or not np.isfinite(float(latest[2])):
                 raise BadInput(f"{path}: run {record['source_run_id']} has no {schema.METRIC_EVAL_MEAN_RETURN} (its "
                                "detached evaluation); export runs that finished their evaluation.")
-            rows.append({"task": tags.get(schema.TAG_TASK, DEFAULT_TASK), "arm": tags.get(schema.TAG_ARM, ""),
+            rows.append({"task": recorded_task(tags.get(schema.TAG_TASK)), "arm": tags.get(schema.TAG_ARM, ""),
                          "seed": int(tags.get(schema.TAG_SEED, -1)),
                          "config_hash": tags.get(schema.TAG_CONFIG_HASH, ""),
                          "run_id": record["source_run_id"], "score": float(latest[2]),

@@ -15,18 +15,8 @@ import pandas as pd
 from vlmrl_cli.analysis import stats
 from vlmrl_cli.core import tables
 from vlmrl_cli.report.table2 import order_arms
-from vlmrl_cli.shaping.hacking import HOVER_FLAG, HOVER_HORIZON, HOVER_X
+from vlmrl_cli.shaping.hacking import HOVER_FLAG, HOVER_HORIZON
 
-TIMEOUT = 200  # MountainCar-v0's time limit (steps): a detached episode this long never reached the flag
-
-DEFINITION = (
-    f"Hover fraction: the share of a run's detached evaluation steps spent right of x = {HOVER_X:g} without "
-    f"reaching the flag within the next {HOVER_HORIZON} steps (driving straight in takes about 5-7 steps from "
-    f"there); a run is flagged when it exceeds {HOVER_FLAG:g}. Dwell: mean steps per detached episode right of "
-    f"x = {HOVER_X:g}. Shaped - native: mean over the last training window of the shaped minus the native "
-    "episode return (what the shaping paid on top of the task). Flagged seeds are counted per seed with a Wilson "
-    "interval; detached lengths and timeouts are per episode, pooled over seeds."
-)
 NO_DIAGNOSTIC = (
     "This task has no hovering diagnostic (its plug-in names no position to watch), so there is no hover "
     "fraction, dwell or flagged seed. Shaped - native: mean over the last training window of the shaped minus the "
@@ -35,10 +25,24 @@ NO_DIAGNOSTIC = (
 )
 
 
-def definition(hover: bool) -> str:
-    """What the section's columns mean: MountainCar's hovering diagnostic, or (``hover`` False, a
-    task whose plug-in names no position) only the columns that apply."""
-    return DEFINITION if hover else NO_DIAGNOSTIC
+def definition(hover_from: float | None) -> str:
+    """What the section's columns mean: the hovering diagnostic past ``hover_from`` (the task's
+    ``Task.hover_from``), or (None: the task's plug-in names no position) only the columns that apply.
+
+    Example:
+        >>> definition(0.3)[:64]
+        "Hover fraction: the share of a run's detached evaluation steps s"
+    """
+    if hover_from is None:
+        return NO_DIAGNOSTIC
+    return (
+        f"Hover fraction: the share of a run's detached evaluation steps spent right of x = {hover_from:g} without "
+        f"reaching the flag within the next {HOVER_HORIZON} steps (driving straight in takes about 5-7 steps from "
+        f"there); a run is flagged when it exceeds {HOVER_FLAG:g}. Dwell: mean steps per detached episode right of "
+        f"x = {hover_from:g}. Shaped - native: mean over the last training window of the shaped minus the native "
+        "episode return (what the shaping paid on top of the task). Flagged seeds are counted per seed with a Wilson "
+        "interval; detached lengths and timeouts are per episode, pooled over seeds."
+    )
 
 
 def _finite(x: Any) -> np.ndarray:
@@ -46,8 +50,7 @@ def _finite(x: Any) -> np.ndarray:
     return a[np.isfinite(a)]
 
 
-def hacking_frame(per_seed: pd.DataFrame, eval_episodes: pd.DataFrame, ci: float = 0.95,
-                  timeout: int = TIMEOUT) -> pd.DataFrame:
+def hacking_frame(per_seed: pd.DataFrame, eval_episodes: pd.DataFrame, ci: float, timeout: int) -> pd.DataFrame:
     """One row per arm: seeds, hover fraction (mean, max over seeds), flagged seeds with a Wilson CI,
     mean dwell, mean shaped-minus-native gap, and the detached episode lengths (episodes, median,
     90th percentile, share of timeouts: episodes of ``timeout`` steps, the task's time limit). NaN

@@ -40,7 +40,7 @@ from vlmrl_cli.report.table2 import (
 from vlmrl_cli.shaping.arms import ARMS, DENSE, METHOD, ArmSpec
 from vlmrl_cli.shaping.hacking import HOVER_FLAG
 from vlmrl_cli.tasks.base import Task
-from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
 
@@ -255,13 +255,12 @@ def _statistics_md(cfg: ReportConfig, family_size: int = 0, auc_margin: float = 
 
 def _hacking_intro(task: Task) -> list[str]:
     """The reward-hacking section's heading and definition for the runs' task."""
-    if task.name == DEFAULT_TASK:
-        return ["## Reward hacking: hovering short of the flag", "",
-                "R_kin = max(0, 2(x + 0.4)) pays up to +1.8 per step just left of the flag, more than the -1 step "
-                "cost, so parking near x = 0.45 can pay more than finishing. " + hacking.DEFINITION, ""]
+    if task.hacking_note:
+        heading, why = task.hacking_note
+        return [f"## Reward hacking: {heading}", "", f"{why} {hacking.definition(task.hover_from)}", ""]
     return ["## Reward hacking", "",
             "A dense term that pays more per step than finishing can keep an agent from finishing. "
-            + hacking.definition(task.hover_diagnostic), ""]
+            + hacking.definition(task.hover_from if task.hover_diagnostic else None), ""]
 
 
 def for_task(cfg: ReportConfig, task: Task) -> ReportConfig:
@@ -290,7 +289,7 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
     assert cfg.window is not None  # resolved to the task's by write_report
     simulated = bool(data.runs["simulated"].any())
     task = get_task(data.task)
-    paper_task = data.task == DEFAULT_TASK
+    paper_task = task.reported_in_paper
     title = "Reproduction report" if paper_task else f"Report (task {data.task})"
     parts = [f"# {title}: experiment `{data.experiment_name}`", ""]
     if simulated:
@@ -408,7 +407,7 @@ def write_report(cfg: ReportConfig, registry: Mapping[str, ArmSpec] = ARMS) -> R
     data = load_experiment(client, cfg.experiment)
     check_paths(data.runs, cfg.allow_mixed_paths)  # before anything is computed or written
     task = get_task(data.task)
-    if data.task != DEFAULT_TASK:
+    if not task.reported_in_paper:
         reported = {}  # the paper's numbers and claims are MountainCar-v0's: none beside another task
     cfg = for_task(cfg, task)
     thresholds = cfg.thresholds
@@ -451,7 +450,7 @@ def write_report(cfg: ReportConfig, registry: Mapping[str, ArmSpec] = ARMS) -> R
                           + attribution.attribution_markdown(comparisons, cfg.ci, cfg.adjust))
     files += _write_frame(hack, out / "hacking", fig_note,
                           "# Reward-hacking diagnostic\n\n" + fig_note + ".\n\n"
-                          + hacking.definition(task.hover_diagnostic) + "\n\n"
+                          + hacking.definition(task.hover_from if task.hover_diagnostic else None) + "\n\n"
                           + hacking.hacking_markdown(hack, cfg.ci, task.hover_diagnostic))
     per_seed_path = out / "per_seed.csv"
     labelled = per_seed.merge(data.runs[["run_id", "vlm", "simulated"]], on="run_id", how="left")

@@ -1,26 +1,23 @@
 """The simulator's camera: the only component of the visual pipeline that knows the state.
 
-MountainCar's picture depends on the position ``x`` alone, so the camera snaps ``x`` to a
-grid of ``render_quantum`` (0.001 x units, a third of a pixel), renders each grid cell once
-with gymnasium's own renderer and memoises the cell's SHA-256 and features. Pixels are kept
-in a small LRU and re-rendered on demand (a render costs about 2 ms). Everything downstream
-(features, VLM, RBF, lock) receives a ``FrameView`` that carries no state: this is the
-modality separation of paper Section 3.3.
+A task's camera (``Task.make_camera``) snaps the simulator's state to a grid of cells, renders
+each cell once and memoises the cell's SHA-256 and features (``CellCamera``). Pixels are kept
+in a small LRU and re-rendered on demand. Everything downstream (features, VLM, RBF, lock)
+receives a ``FrameView`` that carries no state: this is the modality separation of paper
+Section 3.3. MountainCar's camera is ``tasks/mountain_car/camera.py``.
 """
 
 from __future__ import annotations
 
 import functools
-import math
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Generic, TypeVar
+from typing import Generic, TypeVar
 
 import numpy as np
 
-from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION
-from vlmrl_cli.frames.render import Frame, FrameRenderer
+from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.shaping.features import darkness_counts
 
 Cell = TypeVar("Cell")  # a camera's grid cell: MountainCar's position index, Acrobot's pair of angle bins
@@ -117,68 +114,3 @@ class CellCamera(Generic[Cell]):
     def close(self) -> None:
         self._release()
         self._frames.clear()
-
-
-class Camera(CellCamera[int]):
-    """Renders MountainCar at a position snapped to ``render_quantum``; memoises per grid cell.
-
-    ``renders`` counts calls to gymnasium's renderer; ``pixel_cache`` is how many frames'
-    pixels are kept (about 0.7 MB each; frames a deterministic VLM has labelled leave first, so
-    the cache mostly holds frames still waiting for their first label).
-
-    Example:
-        >>> cam = Camera(render_quantum=0.001)
-        >>> a, b = cam.view(-0.5), cam.view(-0.50001)  # the same grid cell
-        >>> a.key == b.key, cam.renders, a.features.shape
-        (True, 1, (600,))
-        >>> a.frame().pixels.shape
-        (400, 600, 3)
-        >>> cam.close()
-    """
-
-    def __init__(self, render_quantum: float = 0.003, pixel_cache: int = 384, env_id: str = "MountainCar-v0") -> None:
-        if not (math.isfinite(render_quantum) and 0 < render_quantum <= MAX_POSITION - MIN_POSITION):
-            raise ValueError(
-                f"render_quantum must be in (0, {MAX_POSITION - MIN_POSITION}] x units, got {render_quantum}"
-            )
-        super().__init__(pixel_cache)
-        self.render_quantum = float(render_quantum)
-        self.env_id = env_id  # whose renderer draws the track (MountainCarContinuous-v0: flag at 0.45)
-        self._renderer: FrameRenderer | None = None
-        self._last = round((MAX_POSITION - MIN_POSITION) / self.render_quantum)  # the last grid cell
-
-    def _cell(self, x: float) -> int:
-        if not math.isfinite(x):
-            raise ValueError(f"x must be finite, got {x}")
-        return min(max(round((x - MIN_POSITION) / self.render_quantum), 0), self._last)
-
-    def _cell_position(self, cell: int) -> float:
-        return min(max(MIN_POSITION + cell * self.render_quantum, MIN_POSITION), MAX_POSITION)
-
-    def grid_positions(self) -> list[float]:
-        """Every position the camera can show (one per grid cell, track end to track end)."""
-        return [self._cell_position(cell) for cell in range(self._last + 1)]
-
-    def rendered_position(self, x: float) -> float:
-        """The position (x units) whose frame ``view(x)`` shows: ``x`` snapped to the grid."""
-        return self._cell_position(self._cell(float(x)))
-
-    def _draw(self, cell: int, sha256: str | None) -> Frame:
-        if self._renderer is None:
-            self._renderer = FrameRenderer(self.env_id)
-        return self._renderer.render(self._cell_position(cell), sha256=sha256)
-
-    def _release(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-
-    def view(self, x: float) -> FrameView:
-        """The view of the car at position ``x`` (x units), rendered at most once per grid cell."""
-        return self._view_of(self._cell(float(x)))
-
-    def look(self, sim: Any) -> FrameView:
-        """The view of the simulator ``sim`` (the unwrapped env): its position ``state[0]``."""
-        cell = self._cell(float(sim.state[0]))
-        view = self._views.get(cell)  # every env step: a known cell is one dict lookup
-        return view if view is not None else self._view_of(cell)

@@ -1,11 +1,11 @@
-"""Reward-hacking diagnostic for the kinematic term: does a policy hover short of the flag?
+"""Reward-hacking diagnostic for a dense term: does a policy hover short of the goal?
 
-``R_kin = max(0, 2 (x + 0.4))`` pays up to +1.8 per step just left of the flag (x = 0.5), more
-than the -1 native step cost, so an agent can earn more by parking right of the valley than by
-finishing the episode. These pure functions measure that on recorded position trajectories
-(one array of x per episode, the position after each step, track units in [-1.2, 0.6]).
-A policy that drives to the flag spends only the last few steps right of ``HOVER_X`` (about 5-7
-for energy pumping); one that hovers stays there without finishing.
+A dense term that grows towards the goal can pay more per step near it than the native step
+cost, so an agent can earn more by parking there than by finishing the episode (MountainCar's
+Eq. 1 is the paper's case). These pure functions measure that on recorded trajectories of the
+task's position (``Task.position``: one array per episode, the position after each step) against
+``x_min``, where hovering starts (``Task.hover_from``). A policy that drives to the goal spends
+only its last few steps past ``x_min``; one that hovers stays there without finishing.
 """
 
 from __future__ import annotations
@@ -16,16 +16,14 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-#: Positions right of this (track units) pay R_kin >= 1.4 per step: the region a hovering policy sits in.
-HOVER_X = 0.3
-#: A step right of ``HOVER_X`` is "on the way in" when the flag is reached within this many more steps;
-#: energy pumping covers x = 0.3 -> 0.5 in at most ~7 steps.
+#: A step past ``x_min`` is "on the way in" when the goal is reached within this many more steps
+#: (MountainCar's energy pumping covers its last 0.2 of track in at most ~7 steps).
 HOVER_HORIZON = 10
 #: A run is flagged as hovering when more than this fraction of its detached evaluation steps hover.
 HOVER_FLAG = 0.1
 
 
-def hover_steps(xs: npt.ArrayLike, reached_flag: bool, x_min: float = HOVER_X, horizon: int = HOVER_HORIZON
+def hover_steps(xs: npt.ArrayLike, reached_flag: bool, x_min: float, horizon: int = HOVER_HORIZON
                 ) -> np.ndarray:
     """Which steps of one episode hover: right of ``x_min`` without reaching the flag within ``horizon`` steps.
 
@@ -40,9 +38,9 @@ def hover_steps(xs: npt.ArrayLike, reached_flag: bool, x_min: float = HOVER_X, h
         Bool array of shape ``(T,)``.
 
     Example:
-        >>> hover_steps([0.1, 0.35, 0.45, 0.5], reached_flag=True, horizon=2).tolist()
+        >>> hover_steps([0.1, 0.35, 0.45, 0.55], reached_flag=True, x_min=0.3, horizon=2).tolist()
         [False, False, False, False]
-        >>> hover_steps([0.1, 0.35, 0.45, 0.4], reached_flag=False).tolist()
+        >>> hover_steps([0.1, 0.35, 0.45, 0.4], reached_flag=False, x_min=0.3).tolist()
         [False, True, True, True]
     """
     x = np.asarray(xs, dtype=float).reshape(-1)
@@ -53,11 +51,11 @@ def hover_steps(xs: npt.ArrayLike, reached_flag: bool, x_min: float = HOVER_X, h
     return np.asarray((x > x_min) & ~arriving)
 
 
-def dwell_right_steps(xs: npt.ArrayLike, x_min: float = HOVER_X) -> int:
+def dwell_right_steps(xs: npt.ArrayLike, x_min: float) -> int:
     """Steps one episode spends right of ``x_min`` (shape ``(T,)`` positions; the flag ends the episode).
 
     Example:
-        >>> dwell_right_steps([0.1, 0.35, 0.2, 0.4, 0.5])
+        >>> dwell_right_steps([0.1, 0.35, 0.2, 0.4, 0.55], x_min=0.3)
         3
     """
     return int(np.count_nonzero(np.asarray(xs, dtype=float) > x_min))
@@ -68,7 +66,7 @@ class HoverSummary:
     """One run's detached evaluation, seen for hovering.
 
     ``hover_fraction``: hovering steps / all steps, pooled over episodes (in [0, 1]).
-    ``dwell_right_steps``: mean over episodes of the steps spent right of ``HOVER_X``.
+    ``dwell_right_steps``: mean over episodes of the steps spent past ``x_min``.
     ``flagged``: ``hover_fraction > HOVER_FLAG``.
     """
 
@@ -82,7 +80,7 @@ class HoverSummary:
 
 
 def summarize_hovering(
-    trajectories: Sequence[npt.ArrayLike], reached_flag: npt.ArrayLike, x_min: float = HOVER_X,
+    trajectories: Sequence[npt.ArrayLike], reached_flag: npt.ArrayLike, x_min: float,
     horizon: int = HOVER_HORIZON,
 ) -> HoverSummary:
     """Hover fraction and mean dwell right of ``x_min`` over a run's episodes.
@@ -92,7 +90,7 @@ def summarize_hovering(
         reached_flag: shape ``(episodes,)``, whether each episode ended at the flag.
 
     Example:
-        >>> s = summarize_hovering([[0.1, 0.4, 0.5], [0.35, 0.4, 0.45, 0.4]], [True, False])
+        >>> s = summarize_hovering([[0.1, 0.4, 0.55], [0.35, 0.4, 0.45, 0.4]], [True, False], x_min=0.3)
         >>> s.hover_fraction, s.dwell_right_steps, s.flagged
         (0.5714285714285714, 3.0, True)
     """

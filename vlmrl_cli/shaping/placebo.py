@@ -22,7 +22,7 @@ import hashlib
 from vlmrl_cli.shaping.arms import ArmSpec
 from vlmrl_cli.shaping.config import ShapingConfig
 
-LabelMap = tuple[tuple[str, float], ...]  # labels: MountainCar's Zone, or another task's names
+LabelMap = tuple[tuple[str, float], ...]  # (label, raw potential), in the task's label order
 
 
 def permutation(n: int, seed: int, salt: str = "vlmrl-placebo") -> tuple[int, ...]:
@@ -85,7 +85,7 @@ def oracle_shaping(arm: ArmSpec, shaping: ShapingConfig, seed: int) -> ShapingCo
 
 
 def describe_map(label_potentials: LabelMap) -> str:
-    """``"LEFT_PEAK=0.3 LEFT_SLOPE=0.1 ..."``: a label map as one loggable line.
+    """``"HANGING=0 LOW_SWING=0.2 ..."``: a label map as one loggable line.
 
     Example:
         >>> describe_map((("BOTTOM", 0.0), ("GOAL", 1.0)))

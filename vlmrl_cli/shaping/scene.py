@@ -1,8 +1,8 @@
 """What the hybrid reward needs to know of a task: its observation, its dense term, its camera.
 
 A task plug-in (``vlmrl_cli.tasks``) fills a ``Scene``; ``HybridReward`` reads nothing else about
-the environment. ``MOUNTAIN_CAR`` is the paper's: observation ``[x, v]``, Eq. 1's kinematic term
-on ``x`` and a camera that images the position.
+the environment. MountainCar's (``tasks/mountain_car``) is the paper's: observation ``[x, v]``,
+Eq. 1's kinematic term on ``x`` and a camera that images the position.
 """
 
 from __future__ import annotations
@@ -12,7 +12,6 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
-from gymnasium.envs.classic_control.mountain_car import MountainCarEnv
 
 from vlmrl_cli.shaping.camera import FrameView
 
@@ -44,16 +43,3 @@ class Scene:
     obs_shape: tuple[int, ...]
     dense: DenseTerm
     sim_type: type
-
-
-def mountain_car_dense(obs: np.ndarray, scale: float, offset: float) -> float:
-    """Paper Eq. 1 on the position ``obs[0]``: ``max(0, scale (x + offset))``.
-
-    Example:
-        >>> mountain_car_dense(np.array([0.1, 0.0]), 2.0, 0.4)
-        1.0
-    """
-    return max(0.0, scale * (float(obs[0]) + offset))  # kinematic_reward, inlined: every env step
-
-
-MOUNTAIN_CAR = Scene("mountain-car", (2,), mountain_car_dense, MountainCarEnv)

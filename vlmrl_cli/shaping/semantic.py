@@ -16,7 +16,7 @@ arm (source, rbf, lock)       Phi(s)
 hybrid (MCQ, rbf, lock)       max(lock level, Phi_rbf(s))
 hybrid-no-lock (MCQ, rbf)     Phi_rbf(s)
 hybrid-no-rbf (MCQ, lock)     max(lock level, latest label's raw potential)
-vision-float (FLOAT)          latest float potential (parsed x mapped to [0, 1])
+vision-float (FLOAT)          latest float potential (parsed number mapped to [0, 1])
 ============================  ======================================================
 
 Nothing here sees the environment state: the only input is a ``FrameView``.
@@ -29,17 +29,16 @@ from collections.abc import Callable
 
 import numpy as np
 
-from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION
 from vlmrl_cli.shaping.arms import PotentialSource
 from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
-from vlmrl_cli.shaping.features import FEATURE_DIM, FEATURE_UNIT
+from vlmrl_cli.shaping.features import FEATURE_UNIT
 from vlmrl_cli.shaping.hysteresis import LockState, lock_step
 from vlmrl_cli.shaping.rbf import RBFField, squared_distances
 from vlmrl_cli.tracking import schema
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.parsers import parse_float, parse_mcq
-from vlmrl_cli.vlm.prompts import PROMPTS, ZONE_MILESTONES, Milestones, PromptKind
+from vlmrl_cli.vlm.prompts import Milestones, NumberQuestions
 
 STAT_KEYS: tuple[str, ...] = (
     schema.METRIC_VLM_QUERIES,
@@ -50,28 +49,19 @@ STAT_KEYS: tuple[str, ...] = (
 )
 
 
-def float_potential(x: float) -> float:
-    """A position answer (x units) mapped linearly onto [0, 1] over the track, clipped.
-
-    Example:
-        >>> float_potential(-1.2), float_potential(0.6), float_potential(7.0)
-        (0.0, 1.0, 1.0)
-    """
-    return float(np.clip((x - MIN_POSITION) / (MAX_POSITION - MIN_POSITION), 0.0, 1.0))
-
-
 class SemanticOracle:
     """The VLM behind a Visual Prototype Cache, shared by the envs of one run.
 
     ``source`` picks the prompt: ``MCQ`` (label -> ``cfg.potential_of(label)``) or ``FLOAT``
-    (the parsed x through ``float_potential``). ``rbf`` says whether arms read the smoothed
+    (the parsed number through ``numbers.potential``). ``rbf`` says whether arms read the smoothed
     ``phi_rbf`` or the raw label potentials. Unparsed answers count as parse failures and add
     no prototype. ``milestones``: the task's MCQ vocabulary and prompt; ``feature_dim``: the size
-    of its frames' features (``features.feature_dim``); MountainCar's by default.
+    of its frames' features (``features.feature_dim``); ``numbers``: the task's float question
+    (needed by the FLOAT source only).
     """
 
-    def __init__(self, client: VLMClient, cfg: ShapingConfig, source: PotentialSource, rbf: bool = True,
-                 milestones: Milestones = ZONE_MILESTONES, feature_dim: int = FEATURE_DIM) -> None:
+    def __init__(self, client: VLMClient, cfg: ShapingConfig, source: PotentialSource, milestones: Milestones,
+                 feature_dim: int, rbf: bool = True, numbers: NumberQuestions | None = None) -> None:
         if source is PotentialSource.NONE:
             raise ValueError("a SemanticOracle needs a potential source (MCQ or FLOAT); arms without one need none.")
         if not (math.isfinite(cfg.bandwidth) and cfg.bandwidth > 0):
@@ -91,9 +81,11 @@ class SemanticOracle:
             if unknown:
                 raise ValueError(f"the label map and the task's labels differ in {', '.join(unknown)}; give a "
                                  "potential for every label of the task, and for no other")
-        self._prompt = milestones.prompt if source is PotentialSource.MCQ else PROMPTS[PromptKind.FLOAT]
-        # MountainCar's zones parse with their own fixed patterns (labels come back as Zone)
-        self._labels = None if milestones == ZONE_MILESTONES else milestones.labels
+        if source is PotentialSource.FLOAT and numbers is None:
+            raise ValueError("a FLOAT potential needs the task's float question (Task.numbers)")
+        self._numbers = numbers
+        self._prompt = milestones.prompt if numbers is None or source is PotentialSource.MCQ else numbers.float_prompt
+        self._labels = milestones.labels
         self._potential_of = dict(cfg.label_potentials)
         self._features = np.empty((0, 0), dtype=np.int64)
         self._potentials = np.empty(0, dtype=np.float64)
@@ -161,10 +153,12 @@ class SemanticOracle:
             if not mcq.ok or mcq.label is None:
                 return None
             return float(self._potential_of[mcq.label])
-        number = parse_float(answer.text)
+        numbers = self._numbers
+        assert numbers is not None  # checked in __init__
+        number = parse_float(answer.text, numbers.low, numbers.high)
         if not number.ok or number.value is None or not math.isfinite(number.value):
             return None
-        return float_potential(number.value)
+        return numbers.potential(number.value)
 
     def _add(self, view: FrameView, potential: float) -> None:
         row = self._row_of.get(view.key)

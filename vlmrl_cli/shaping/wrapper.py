@@ -12,15 +12,15 @@ from vlmrl_cli.shaping.arms import ArmSpec
 from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.pbrs import pbrs_term
-from vlmrl_cli.shaping.scene import MOUNTAIN_CAR, Scene, SceneCamera
+from vlmrl_cli.shaping.scene import Scene, SceneCamera
 from vlmrl_cli.shaping.semantic import EpisodePotential, SemanticOracle
 
 
 class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.RecordConstructorArgs):
     """``R_total = R_env [+ R_kin(x)] [+ alpha (gamma Phi(s') - Phi(s))]``, terms chosen by ``arm``.
 
-    Observations pass through unchanged: the policy sees the task's native observation
-    (MountainCar's ``[x, v]``). ``R_kin`` is the ``scene``'s dense term on the observation
+    Observations pass through unchanged: the policy sees the task's native observation.
+    ``R_kin`` is the ``scene``'s dense term on the observation
     (proprioception); the potential reads the simulator only through ``camera``
     (exteroception), whose ``FrameView`` is all the
     ``oracle`` ever gets. Every step puts the env's own reward in ``info["native_reward"]``;
@@ -29,21 +29,24 @@ class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.Reco
     without shaping (``baseline``) passes rewards through and still adds these keys.
 
     Args:
-        env: an env of ``scene``'s task (MountainCar-v0 by default: observation ``[x, v]``).
+        env: an env of ``scene``'s task.
         arm: which terms to add.
         shaping: alpha, the kinematic coefficients and the label schedule.
         gamma: PBRS discount in (0, 1], normally the learner's.
+        scene: what the task's observation, dense term and simulator are (``Task.scene``).
         camera, oracle: required when ``arm.uses_vlm``; shared by the envs of one run.
-        scene: what the task's observation, dense term and simulator are (MountainCar's).
 
     Example:
         >>> import gymnasium as gym
+        >>> from gymnasium.envs.classic_control.cartpole import CartPoleEnv
         >>> from vlmrl_cli.shaping.arms import ARMS
-        >>> env = HybridReward(gym.make("MountainCar-v0"), ARMS["kinematic"], ShapingConfig(), gamma=0.99)
+        >>> upright = Scene("cartpole", (4,), lambda obs, scale, offset: scale * (offset - abs(float(obs[2]))),
+        ...                 CartPoleEnv)
+        >>> env = HybridReward(gym.make("CartPole-v1"), ARMS["kinematic"], ShapingConfig(), 0.99, upright)
         >>> obs, _ = env.reset(seed=0)
-        >>> obs, reward, terminated, truncated, info = env.step(2)
-        >>> info["native_reward"], reward == -1.0 + max(0.0, 2.0 * (float(obs[0]) + 0.4))
-        (-1.0, True)
+        >>> obs, reward, terminated, truncated, info = env.step(1)
+        >>> info["native_reward"], reward == 1.0 + 2.0 * (0.4 - abs(float(obs[2])))
+        (1.0, True)
         >>> env.close()
     """
 
@@ -53,9 +56,9 @@ class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.Reco
         arm: ArmSpec,
         shaping: ShapingConfig,
         gamma: float,
+        scene: Scene,
         camera: SceneCamera | None = None,
         oracle: SemanticOracle | None = None,
-        scene: Scene = MOUNTAIN_CAR,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self, arm=arm, shaping=shaping, gamma=gamma, camera=camera, oracle=oracle, scene=scene
@@ -63,8 +66,7 @@ class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.Reco
         gym.Wrapper.__init__(self, env)
         shape = getattr(env.observation_space, "shape", None)
         if shape != scene.obs_shape:
-            what = " (observation [x, v])" if scene is MOUNTAIN_CAR else ""
-            raise ValueError(f"HybridReward wraps {scene.name}{what}, observation shape {scene.obs_shape}; "
+            raise ValueError(f"HybridReward wraps {scene.name}, observation shape {scene.obs_shape}; "
                              f"got shape {shape}.")
         if not (math.isfinite(gamma) and 0.0 < gamma <= 1.0):
             raise ValueError(f"gamma must be in (0, 1], got {gamma}; pass the learner's discount.")

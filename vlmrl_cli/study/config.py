@@ -32,10 +32,9 @@ from vlmrl_cli.calibration.regimes import Regime, resolve_regime
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.probe.scoring import DEFAULT_STATES
 from vlmrl_cli.shaping.arms import BASELINE, DENSE, METHOD, NO_LOCK, PLACEBO_OF, POTENTIAL_ONLY
-from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig, resolve
 from vlmrl_cli.training.overrides import parse_assignment, parse_value
-from vlmrl_cli.training.presets import PRESETS
 from vlmrl_cli.vlm.config import SIM_PROFILES
 
 DEFAULT_EXPERIMENT = "vlmrl-study"
@@ -247,7 +246,7 @@ def task_regimes(task: str) -> dict[str, dict[str, Any]]:
 
 
 def choose_regimes(flags: Sequence[str], file_regimes: Mapping[str, Mapping[str, Any]] | None,
-                   task: str = DEFAULT_TASK) -> tuple[dict[str, dict[str, Any]], list[str]]:
+                   task: str) -> tuple[dict[str, dict[str, Any]], list[str]]:
     """The regimes to run (name -> overrides) and notes on the defaults left out: ``--regime``
     flags, else the file's, else ``DEFAULT_REGIMES`` without those whose preset does not exist yet
     (another task: ``task_regimes``)."""
@@ -258,17 +257,7 @@ def choose_regimes(flags: Sequence[str], file_regimes: Mapping[str, Mapping[str,
         return chosen, []
     if file_regimes:
         return {k: dict(v) for k, v in file_regimes.items()}, []
-    if task != DEFAULT_TASK:
-        return task_regimes(task), []
-    chosen, notes = {}, []
-    for name, point in DEFAULT_REGIMES.items():
-        preset = point.get("preset")
-        if isinstance(preset, str) and preset not in PRESETS:
-            notes.append(f"regime '{name}' skipped: preset '{preset}' does not exist yet (run `vlmrl calibrate` "
-                         "and add the closest regime to training/presets.py as that preset).")
-            continue
-        chosen[name] = dict(point)
-    return chosen, notes
+    return task_regimes(task), []
 
 
 def _label(point: Mapping[str, Any]) -> str:
@@ -302,15 +291,16 @@ def build_study(
     tasks = sorted({r.run.task for r in built})
     if len(tasks) > 1:
         raise BadInput(f"the regimes span tasks {', '.join(tasks)}; a study covers one task (--task).")
-    if tasks[0] != DEFAULT_TASK:
-        if profiles or flickers:
-            raise BadInput(f"task {tasks[0]}: the VLM-quality variants (--profiles, --flickers) are MountainCar's "
-                           "(their accuracy comes from its taxonomy probe); pass --profiles none --flickers none.")
-        task = get_task(tasks[0])
-        settings.setdefault("thresholds", task.thresholds)
-        settings.setdefault("window", task.window)
+    task = get_task(tasks[0])
+    if (profiles or flickers) and not task.probes_floats:
+        raise BadInput(f"task {tasks[0]}: the VLM-quality variants (--profiles, --flickers) take their accuracy "
+                       "from the float and box taxonomy probe, which this task has not; pass --profiles none "
+                       "--flickers none.")
+    settings.setdefault("thresholds", task.thresholds)
+    settings.setdefault("window", task.window)
     notes = list(notes)
-    target = vlm_regime or (CALIBRATED if CALIBRATED in regimes else next(iter(regimes)))
+    preferred = task.study_preset if task.study_preset in regimes else None
+    target = vlm_regime or preferred or next(iter(regimes))
     if target not in regimes:
         raise BadInput(f"--vlm-regime '{target}' is not a regime of this study{did_you_mean(target, regimes)}.")
     variants: list[Regime] = []

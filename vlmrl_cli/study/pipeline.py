@@ -248,16 +248,19 @@ DEFAULT_SD_LOG = 0.2
 
 
 def pooled_sd_log(per_seed: pd.DataFrame, top: float) -> float:
-    """The pooled within-arm standard deviation of log restricted steps to ``top`` (NaN without two
-    seeds in some arm)."""
+    """The pooled within-arm standard deviation of log steps to ``top`` over the seeds that reached
+    it within the budget (NaN without two finished seeds in some arm): a DNF, censored at the
+    budget, says nothing of the spread, and an arm of DNFs alone would pull the spread to 0."""
     from vlmrl_cli.analysis import censored
 
     key = f"steps_{top:g}"
     ss, df = 0.0, 0
     for _, d in per_seed.drop_duplicates("run_id").groupby(["variant", "arm"]):
-        if len(d) < 2:
+        steps, budgets = d[key].to_numpy(dtype=float), d["budget"].to_numpy(dtype=float)
+        done = censored.reached(steps, budgets)
+        if int(done.sum()) < 2:
             continue
-        x = np.log(censored.restricted(d[key].to_numpy(dtype=float), d["budget"].to_numpy(dtype=float)))
+        x = np.log(steps[done])
         ss += float(((x - x.mean()) ** 2).sum())
         df += len(x) - 1
     return math.sqrt(ss / df) if df > 0 else math.nan
@@ -377,8 +380,10 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
               "`taxonomy/<variant>/`). The baseline is the regime's own.", "",
               _vlm_table(result.vlm_points, cfg.top) if len(result.vlm_points) else "No VLM variant was run.\n",
               "![VLM quality](vlm_quality.png)", ""]
-    hover = {regime.id: get_task(regime.run.task).hover_diagnostic for regime in cfg.regimes}
-    lines += ["## Reward hacking", "", hacking.definition(any(hover.values())), ""]
+    tasks = {regime.id: get_task(regime.run.task) for regime in cfg.regimes}
+    hover = {rid: task.hover_diagnostic for rid, task in tasks.items()}
+    hover_from = next((task.hover_from for task in tasks.values() if task.hover_diagnostic), None)
+    lines += ["## Reward hacking", "", hacking.definition(hover_from), ""]
     for regime in cfg.regimes:
         part = hack_frame[hack_frame["regime"] == regime.id] if len(hack_frame) else hack_frame
         lines += [f"### `{regime.id}`", "",

@@ -5,12 +5,9 @@ from __future__ import annotations
 
 from vlmrl_cli.shaping.arms import PotentialSource
 from vlmrl_cli.sweep.executors import check_executor
-from vlmrl_cli.tasks.registry import DEFAULT_TASK
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.vlm.preflight import check_coverage, check_vlm
-from vlmrl_cli.vlm.prompts import PromptKind
-
-_PROMPT_OF = {PotentialSource.MCQ: PromptKind.MCQ, PotentialSource.FLOAT: PromptKind.FLOAT}
 
 
 def preflight(cfg: RunConfig) -> None:
@@ -21,12 +18,10 @@ def preflight(cfg: RunConfig) -> None:
     if not shaped:
         return
     check_vlm(cfg.vlm)
-    if cfg.vlm.backend == "replay" and cfg.task == DEFAULT_TASK:  # another task's frames: replay refuses at once
-        from vlmrl_cli.frames.render import FrameRenderer
-        from vlmrl_cli.shaping.camera import Camera
-
-        kinds = [_PROMPT_OF[job.arm.potential] for job in shaped]
-        quanta = sorted({job.shaping.render_quantum for job in shaped})
-        with FrameRenderer() as renderer:
-            frames = [renderer.render(x) for q in quanta for x in Camera(q).grid_positions()]
-        check_coverage(cfg.vlm, kinds, frames)
+    task = get_task(cfg.task)
+    if cfg.vlm.backend == "replay" and task.grid_frames is not None:  # else replay refuses the frames at once
+        prompts = [task.milestones.prompt if job.arm.potential is PotentialSource.MCQ or task.numbers is None
+                   else task.numbers.float_prompt for job in shaped]
+        shapings = {job.shaping.render_quantum: job.shaping for job in shaped}
+        frames = [frame for _, shaping in sorted(shapings.items()) for frame in task.grid_frames(shaping)]
+        check_coverage(cfg.vlm, prompts, frames)

@@ -3,9 +3,8 @@
 Training builds its envs with ``Task.make_env``, the reward wrapper reads the task's ``Scene``
 (observation, dense term, simulator type), the camera comes from ``Task.make_camera``, the
 simulated VLM reads milestones with ``Task.reader``, and reports take their thresholds and
-success rule from here. The one exception: MountainCar-v0's pieces predate tasks and still live
-where they were (``frames/geometry.py``, ``shaping/camera.py``, the simulated VLM's built-in wheel
-reader); ``tasks/mountain_car.py`` assembles them, and their numbers are pinned by tests.
+success rule from here. MountainCar-v0, the paper's task, is one of them (``tasks/mountain_car``):
+no layer below this one knows it.
 
 A user's own task is a ``Task`` value in the user's code, loaded by ``--task package.module:NAME``
 (see ``tasks/registry.py`` and the docs' "Add a task" page).
@@ -13,6 +12,7 @@ A user's own task is a ``Task`` value in the user's code, loaded by ``--task pac
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -21,10 +21,11 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.shaping.config import ShapingConfig, label_problem
 from vlmrl_cli.shaping.scene import Scene, SceneCamera
-from vlmrl_cli.vlm.prompts import Milestones
-from vlmrl_cli.vlm.sim import MilestoneReader
+from vlmrl_cli.vlm.prompts import Milestones, NumberQuestions
+from vlmrl_cli.vlm.sim import MilestoneReader, NumberReader
 
 LabelMap = tuple[tuple[str, float], ...]
 
@@ -56,19 +57,20 @@ class Task:
         truth: the true label of a simulator (the unwrapped env), for probes and diagnostics.
         make_camera: the run's camera for a shaping config, quantised so that distinct frames
             (and a real VLM's queries per run) are bounded.
-        reader: the simulated VLM's pixel reader; None for MountainCar's built-in one.
+        reader: the simulated VLM's pixel reader (a ``NumberReader`` also answers ``numbers``).
         feature_dim: the size of the camera's frame features (``shaping.features.feature_dim``).
         thresholds: reward thresholds of reports (rolling mean native return), lowest first.
         max_steps: the time limit; an episode succeeds when it terminates (``success``).
-        presets: PPO presets as ``PPOConfig`` keyword arguments (None: MountainCar's table
-            in ``training/presets.py``); at least ``zoo`` and ``smoke``.
+        presets: PPO presets as ``PPOConfig`` keyword arguments; at least ``zoo`` and ``smoke``.
         default_preset: the preset a run takes when none is named.
         zoo_reference: rl-baselines3-zoo's published PPO result for the env, cited.
         position: the coordinate of the hovering diagnostic, read from an observation (None:
             no diagnostic), and ``hover_from``, where hovering starts.
-        probes_floats: whether the float and box probe (and the ``vision-float`` arm) exist.
-        probe_states: about ``n`` simulator states for ``vlmrl taxonomy`` of this task (each drawn
-            by the task's camera; None: MountainCar's own probe).
+        numbers: the float and box questions of Table 1's rows I and II and of the
+            ``vision-float`` arm (None: the picture has no number to ask for; its reader must be
+            a ``NumberReader`` to answer them).
+        probe_states: about ``n`` simulator states for ``vlmrl taxonomy``'s milestone table of
+            this task (each drawn by the task's camera; None: no such table).
         env_kwargs: keyword arguments of ``gym.make``.
         window: episodes in the rolling mean return that thresholds are read on (100, as SB3's
             ``ep_rew_mean``; fewer for a task whose episodes are long next to its budgets).
@@ -78,6 +80,17 @@ class Task:
             the baseline is slow or unreliable (None: the default preset).
         area_margin: the equivalence margin of a learning-curve area difference, in return units
             (None: ``auc_margin``'s default, scaled to the task's return range).
+        name_in_identity: whether the task's name enters its runs' config hashes (False only for
+            MountainCar-v0, whose runs predate tasks and keep their hashes).
+        reported_in_paper: whether the paper reports this task (its Table 2, ``paper/reported.json``):
+            calibration aims at the paper's baseline itself and reports set their numbers beside
+            the paper's (MountainCar-v0 only).
+        grid_frames: every frame the task's camera can show under a shaping config, so that a
+            replay transcript is checked to answer them all before training (None: not checked).
+        hacking_note: the report's reward-hacking heading and the sentence saying how the task's
+            dense term can pay more than finishing (None: a generic one).
+        describe_step: a played step's observation and action as named fields (``vlmrl evaluate``'s
+            JSON) and one caption line of its GIF (None: the raw observation and action).
     """
 
     name: str
@@ -88,22 +101,27 @@ class Task:
     label_potentials: LabelMap
     truth: Callable[[Any], str]
     make_camera: Callable[[ShapingConfig], SceneCamera]
-    reader: MilestoneReader | None
+    reader: MilestoneReader
     feature_dim: int
     thresholds: tuple[float, ...]
     max_steps: int
-    presets: Mapping[str, Mapping[str, Any]] | None
+    presets: Mapping[str, Mapping[str, Any]]
     default_preset: str
     zoo_reference: str
     position: Callable[[np.ndarray], float] | None = None
     hover_from: float | None = None
-    probes_floats: bool = False
+    numbers: NumberQuestions | None = None
     probe_states: Callable[[int], list[np.ndarray]] | None = None
     env_kwargs: Mapping[str, Any] = field(default_factory=dict)
     window: int = 100
     calibration: tuple[Mapping[str, Any], ...] = ()
     study_preset: str | None = None
     area_margin: float | None = None
+    name_in_identity: bool = True
+    reported_in_paper: bool = False
+    grid_frames: Callable[[ShapingConfig], list[Frame]] | None = None
+    hacking_note: tuple[str, str] | None = None
+    describe_step: Callable[[tuple[float, ...], Any], tuple[dict[str, Any], str]] | None = None
 
     @property
     def auc_margin(self) -> float:
@@ -127,11 +145,17 @@ class Task:
             raise ValueError(f"task '{self.name}': {problem}")
         if list(self.thresholds) != sorted(self.thresholds) or not self.thresholds:
             raise ValueError(f"task '{self.name}': give its reward thresholds lowest first")
-        if self.presets is not None and not {"zoo", "smoke"} <= set(self.presets):
+        if not {"zoo", "smoke"} <= set(self.presets):
             raise ValueError(f"task '{self.name}': its presets must include 'zoo' and 'smoke'")
+        if self.numbers is not None and not isinstance(self.reader, NumberReader):
+            raise ValueError(f"task '{self.name}': it asks for numbers, so its reader must be a NumberReader "
+                             "(estimate, label_at, box_at)")
         if self.window < 1:
             raise ValueError(f"task '{self.name}': its window must be at least 1 episode")
-        if self.presets is not None and self.study_preset is not None and self.study_preset not in self.presets:
+        if self.default_preset not in self.presets:
+            raise ValueError(f"task '{self.name}': its default preset '{self.default_preset}' is not one of "
+                             "its presets")
+        if self.study_preset is not None and self.study_preset not in self.presets:
             raise ValueError(f"task '{self.name}': its study preset '{self.study_preset}' is not one of its presets")
 
     def make_env(self, render_mode: str | None = None) -> gym.Env[Any, Any]:
@@ -142,6 +166,11 @@ class Task:
         return gym.make(self.env_id, render_mode=render_mode, **dict(self.env_kwargs))
 
     @property
+    def probes_floats(self) -> bool:
+        """Whether the float and box probe (and the ``vision-float`` arm) exist for this task."""
+        return self.numbers is not None
+
+    @property
     def hover_diagnostic(self) -> bool:
         """Whether its runs carry the hovering diagnostic (the plug-in names a ``position``)."""
         return self.position is not None
@@ -149,6 +178,12 @@ class Task:
     def success(self, terminated: bool, length: int) -> bool:
         """The one success rule: the episode terminated (goal reached) within the time limit."""
         return bool(terminated) and length <= self.max_steps
+
+    def shaping_for(self, shaping: ShapingConfig) -> ShapingConfig:
+        """``shaping`` with this task's label map where it names none (its default, empty)."""
+        if shaping.label_potentials:
+            return shaping
+        return dataclasses.replace(shaping, label_potentials=self.label_potentials)
 
     def labels_problem(self, label_potentials: LabelMap) -> str | None:
         """Why a label map does not fit this task (None when it does)."""

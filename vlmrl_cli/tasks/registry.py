@@ -21,6 +21,8 @@ from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.tasks.base import Task
 
 DEFAULT_TASK = "mountain-car"
+#: The default task's default preset (``Task.default_preset``; a test checks that they agree).
+DEFAULT_PRESET = "paper"
 ENTRY_POINT_GROUP = "vlmrl.tasks"
 
 
@@ -47,6 +49,17 @@ BUILTIN: dict[str, Callable[[], Task]] = {
     "mountain-car-continuous": _mountain_car_continuous,
     "acrobot": _acrobot,
 }
+
+
+def recorded_task(name: object) -> str:
+    """The task a run recorded (its ``vlmrl.task`` tag, its config's ``task``): runs from before
+    tasks existed record none, and they are all the default task's.
+
+    Example:
+        >>> recorded_task("acrobot"), recorded_task(None)
+        ('acrobot', 'mountain-car')
+    """
+    return str(name) if name else DEFAULT_TASK
 
 
 def task_names() -> list[str]:

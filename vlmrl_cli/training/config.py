@@ -50,11 +50,11 @@ from vlmrl_cli.core.fields import one_of
 from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec, PotentialSource, parse_arms
-from vlmrl_cli.shaping.config import DEFAULT_LABEL_POTENTIALS, ShapingConfig
-from vlmrl_cli.tasks.registry import DEFAULT_TASK
+from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.tasks.registry import DEFAULT_PRESET, DEFAULT_TASK
 from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.overrides import nest, parse_assignment, parse_value, resolve_raw
-from vlmrl_cli.training.presets import DEFAULT_PRESET, PRESETS, PPOConfig, ppo_identity, preset_names, preset_of
+from vlmrl_cli.training.presets import PPOConfig, ppo_identity, preset_names, preset_of
 from vlmrl_cli.vlm.config import VLMConfig, sim_identity
 
 DEFAULT_EXPERIMENT = "vlmrl"
@@ -94,17 +94,18 @@ def _uri(value: str | None) -> str | None:
 
 
 def _known_preset(value: str) -> str:
-    # MountainCar's presets; another task's are checked against its plug-in when the layers are
-    # resolved (training/overrides.py) and in ``RunConfig.validate``
-    if value in PRESETS or value in _other_presets():
+    # a preset of some built-in task; the run's own task's presets are checked against its
+    # plug-in when the layers are resolved (training/overrides.py) and in ``RunConfig.validate``
+    known = _builtin_presets()
+    if value in known:
         return value
-    return one_of(PRESETS, "preset")(value)
+    return one_of(known, "preset")(value)
 
 
-def _other_presets() -> set[str]:
+def _builtin_presets() -> list[str]:
     from vlmrl_cli.tasks.registry import BUILTIN
 
-    return {name for task in BUILTIN for name in preset_names(task)}
+    return list(dict.fromkeys(name for task in BUILTIN for name in preset_names(task)))
 
 
 def _known_task(value: str) -> str:
@@ -118,13 +119,16 @@ def _known_task(value: str) -> str:
 
 
 def with_task_labels(shaping: ShapingConfig, task: str) -> ShapingConfig:
-    """``shaping`` with ``task``'s own label map when its map is MountainCar's default (the
-    field's default: another task's runs take that task's map unless one is given)."""
-    if task == DEFAULT_TASK or shaping.label_potentials != DEFAULT_LABEL_POTENTIALS:
-        return shaping
+    """``shaping`` with ``task``'s own label map when it names none (the field's default)."""
     from vlmrl_cli.tasks.registry import get_task
 
-    return dataclasses.replace(shaping, label_potentials=get_task(task).label_potentials)
+    return get_task(task).shaping_for(shaping)
+
+
+def _task_in_identity(task: str) -> bool:
+    from vlmrl_cli.tasks.registry import get_task
+
+    return get_task(task).name_in_identity
 
 
 @dataclass(frozen=True)
@@ -239,7 +243,7 @@ class TrainJob:
     vlm: VLMConfig
     shaping: ShapingConfig
     regime: str | None = None
-    task: str = DEFAULT_TASK
+    task: str = field(kw_only=True)  # the run's task (tasks/registry.py)
 
     @property
     def name(self) -> str:
@@ -263,7 +267,7 @@ class TrainJob:
             "ppo": ppo_identity(self.ppo),
             "eval_seed": EVAL_SEED,
         }
-        if self.task != DEFAULT_TASK:  # MountainCar's runs predate tasks and keep their hashes
+        if _task_in_identity(self.task):  # False for MountainCar-v0: its runs predate tasks
             ident["task"] = self.task
         if self.arm.kinematic or self.arm.uses_vlm:
             ident["shaping"] = to_jsonable(self.shaping)
@@ -321,7 +325,7 @@ def to_toml(cfg: RunConfig) -> str:
 
     Keys whose value is None are left out (TOML has no null; every such key defaults to None).
     """
-    raw = to_jsonable(dataclasses.replace(cfg, ppo=cfg.ppo_config))
+    raw = to_jsonable(dataclasses.replace(cfg, ppo=cfg.ppo_config, shaping=cfg.task_shaping))
     raw["shaping"]["label_potentials"] = dict(raw["shaping"]["label_potentials"])
     return tomli_w.dumps(_drop_none(raw))
 

@@ -14,7 +14,6 @@ from vlmrl_cli.shaping.placebo import oracle_shaping
 from vlmrl_cli.shaping.semantic import SemanticOracle
 from vlmrl_cli.shaping.wrapper import HybridReward
 from vlmrl_cli.tasks.base import Task
-from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
 from vlmrl_cli.training.presets import PPOConfig
 from vlmrl_cli.vlm.client import VLMClient
 
@@ -25,10 +24,10 @@ def make_train_env(
     shaping: ShapingConfig,
     client: VLMClient | None,
     seed: int,
-    task: Task | None = None,
+    task: Task,
 ) -> tuple[VecEnv, SemanticOracle | None]:
-    """The training VecEnv of one run of ``task`` (MountainCar-v0 by default) and its oracle
-    (None for arms without a VLM).
+    """The training VecEnv of one run of ``task`` and its oracle (None for arms without a VLM).
+    A ``shaping`` that names no label map takes the task's (``Task.shaping_for``).
 
     Per env: ``task.make_env()`` -> ``Monitor`` (SB3's episode stats are the NATIVE
     return and length) -> ``HybridReward`` (the arm's reward; a pass-through adding the info
@@ -43,17 +42,17 @@ def make_train_env(
         raise ValueError(f"arm '{arm.name}' queries a VLM; pass a VLMClient (e.g. the simulated one).")
     if ppo.n_envs < 1:
         raise ValueError(f"n_envs={ppo.n_envs}; a run needs at least one env.")
-    task = task if task is not None else get_task(DEFAULT_TASK)
+    shaping = task.shaping_for(shaping)
     gamma = shaping.gamma if shaping.gamma is not None else ppo.gamma
     camera = task.make_camera(shaping) if arm.uses_vlm else None
-    oracle = (SemanticOracle(client, oracle_shaping(arm, shaping, seed), arm.potential, rbf=arm.rbf,
-                             milestones=task.milestones, feature_dim=task.feature_dim)
+    oracle = (SemanticOracle(client, oracle_shaping(arm, shaping, seed), arm.potential, task.milestones,
+                             task.feature_dim, rbf=arm.rbf, numbers=task.numbers)
               if arm.uses_vlm and client else None)
 
     def make_one() -> gym.Env:
         env: gym.Env = task.make_env()
         env = Monitor(env)
-        return HybridReward(env, arm, shaping, gamma=gamma, camera=camera, oracle=oracle, scene=task.scene)
+        return HybridReward(env, arm, shaping, gamma, task.scene, camera=camera, oracle=oracle)
 
     fns: list[Callable[[], gym.Env]] = [make_one] * ppo.n_envs
     venv: VecEnv = DummyVecEnv(fns)

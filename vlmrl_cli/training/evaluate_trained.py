@@ -27,7 +27,7 @@ from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.scene import SceneCamera
 from vlmrl_cli.tasks.base import Task
-from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.tracking import store
 from vlmrl_cli.training.config import EVAL_SEED
 from vlmrl_cli.training.evaluation import EvalResult, Policy, evaluate_detached
@@ -36,7 +36,6 @@ from vlmrl_cli.vlm.config import DEFAULT_CACHE
 
 DEFAULT_ROOT = Path("results") / "evaluate"
 ARTIFACT_PATH = "evaluate"
-ACTIONS = {0: "push left", 1: "no push", 2: "push right"}
 SIMULATED_ALERT = "SIMULATED VLM (not a real model)"
 
 
@@ -102,18 +101,19 @@ class PlayedStep:
         return self.obs[1] if len(self.obs) > 1 else math.nan
 
 
-def play_episode(policy: Policy, seed: int, shaping: ShapingConfig, frame_every: int = 2,
-                 task: Task | None = None, camera: SceneCamera | None = None) -> list[PlayedStep]:
-    """Play one native episode of ``task`` (MountainCar-v0 by default) reset with ``seed``,
+def play_episode(policy: Policy, seed: int, shaping: ShapingConfig, task: Task, frame_every: int = 2,
+                 camera: SceneCamera | None = None) -> list[PlayedStep]:
+    """Play one native episode of ``task`` reset with ``seed``,
     rendering every ``frame_every``-th state (and the last one) with gymnasium's ``rgb_array``
     renderer; with ``camera`` (the training camera) those states' views are kept too.
 
     Example:
-        >>> steps = play_episode(lambda obs: 2 if obs[1] >= 0 else 0, seed=0, shaping=ShapingConfig(), frame_every=50)
+        >>> from vlmrl_cli.tasks.registry import get_task
+        >>> steps = play_episode(lambda obs: 2 if obs[1] >= 0 else 0, seed=0, shaping=ShapingConfig(),
+        ...                      task=get_task("mountain-car"), frame_every=50)
         >>> steps[-1].terminated, [s.t for s in steps if s.pixels is not None][:2]
         (True, [0, 50])
     """
-    task = task if task is not None else get_task(DEFAULT_TASK)
     env: Any = task.make_env(render_mode="rgb_array")  # gymnasium's rgb_array renderer, headless
 
     def step_of(t: int, obs: np.ndarray, action: Any, r_kin: float, total: float, terminated: bool,
@@ -168,42 +168,46 @@ def label_frames(run: TrainedRun, views: list[FrameView], cfg: EvaluateConfig) -
     """Ask the run's VLM (its own config; cache as ``cfg`` says) about each view of the training
     camera (snapped to its grid, as in training)."""
     from vlmrl_cli.shaping.placebo import oracle_shaping
-    from vlmrl_cli.shaping.semantic import float_potential
     from vlmrl_cli.vlm.parsers import parse_float, parse_mcq
-    from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
     from vlmrl_cli.vlm.registry import build_client
 
     task = get_task(run.task)
     mcq = run.arm.potential is PotentialSource.MCQ
-    label_map = oracle_shaping(run.arm, run.shaping, run.seed)  # a placebo's shuffled map
-    prompt = task.milestones.prompt if mcq else PROMPTS[PromptKind.FLOAT]
-    vocabulary = None if run.task == DEFAULT_TASK else task.milestones.labels
+    label_map = oracle_shaping(run.arm, task.shaping_for(run.shaping), run.seed)  # a placebo's shuffled map
+    numbers = task.numbers
+    if not mcq and numbers is None:
+        raise BadInput(f"run {run.run_id} asks for a number, which task {task.name} does not ask for")
+    prompt = task.milestones.prompt if mcq or numbers is None else numbers.float_prompt
     client = build_client(replace(run.vlm, use_cache=cfg.use_cache, cache_path=cfg.cache_path), reader=task.reader)
     labels = []
     try:
         for view in views:
             text = client.ask(prompt, view.frame()).text
             if mcq:
-                label = parse_mcq(text, vocabulary)
+                label = parse_mcq(text, task.milestones.labels)
                 labels.append(FrameLabel(str(label.label), label_map.potential_of(label.label))
                               if label.ok and label.label is not None else FrameLabel(f"({label.status})", None))
             else:
-                number = parse_float(text)
-                labels.append(FrameLabel(f"x={number.value:+.3f}", float_potential(number.value))
+                assert numbers is not None
+                number = parse_float(text, numbers.low, numbers.high)
+                labels.append(FrameLabel(f"x={number.value:+.3f}", numbers.potential(number.value))
                               if number.ok and number.value is not None else FrameLabel(f"({number.status})", None))
     finally:
         client.close()
     return labels
 
 
+def describe_step(task: Task, obs: tuple[float, ...], action: Any) -> tuple[dict[str, Any], str]:
+    """A played step's observation as the evaluation's JSON fields and its caption line: the
+    task's own (``Task.describe_step``), else the raw observation and action."""
+    if task.describe_step is not None:
+        return task.describe_step(obs, action)
+    shown = "-" if action is None else (f"{action:+.2f}" if isinstance(action, float) else str(action))
+    return {"obs": list(obs)}, f"obs [{' '.join(f'{v:+.2f}' for v in obs[:6])}]  action {shown}"
+
+
 def _captions(run: TrainedRun, step: PlayedStep, last: int, index: int) -> list[str]:
-    if run.task == DEFAULT_TASK:
-        action = ACTIONS.get(step.action, str(step.action)) if step.action is not None else "-"
-        state = f"x {step.x:+.3f}  v {step.v:+.4f}  action {action}"
-    else:
-        shown = "-" if step.action is None else (f"{step.action:+.2f}" if isinstance(step.action, float)
-                                                 else str(step.action))
-        state = f"obs [{' '.join(f'{v:+.2f}' for v in step.obs[:6])}]  action {shown}"
+    _, state = describe_step(get_task(run.task), step.obs, step.action)
     return [
         f"{run.name}  episode {index}  step {step.t}/{last}",
         state,
@@ -239,7 +243,7 @@ def evaluate_run(cfg: EvaluateConfig) -> EvaluateResult:
     seed = EVAL_SEED + cfg.episode_index
     camera = task.make_camera(run.shaping) if run.arm.uses_vlm else None
     try:
-        steps = play_episode(run.policy, seed, run.shaping, cfg.frame_every, task, camera)
+        steps = play_episode(run.policy, seed, run.shaping, task, cfg.frame_every, camera)
         shown = [s for s in steps if s.pixels is not None]
         labels = (label_frames(run, [s.view for s in shown if s.view is not None], cfg)
                   if run.arm.uses_vlm else None)
@@ -278,16 +282,16 @@ def _summary(
     gif: Path,
 ) -> dict[str, Any]:
     frames = []
+    task = get_task(run.task)
     for i, s in enumerate(shown):
-        frame: dict[str, Any] = ({"step": s.t, "x": s.x, "v": s.v} if run.task == DEFAULT_TASK
-                                 else {"step": s.t, "obs": list(s.obs)})
+        frame: dict[str, Any] = {"step": s.t, **describe_step(task, s.obs, s.action)[0]}
         frame.update({"action": s.action, "r_kin": s.r_kin, "native_return": s.native_return})
         if labels is not None:
             frame.update(vlm_answer=labels[i].answer, phi_raw=labels[i].potential)
         frames.append(frame)
     figures: dict[str, Any] = {
         "run_id": run.run_id, "run_name": run.name, "arm": run.arm.name, "run_status": run.status,
-        **({"task": run.task} if run.task != DEFAULT_TASK else {}),
+        **({"task": run.task} if task.name_in_identity else {}),  # MountainCar's files predate tasks
         "vlm": run.vlm_label if run.arm.uses_vlm else "none (this arm queries no VLM)",
         "simulated": run.arm.uses_vlm and run.simulated,
     }

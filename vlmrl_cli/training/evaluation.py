@@ -10,7 +10,6 @@ import numpy as np
 
 from vlmrl_cli.shaping.hacking import HoverSummary, summarize_hovering
 from vlmrl_cli.tasks.base import Task
-from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
 
 Policy = Callable[[np.ndarray], Any]  # an observation -> an action (an int for discrete actions)
 
@@ -19,14 +18,16 @@ Policy = Callable[[np.ndarray], Any]  # an observation -> an action (an int for 
 class EvalResult:
     """Per-episode figures of a detached evaluation, each shape (episodes,).
 
-    ``positions``: one array of shape ``(length_i,)`` per episode, the car's x after each step
-    (for the hovering diagnostic; empty when not recorded).
+    ``positions``: one array of shape ``(length_i,)`` per episode, the task's position after each
+    step (for the hovering diagnostic; empty when not recorded), ``hover_from`` where hovering
+    starts (``Task.hover_from``).
     """
 
     returns: np.ndarray
     lengths: np.ndarray
     successes: np.ndarray
     positions: tuple[np.ndarray, ...] = field(default=())
+    hover_from: float | None = None
 
     @property
     def success_rate(self) -> float:
@@ -42,14 +43,14 @@ class EvalResult:
 
     @property
     def hovering(self) -> HoverSummary:
-        """Hover fraction and dwell right of x = 0.3 (see ``shaping.hacking``); NaN without positions."""
-        return summarize_hovering(self.positions, self.successes > 0.5) if self.positions else HoverSummary(
-            float("nan"), float("nan"), 0)
+        """Hover fraction and dwell past ``hover_from`` (see ``shaping.hacking``); NaN without positions."""
+        if not self.positions or self.hover_from is None:
+            return HoverSummary(float("nan"), float("nan"), 0)
+        return summarize_hovering(self.positions, self.successes > 0.5, self.hover_from)
 
 
-def evaluate_detached(policy: Policy, episodes: int, seed: int, task: Task | None = None) -> EvalResult:
-    """Run ``episodes`` native episodes of ``task`` (MountainCar-v0 by default); episode ``i``
-    resets with ``seed + i``.
+def evaluate_detached(policy: Policy, episodes: int, seed: int, task: Task) -> EvalResult:
+    """Run ``episodes`` native episodes of ``task``; episode ``i`` resets with ``seed + i``.
 
     ``policy`` maps a raw observation (MountainCar's [x, v]) to an action (it applies any
     observation normalisation itself). Success is the task's rule (``Task.success``: terminated
@@ -57,11 +58,11 @@ def evaluate_detached(policy: Policy, episodes: int, seed: int, task: Task | Non
     (MountainCar's x) when it has one.
 
     Example:
-        >>> r = evaluate_detached(lambda obs: 2 if obs[1] >= 0 else 0, episodes=3, seed=0)
+        >>> from vlmrl_cli.tasks.registry import get_task
+        >>> r = evaluate_detached(lambda obs: 2 if obs[1] >= 0 else 0, 3, 0, get_task("mountain-car"))
         >>> r.success_rate, bool(r.mean_length < 200)
         (1.0, True)
     """
-    task = task if task is not None else get_task(DEFAULT_TASK)
     env = task.make_env()
     position = task.position
     returns, lengths, successes, positions = [], [], [], []
@@ -84,4 +85,5 @@ def evaluate_detached(policy: Policy, episodes: int, seed: int, task: Task | Non
                 positions.append(np.asarray(xs))
     finally:
         env.close()
-    return EvalResult(np.asarray(returns), np.asarray(lengths), np.asarray(successes, dtype=float), tuple(positions))
+    return EvalResult(np.asarray(returns), np.asarray(lengths), np.asarray(successes, dtype=float), tuple(positions),
+                      task.hover_from)

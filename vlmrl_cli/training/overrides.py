@@ -22,7 +22,7 @@ from typing import Any
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.provenance import to_jsonable
-from vlmrl_cli.training.presets import DEFAULT_PRESET, preset_of
+from vlmrl_cli.training.presets import preset_of
 from vlmrl_cli.vlm.config import resolve_sim_profile
 
 #: Top-level keys of older config files that now live in ``[ppo]``.
@@ -127,7 +127,7 @@ def _lift_moved(layer: Mapping[str, Any]) -> dict[str, Any]:
 def resolve_raw(layers: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
     """The merged raw configuration of ``layers`` (lowest first) over the named preset's ``[ppo]``
     (the task's: a task other than MountainCar starts from its own default preset)."""
-    from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
+    from vlmrl_cli.tasks.registry import DEFAULT_PRESET, DEFAULT_TASK, get_task
 
     lifted = [_lift_moved(layer) for layer in layers]
     task_name: Any = DEFAULT_TASK

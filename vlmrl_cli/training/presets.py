@@ -7,7 +7,8 @@ field must respect are declared once, in ``training/validation.py``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+import functools
+from dataclasses import dataclass, field
 from typing import Literal
 
 from annotated_types import Ge, Gt, Interval
@@ -16,7 +17,6 @@ from pydantic import AfterValidator
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 
 LrSchedule = Literal["constant", "linear"]
-DEFAULT_PRESET = "paper"
 
 
 def _layer_sizes(sizes: tuple[int, ...]) -> tuple[int, ...]:
@@ -76,40 +76,6 @@ class PPOConfig:
         return self.normalize_obs or self.normalize_reward
 
 
-# rl-baselines3-zoo, hyperparams/ppo.yml, MountainCar-v0 (n_timesteps there: 1e6).
-ZOO = PPOConfig(n_envs=16, n_steps=16, batch_size=64, gae_lambda=0.98, gamma=0.99, n_epochs=4, ent_coef=0.0,
-                learning_rate=3e-4, normalize_obs=True, normalize_reward=True, timesteps=1_000_000)
-
-PRESETS: dict[str, PPOConfig] = {
-    "zoo": ZOO,
-    "sb3-default": PPOConfig(n_envs=1, n_steps=2048, batch_size=64, gae_lambda=0.95, gamma=0.99, n_epochs=10,
-                             ent_coef=0.0, learning_rate=3e-4, normalize_obs=False, normalize_reward=False,
-                             timesteps=300_000),
-    "smoke": PPOConfig(n_envs=2, n_steps=64, batch_size=64, gae_lambda=0.95, gamma=0.99, n_epochs=1, ent_coef=0.0,
-                       learning_rate=3e-4, normalize_obs=True, normalize_reward=True, timesteps=1_024,
-                       eval_episodes=5),
-    # The paper names no PPO hyperparameters. This is the public tuned configuration for this
-    # environment (zoo) with a 300,000-step budget, just above the largest threshold step the
-    # paper reports (272,448). Plain PPO solves every seed with it; `vlmrl calibrate` searches
-    # for a regime whose baseline learns like the paper's.
-    "paper": replace(ZOO, timesteps=300_000),
-    # The closest regime of the committed calibrations (results/calibration/calibration.md, the
-    # default 8-regime grid, and results/calibration/grid-2x2/, `--grid ppo.normalize_reward=true,false
-    # --grid ppo.learning_rate=0.0003,0.0001`; 10 seeds per regime, 2026-11-29): the paper preset
-    # without reward normalisation. Its baseline reached -130 on 9/10 seeds (90% [60%, 98%]) in
-    # 177,331 steps on average, against the paper's 60% and 272,448: slower and less reliable than
-    # `paper`, but not the paper's baseline (distance 0.795 [0.321, 1.129]; no regime of either grid
-    # fell between 40% and 80%).
-    "paper-calibrated": replace(ZOO, timesteps=300_000, normalize_reward=False),
-    # A regime whose baseline fails on some seeds, so that reliability can be compared at all
-    # (issue 18): `paper-calibrated` at half the step size's way down to 1e-4. In the refined
-    # calibration (results/calibration/refine-lr/, `--set ppo.normalize_reward=false --grid
-    # ppo.learning_rate=0.00015,0.0002`, 20 seeds, 2026-12-01) its baseline reached -130 on 8/20
-    # seeds (40% [22%, 61%]), against 17/20 at lr 2e-4, 9/10 at 3e-4 and 0/10 at 1e-4.
-    "paper-unreliable": replace(ZOO, timesteps=300_000, normalize_reward=False, learning_rate=1.5e-4),
-}
-
-
 #: Knobs added after runs existed, with the value that leaves training as it was.
 NEUTRAL_PPO_KNOBS: dict[str, object] = {"use_sde": False, "log_std_init": 0.0, "ortho_init": True}
 
@@ -131,31 +97,31 @@ def ppo_identity(ppo: PPOConfig) -> dict[str, object]:
 
 
 def preset_names(task: str) -> list[str]:
-    """The presets of ``task`` (MountainCar's: ``PRESETS``)."""
+    """The presets of ``task`` (its plug-in's ``Task.presets``)."""
     from vlmrl_cli.tasks.registry import get_task
 
-    table = get_task(task).presets
-    return list(PRESETS) if table is None else list(table)
+    return list(get_task(task).presets)
 
 
 def preset_of(task: str, name: str) -> PPOConfig:
-    """The PPO preset ``name`` of ``task``: MountainCar's from ``PRESETS``, another task's from
-    its plug-in (``Task.presets``); an unknown one is a ``BadInput`` naming the task's presets."""
+    """The PPO preset ``name`` of ``task``, from its plug-in (``Task.presets``), checked like a
+    config file; an unknown one is a ``BadInput`` naming the task's presets."""
     from vlmrl_cli.tasks.registry import get_task
 
     table = get_task(task).presets
-    if table is None:
-        return get_preset(name)
     if name not in table:
         raise BadInput(f"unknown preset '{name}' for task {task}{did_you_mean(name, table)}; "
                        f"choose from {', '.join(table)}.")
+    items = tuple(sorted(table[name].items()))
+    try:
+        return _validated(items)
+    except TypeError:  # a value that cannot be hashed (a list): checked without the memo
+        return _validated.__wrapped__(items)
+
+
+@functools.lru_cache(maxsize=256)
+def _validated(items: tuple[tuple[str, object], ...]) -> PPOConfig:
     from vlmrl_cli.training.validation import validate_as
 
-    ppo: PPOConfig = validate_as(PPOConfig, dict(table[name]))  # a plug-in's table is checked like a config file
+    ppo: PPOConfig = validate_as(PPOConfig, dict(items))  # a plug-in's table is checked like a config file
     return ppo
-
-
-def get_preset(name: str) -> PPOConfig:
-    if name not in PRESETS:
-        raise BadInput(f"unknown preset '{name}'{did_you_mean(name, PRESETS)}; choose from {', '.join(PRESETS)}.")
-    return PRESETS[name]

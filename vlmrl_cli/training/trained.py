@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +13,7 @@ from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.tasks.base import Task
-from vlmrl_cli.tasks.registry import DEFAULT_TASK, get_task
+from vlmrl_cli.tasks.registry import get_task, recorded_task
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training.evaluation import Policy
 from vlmrl_cli.training.validation import validate_as
@@ -58,7 +58,7 @@ class TrainedRun:
     simulated: bool
     policy: Policy
     seed: int = 0  # the training seed (a placebo arm's label map depends on it)
-    task: str = DEFAULT_TASK  # the run's task (config.json names it when not MountainCar)
+    task: str = field(kw_only=True)  # the run's task (``recorded_task`` of its config.json)
 
 
 def load_trained_run(client: Any, run_id: str, workdir: Path) -> TrainedRun:
@@ -81,7 +81,7 @@ def load_trained_run(client: Any, run_id: str, workdir: Path) -> TrainedRun:
     store.download_artifacts(client, run_id, [n for n in (MODEL, CONFIG, NORMALIZER) if n in artifacts], workdir)
     config = json.loads((workdir / CONFIG).read_text(encoding="utf-8"))
     tags = run.data.tags
-    task = str(config.get("task", DEFAULT_TASK))
+    task = recorded_task(config.get("task"))
     return TrainedRun(
         run_id=run_id,
         name=tags.get(schema.MLFLOW_RUN_NAME, run_id),

@@ -181,7 +181,7 @@ def rebuild_job(run: RecordedRun) -> TrainJob:
     cannot rebuild it with the recorded config hash (another version changed what it means)."""
     from vlmrl_cli.shaping.arms import ARMS
     from vlmrl_cli.shaping.config import ShapingConfig
-    from vlmrl_cli.tasks.registry import DEFAULT_TASK
+    from vlmrl_cli.tasks.registry import recorded_task
     from vlmrl_cli.training.config import with_task_labels
     from vlmrl_cli.training.presets import PPOConfig
     from vlmrl_cli.training.validation import validate_as
@@ -190,7 +190,7 @@ def rebuild_job(run: RecordedRun) -> TrainJob:
     cfg = run.config
     try:
         arm = ARMS[cfg["arm"]["name"]]
-        task = str(cfg.get("task", DEFAULT_TASK))
+        task = recorded_task(cfg.get("task"))
         ppo = validate_as(PPOConfig, dict(cfg["ppo"]))
         shaping = (validate_as(ShapingConfig, dict(cfg["shaping"])) if "shaping" in cfg
                    else with_task_labels(ShapingConfig(), task))

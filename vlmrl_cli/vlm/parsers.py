@@ -4,8 +4,8 @@ Each parser accepts the formats small VLMs actually emit (bare values, values in
 ``x = -0.5``, ``Box [..]``, JSON, ``Choice = BOTTOM``) and classifies everything else:
 
 - ``FORMAT_COLLAPSE``: nothing parseable, or the all-zero ``Error [0, 0, 0, 0]`` box;
-- ``OUT_OF_RANGE``: a float outside the track [-1.2, 0.6], a box outside the 600x400 frame
-  or degenerate (zero or negative width/height);
+- ``OUT_OF_RANGE``: a float outside the task's range (``NumberQuestions``), a box outside the
+  frame or degenerate (zero or negative width/height);
 - ``AMBIGUOUS``: several different answers in one text (two labels, two numbers, two boxes);
 - ``EMPTY``: blank text; ``NO_ANSWER``: there was no text at all (replay had no record).
 """
@@ -20,8 +20,6 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
-
-from vlmrl_cli.frames.geometry import MAX_POSITION, MIN_POSITION, SCREEN_HEIGHT, SCREEN_WIDTH, Zone
 
 Box = tuple[float, float, float, float]
 
@@ -39,7 +37,7 @@ class ParseStatus(StrEnum):
 
 @dataclass(frozen=True)
 class FloatResult:
-    """A parsed position. ``value`` (x units) is set for OK and OUT_OF_RANGE, else None."""
+    """A parsed number (the task's units). ``value`` is set for OK and OUT_OF_RANGE, else None."""
 
     status: ParseStatus
     value: float | None = None
@@ -70,7 +68,7 @@ class MCQResult:
     """A parsed zone label, set only for OK."""
 
     status: ParseStatus
-    label: str | None = None  # a ``Zone`` for MountainCar's vocabulary (a ``str`` enum)
+    label: str | None = None
 
     @property
     def ok(self) -> bool:
@@ -93,10 +91,6 @@ _JSON_KEYS: tuple[tuple[str, str, str, str], ...] = (
     ("x1", "y1", "x2", "y2"),
     ("left", "top", "right", "bottom"),
 )
-_LABEL = re.compile(r"\b(LEFT PEAK|LEFT SLOPE|BOTTOM|RIGHT SLOPE|NEAR GOAL|GOAL)\b")
-# "Choice = BOTTOM", "Answer: LEFT_SLOPE", "Zone is GOAL" (after _normalise_label_text)
-_CHOICE = re.compile(r"\b(?:CHOICE|ANSWER|LABEL|ZONE)\s*(?:=|:|IS)\s*(LEFT PEAK|LEFT SLOPE|BOTTOM|RIGHT SLOPE|"
-                     r"NEAR GOAL|GOAL)\b")
 
 
 def _to_float(token: str) -> float | None:
@@ -107,15 +101,15 @@ def _to_float(token: str) -> float | None:
     return None if math.isnan(value) else value
 
 
-def parse_float(text: str | None) -> FloatResult:
-    """The position x in a float answer.
+def parse_float(text: str | None, low: float, high: float) -> FloatResult:
+    """The number in a float answer; outside ``[low, high]`` (the task's range) it is OUT_OF_RANGE.
 
     An explicit ``x = ...`` wins; otherwise the text must hold exactly one distinct number.
 
     Example:
-        >>> parse_float("The car is at approximately -0.52.")
+        >>> parse_float("The car is at approximately -0.52.", -1.2, 0.6)
         FloatResult(status=<ParseStatus.OK: 'ok'>, value=-0.52)
-        >>> parse_float("7").status, parse_float("no idea").status
+        >>> parse_float("7", -1.2, 0.6).status, parse_float("no idea", -1.2, 0.6).status
         (<ParseStatus.OUT_OF_RANGE: 'out_of_range'>, <ParseStatus.FORMAT_COLLAPSE: 'format_collapse'>)
     """
     try:
@@ -131,7 +125,7 @@ def parse_float(text: str | None) -> FloatResult:
         if len(distinct) > 1:
             return FloatResult(ParseStatus.AMBIGUOUS)
         value = distinct[0]
-        if not (math.isfinite(value) and MIN_POSITION <= value <= MAX_POSITION):
+        if not (math.isfinite(value) and low <= value <= high):
             return FloatResult(ParseStatus.OUT_OF_RANGE, value)
         return FloatResult(ParseStatus.OK, value)
     except Exception:  # a parser must never take the probe down; odd input is a collapse
@@ -156,36 +150,36 @@ def _json_boxes(text: str) -> list[tuple[float, ...]]:
     return boxes
 
 
-def _validate_box(raw: tuple[float, ...]) -> BoxResult:
+def _validate_box(raw: tuple[float, ...], width: int, height: int) -> BoxResult:
     if any(math.isnan(v) for v in raw):
         return BoxResult(ParseStatus.FORMAT_COLLAPSE)
     if all(v == 0 for v in raw):
         return BoxResult(ParseStatus.FORMAT_COLLAPSE)  # "Error [0, 0, 0, 0]": the model gave up
     normalised = all(0.0 <= v <= 1.0 for v in raw)
     if normalised:  # 0-1 coordinates (fractions of width and height) are scaled to pixels
-        raw = (raw[0] * SCREEN_WIDTH, raw[1] * SCREEN_HEIGHT, raw[2] * SCREEN_WIDTH, raw[3] * SCREEN_HEIGHT)
+        raw = (raw[0] * width, raw[1] * height, raw[2] * width, raw[3] * height)
     x0, y0, x1, y1 = raw
     box = (float(x0), float(y0), float(x1), float(y1))
-    inside = x0 >= 0 and y0 >= 0 and x1 <= SCREEN_WIDTH and y1 <= SCREEN_HEIGHT
+    inside = x0 >= 0 and y0 >= 0 and x1 <= width and y1 <= height
     if not inside or x1 <= x0 or y1 <= y0:
         return BoxResult(ParseStatus.OUT_OF_RANGE, box, normalised)
     return BoxResult(ParseStatus.OK, box, normalised)
 
 
-def parse_box(text: str | None) -> BoxResult:
-    """The box (x0, y0, x1, y1) in image pixels in a box answer.
+def parse_box(text: str | None, width: int, height: int) -> BoxResult:
+    """The box (x0, y0, x1, y1) in image pixels in a box answer about a ``width`` x ``height`` frame.
 
     Accepts ``[a, b, c, d]``, ``(a, b, c, d)``, ``Box [..]``, JSON objects with ``x_min``..
     ``y_max`` (or ``xmin``.., ``x1``..``y2``, ``left``..``bottom``), and four bare numbers.
-    Boxes whose four coordinates all lie in [0, 1] are read as fractions of the 600x400
-    frame and scaled to pixels (``normalised=True``).
+    Boxes whose four coordinates all lie in [0, 1] are read as fractions of the frame's width
+    and height and scaled to pixels (``normalised=True``).
 
     Example:
-        >>> parse_box("Box [450, 210, 480, 230]").box
+        >>> parse_box("Box [450, 210, 480, 230]", 600, 400).box
         (450.0, 210.0, 480.0, 230.0)
-        >>> parse_box("Error [0, 0, 0, 0]").status
+        >>> parse_box("Error [0, 0, 0, 0]", 600, 400).status
         <ParseStatus.FORMAT_COLLAPSE: 'format_collapse'>
-        >>> parse_box('{"x_min": 0.5, "y_min": 0.5, "x_max": 0.75, "y_max": 1.0}').box
+        >>> parse_box('{"x_min": 0.5, "y_min": 0.5, "x_max": 0.75, "y_max": 1.0}', 600, 400).box
         (300.0, 200.0, 450.0, 400.0)
     """
     try:
@@ -208,15 +202,15 @@ def parse_box(text: str | None) -> BoxResult:
             return BoxResult(ParseStatus.FORMAT_COLLAPSE)
         if len(distinct) > 1:
             return BoxResult(ParseStatus.AMBIGUOUS)
-        return _validate_box(distinct[0])
+        return _validate_box(distinct[0], width, height)
     except Exception:  # a parser must never take the probe down; odd input is a collapse
         return BoxResult(ParseStatus.FORMAT_COLLAPSE)
 
 
 @functools.lru_cache(maxsize=16)
 def _label_patterns(labels: tuple[str, ...]) -> tuple[re.Pattern[str], re.Pattern[str]]:
-    """The (choice, label) patterns of a vocabulary, as ``_CHOICE`` and ``_LABEL`` for the zones;
-    longer labels first, so that ``NEAR GOAL`` is not read as ``GOAL``."""
+    """The (choice, label) patterns of a vocabulary: ``Choice = X`` (or ``Answer:``, ``Label is``,
+    ``Zone:``) and a bare label; longer labels first, so that ``NEAR TOP`` is not read as ``TOP``."""
     words = sorted((re.escape(_normalise_label_text(label)) for label in labels), key=len, reverse=True)
     alternatives = "|".join(words)
     return (re.compile(rf"\b(?:CHOICE|ANSWER|LABEL|ZONE)\s*(?:=|:|IS)\s*({alternatives})\b"),
@@ -227,21 +221,20 @@ def _normalise_label_text(text: str) -> str:
     return re.sub(r"[\s_\-]+", " ", text.upper())
 
 
-def parse_mcq(text: str | None, labels: Sequence[str] | None = None) -> MCQResult:
-    """The zone label in an MCQ answer, in any case, with ``_``, ``-`` or spaces inside.
+def parse_mcq(text: str | None, labels: Sequence[str]) -> MCQResult:
+    """The label of the task's vocabulary ``labels`` (upper-case, ``_`` between words) in an MCQ
+    answer, in any case, with ``_``, ``-`` or spaces inside.
 
     ``Choice = X`` / ``Answer: X`` wins; otherwise exactly one distinct label must appear
-    (a text naming two labels, e.g. an echo of the choices, is AMBIGUOUS). ``labels``: another
-    task's vocabulary (upper-case, ``_`` between words); None is MountainCar's zones.
+    (a text naming two labels, e.g. an echo of the choices, is AMBIGUOUS).
 
     Example:
-        >>> parse_mcq("Choice = BOTTOM").label
-        <Zone.BOTTOM: 'BOTTOM'>
-        >>> parse_mcq("left-slope.").label
-        <Zone.LEFT_SLOPE: 'LEFT_SLOPE'>
-        >>> parse_mcq("BOTTOM or LEFT_SLOPE").status
+        >>> stages = ("LOW", "HALF_WAY", "NEAR_TOP", "TOP")
+        >>> parse_mcq("Choice = LOW", stages).label, parse_mcq("near-top.", stages).label
+        ('LOW', 'NEAR_TOP')
+        >>> parse_mcq("LOW or HALF_WAY", stages).status
         <ParseStatus.AMBIGUOUS: 'ambiguous'>
-        >>> parse_mcq("Answer: above bar", labels=("HANGING", "ABOVE_BAR")).label
+        >>> parse_mcq("Answer: above bar", ("HANGING", "ABOVE_BAR")).label
         'ABOVE_BAR'
     """
     try:
@@ -250,14 +243,12 @@ def parse_mcq(text: str | None, labels: Sequence[str] | None = None) -> MCQResul
         if not text.strip():
             return MCQResult(ParseStatus.EMPTY)
         norm = _normalise_label_text(text)
-        choice, label = (_CHOICE, _LABEL) if labels is None else _label_patterns(tuple(labels))
+        choice, label = _label_patterns(tuple(labels))
         chosen = list(dict.fromkeys(choice.findall(norm))) or list(dict.fromkeys(label.findall(norm)))
         if not chosen:
             return MCQResult(ParseStatus.FORMAT_COLLAPSE)
         if len(chosen) > 1:
             return MCQResult(ParseStatus.AMBIGUOUS)
-        if labels is not None:
-            return MCQResult(ParseStatus.OK, chosen[0].replace(" ", "_"))
-        return MCQResult(ParseStatus.OK, Zone(chosen[0].replace(" ", "_")))
+        return MCQResult(ParseStatus.OK, chosen[0].replace(" ", "_"))
     except Exception:  # a parser must never take the probe down; odd input is a collapse
         return MCQResult(ParseStatus.FORMAT_COLLAPSE)

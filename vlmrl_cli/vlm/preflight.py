@@ -15,7 +15,7 @@ from vlmrl_cli.core.errors import BackendUnavailable, BadInput
 from vlmrl_cli.core.paths import file_problem
 from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.vlm.config import VLMConfig
-from vlmrl_cli.vlm.prompts import PROMPTS, PromptKind
+from vlmrl_cli.vlm.prompts import Prompt
 
 
 def check_vlm(cfg: VLMConfig) -> None:
@@ -34,23 +34,23 @@ def check_vlm(cfg: VLMConfig) -> None:
             if problem:
                 raise BackendUnavailable(f"cannot load the hf model: {problem}; pass --model PATH to a downloaded "
                                          "model folder, or download it first.")
-    else:
+    elif cfg.backend != "sim":  # the simulated VLM always starts
         from vlmrl_cli.vlm.registry import build_backend
 
         # openai: the server answers; replay: the transcript reads; an unknown name is refused
         build_backend(cfg).close()
 
 
-def check_coverage(cfg: VLMConfig, kinds: Iterable[PromptKind], frames: Iterable[Frame]) -> None:
-    """For the replay backend: every frame of ``frames`` has an answer to every prompt of
-    ``kinds`` (a training run may be shown any of them); other backends answer anything."""
+def check_coverage(cfg: VLMConfig, prompts: Iterable[Prompt], frames: Iterable[Frame]) -> None:
+    """For the replay backend: every frame of ``frames`` has an answer to every one of
+    ``prompts`` (a training run may be shown any of them); other backends answer anything."""
     if cfg.backend != "replay":
         return
     from vlmrl_cli.core.errors import MissingAnswer
     from vlmrl_cli.vlm.replay import ReplayBackend
 
     backend = ReplayBackend.from_config(cfg)
-    wanted = [PROMPTS[kind] for kind in dict.fromkeys(kinds)]
+    wanted = list(dict.fromkeys(prompts))
     missing = total = 0
     first: str | None = None
     for frame in frames:

@@ -17,12 +17,14 @@ if TYPE_CHECKING:
 
 def build_backend(cfg: VLMConfig, stream: int = 0, reader: MilestoneReader | None = None) -> Backend:
     """Instantiate the backend ``cfg.backend``; unknown names are a ``BadInput``. ``stream`` seeds a
-    stochastic simulated VLM's per-query draws (the training run's seed); ``reader`` is a task's
-    pixel reader for the simulated VLM (None: MountainCar's). Real backends ignore both."""
+    stochastic simulated VLM's per-query draws (the training run's seed); ``reader`` is the task's
+    pixel reader (``Task.reader``), which the simulated VLM needs. Real backends ignore both."""
     if cfg.backend == "sim":
         from vlmrl_cli.vlm.sim import SimulatedVLM
 
-        return SimulatedVLM(cfg.sim, stream=stream, reader=reader)
+        if reader is None:
+            raise BadInput("the simulated VLM reads a task's frames through the task's reader; pass Task.reader.")
+        return SimulatedVLM(reader, cfg.sim, stream=stream)
     if cfg.backend == "hf":
         from vlmrl_cli.vlm.hf import HFBackend
 

@@ -7,26 +7,28 @@ from typing import Any
 import numpy as np
 import pytest
 
-from vlmrl_cli.frames import geometry
-from vlmrl_cli.frames.render import FrameRenderer
-from vlmrl_cli.shaping.scene import MOUNTAIN_CAR as MC_SCENE
-from vlmrl_cli.tasks.mountain_car import (
+from vlmrl_cli.tasks.mountain_car.reader import WheelReader
+from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
+from vlmrl_cli.tasks.mountain_car.task import (
     CONTINUOUS_ENV_ID,
     CONTINUOUS_GOAL,
     MOUNTAIN_CAR,
     MOUNTAIN_CAR_CONTINUOUS,
     ContinuousZoneReader,
+    geometry,
 )
+from vlmrl_cli.tasks.mountain_car.task import MOUNTAIN_CAR_SCENE as MC_SCENE
 from vlmrl_cli.training.config import RunConfig
-from vlmrl_cli.training.presets import PRESETS, preset_of
+from vlmrl_cli.training.presets import preset_of
 
 
 def test_mountain_car_is_the_paper_task_as_before() -> None:
-    assert MOUNTAIN_CAR.scene is MC_SCENE and MOUNTAIN_CAR.reader is None and MOUNTAIN_CAR.presets is None
+    assert MOUNTAIN_CAR.scene is MC_SCENE and isinstance(MOUNTAIN_CAR.reader, WheelReader)
+    assert MOUNTAIN_CAR.probes_floats and not MOUNTAIN_CAR.name_in_identity and MOUNTAIN_CAR.reported_in_paper
     assert MOUNTAIN_CAR.thresholds == (-190.0, -160.0, -130.0) and MOUNTAIN_CAR.max_steps == 200
     job = RunConfig.from_sources(None, {"arms": ["hybrid"], "seeds": [0]}).jobs()[0]
     assert "task" not in job.identity()  # MountainCar's hashes predate tasks (test_pinned_hashes.py)
-    assert job.preset == "paper" and job.ppo == PRESETS["paper"]
+    assert job.preset == "paper" and job.ppo == preset_of("mountain-car", "paper")
 
 
 def test_the_continuous_reader_reads_the_true_zone_off_the_pixels() -> None:

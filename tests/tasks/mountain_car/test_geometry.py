@@ -7,9 +7,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from vlmrl_cli.frames import geometry
-from vlmrl_cli.frames.geometry import GroundTruth, Zone, car_box_px, zone_of
-from vlmrl_cli.frames.render import FrameRenderer
+from vlmrl_cli.tasks.mountain_car import geometry
+from vlmrl_cli.tasks.mountain_car.geometry import GroundTruth, Zone, car_box_px, zone_of
+from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 
 
 @pytest.fixture(scope="module")

@@ -4,7 +4,12 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from vlmrl_cli.shaping.kinematic import kinematic_reward
+from vlmrl_cli.tasks.mountain_car.task import kinematic_dense
+
+
+def kinematic_reward(x: float, scale: float = 2.0, offset: float = 0.4) -> float:
+    """Eq. 1 on a position, as MountainCar's dense term reads it from the observation ``[x, v]``."""
+    return kinematic_dense(np.array([x, 0.0]), scale, offset)
 
 positions = st.floats(-1.2, 0.6)
 scales = st.floats(0.0, 10.0)
@@ -35,8 +40,6 @@ def test_paper_defaults_eq1() -> None:
 
 @given(st.floats(-1.2, 0.6), st.floats(0.0, 10.0), st.floats(-2.0, 2.0))
 def test_the_scene_dense_term_is_eq1_on_the_observed_position(x: float, scale: float, offset: float) -> None:
-    """MountainCar's scene term (inlined for speed) equals ``kinematic_reward`` on ``obs[0]``, bit for bit."""
-    from vlmrl_cli.shaping.scene import mountain_car_dense
-
+    """MountainCar's scene term is Eq. 1 on ``obs[0]`` of a float32 observation, bit for bit."""
     obs = np.array([x, 0.01], dtype=np.float32)
-    assert mountain_car_dense(obs, scale, offset) == kinematic_reward(float(obs[0]), scale, offset)
+    assert kinematic_dense(obs, scale, offset) == max(0.0, scale * (float(obs[0]) + offset))
