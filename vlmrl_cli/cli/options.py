@@ -198,7 +198,7 @@ Preset = Annotated[str, typer.Option("--preset", metavar=choices(preset_names(DE
                                      help="PPO preset (the bottom layer of [ppo]); another task's presets "
                                           "are its own (default: the task's, e.g. zoo).")]
 TaskOpt = Annotated[str | None, typer.Option(
-    "--task", metavar="mountain-car|mountain-car-continuous|acrobot|MODULE:NAME",
+    "--task", metavar="mountain-car|mountain-car-continuous|acrobot|minigrid-doorkey|MODULE:NAME",
     help="The environment (default mountain-car): a built-in task, or a Task in your code as "
          "package.module:NAME (see the docs' 'Add a task').")]
 Workers = Annotated[int | None, typer.Option("--workers", help="Worker processes (default: cores).")]

@@ -91,6 +91,8 @@ class Task:
             dense term can pay more than finishing (None: a generic one).
         describe_step: a played step's observation and action as named fields (``vlmrl evaluate``'s
             JSON) and one caption line of its GIF (None: the raw observation and action).
+        wrap: observation wrappers ``make_env`` puts around ``gym.make(env_id)`` (a grid world's
+            Dict observation flattened for an MLP policy); None: the env as gymnasium makes it.
     """
 
     name: str
@@ -122,6 +124,7 @@ class Task:
     grid_frames: Callable[[ShapingConfig], list[Frame]] | None = None
     hacking_note: tuple[str, str] | None = None
     describe_step: Callable[[tuple[float, ...], Any], tuple[dict[str, Any], str]] | None = None
+    wrap: Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None = None
 
     @property
     def auc_margin(self) -> float:
@@ -163,7 +166,8 @@ class Task:
         one draws headless (SDL's dummy video driver unless one is set)."""
         if render_mode is not None:
             os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
-        return gym.make(self.env_id, render_mode=render_mode, **dict(self.env_kwargs))
+        env = gym.make(self.env_id, render_mode=render_mode, **dict(self.env_kwargs))
+        return env if self.wrap is None else self.wrap(env)
 
     @property
     def probes_floats(self) -> bool:

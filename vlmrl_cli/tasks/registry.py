@@ -44,10 +44,17 @@ def _acrobot() -> Task:
     return ACROBOT
 
 
+def _minigrid_doorkey() -> Task:
+    from vlmrl_cli.tasks.minigrid_doorkey import DOORKEY
+
+    return DOORKEY
+
+
 BUILTIN: dict[str, Callable[[], Task]] = {
     "mountain-car": _mountain_car,
     "mountain-car-continuous": _mountain_car_continuous,
     "acrobot": _acrobot,
+    "minigrid-doorkey": _minigrid_doorkey,
 }
 
 

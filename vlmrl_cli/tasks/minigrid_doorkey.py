@@ -1,0 +1,246 @@
+"""MiniGrid DoorKey-5x5 as a task: pick up the key, open the locked door, reach the green goal.
+
+Nothing like a car: a 5 x 5 grid world, 7 discrete actions, reward ``1 - 0.9 t / 250`` at the goal
+and 0 otherwise, 250 steps. The policy sees MiniGrid's egocentric 7 x 7 x 3 view, flattened to 147
+numbers (``ImgObsWrapper`` then ``FlattenObservation``; rl-baselines3-zoo uses ``FlatObsWrapper``,
+which adds an encoding of the mission text, a constant here).
+
+Milestones, low to high: NO_KEY, HAS_KEY, DOOR_OPEN, AT_GOAL. The camera draws the whole grid from
+above (32 px tiles: 160 x 160); the simulated VLM's reader finds them in those pixels only: the
+locked door's dark-yellow fill, an open door's yellow strip along its tile's right edge, the key's
+yellow glyph inside its tile, the agent's red triangle, the goal's green. The picture never shows
+what the agent carries, so HAS_KEY is read as "no key on the floor, the door still shut".
+
+The dense term is Eq. 1 on a stage coordinate read from the observation: ``u = 2 p - 1`` with
+``p`` = (carries the key + an open door in view) / 2, so ``max(0, scale (u + offset)) / 250``:
+with the defaults 2.0 and 0.4 it pays 0 before the key, 0.8 / 250 per step holding it and
+2.8 / 250 per step with the door open in view. Over a whole episode it pays at most 2.8, more
+than the goal's reward: lingering can pay (the hacking the paper's Eq. 1 has on MountainCar); this
+task has no position, so no hovering diagnostic measures it.
+
+Not yet calibrated and no study yet (issue 28): its presets are zoo's and ``smoke``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import minigrid  # noqa: F401  (registers the MiniGrid envs with gymnasium)
+import numpy as np
+
+from vlmrl_cli.frames.render import Frame
+from vlmrl_cli.shaping.camera import CellCamera, FrameView
+from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.vlm.prompts import Milestones, mcq_prompt
+
+ENV_ID = "MiniGrid-DoorKey-5x5-v0"
+TILE = 32  # px per grid cell: 5 cells give 160 px, a multiple of the features' 20 px blocks
+MAX_STEPS = 250
+LABELS = ("NO_KEY", "HAS_KEY", "DOOR_OPEN", "AT_GOAL")
+MILESTONES = Milestones(LABELS, mcq_prompt(
+    "This image shows a small grid world from above: a red triangle (the agent), a yellow key, a "
+    "yellow door in a grey wall and a green goal square. Which stage has the agent reached? NO_KEY: "
+    "the key still lies on the floor; HAS_KEY: the key is gone from the floor and the door is still "
+    "shut; DOOR_OPEN: the door is open; AT_GOAL: the agent stands on the green square.", LABELS))
+POTENTIALS: tuple[tuple[str, float], ...] = (("NO_KEY", 0.0), ("HAS_KEY", 0.3), ("DOOR_OPEN", 0.6),
+                                             ("AT_GOAL", 1.0))
+
+YELLOW = (255, 255, 0)
+LOCKED_FILL = (114, 114, 0)  # MiniGrid fills a locked door with 0.45 x its colour
+RED = (255, 0, 0)
+GREEN = (0, 255, 0)
+OPEN_STRIP_FROM = 28  # an open door is drawn as its tile's columns 0.88..1.0 (28..31 px)
+
+
+def _count(tile: np.ndarray, colour: tuple[int, int, int]) -> np.ndarray:
+    return np.all(tile == np.asarray(colour, dtype=np.uint8), axis=-1)
+
+
+def read_stage(pixels: np.ndarray, tile: int = TILE) -> str | None:
+    """The stage a top-down DoorKey frame shows, from its pixels only (None: no agent drawn).
+
+    Example:
+        >>> frame = render_state(reset_state(0))
+        >>> read_stage(frame.pixels)
+        'NO_KEY'
+    """
+    rows, cols = pixels.shape[0] // tile, pixels.shape[1] // tile
+    agent_on_goal = agent_seen = key_seen = door_open = False
+    for j in range(rows):
+        for i in range(cols):
+            t = pixels[j * tile:(j + 1) * tile, i * tile:(i + 1) * tile]
+            red, green = int(_count(t, RED).sum()), int(_count(t, GREEN).sum())
+            if red > tile:
+                agent_seen = True
+                agent_on_goal = agent_on_goal or green > 0
+            yellow = _count(t, YELLOW)
+            if not yellow.any():
+                continue
+            used = np.nonzero(yellow.any(axis=0))[0]
+            if _count(t, LOCKED_FILL).any():
+                continue  # the locked door
+            if used.min() >= OPEN_STRIP_FROM * tile // TILE:
+                door_open = True
+            elif used.min() > 2 and used.max() < OPEN_STRIP_FROM * tile // TILE:
+                key_seen = True  # a glyph inside its tile, off the edges: the key on the floor
+            # else: a closed, unlocked door (its outline touches both edges)
+    if not agent_seen:
+        return None
+    if agent_on_goal:
+        return "AT_GOAL"
+    if door_open:
+        return "DOOR_OPEN"
+    return "NO_KEY" if key_seen else "HAS_KEY"
+
+
+def label_of_sim(sim: Any) -> str:
+    """The true stage of a DoorKey simulator (probes and diagnostics only, never the VLM)."""
+    here = sim.grid.get(*sim.agent_pos)
+    if here is not None and here.type == "goal":
+        return "AT_GOAL"
+    doors = [c for c in sim.grid.grid if c is not None and c.type == "door"]
+    if doors and doors[0].is_open:
+        return "DOOR_OPEN"
+    carrying = getattr(sim, "carrying", None)
+    return "HAS_KEY" if carrying is not None and carrying.type == "key" else "NO_KEY"
+
+
+class StageReader:
+    """The simulated VLM's reader (a ``MilestoneReader``): ``read_stage`` on the frame's pixels."""
+
+    name = "minigrid-doorkey"
+    milestones = MILESTONES
+
+    def read(self, pixels: np.ndarray) -> str | None:
+        return read_stage(pixels)
+
+
+Cell = tuple[bytes, tuple[int, int, int], int, int]  # grid encoding, its shape, agent x, y as (x, y, dir)
+
+
+def cell_of(sim: Any) -> Cell:
+    """What the top-down picture depends on: the grid's encoding and the agent's pose."""
+    encoded = sim.grid.encode()
+    x, y = (int(v) for v in sim.agent_pos)
+    return encoded.tobytes(), tuple(int(s) for s in encoded.shape), x, y * 4 + int(sim.agent_dir)  # type: ignore[return-value]
+
+
+def render_cell(cell: Cell, sha256: str | None = None) -> Frame:
+    """Draw a cell again from its encoding (no simulator needed)."""
+    from minigrid.core.grid import Grid
+
+    raw, shape, x, pose = cell
+    grid, _ = Grid.decode(np.frombuffer(raw, dtype=np.uint8).reshape(shape))
+    pixels = grid.render(TILE, (x, pose // 4), pose % 4, highlight_mask=None)
+    return Frame.drawn(pixels, sha256=sha256)
+
+
+class DoorKeyCamera(CellCamera[Cell]):
+    """The top-down camera: one frame per (grid, agent pose); a 5 x 5 DoorKey layout has at most
+    9 floor cells x 4 directions x (key on the floor or not) x 3 door states per layout."""
+
+    def _draw(self, cell: Cell, sha256: str | None) -> Frame:
+        return render_cell(cell, sha256)
+
+    def look(self, sim: Any) -> FrameView:
+        cell = cell_of(sim)
+        view = self._views.get(cell)
+        return view if view is not None else self._view_of(cell)
+
+
+def stage_of_obs(obs: np.ndarray) -> float:
+    """``p`` in [0, 1] from the flattened egocentric view (7 x 7 x 3, object/colour/state): half for
+    carrying the key (MiniGrid draws a carried object in the agent's own cell, (3, 6)), half for
+    an open door (object 4, state 0) anywhere in view.
+
+    Example:
+        >>> view = np.zeros((7, 7, 3)); view[3, 6] = (5, 4, 0)
+        >>> stage_of_obs(view.reshape(-1))
+        0.5
+    """
+    view = np.asarray(obs).reshape(7, 7, 3)
+    carries = float(view[3, 6, 0] == 5)
+    door_open = float(np.any((view[..., 0] == 4) & (view[..., 2] == 0)))
+    return (carries + door_open) / 2.0
+
+
+def doorkey_dense(obs: np.ndarray, scale: float, offset: float) -> float:
+    """Eq. 1 on the stage coordinate ``u = 2 p - 1``, per step of the 250-step limit.
+
+    Example:
+        >>> view = np.zeros((7, 7, 3)); view[3, 6] = (5, 4, 0)
+        >>> round(doorkey_dense(view.reshape(-1), 2.0, 0.4) * MAX_STEPS, 6)
+        0.8
+    """
+    return max(0.0, scale * (2.0 * stage_of_obs(obs) - 1.0 + offset)) / MAX_STEPS
+
+
+def flat_image(env: gym.Env[Any, Any]) -> gym.Env[Any, Any]:
+    """MiniGrid's Dict observation as the flattened egocentric image (147 numbers)."""
+    from minigrid.wrappers import ImgObsWrapper
+
+    return gym.wrappers.FlattenObservation(ImgObsWrapper(env))
+
+
+def make_doorkey_env(render_mode: str | None = None) -> gym.Env[Any, Any]:
+    """DoorKey-5x5 with the flattened egocentric image as its observation."""
+    return flat_image(gym.make(ENV_ID, render_mode=render_mode))
+
+
+def reset_state(seed: int) -> Any:
+    """A freshly reset DoorKey simulator (the unwrapped env) for ``seed``."""
+    env = make_doorkey_env()
+    env.reset(seed=seed)
+    return env.unwrapped
+
+
+def render_state(sim: Any) -> Frame:
+    """The camera's frame of a simulator."""
+    return render_cell(cell_of(sim))
+
+
+def _camera(shaping: ShapingConfig) -> DoorKeyCamera:
+    return DoorKeyCamera()
+
+
+# rl-baselines3-zoo, hyperparams/ppo.yml, the MiniGrid defaults (MiniGrid-DoorKey-5x5-v0 among them;
+# "Following https://github.com/lcswillems/rl-starter-files"): normalize true, 8 envs, n_timesteps
+# 1e5, n_steps 128, batch 64, gae 0.95, gamma 0.99, 10 epochs, ent_coef 0, lr 2.5e-4, clip 0.2, with
+# FlatObsWrapper (here the image only, see the module's docstring).
+_ZOO: dict[str, Any] = {
+    "n_envs": 8, "n_steps": 128, "batch_size": 64, "gae_lambda": 0.95, "gamma": 0.99, "n_epochs": 10,
+    "ent_coef": 0.0, "learning_rate": 2.5e-4, "clip_range": 0.2, "normalize_obs": True, "normalize_reward": True,
+    "timesteps": 100_000,
+}
+
+
+def _task() -> Any:
+    from vlmrl_cli.shaping.features import feature_dim
+    from vlmrl_cli.shaping.scene import Scene
+    from vlmrl_cli.tasks.base import SMOKE, Task
+
+    sim_type = type(gym.make(ENV_ID).unwrapped)
+    return Task(
+        name="minigrid-doorkey",
+        env_id=ENV_ID,
+        summary="MiniGrid-DoorKey-5x5-v0: key, locked door, goal (7 actions, 1 - 0.9 t/250 at the goal, 250 steps)",
+        scene=Scene("minigrid-doorkey", (147,), doorkey_dense, sim_type),
+        milestones=MILESTONES,
+        label_potentials=POTENTIALS,
+        truth=label_of_sim,
+        make_camera=_camera,
+        reader=StageReader(),
+        feature_dim=feature_dim((5 * TILE, 5 * TILE, 3)),
+        thresholds=(0.5, 0.8, 0.9),
+        max_steps=MAX_STEPS,
+        presets={"zoo": _ZOO, "smoke": SMOKE},
+        default_preset="zoo",
+        zoo_reference="rl-baselines3-zoo hyperparams/ppo.yml, MiniGrid defaults; its benchmark.md (at 02a1a90 "
+                      "and 0088472) has no PPO row for MiniGrid-DoorKey-5x5-v0",
+        window=50,
+        wrap=flat_image,
+    )
+
+
+DOORKEY = _task()
