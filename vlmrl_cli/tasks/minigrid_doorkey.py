@@ -116,7 +116,7 @@ class StageReader:
         return read_stage(pixels)
 
 
-Cell = tuple[bytes, tuple[int, int, int], int, int]  # grid encoding, its shape, agent x, y as (x, y, dir)
+Cell = tuple[bytes, tuple[int, int, int], int, int]  # grid encoding, its shape, agent x, agent y * 4 + direction
 
 
 def cell_of(sim: Any) -> Cell:
