@@ -216,16 +216,17 @@ _ZOO: dict[str, Any] = {
 
 
 def _task() -> Any:
+    from minigrid.envs import DoorKeyEnv  # the unwrapped env's class, without building an env at import
+
     from vlmrl_cli.shaping.features import feature_dim
     from vlmrl_cli.shaping.scene import Scene
     from vlmrl_cli.tasks.base import SMOKE, Task
 
-    sim_type = type(gym.make(ENV_ID).unwrapped)
     return Task(
         name="minigrid-doorkey",
         env_id=ENV_ID,
         summary="MiniGrid-DoorKey-5x5-v0: key, locked door, goal (7 actions, 1 - 0.9 t/250 at the goal, 250 steps)",
-        scene=Scene("minigrid-doorkey", (147,), doorkey_dense, sim_type),
+        scene=Scene("minigrid-doorkey", (147,), doorkey_dense, DoorKeyEnv),
         milestones=MILESTONES,
         label_potentials=POTENTIALS,
         truth=label_of_sim,
