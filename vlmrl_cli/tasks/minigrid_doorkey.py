@@ -220,7 +220,7 @@ def _task() -> Any:
 
     from vlmrl_cli.shaping.features import feature_dim
     from vlmrl_cli.shaping.scene import Scene
-    from vlmrl_cli.tasks.base import SMOKE, Task
+    from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, Task
 
     return Task(
         name="minigrid-doorkey",
@@ -235,8 +235,18 @@ def _task() -> Any:
         feature_dim=feature_dim((5 * TILE, 5 * TILE, 3)),
         thresholds=(0.5, 0.8, 0.9),
         max_steps=MAX_STEPS,
-        presets={"zoo": _ZOO, "smoke": SMOKE},
+        presets={
+            "zoo": _ZOO,
+            # The candidates of `vlmrl calibrate --task minigrid-doorkey` (Task.calibration), 100,000
+            # steps each: zoo's knobs; the same without VecNormalize; SB3's PPO defaults on one env;
+            # the same with VecNormalize (which of the two differences matters).
+            "zoo-100k-raw": {**_ZOO, "normalize_obs": False, "normalize_reward": False},
+            "sb3-default-100k": SB3_DEFAULT_100K,
+            "sb3-default-100k-norm": {**SB3_DEFAULT_100K, "normalize_obs": True, "normalize_reward": True},
+            "smoke": SMOKE,
+        },
         default_preset="zoo",
+        calibration=tuple({"preset": p} for p in ("zoo", "zoo-100k-raw", "sb3-default-100k", "sb3-default-100k-norm")),
         zoo_reference="rl-baselines3-zoo hyperparams/ppo.yml, MiniGrid defaults; its benchmark.md (at 02a1a90 "
                       "and 0088472) has no PPO row for MiniGrid-DoorKey-5x5-v0",
         window=50,
