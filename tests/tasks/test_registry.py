@@ -1,5 +1,6 @@
 """Finding tasks: built-in names, a user's ``package.module:NAME`` (the docs' example, run as a
-smoke sweep), and every way a name can be wrong."""
+smoke sweep; the grid-world example read frame by frame and run through study and evaluate), and every
+way a name can be wrong."""
 
 from __future__ import annotations
 
@@ -8,33 +9,52 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
 import pytest
+from typer.testing import CliRunner
 
+from vlmrl_cli.cli.app import app
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.shaping.camera import CellCamera
+from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
 from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.tasks.registry import BUILTIN, DEFAULT_TASK, get_task, task_names
 from vlmrl_cli.tracking import store
 from vlmrl_cli.training.config import RunConfig
 
+runner = CliRunner()
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "tasks.md"
 
 
-def _example_code() -> str:
-    """The one ``python`` block of docs/tasks.md: the "Add a task" example, verbatim."""
+def _example_code(path: str) -> str:
+    """The ``python`` block of docs/tasks.md whose docstring opens with ``path``, verbatim."""
     blocks = re.findall(r"```python\n(.*?)```", DOCS.read_text(encoding="utf-8"), flags=re.S)
-    assert len(blocks) == 1, "docs/tasks.md should hold exactly one python example"
-    return blocks[0]
+    found = [b for b in blocks if b.startswith(f'"""{path}:')]
+    assert len(found) == 1, f"docs/tasks.md should hold one python example of {path}"
+    return found[0]
+
+
+def _as_user_module(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, path: str, module: str) -> Iterator[str]:
+    """A docs example as ``module`` on sys.path and on the workers' PYTHONPATH."""
+    (tmp_path / f"{module}.py").write_text(_example_code(path), encoding="utf-8")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv("PYTHONPATH", f"{tmp_path}:{':'.join(p for p in sys.path if p)}")
+    yield f"{module}:TASK"
+    sys.modules.pop(module, None)
 
 
 @pytest.fixture
 def user_module(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
-    """The docs' example as ``mytasks_valley`` on sys.path and on the workers' PYTHONPATH."""
-    (tmp_path / "mytasks_valley.py").write_text(_example_code(), encoding="utf-8")
-    monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setenv("PYTHONPATH", f"{tmp_path}:{':'.join(p for p in sys.path if p)}")
-    yield "mytasks_valley:TASK"
-    sys.modules.pop("mytasks_valley", None)
+    """The docs' first example (MountainCar seen through two milestones) as ``mytasks_valley``."""
+    yield from _as_user_module(tmp_path, monkeypatch, "mytasks/valley.py", "mytasks_valley")
+
+
+@pytest.fixture
+def room_module(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
+    """The docs' grid-world example (MiniGrid's empty room) as ``mytasks_room``."""
+    yield from _as_user_module(tmp_path, monkeypatch, "mytasks/room.py", "mytasks_room")
 
 
 def test_every_builtin_task_loads_and_mountain_car_is_the_default() -> None:
@@ -82,3 +102,57 @@ def test_a_user_task_runs_a_smoke_sweep(tmp_path: Path, user_module: str) -> Non
     hybrid = next(r for r in runs if r.data.tags["vlmrl.arm"] == "hybrid")
     assert hybrid.data.metrics["vlm/queries"] > 0 and hybrid.data.metrics["vlm/parse_failures"] == 0
     assert "pixel-reader-v1-valley/" in hybrid.data.tags["vlmrl.vlm"]
+
+
+def test_the_grid_world_example_reads_every_frame_of_random_episodes_as_the_truth(room_module: str) -> None:
+    task = get_task(room_module)
+    camera = task.make_camera(ShapingConfig())
+    assert isinstance(camera, CellCamera)
+    env = task.make_env()
+    rng = np.random.default_rng(0)
+    frames, seen = 0, set()
+    for episode in range(6):
+        env.reset(seed=episode)
+        done = False
+        while True:
+            sim = env.unwrapped
+            assert task.reader.read(camera.look(sim).frame().pixels) == task.truth(sim)
+            frames += 1
+            seen.add(task.truth(sim))
+            if done:
+                break
+            _, _, terminated, truncated, _ = env.step(int(rng.integers(3)))  # left, right, forward
+            done = terminated or truncated
+    assert frames > 300 and seen == {"FAR", "NEAR", "AT_GOAL"}
+    assert camera.cells <= 4 * 4 * 4  # 16 floor cells x 4 directions, each drawn once
+    assert task.reader.read(np.zeros((120, 120, 3), dtype=np.uint8)) is None
+
+
+@pytest.mark.slow
+def test_the_grid_world_example_runs_study_and_evaluate_end_to_end(tmp_path: Path, room_module: str) -> None:
+    uri = f"sqlite:///{tmp_path / 'room.db'}"
+    out = tmp_path / "study"
+    result = runner.invoke(app, [
+        "study", "--task", room_module, "--regime", "smoke", "--arms", "baseline,kinematic,hybrid,hybrid-shuffled",
+        "--seeds", "1", "--workers", "1", "--alphas", "none", "--kin-scales", "none", "--query-flickers", "none",
+        "--profiles", "none", "--flickers", "none", "--tracking-uri", uri, "--out", str(out),
+        "--set", f"vlm.cache_path={tmp_path / 'c.sqlite'}"])
+    assert result.exit_code == 0, result.output + result.stderr
+    per_seed = pd.read_csv(out / "per_seed.csv")
+    assert sorted(per_seed["arm"]) == ["baseline", "hybrid", "hybrid-shuffled", "kinematic"]
+    report = (out / "report.md").read_text()
+    assert "SIMULATED VLM" in report and "seeds reaching 0.9" in report
+    client = store.connect(uri)
+    exp = client.get_experiment_by_name("vlmrl-study")
+    assert exp is not None
+    runs = [r for r in client.search_runs([exp.experiment_id]) if r.data.tags.get("vlmrl.kind") == "train"]
+    assert {r.data.tags["vlmrl.task"] for r in runs} == {room_module}
+    hybrid = next(r for r in runs if r.data.tags["vlmrl.arm"] == "hybrid")
+    assert hybrid.data.metrics["vlm/queries"] > 0 and hybrid.data.metrics["vlm/parse_failures"] == 0
+    kinematic = next(r for r in runs if r.data.tags["vlmrl.arm"] == "kinematic")
+    assert "vlm/queries" not in kinematic.data.metrics  # the dense term alone asks the VLM nothing
+
+    evaluated = runner.invoke(app, ["evaluate", hybrid.info.run_id, "--episodes", "1", "--tracking-uri", uri,
+                                    "--out", str(tmp_path / "ev"), "--cache-path", str(tmp_path / "c.sqlite")])
+    assert evaluated.exit_code == 0, evaluated.output + evaluated.stderr
+    assert (tmp_path / "ev" / "episode-0.gif").is_file() and "SIMULATED VLM" in evaluated.stderr
