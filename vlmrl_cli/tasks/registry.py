@@ -60,13 +60,16 @@ BUILTIN: dict[str, Callable[[], Task]] = {
 
 def recorded_task(name: object) -> str:
     """The task a run recorded (its ``vlmrl.task`` tag, its config's ``task``): runs from before
-    tasks existed record none, and they are all the default task's.
+    tasks existed record none; they are the built-in task that keeps its name out of its config
+    hashes for them (``Task.name_in_identity`` False).
 
     Example:
         >>> recorded_task("acrobot"), recorded_task(None)
         ('acrobot', 'mountain-car')
     """
-    return str(name) if name else DEFAULT_TASK
+    if name:
+        return str(name)
+    return next(key for key, load in BUILTIN.items() if not load().name_in_identity)
 
 
 def task_names() -> list[str]:

@@ -306,7 +306,7 @@ def resolve(layers: Iterable[Mapping[str, Any]]) -> RunConfig:
     """The validated ``RunConfig`` of ``layers`` (lowest first: config file, ``--set``, flags)."""
     from vlmrl_cli.training.validation import validate_as
 
-    cfg: RunConfig = validate_as(RunConfig, resolve_raw(layers))
+    cfg: RunConfig = validate_as(RunConfig, resolve_raw(layers, default_task=DEFAULT_TASK))
     cfg._check_task()
     return cfg
 

@@ -124,13 +124,13 @@ def _lift_moved(layer: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def resolve_raw(layers: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
+def resolve_raw(layers: Iterable[Mapping[str, Any]], default_task: str) -> dict[str, Any]:
     """The merged raw configuration of ``layers`` (lowest first) over the named preset's ``[ppo]``
-    (the task's: a task other than MountainCar starts from its own default preset)."""
-    from vlmrl_cli.tasks.registry import DEFAULT_PRESET, DEFAULT_TASK, get_task
+    (the task's default preset when none is named; ``default_task`` when no layer names a task)."""
+    from vlmrl_cli.tasks.registry import get_task
 
     lifted = [_lift_moved(layer) for layer in layers]
-    task_name: Any = DEFAULT_TASK
+    task_name: Any = default_task
     preset: Any = None
     for layer in lifted:
         task_name = layer.get("task", task_name)
@@ -139,9 +139,9 @@ def resolve_raw(layers: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
     if isinstance(task_name, str):
         with contextlib.suppress(BadInput):  # the task field's own check says what is wrong with the name
             task = get_task(task_name)
-    if preset is None:
-        preset = task.default_preset if task is not None else DEFAULT_PRESET
-    raw: dict[str, Any] = {"preset": preset}
+    if preset is None and task is not None:  # else the config's own default preset
+        preset = task.default_preset
+    raw: dict[str, Any] = {} if preset is None else {"preset": preset}
     if isinstance(preset, str) and task is not None:  # else the schema says what is wrong
         raw["ppo"] = to_jsonable(preset_of(task_name, preset))
     for layer in lifted:
