@@ -18,6 +18,7 @@ from vlmrl_cli.tasks.minigrid_doorkey import (
     doorkey_dense,
     label_of_sim,
     make_doorkey_env,
+    probe_states,
     read_stage,
     render_state,
 )
@@ -71,6 +72,15 @@ def test_the_camera_draws_each_pose_once() -> None:
     assert a.key == b.key and camera.renders == 1 and a.frame().pixels.shape == (160, 160, 3)
     camera.close()
     env.close()
+
+
+def test_the_taxonomy_s_probe_states_cover_every_stage_evenly_and_read_as_their_truth() -> None:
+    sims = probe_states(40)
+    camera = DoorKeyCamera()
+    truths = [label_of_sim(s) for s in sims]
+    assert len(sims) == 40 and {t: truths.count(t) for t in LABELS} == dict.fromkeys(LABELS, 10)
+    assert [read_stage(camera.look(s).frame().pixels) for s in sims] == truths
+    assert all(s.grid.get(*s.agent_pos) is None or s.grid.get(*s.agent_pos).type == "goal" for s in sims)
 
 
 def test_the_task_is_a_builtin_with_its_labels_and_presets() -> None:

@@ -120,12 +120,14 @@ def run_milestone_taxonomy(task: Task, vlm: Any, states: int, out: Path, trackin
             probes, shown = [], []
             planned = task.probe_states(states)
             for i, state in enumerate(planned, start=1):
-                sim = SimpleNamespace(state=np.asarray(state, dtype=float))
+                vector = isinstance(state, np.ndarray)  # else a simulator of the task's own
+                sim = SimpleNamespace(state=np.asarray(state, dtype=float)) if vector else state
                 view = camera.look(sim)
                 frame = view.frame()
                 answer = client.ask(task.milestones.prompt, frame).text
                 parsed = parse_mcq(answer, task.milestones.labels)
-                probe = MilestoneProbe(_frame_id(state), task.truth(sim), answer,
+                frame_id = _frame_id(state) if vector else f"{task.name}-{i:04d}-{view.key[:12]}"
+                probe = MilestoneProbe(frame_id, task.truth(sim), answer,
                                        str(parsed.label) if parsed.ok and parsed.label is not None else None,
                                        parsed.status)
                 probes.append(probe)

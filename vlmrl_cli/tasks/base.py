@@ -70,7 +70,9 @@ class Task:
             ``vision-float`` arm (None: the picture has no number to ask for; its reader must be
             a ``NumberReader`` to answer them).
         probe_states: about ``n`` simulator states for ``vlmrl taxonomy``'s milestone table of
-            this task (each drawn by the task's camera; None: no such table).
+            this task, each drawn by the task's camera: state vectors (the probe sets them as
+            ``sim.state``) or simulators themselves, for a task whose state is no vector (None:
+            no such table).
         env_kwargs: keyword arguments of ``gym.make``.
         window: episodes in the rolling mean return that thresholds are read on (100, as SB3's
             ``ep_rew_mean``; fewer for a task whose episodes are long next to its budgets).
@@ -113,7 +115,7 @@ class Task:
     position: Callable[[np.ndarray], float] | None = None
     hover_from: float | None = None
     numbers: NumberQuestions | None = None
-    probe_states: Callable[[int], list[np.ndarray]] | None = None
+    probe_states: Callable[[int], list[Any]] | None = None
     env_kwargs: Mapping[str, Any] = field(default_factory=dict)
     window: int = 100
     calibration: tuple[Mapping[str, Any], ...] = ()

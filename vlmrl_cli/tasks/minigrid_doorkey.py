@@ -200,6 +200,50 @@ def render_state(sim: Any) -> Frame:
     return render_cell(cell_of(sim))
 
 
+def probe_states(n: int) -> list[Any]:
+    """About ``n`` DoorKey simulators, a quarter at each stage, for ``vlmrl taxonomy``: the layouts
+    of seeds 0, 1, ... staged (key taken, door opened, agent on the goal) with the agent on each
+    free cell it could reach at that stage, facing each way in turn.
+
+    Example:
+        >>> sims = probe_states(8)
+        >>> len(sims), sorted({label_of_sim(s) for s in sims}) == sorted(LABELS)
+        (8, True)
+    """
+    import copy
+
+    from minigrid.core.world_object import Key
+
+    want = -(-n // len(LABELS))
+    staged: dict[str, list[Any]] = {label: [] for label in LABELS}
+    for seed in range(1_000):
+        if min(len(v) for v in staged.values()) >= want:
+            break
+        base = reset_state(seed)
+        cells = [(i % base.width, i // base.width, c) for i, c in enumerate(base.grid.grid)]
+        key, door, goal = (next((x, y) for x, y, c in cells if c is not None and c.type == kind)
+                           for kind in ("key", "door", "goal"))
+        for label in LABELS:
+            sim = copy.deepcopy(base)
+            if label != "NO_KEY":
+                sim.grid.set(*key, None)
+                sim.carrying = Key("yellow")
+            if label in ("DOOR_OPEN", "AT_GOAL"):
+                shut = sim.grid.get(*door)
+                shut.is_locked, shut.is_open = False, True
+            if label == "AT_GOAL":
+                spots = [goal] * 4
+            else:
+                spots = [(x, y) for x, y, _ in cells
+                         if sim.grid.get(x, y) is None and (label == "DOOR_OPEN" or x < door[0])]
+            for k, (x, y) in enumerate(spots):
+                posed = copy.deepcopy(sim)
+                posed.agent_pos, posed.agent_dir = (x, y), (k + seed) % 4
+                staged[label].append(posed)
+    picks = [staged[label][i] for i in range(want) for label in LABELS]
+    return picks[:n]
+
+
 def _camera(shaping: ShapingConfig) -> DoorKeyCamera:
     return DoorKeyCamera()
 
@@ -251,6 +295,7 @@ def _task() -> Any:
                       "and 0088472) has no PPO row for MiniGrid-DoorKey-5x5-v0",
         window=50,
         wrap=flat_image,
+        probe_states=probe_states,
     )
 
 
