@@ -10,14 +10,14 @@
 # imported into the stage's store, so a fresh machine picks up where the last one stopped.
 # Before a session stops: `bash scripts/retrain_pinned.sh export EXPERIMENT...` writes the partial
 # exports of the experiments named (of every one with a store when none is named).
-# STAGES (default: all of "acrobot mcc mc-calibrate study") names the stages to run, so a session
+# STAGES (default: all of "acrobot mcc doorkey mc-calibrate study") names the stages to run, so a session
 # can skip those already committed on the pin, e.g. STAGES="mcc mc-calibrate study".
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PY:-python3}
 STORE=${STORE:-$PWD/results/_scratch/pinned}
 WORKERS=${WORKERS:-2}
-STAGES=${STAGES:-acrobot mcc mc-calibrate study}
+STAGES=${STAGES:-acrobot mcc doorkey mc-calibrate study}
 export PYTHONPATH=$PWD OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 mkdir -p "$STORE" results/resume
 vlmrl() { "$PY" -m vlmrl_cli "$@"; }
@@ -26,6 +26,7 @@ vlmrl() { "$PY" -m vlmrl_cli "$@"; }
 declare -A DB=(
   [tasks-acrobot-calibrate]=acrobot.db [tasks-acrobot-study]=acrobot.db
   [tasks-mcc-calibrate]=mcc.db [tasks-mcc-study]=mcc.db
+  [tasks-doorkey-calibrate]=doorkey.db [tasks-doorkey-study]=doorkey.db
   [vlmrl-calibrate]=calibration.db [vlmrl-study]=study.db
 )
 uri() { echo "sqlite:///$STORE/${DB[$1]}"; }
@@ -57,7 +58,7 @@ if [[ ${1:-} == export ]]; then  # the finished runs of unfinished stages, for t
   exit 0
 fi
 
-task_stage() {  # $1 short name, $2 task, $3 study regime
+task_stage() {  # $1 short name, $2 task, $3 study regime (its calibration's closest)
   resume "tasks-$1-calibrate" "results/tasks/$2/runs-calibration.jsonl.gz"
   vlmrl calibrate --task "$2" --seeds 5 --workers "$WORKERS" --experiment "tasks-$1-calibrate" \
     --tracking-uri "$(uri "tasks-$1-calibrate")" --out "results/tasks/$2/calibration"
@@ -75,6 +76,7 @@ want() { [[ " $STAGES " == *" $1 "* ]]; }
 
 if want acrobot; then task_stage acrobot acrobot zoo-100k-lr1e-4; fi
 if want mcc; then task_stage mcc mountain-car-continuous sb3-default-100k; fi
+if want doorkey; then task_stage doorkey minigrid-doorkey zoo; fi
 
 # MountainCar's calibration: the default grid and the 2x2 grid (results/calibration/)
 if want mc-calibrate; then
