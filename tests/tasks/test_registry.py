@@ -20,9 +20,9 @@ from vlmrl_cli.shaping.camera import CellCamera
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
 from vlmrl_cli.tasks.base import Task
-from vlmrl_cli.tasks.registry import BUILTIN, DEFAULT_TASK, get_task, task_names
+from vlmrl_cli.tasks.registry import BUILTIN, get_task, task_names
 from vlmrl_cli.tracking import store
-from vlmrl_cli.training.config import RunConfig
+from vlmrl_cli.training.config import DEFAULT_TASK, RunConfig
 
 runner = CliRunner()
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "tasks.md"

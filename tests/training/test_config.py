@@ -230,3 +230,11 @@ def test_from_sources_turns_a_bad_set_into_bad_input(sets: list[str], match: str
 def test_from_sources_with_a_missing_file_is_bad_input(tmp_path: Path) -> None:
     with pytest.raises(BadInput, match="cannot read"):
         RunConfig.from_sources(tmp_path / "nope.toml", {}, [])
+
+
+def test_the_default_preset_is_the_default_tasks_own() -> None:
+    from vlmrl_cli.tasks.registry import get_task
+    from vlmrl_cli.training.config import DEFAULT_PRESET, DEFAULT_TASK
+
+    assert get_task(DEFAULT_TASK).default_preset == DEFAULT_PRESET == RunConfig().preset
+    assert RunConfig().task == DEFAULT_TASK

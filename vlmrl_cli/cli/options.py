@@ -16,8 +16,7 @@ import typer
 from vlmrl_cli.analysis.multiplicity import METHODS
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.shaping.arms import ARMS
-from vlmrl_cli.tasks.registry import DEFAULT_TASK
-from vlmrl_cli.training.config import source_layers
+from vlmrl_cli.training.config import DEFAULT_TASK, source_layers
 from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.presets import preset_names
 from vlmrl_cli.vlm.config import BACKENDS, DEFAULT_SIM_PROFILE, SIM_PROFILES, SimKnobs, VLMConfig

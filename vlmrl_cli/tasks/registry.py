@@ -20,9 +20,6 @@ from collections.abc import Callable
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.tasks.base import Task
 
-DEFAULT_TASK = "mountain-car"
-#: The default task's default preset (``Task.default_preset``; a test checks that they agree).
-DEFAULT_PRESET = "paper"
 ENTRY_POINT_GROUP = "vlmrl.tasks"
 
 

@@ -51,13 +51,16 @@ from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec, PotentialSource, parse_arms
 from vlmrl_cli.shaping.config import ShapingConfig
-from vlmrl_cli.tasks.registry import DEFAULT_PRESET, DEFAULT_TASK
 from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.overrides import nest, parse_assignment, parse_value, resolve_raw
 from vlmrl_cli.training.presets import PPOConfig, ppo_identity, preset_names, preset_of
 from vlmrl_cli.vlm.config import VLMConfig, sim_identity
 
 DEFAULT_EXPERIMENT = "vlmrl"
+#: The task of a config that names none (``vlmrl run`` without ``--task``), and its preset (the
+#: task's ``default_preset``; a test checks that the two agree). Nothing below this layer knows it.
+DEFAULT_TASK = "mountain-car"
+DEFAULT_PRESET = "paper"
 EVAL_SEED = 1_000_000  # detached evaluation episode i resets with seed EVAL_SEED + i
 
 
@@ -306,7 +309,7 @@ def resolve(layers: Iterable[Mapping[str, Any]]) -> RunConfig:
     """The validated ``RunConfig`` of ``layers`` (lowest first: config file, ``--set``, flags)."""
     from vlmrl_cli.training.validation import validate_as
 
-    cfg: RunConfig = validate_as(RunConfig, resolve_raw(layers, default_task=DEFAULT_TASK))
+    cfg: RunConfig = validate_as(RunConfig, resolve_raw(layers, default_task=RunConfig.task))
     cfg._check_task()
     return cfg
 
