@@ -43,7 +43,7 @@ def test_played_steps_add_up_and_keep_every_kth_frame_and_the_last() -> None:
 def _run(arm: str) -> TrainedRun:
     return TrainedRun(run_id="r", name=f"{arm}-s0", status="FINISHED", arm=ARMS[arm], shaping=ShapingConfig(),
                       vlm=VLMConfig(), vlm_label="sim", simulated=True, policy=_energy,
-                      task="mountain-car")
+                      task=MOUNTAIN_CAR)
 
 
 def test_mcq_labels_carry_the_label_potential() -> None:

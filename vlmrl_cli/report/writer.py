@@ -285,10 +285,9 @@ def for_task(cfg: ReportConfig, task: Task) -> ReportConfig:
 
 def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: Sequence[claims_mod.ClaimResult],
                per_seed: pd.DataFrame, note: str, warns: Sequence[str], comparisons: pd.DataFrame,
-               hack: pd.DataFrame) -> str:
+               hack: pd.DataFrame, task: Task) -> str:
     assert cfg.window is not None  # resolved to the task's by write_report
     simulated = bool(data.runs["simulated"].any())
-    task = get_task(data.task)
     paper_task = task.reported_in_paper
     title = "Reproduction report" if paper_task else f"Report (task {data.task})"
     parts = [f"# {title}: experiment `{data.experiment_name}`", ""]
@@ -328,7 +327,7 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
                   "kinematic test that credit (the two arms share the dense kinematic term and differ only by the "
                   "VLM potential).", ""]
     parts += [*_statistics_md(cfg, int(attribution.is_family(comparisons).sum()) if len(comparisons) else 0,
-                              get_task(data.task).auc_margin),
+                              task.auc_margin),
               "## Attribution: what the VLM and the dense term each add", ""]
     if len(comparisons):
         parts += [attribution.attribution_markdown(comparisons, cfg.ci, cfg.adjust),
@@ -457,7 +456,7 @@ def write_report(cfg: ReportConfig, registry: Mapping[str, ArmSpec] = ARMS) -> R
     labelled.to_csv(per_seed_path, index=False)
     files.append(per_seed_path)
     report_path = out / "report.md"
-    report_path.write_text(_report_md(cfg, data, table, results, per_seed, note, warns, comparisons, hack),
+    report_path.write_text(_report_md(cfg, data, table, results, per_seed, note, warns, comparisons, hack, task),
                            encoding="utf-8")
     files.append(report_path)
 

@@ -27,7 +27,6 @@ from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.scene import SceneCamera
 from vlmrl_cli.tasks.base import Task
-from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.tracking import store
 from vlmrl_cli.training.config import EVAL_SEED
 from vlmrl_cli.training.evaluation import EvalResult, Policy, evaluate_detached
@@ -171,7 +170,7 @@ def label_frames(run: TrainedRun, views: list[FrameView], cfg: EvaluateConfig) -
     from vlmrl_cli.vlm.parsers import parse_float, parse_mcq
     from vlmrl_cli.vlm.registry import build_client
 
-    task = get_task(run.task)
+    task = run.task
     mcq = run.arm.potential is PotentialSource.MCQ
     label_map = oracle_shaping(run.arm, task.shaping_for(run.shaping), run.seed)  # a placebo's shuffled map
     numbers = task.numbers
@@ -207,7 +206,7 @@ def describe_step(task: Task, obs: tuple[float, ...], action: Any) -> tuple[dict
 
 
 def _captions(run: TrainedRun, step: PlayedStep, last: int, index: int) -> list[str]:
-    _, state = describe_step(get_task(run.task), step.obs, step.action)
+    _, state = describe_step(run.task, step.obs, step.action)
     return [
         f"{run.name}  episode {index}  step {step.t}/{last}",
         state,
@@ -238,7 +237,7 @@ def evaluate_run(cfg: EvaluateConfig) -> EvaluateResult:
     client = store.connect_existing(cfg.tracking_uri)
     with tempfile.TemporaryDirectory(prefix="vlmrl-evaluate-") as tmp:
         run = load_trained_run(client, cfg.run_id, Path(tmp))
-    task = get_task(run.task)
+    task = run.task
     result = evaluate_detached(run.policy, cfg.episodes, EVAL_SEED, task)
     seed = EVAL_SEED + cfg.episode_index
     camera = task.make_camera(run.shaping) if run.arm.uses_vlm else None
@@ -282,7 +281,7 @@ def _summary(
     gif: Path,
 ) -> dict[str, Any]:
     frames = []
-    task = get_task(run.task)
+    task = run.task
     for i, s in enumerate(shown):
         frame: dict[str, Any] = {"step": s.t, **describe_step(task, s.obs, s.action)[0]}
         frame.update({"action": s.action, "r_kin": s.r_kin, "native_return": s.native_return})
@@ -291,7 +290,7 @@ def _summary(
         frames.append(frame)
     figures: dict[str, Any] = {
         "run_id": run.run_id, "run_name": run.name, "arm": run.arm.name, "run_status": run.status,
-        **({"task": run.task} if task.name_in_identity else {}),  # MountainCar's files predate tasks
+        **({"task": run.task_ref or task.name} if task.name_in_identity else {}),  # MountainCar's files predate tasks
         "vlm": run.vlm_label if run.arm.uses_vlm else "none (this arm queries no VLM)",
         "simulated": run.arm.uses_vlm and run.simulated,
     }

@@ -58,7 +58,8 @@ class TrainedRun:
     simulated: bool
     policy: Policy
     seed: int = 0  # the training seed (a placebo arm's label map depends on it)
-    task: str = field(kw_only=True)  # the run's task (``recorded_task`` of its config.json)
+    task: Task = field(kw_only=True)  # the run's task, resolved once from its config.json
+    task_ref: str = field(default="", kw_only=True)  # how its config.json names it (a user task: module:NAME)
 
 
 def load_trained_run(client: Any, run_id: str, workdir: Path) -> TrainedRun:
@@ -81,7 +82,8 @@ def load_trained_run(client: Any, run_id: str, workdir: Path) -> TrainedRun:
     store.download_artifacts(client, run_id, [n for n in (MODEL, CONFIG, NORMALIZER) if n in artifacts], workdir)
     config = json.loads((workdir / CONFIG).read_text(encoding="utf-8"))
     tags = run.data.tags
-    task = recorded_task(config.get("task"))
+    task_ref = recorded_task(config.get("task"))
+    task = get_task(task_ref)
     return TrainedRun(
         run_id=run_id,
         name=tags.get(schema.MLFLOW_RUN_NAME, run_id),
@@ -91,9 +93,10 @@ def load_trained_run(client: Any, run_id: str, workdir: Path) -> TrainedRun:
         vlm=validate_as(VLMConfig, dict(config["vlm"])) if "vlm" in config else VLMConfig(),
         vlm_label=tags.get(schema.TAG_VLM, "unknown"),
         simulated=tags.get(schema.TAG_SIMULATED) == "true",
-        policy=_load_policy(workdir, get_task(task)),
+        policy=_load_policy(workdir, task),
         seed=int(config.get("seed", 0)),
         task=task,
+        task_ref=task_ref,
     )
 
 
