@@ -197,3 +197,12 @@ def test_judge_family_says_where_the_two_tests_disagree() -> None:
     assert f.disagreement == ("rank test only", "log-rank only", "")
     with pytest.raises(ValueError, match="one entry per comparison"):
         censored.judge_family([0.1], [0.1, 0.2], [1], [[1, 2]], [[1, 2]], [True])
+
+
+def test_a_significant_area_whose_interval_holds_zero_is_never_higher() -> None:
+    from vlmrl_cli.analysis.censored import difference_verdict
+    from vlmrl_cli.analysis.stats import Estimate
+
+    assert difference_verdict(Estimate(0.005, -0.001, 0.012), (0.0, 0.02), 0.026, 0.05, 0.01) == "inconclusive"
+    assert difference_verdict(Estimate(0.005, 0.001, 0.012), (0.002, 0.011), 0.026, 0.05, 0.01) == "higher"
+    assert difference_verdict(Estimate(-0.6, -0.7, -0.5), (-0.7, -0.5), 0.003, 0.05, 0.03) == "lower"

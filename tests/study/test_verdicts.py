@@ -94,3 +94,13 @@ def test_a_bad_adjustment_is_refused_when_the_study_is_built() -> None:
     with pytest.raises(BadInput, match="--adjust is one of holm, bh, none"):
         build_study([], {"paper": {"preset": "smoke"}}, profiles=(), flickers=(), alphas=(), kin_scales=(),
                     query_flickers=(), adjust="bonferroni")
+
+
+def test_an_area_on_a_zero_to_one_return_scale_keeps_its_digits() -> None:
+    from vlmrl_cli.study.verdicts import format_difference
+
+    small = {"k.auc_diff": -0.0123, "k.auc_low": -0.02, "k.auc_high": -0.004, "k.auc_p": 0.01,
+             "k.auc_verdict": "lower"}
+    assert format_difference(small, "k", "auc").startswith("-0.012 [-0.020, -0.004]")
+    large = {**small, "k.auc_diff": 7.44, "k.auc_low": 2.1, "k.auc_high": 12.5}
+    assert format_difference(large, "k", "auc").startswith("+7.4 [+2.1, +12.5]")

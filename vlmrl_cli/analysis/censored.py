@@ -308,18 +308,24 @@ def judge_family(p_values: npt.ArrayLike, logrank_p: npt.ArrayLike, directions: 
 def difference_verdict(diff: Estimate, tost: tuple[float, float], p_value: float, alpha: float,
                        delta: float) -> str:
     """Verdict on a difference where higher is better (e.g. AUC, return units): ``higher``/``lower``
-    when the test is significant, ``equivalent within +-delta`` when the ``1 - 2 alpha`` interval
-    ``tost`` lies inside ``(-delta, delta)``, else ``inconclusive``.
+    when the test is significant *and* the interval excludes 0 on the same side (as for speedups: a
+    test and an interval that disagree make no verdict), ``equivalent within +-delta`` when the
+    ``1 - 2 alpha`` interval ``tost`` lies inside ``(-delta, delta)``, else ``inconclusive``.
 
     Example:
         >>> difference_verdict(Estimate(1.0, -2.0, 3.0), (-1.5, 2.5), 0.4, 0.05, 5.0)
         'equivalent within +-5'
+        >>> difference_verdict(Estimate(0.005, -0.001, 0.012), (0.0, 0.011), 0.026, 0.05, 0.1)
+        'equivalent within +-0.1'
     """
-    if math.isfinite(p_value) and p_value < alpha and math.isfinite(diff.value) and diff.value != 0:
-        return HIGHER if diff.value > 0 else LOWER
+    significant = math.isfinite(p_value) and p_value < alpha and math.isfinite(diff.value) and diff.value != 0
+    if significant and diff.value > 0 and diff.low > 0:
+        return HIGHER
+    if significant and diff.value < 0 and diff.high < 0:
+        return LOWER
     low, high = tost
     if math.isfinite(low) and math.isfinite(high) and -delta < low and high < delta:
-        return f"equivalent within +-{delta:g}"
+        return f"equivalent within +-{delta:.3g}"
     return INCONCLUSIVE
 
 

@@ -413,7 +413,9 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
               "rejects, and both point one way. A speedup of restricted means is a lower bound on the speedup of "
               "true means when the slower arm DNFs. Learning-curve area: per seed, the mean native return over the "
               "budget (each step weighs its episode's return); a difference of means with a bootstrap CI, a "
-              f"Mann-Whitney p, and equivalence within +-{auc_margin(cfg):g} return points (the task's margin). "
+              f"Mann-Whitney p (not adjusted), and equivalence within +-{auc_margin(cfg):.3g} return points "
+                "(the task's "
+              "margin); higher or lower only when p < 0.05 and the interval excludes 0 on the same side. "
               "The unit is the seed. "
               "`per_seed.csv` holds every run's figures, so every number here can be recomputed.", "",
               *result.power, ""]

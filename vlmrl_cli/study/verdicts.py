@@ -298,9 +298,11 @@ def format_difference(row: dict[str, Any], key: str, kind: str) -> str:
     scale, unit = (100.0, " pts") if kind == "reliability" else (1.0, "")
     low, high = row.get(f"{key}.{kind}_{'diff_low' if kind == 'reliability' else 'low'}", math.nan), row.get(
         f"{key}.{kind}_{'diff_high' if kind == 'reliability' else 'high'}", math.nan)
-    text = f"{scale * value:+.1f}{unit}"
+    shown = [scale * x for x in (value, low, high) if math.isfinite(x)]
+    d = 1 if max(abs(x) for x in shown) >= 1 else 3  # a task whose returns span 0..1 (DoorKey) needs more digits
+    text = f"{scale * value:+.{d}f}{unit}"
     if math.isfinite(low) and math.isfinite(high):
-        text += f" [{scale * low:+.1f}, {scale * high:+.1f}]"
+        text += f" [{scale * low:+.{d}f}, {scale * high:+.{d}f}]"
     return f"{text}, {censored.format_p(row.get(f'{key}.{kind}_p', math.nan))} ({row.get(f'{key}.{kind}_verdict')})"
 
 
