@@ -167,14 +167,14 @@ def calibrate_config(regimes: tuple[Regime, ...], **settings: Any) -> CalibrateC
         raise BadInput(f"the regimes span tasks {', '.join(tasks)}; calibrate one task at a time (--task).")
     base = regimes[0].run
     settings.setdefault("target", calibration_target(base))
-    settings.setdefault("window", get_task(base.task).window)
+    settings.setdefault("window", base.task_plugin.window)
     return CalibrateConfig(regimes, **settings)
 
 
 def calibration_target(run: RunConfig) -> TargetProfile:
     """What a regime's baseline is scored against: the paper's baseline for the task it reports,
     else its shape on the task's thresholds and the run's budget (``scaled_target``)."""
-    task = get_task(run.task)
+    task = run.task_plugin
     if task.reported_in_paper:
         return paper_baseline()
     return scaled_target(task.thresholds, run.budget)

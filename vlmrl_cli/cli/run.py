@@ -110,10 +110,9 @@ def print_children(console: Console, cfg: RunConfig, experiment_id: str) -> None
     """The sweep's training runs, one plain line each (readable at 80 columns and in a pipe): the ids
     `vlmrl evaluate` takes."""
     from vlmrl_cli.report.children import child_rows, format_rows, header
-    from vlmrl_cli.tasks.registry import get_task
     from vlmrl_cli.tracking import store
 
-    task = get_task(cfg.task)
+    task = cfg.task_plugin
     top = task.thresholds[-1]
     client = store.connect(cfg.tracking_uri)
     rows = [header(top), *format_rows(child_rows(client, experiment_id, cfg.jobs(), top, task.window), top)]
@@ -131,11 +130,10 @@ def dry_run_text(cfg: RunConfig) -> str:
     from vlmrl_cli.report.children import child_rows, format_rows
     from vlmrl_cli.sweep.cost import estimate_sweeps
     from vlmrl_cli.sweep.runner import dry_plan
-    from vlmrl_cli.tasks.registry import get_task
     from vlmrl_cli.tracking import store
 
     plan = dry_plan(cfg)
-    task = get_task(cfg.task)
+    task = cfg.task_plugin
     top = task.thresholds[-1]
     done = {(j.arm.name, j.seed) for j in plan.done}
     found = {}

@@ -291,7 +291,7 @@ def build_study(
     tasks = sorted({r.run.task for r in built})
     if len(tasks) > 1:
         raise BadInput(f"the regimes span tasks {', '.join(tasks)}; a study covers one task (--task).")
-    task = get_task(tasks[0])
+    task = built[0].run.task_plugin
     if (profiles or flickers) and not task.probes_floats:
         raise BadInput(f"task {tasks[0]}: the VLM-quality variants (--profiles, --flickers) take their accuracy "
                        "from the float and box taxonomy probe, which this task has not; pass --profiles none "

@@ -43,7 +43,6 @@ from vlmrl_cli.study.config import StudyConfig
 from vlmrl_cli.sweep import cost as cost_model
 from vlmrl_cli.sweep.cost import CostEstimate
 from vlmrl_cli.sweep.runner import JobResult, SweepReporter, vlm_identity
-from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.tracking import schema, store
 
 KIND = schema.KIND_STUDY
@@ -87,7 +86,7 @@ class StudyResult:
 
 def auc_margin(cfg: StudyConfig) -> float:
     """The equivalence margin of the study's learning-curve areas: its task's (``Task.auc_margin``)."""
-    return get_task(cfg.base.task).auc_margin
+    return cfg.base.task_plugin.auc_margin
 
 
 def slug(name: str) -> str:
@@ -139,7 +138,7 @@ def run_study(
         row["overrides"] = regime.label
         row["train_wall_s"] = sum(wall_s(client, r) for r in per_seed["run_id"])
         rows.append(row)
-        hack.append(hacking.hacking_frame(per_seed, sub.eval_episodes, cfg.ci, get_task(regime.run.task).max_steps)
+        hack.append(hacking.hacking_frame(per_seed, sub.eval_episodes, cfg.ci, regime.run.task_plugin.max_steps)
                     .assign(regime=regime.id))
         seeds.append(per_seed.assign(regime=regime.id, variant=""))
     seeds += _other_sweep_frames(cfg, data)
@@ -380,7 +379,7 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
               "`taxonomy/<variant>/`). The baseline is the regime's own.", "",
               _vlm_table(result.vlm_points, cfg.top) if len(result.vlm_points) else "No VLM variant was run.\n",
               "![VLM quality](vlm_quality.png)", ""]
-    tasks = {regime.id: get_task(regime.run.task) for regime in cfg.regimes}
+    tasks = {regime.id: regime.run.task_plugin for regime in cfg.regimes}
     hover = {rid: task.hover_diagnostic for rid, task in tasks.items()}
     hover_from = next((task.hover_from for task in tasks.values() if task.hover_diagnostic), None)
     lines += ["## Reward hacking", "", hacking.definition(hover_from), ""]

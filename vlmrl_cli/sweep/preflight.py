@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from vlmrl_cli.shaping.arms import PotentialSource
 from vlmrl_cli.sweep.executors import check_executor
-from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.vlm.preflight import check_coverage, check_vlm
 
@@ -18,7 +17,7 @@ def preflight(cfg: RunConfig) -> None:
     if not shaped:
         return
     check_vlm(cfg.vlm)
-    task = get_task(cfg.task)
+    task = cfg.task_plugin
     if cfg.vlm.backend == "replay" and task.grid_frames is not None:  # else replay refuses the frames at once
         prompts = [task.milestones.prompt if job.arm.potential is PotentialSource.MCQ or task.numbers is None
                    else task.numbers.float_prompt for job in shaped]

@@ -65,11 +65,10 @@ def vlm_identity(cfg: RunConfig) -> tuple[str, bool]:
         return "none (no arm uses a VLM)", False
     if cfg.vlm.backend == "hf":
         return f"hf:{cfg.vlm.model or ''}", False
-    from vlmrl_cli.tasks.registry import get_task
     from vlmrl_cli.vlm.base import describe
     from vlmrl_cli.vlm.registry import build_backend
 
-    backend = build_backend(cfg.vlm, reader=get_task(cfg.task).reader)
+    backend = build_backend(cfg.vlm, reader=cfg.task_plugin.reader)
     try:
         return describe(backend), bool(backend.simulated)
     finally:

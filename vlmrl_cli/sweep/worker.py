@@ -151,7 +151,6 @@ def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> J
     (``run_claimed`` sets it). Raises on failure."""
     from stable_baselines3.common.logger import Logger
 
-    from vlmrl_cli.tasks.registry import get_task
     from vlmrl_cli.training.envs import make_train_env
     from vlmrl_cli.training.logger import MetricsOutputFormat
     from vlmrl_cli.training.model import make_model
@@ -174,7 +173,7 @@ def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> J
             store.log_params(client, run_id, {schema.PARAM_TIMESTEPS: str(job.timesteps), **flatten(job.params())})
             if stopped():
                 return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start)
-            task = get_task(job.task)
+            task = job.task_plugin
             if job.arm.uses_vlm:
                 vlm_client = build_client(job.vlm, transcript=out / "transcript.jsonl", stream=job.seed,
                                           reader=task.reader)

@@ -39,7 +39,7 @@ import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import tomli_w
 from annotated_types import Ge, Gt
@@ -55,6 +55,9 @@ from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.overrides import nest, parse_assignment, parse_value, resolve_raw
 from vlmrl_cli.training.presets import PPOConfig, ppo_identity, preset_names, preset_of
 from vlmrl_cli.vlm.config import VLMConfig, sim_identity
+
+if TYPE_CHECKING:
+    from vlmrl_cli.tasks.base import Task
 
 DEFAULT_EXPERIMENT = "vlmrl"
 #: The task of a config that names none (``vlmrl run`` without ``--task``), and its preset (the
@@ -121,17 +124,22 @@ def _known_task(value: str) -> str:
     return value
 
 
-def with_task_labels(shaping: ShapingConfig, task: str) -> ShapingConfig:
-    """``shaping`` with ``task``'s own label map when it names none (the field's default)."""
+def task_of(name: str) -> Task:
+    """The Task a config names: the one place a run's or a job's ``task`` field becomes the object
+    (``RunConfig.task_plugin``, ``TrainJob.task_plugin``). The field stays a name because it is
+    hashed, logged and sent to workers; the code that needs the task takes it from there."""
     from vlmrl_cli.tasks.registry import get_task
 
-    return get_task(task).shaping_for(shaping)
+    return get_task(name)
+
+
+def with_task_labels(shaping: ShapingConfig, task: str) -> ShapingConfig:
+    """``shaping`` with ``task``'s own label map when it names none (the field's default)."""
+    return task_of(task).shaping_for(shaping)
 
 
 def _task_in_identity(task: str) -> bool:
-    from vlmrl_cli.tasks.registry import get_task
-
-    return get_task(task).name_in_identity
+    return task_of(task).name_in_identity
 
 
 @dataclass(frozen=True)
@@ -197,9 +205,7 @@ class RunConfig:
 
     def _check_task(self) -> None:
         """What only the task can say: its presets, its labels, the arms it supports."""
-        from vlmrl_cli.tasks.registry import get_task
-
-        task = get_task(self.task)
+        task = self.task_plugin
         if self.ppo is None:
             preset_of(self.task, self.preset)  # a BadInput naming the task's presets
         problem = task.labels_problem(self.task_shaping.label_potentials)
@@ -211,8 +217,13 @@ class RunConfig:
                            "support; choose arms with MCQ milestones.")
 
     @property
+    def task_plugin(self) -> Task:
+        """The Task object this run trains on (``task_of``)."""
+        return task_of(self.task)
+
+    @property
     def task_shaping(self) -> ShapingConfig:
-        """``shaping`` with the task's label map when the map was left at MountainCar's default."""
+        """``shaping`` with the task's label map when it names none (the field's default)."""
         return with_task_labels(self.shaping, self.task)
 
     @property
@@ -251,6 +262,11 @@ class TrainJob:
     @property
     def name(self) -> str:
         return f"{self.arm.name}-s{self.seed}"
+
+    @property
+    def task_plugin(self) -> Task:
+        """The Task object this job trains on (``task_of``)."""
+        return task_of(self.task)
 
     @property
     def timesteps(self) -> int:

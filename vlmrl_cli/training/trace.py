@@ -18,13 +18,12 @@ def native_returns(job: TrainJob) -> list[float]:
     """Native (unshaped) returns of the episodes completed while training ``job``."""
     import torch
 
-    from vlmrl_cli.tasks.registry import get_task
     from vlmrl_cli.training.envs import make_train_env
     from vlmrl_cli.training.model import make_model
     from vlmrl_cli.vlm.registry import build_client
 
     torch.set_num_threads(1)  # as every worker (sweep.worker.init_worker)
-    task = get_task(job.task)
+    task = job.task_plugin
     client = build_client(job.vlm, stream=job.seed, reader=task.reader) if job.arm.uses_vlm else None
     try:
         env, _ = make_train_env(job.arm, job.ppo, job.shaping, client, job.seed, task)
