@@ -36,3 +36,23 @@ def test_a_grid_over_two_tasks_is_refused() -> None:
     regimes = build_regimes([], {"task": ["mountain-car", "acrobot"], "preset": ["smoke"]})
     with pytest.raises(BadInput, match="calibrate one task at a time"):
         calibrate_config(regimes)
+
+
+def test_a_preset_the_default_grid_would_replace_is_refused_with_the_grids_values() -> None:
+    # DoorKey's default grid is a list of presets: `--preset smoke` would be dropped silently
+    with pytest.raises(BadInput, match=r"preset is set by you and by the task's default calibration grid.*"
+                                       r"\"sb3-default-100k\".*--grid preset=A,B"):
+        build_regimes([{"task": "minigrid-doorkey"}, {}, {"preset": "smoke"}], {})
+
+
+def test_a_key_set_both_by_set_and_by_grid_is_refused() -> None:
+    with pytest.raises(BadInput, match=r"ppo.learning_rate is set by you and by --grid \(ppo.learning_rate=0.0001"):
+        build_regimes([{}, {"ppo": {"learning_rate": 3e-4}}, {}], {"ppo.learning_rate": [1e-4, 2e-4]})
+
+
+def test_keys_the_grid_does_not_set_still_apply_to_every_regime() -> None:
+    # MountainCar's default grid sets no preset, so `--preset smoke` is the base of every regime
+    regimes = build_regimes([{}, {"ppo": {"gamma": 0.98}}, {"preset": "smoke"}], {})
+    assert all(r.run.preset == "smoke" and r.run.ppo.gamma == 0.98 for r in regimes)
+    regimes = build_regimes([{"preset": "smoke"}], {"ppo.learning_rate": [1e-4, 2e-4]})
+    assert [r.run.ppo.learning_rate for r in regimes] == [1e-4, 2e-4]

@@ -42,3 +42,14 @@ def test_an_arm_never_measured_takes_the_median_and_an_empty_store_the_fallback(
     cost = estimate_sweeps([cfg])
     assert cost.per_run_s == pytest.approx(cfg.budget * FALLBACK_S_PER_STEP) and "no finished run" in cost.how
     assert not (tmp_path / "none.db").exists()
+
+
+def test_an_empty_store_estimates_each_task_from_its_own_measured_step_time(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    # DoorKey's steps cost about five times MountainCar's: its figure, not MountainCar's, is used
+    cfg = RunConfig(task="minigrid-doorkey", preset="zoo", arms=("baseline",), seeds=(0,),
+                    tracking_uri=f"sqlite:///{tmp_path}/none.db")
+    step_s = cfg.task_plugin.step_seconds
+    assert step_s is not None and step_s > 3 * FALLBACK_S_PER_STEP
+    cost = estimate_sweeps([cfg])
+    assert cost.per_run_s == pytest.approx(cfg.budget * step_s)
+    assert f"minigrid-doorkey {step_s * 1e3:.2f} ms per step" in cost.how

@@ -26,7 +26,7 @@ from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig, resolve
-from vlmrl_cli.training.overrides import nest, parse_assignment, parse_values
+from vlmrl_cli.training.overrides import dotted_keys, nest, parse_assignment, parse_values
 
 DEFAULT_EXPERIMENT = "vlmrl-calibrate"
 DEFAULT_SEEDS = 10
@@ -133,10 +133,29 @@ def build_regimes(layers: Sequence[Mapping[str, Any]], grid: Mapping[str, Sequen
         raise BadInput(f"the grid of {empty[0]} lists no value; give at least one (e.g. --grid {empty[0]}=1,4).")
     base = {"experiment": DEFAULT_EXPERIMENT, "seeds": list(range(DEFAULT_SEEDS))}
     points = grid_product(grid) if grid else default_grid(resolve([base, *layers]).task)
+    _refuse_shadowed(layers, points, given_grid=bool(grid))
     return tuple(
         resolve_regime(f"R{i}", point, [base, *layers], {"arms": [CALIBRATED_ARM], "regime": _label(point)})
         for i, point in enumerate(points, start=1)
     )
+
+
+def _refuse_shadowed(layers: Sequence[Mapping[str, Any]], points: Sequence[Mapping[str, Any]], *, given_grid: bool
+                     ) -> None:
+    """``BadInput`` when a key set on the command line, by ``--set`` or in the config file is also
+    set by a regime of the grid: the regime's value would replace the user's without a word (e.g.
+    ``--preset smoke`` under a task whose default grid is a list of presets)."""
+    typed = set().union(*(dotted_keys(layer) for layer in layers)) if layers else set()
+    for point in points:
+        shadowed = sorted(typed & set(point))
+        if shadowed:
+            key = shadowed[0]
+            values = sorted({json.dumps(p[key]) for p in points if key in p})
+            where = "--grid" if given_grid else "the task's default calibration grid (Task.calibration)"
+            hint = (f"give its values once in --grid {key}=..." if given_grid else
+                    f"leave {key} out to calibrate the default grid, or name the candidates with --grid {key}=A,B")
+            raise BadInput(f"{key} is set by you and by {where} ({key}={', '.join(values)}), whose value would "
+                           f"replace yours; {hint}.")
 
 
 def resolve_regime(

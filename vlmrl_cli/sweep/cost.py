@@ -91,6 +91,12 @@ def measure(client: Any, experiment_id: str) -> Timings:
     return Timings(medians, statistics.median(shares) if shares else 1.0, sum(len(v) for v in per_arm.values()))
 
 
+def unmeasured(job: TrainJob) -> float:
+    """Seconds per step and worker of ``job`` when nothing in the store has timed it: its task's
+    ``step_seconds`` (measured on its committed runs), else MountainCar-v0's repro figure."""
+    return job.task_plugin.step_seconds or FALLBACK_S_PER_STEP
+
+
 def estimate(pending: Sequence[TrainJob], done: int, workers: int, timings: Timings,
              cores: int | None = None) -> CostEstimate:
     """The wall time of training ``pending`` with ``workers`` workers on ``cores`` (this machine's)."""
@@ -99,15 +105,18 @@ def estimate(pending: Sequence[TrainJob], done: int, workers: int, timings: Timi
     fallback = (statistics.median(s for s, _ in timings.per_arm.values()), 1) if timings.per_arm else None
     seconds = 0.0
     for job in pending:
-        s_per_step, measured_at = timings.per_arm.get(job.arm.name) or fallback or (FALLBACK_S_PER_STEP, cores)
+        s_per_step, measured_at = timings.per_arm.get(job.arm.name) or fallback or (unmeasured(job), cores)
         seconds += job.timesteps * s_per_step * contention(workers, cores) / contention(measured_at, cores)
     total = seconds / min(workers, max(1, len(pending))) / timings.utilisation
     if timings.per_arm:
         how = (f"per-step wall time of {timings.runs} finished run(s) of {len(timings.per_arm)} arm(s) in this "
                f"experiment, {cores} core(s), sweep utilisation {timings.utilisation:.0%}")
     else:
-        how = (f"no finished run to measure yet: {FALLBACK_S_PER_STEP * 1e3:.2f} ms per step and worker, from "
-               "`nox -s repro` on 2 cores (20 runs x 300,000 steps in 665 s)")
+        by_task = {job.task_plugin.name: unmeasured(job) for job in pending}
+        figures = ", ".join(f"{t} {s * 1e3:.2f} ms" for t, s in sorted(by_task.items())) or \
+            f"{FALLBACK_S_PER_STEP * 1e3:.2f} ms"
+        how = (f"no finished run to measure yet: {figures} per step and worker on 2 cores (each task's "
+               "committed runs; MountainCar-v0's from `nox -s repro`, 20 runs x 300,000 steps in 665 s)")
     return CostEstimate(len(pending), done, seconds / len(pending) if pending else 0.0, total, workers, how)
 
 

@@ -116,6 +116,8 @@ ACROBOT = Task(
     # early episodes last 500 steps: 100 of them would be half a 100,000-step budget
     window=20,
     calibration=tuple({"preset": p} for p in ("zoo-100k", "zoo-100k-lr1e-4", "zoo-100k-raw", "sb3-default-100k")),
+    # the median of its 70 committed runs (calibration and study exports; quartiles 0.50-0.85 ms)
+    step_seconds=0.61e-3,
     # The closest regime of `vlmrl calibrate --task acrobot --seeds 5` (results/tasks/acrobot/
     # calibration/, 2026-12-02): distance 0.889 [0.831, 0.985]. Its baseline is slow (-100 at
     # 73,130 steps on average against the target's 90,816) but reaches -100 on 5/5 seeds: no

@@ -127,6 +127,9 @@ class Task:
     hacking_note: tuple[str, str] | None = None
     describe_step: Callable[[tuple[float, ...], Any], tuple[dict[str, Any], str]] | None = None
     wrap: Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None = None
+    # Seconds per environment step and worker (2 workers on 2 cores) of the task's committed runs: the
+    # cost estimate's figure before a store has timed any run of it (None: MountainCar-v0's repro).
+    step_seconds: float | None = None
 
     @property
     def auc_margin(self) -> float:

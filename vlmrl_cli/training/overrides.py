@@ -94,6 +94,22 @@ def nest(assignments: Iterable[tuple[str, Any]]) -> dict[str, Any]:
     return tree
 
 
+def dotted_keys(tree: Mapping[str, Any], prefix: str = "") -> set[str]:
+    """The dotted keys of a nested layer's values (``nest``'s inverse, keys only).
+
+    Example:
+        >>> sorted(dotted_keys({"ppo": {"n_envs": 4, "gamma": 0.99}, "preset": "smoke"}))
+        ['ppo.gamma', 'ppo.n_envs', 'preset']
+    """
+    out: set[str] = set()
+    for key, value in tree.items():
+        if isinstance(value, Mapping) and value:
+            out |= dotted_keys(value, f"{prefix}{key}.")
+        else:
+            out.add(f"{prefix}{key}")
+    return out
+
+
 def merge(base: Mapping[str, Any], top: Mapping[str, Any]) -> dict[str, Any]:
     """``top`` laid over ``base``: tables merge key by key, any other value replaces.
 

@@ -269,6 +269,8 @@ MOUNTAIN_CAR_CONTINUOUS = Task(
     # an episode that never reaches the flag lasts 999 steps: 100 of them would be a whole budget
     window=10,
     calibration=tuple({"preset": p} for p in ("mc-zoo-100k", "mc-zoo-100k-raw-reward", "sb3-default-100k")),
+    # the median of its 65 committed runs (calibration and study exports; quartiles 0.92-1.67 ms)
+    step_seconds=1.21e-3,
     # The closest regime of `vlmrl calibrate --task mountain-car-continuous --seeds 5` (results/tasks/
     # mountain-car-continuous/calibration/, 2026-12-02): distance 0.877. Its baseline never reached
     # the flag (0/5 seeds, detached success 0%): the "exploration deadlock" of the paper.
