@@ -54,7 +54,7 @@ def evaluate(
     seed: Annotated[int | None, typer.Option("--seed", help="With a sweep's parent run id: the seed of the child "
                                                            "run to evaluate.")] = None,
 ) -> None:
-    """Evaluate a trained policy on native MountainCar-v0 and write a captioned GIF of one episode.
+    """Evaluate a trained policy on its task's native environment and write a captioned GIF of one episode.
 
     Outputs go to --out (default results/evaluate/RUN_ID/) and to the run's MLflow artifacts
     under evaluate/.

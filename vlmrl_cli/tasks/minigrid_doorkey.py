@@ -181,6 +181,29 @@ def doorkey_dense(obs: np.ndarray, scale: float, offset: float) -> float:
     return max(0.0, scale * (2.0 * stage_of_obs(obs) - 1.0 + offset)) / MAX_STEPS
 
 
+#: MiniGrid's seven actions (``minigrid.core.actions.Actions``), by index.
+ACTIONS = ("turn left", "turn right", "forward", "pick up", "drop", "toggle", "done")
+
+
+def describe_step(obs: tuple[float, ...], action: Any) -> tuple[dict[str, Any], str]:
+    """A played step of DoorKey, read from the egocentric view as ``stage_of_obs`` reads it: whether
+    the agent carries the key, whether an open door is in view, and the action's name (the
+    caption ``vlmrl evaluate`` draws under its frame).
+
+    Example:
+        >>> view = np.zeros((7, 7, 3)); view[3, 6] = (5, 4, 0)
+        >>> describe_step(tuple(view.reshape(-1)), 5)
+        ({'has_key': True, 'door_open_in_view': False}, 'key carried  door not open in view  action toggle')
+    """
+    view = np.asarray(obs).reshape(7, 7, 3)
+    has_key = bool(view[3, 6, 0] == 5)
+    door_open = bool(np.any((view[..., 0] == 4) & (view[..., 2] == 0)))
+    shown = "-" if action is None else (ACTIONS[int(action)] if 0 <= int(action) < len(ACTIONS) else str(action))
+    caption = (f"key {'carried' if has_key else 'not carried'}  door {'open' if door_open else 'not open'} "
+               f"in view  action {shown}")
+    return {"has_key": has_key, "door_open_in_view": door_open}, caption
+
+
 def flat_image(env: gym.Env[Any, Any]) -> gym.Env[Any, Any]:
     """MiniGrid's Dict observation as the flattened egocentric image (147 numbers)."""
     from minigrid.wrappers import ImgObsWrapper
@@ -305,6 +328,7 @@ def _task() -> Any:
         window=50,
         wrap=flat_image,
         probe_states=probe_states,
+        describe_step=describe_step,
     )
 
 
