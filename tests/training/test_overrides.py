@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.training.config import resolve
-from vlmrl_cli.training.overrides import merge, nest, parse_assignment, parse_value, parse_values
+from vlmrl_cli.training.overrides import dotted, merge, nest, parse_assignment, parse_value, parse_values
 from vlmrl_cli.training.presets import PPOConfig, preset_of
 
 KEYS = st.from_regex(r"[a-z][a-z_]{0,8}", fullmatch=True)
@@ -56,6 +56,16 @@ def test_nest_keeps_the_last_assignment_of_every_dotted_key(assignments: list[tu
         for part in key.split("."):
             node = node[part]
         assert node == value
+
+
+@given(st.lists(st.tuples(st.lists(KEYS, min_size=1, max_size=3).map(".".join), SCALARS), max_size=6))
+def test_dotted_is_nest_s_inverse(assignments: list[tuple[str, Any]]) -> None:
+    try:
+        tree = nest(assignments)
+    except BadInput:
+        return
+    assert dotted(tree) == dict(assignments)
+    assert nest(dotted(tree).items()) == tree
 
 
 @given(st.dictionaries(KEYS, TREES, max_size=4), st.dictionaries(KEYS, TREES, max_size=4))

@@ -26,7 +26,7 @@ from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig, resolve
-from vlmrl_cli.training.overrides import dotted_keys, nest, parse_assignment, parse_values
+from vlmrl_cli.training.overrides import dotted, nest, parse_assignment, parse_values
 
 DEFAULT_EXPERIMENT = "vlmrl-calibrate"
 DEFAULT_SEEDS = 10
@@ -145,7 +145,7 @@ def _refuse_shadowed(layers: Sequence[Mapping[str, Any]], points: Sequence[Mappi
     """``BadInput`` when a key set on the command line, by ``--set`` or in the config file is also
     set by a regime of the grid: the regime's value would replace the user's without a word (e.g.
     ``--preset smoke`` under a task whose default grid is a list of presets)."""
-    typed = set().union(*(dotted_keys(layer) for layer in layers)) if layers else set()
+    typed = {key for layer in layers for key in dotted(layer)}
     for point in points:
         shadowed = sorted(typed & set(point))
         if shadowed:

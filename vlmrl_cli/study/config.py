@@ -34,7 +34,7 @@ from vlmrl_cli.probe.scoring import DEFAULT_STATES
 from vlmrl_cli.shaping.arms import BASELINE, DENSE, METHOD, NO_LOCK, PLACEBO_OF, POTENTIAL_ONLY
 from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig, resolve
-from vlmrl_cli.training.overrides import parse_assignment, parse_value
+from vlmrl_cli.training.overrides import dotted, parse_assignment, parse_value
 from vlmrl_cli.vlm.config import SIM_PROFILES
 
 DEFAULT_EXPERIMENT = "vlmrl-study"
@@ -192,16 +192,6 @@ def parse_regime(text: str) -> tuple[str, dict[str, Any]]:
     return name, point
 
 
-def _dotted(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in table.items():
-        if isinstance(value, Mapping):
-            out.update(_dotted(value, f"{prefix}{key}."))
-        else:
-            out[f"{prefix}{key}"] = value
-    return out
-
-
 def study_section(raw: Any) -> dict[str, Any]:
     """A config file's ``[study]`` table, checked: regimes as ``{name: point}``, the rest as given."""
     if not isinstance(raw, Mapping):
@@ -216,7 +206,7 @@ def study_section(raw: Any) -> dict[str, Any]:
         if not isinstance(regimes, Mapping) or not regimes:
             raise BadInput("study.regimes must be a table of NAME = \"preset\" or NAME = { key = value, ... }.")
         out["regimes"] = {
-            str(name): {"preset": spec} if isinstance(spec, str) else _dotted(spec) if isinstance(spec, Mapping)
+            str(name): {"preset": spec} if isinstance(spec, str) else dotted(spec) if isinstance(spec, Mapping)
             else _bad_regime(str(name))
             for name, spec in regimes.items()
         }

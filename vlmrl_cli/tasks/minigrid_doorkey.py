@@ -164,10 +164,16 @@ def stage_of_obs(obs: np.ndarray) -> float:
         >>> stage_of_obs(view.reshape(-1))
         0.5
     """
+    carries, door_open = key_and_door(obs)
+    return (float(carries) + float(door_open)) / 2.0
+
+
+def key_and_door(obs: Any) -> tuple[bool, bool]:
+    """Whether the agent carries the key (MiniGrid draws a carried object in the agent's own cell,
+    (3, 6), object 5) and whether an open door (object 4, state 0) is in the flattened egocentric
+    view."""
     view = np.asarray(obs).reshape(7, 7, 3)
-    carries = float(view[3, 6, 0] == 5)
-    door_open = float(np.any((view[..., 0] == 4) & (view[..., 2] == 0)))
-    return (carries + door_open) / 2.0
+    return bool(view[3, 6, 0] == 5), bool(np.any((view[..., 0] == 4) & (view[..., 2] == 0)))
 
 
 def doorkey_dense(obs: np.ndarray, scale: float, offset: float) -> float:
@@ -195,9 +201,7 @@ def describe_step(obs: tuple[float, ...], action: Any) -> tuple[dict[str, Any], 
         >>> describe_step(tuple(view.reshape(-1)), 5)
         ({'has_key': True, 'door_open_in_view': False}, 'key carried  door not open in view  action toggle')
     """
-    view = np.asarray(obs).reshape(7, 7, 3)
-    has_key = bool(view[3, 6, 0] == 5)
-    door_open = bool(np.any((view[..., 0] == 4) & (view[..., 2] == 0)))
+    has_key, door_open = key_and_door(obs)
     shown = "-" if action is None else (ACTIONS[int(action)] if 0 <= int(action) < len(ACTIONS) else str(action))
     caption = (f"key {'carried' if has_key else 'not carried'}  door {'open' if door_open else 'not open'} "
                f"in view  action {shown}")

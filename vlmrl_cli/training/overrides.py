@@ -94,19 +94,19 @@ def nest(assignments: Iterable[tuple[str, Any]]) -> dict[str, Any]:
     return tree
 
 
-def dotted_keys(tree: Mapping[str, Any], prefix: str = "") -> set[str]:
-    """The dotted keys of a nested layer's values (``nest``'s inverse, keys only).
+def dotted(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """A nested table -> ``{dotted key: value}`` (``nest``'s inverse; an empty table sets nothing).
 
     Example:
-        >>> sorted(dotted_keys({"ppo": {"n_envs": 4, "gamma": 0.99}, "preset": "smoke"}))
-        ['ppo.gamma', 'ppo.n_envs', 'preset']
+        >>> dotted({"ppo": {"n_envs": 4, "gamma": 0.99}, "preset": "smoke", "shaping": {}})
+        {'ppo.n_envs': 4, 'ppo.gamma': 0.99, 'preset': 'smoke'}
     """
-    out: set[str] = set()
-    for key, value in tree.items():
-        if isinstance(value, Mapping) and value:
-            out |= dotted_keys(value, f"{prefix}{key}.")
+    out: dict[str, Any] = {}
+    for key, value in table.items():
+        if isinstance(value, Mapping):
+            out.update(dotted(value, f"{prefix}{key}."))
         else:
-            out.add(f"{prefix}{key}")
+            out[f"{prefix}{key}"] = value
     return out
 
 
