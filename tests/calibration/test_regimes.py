@@ -53,6 +53,6 @@ def test_a_key_set_both_by_set_and_by_grid_is_refused() -> None:
 def test_keys_the_grid_does_not_set_still_apply_to_every_regime() -> None:
     # MountainCar's default grid sets no preset, so `--preset smoke` is the base of every regime
     regimes = build_regimes([{}, {"ppo": {"gamma": 0.98}}, {"preset": "smoke"}], {})
-    assert all(r.run.preset == "smoke" and r.run.ppo.gamma == 0.98 for r in regimes)
+    assert all(r.run.preset == "smoke" and r.run.ppo is not None and r.run.ppo.gamma == 0.98 for r in regimes)
     regimes = build_regimes([{"preset": "smoke"}], {"ppo.learning_rate": [1e-4, 2e-4]})
-    assert [r.run.ppo.learning_rate for r in regimes] == [1e-4, 2e-4]
+    assert [r.run.ppo.learning_rate if r.run.ppo else None for r in regimes] == [1e-4, 2e-4]
