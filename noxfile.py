@@ -41,7 +41,9 @@ def tests(session: nox.Session) -> None:
     _install(session, "dev,ray")
     _lint(session)
     _docs(session)
-    session.run("pytest", "-n", "2", "--dist", "loadfile", *session.posargs,
+    # whole files per worker, in tests/conftest.py's order (the files with the most slow tests first);
+    # xdist's own reordering (by number of tests) would start the few long files last
+    session.run("pytest", "-n", "2", "--dist", "loadfile", "--no-loadscope-reorder", *session.posargs,
                 env={"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
 
 
