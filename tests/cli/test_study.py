@@ -22,7 +22,7 @@ def _uri(root: Path) -> str:
 def _study(root: Path, *args: str):  # type: ignore[no-untyped-def]
     return runner.invoke(app, [
         "study", "--regime", "norm=smoke", "--regime", "raw=preset=smoke ppo.normalize_obs=false "
-        "ppo.normalize_reward=false", "--arms", "baseline,hybrid", "--seeds", "2", "--workers", "2",
+        "ppo.normalize_reward=false", "--arms", "baseline,hybrid", "--seeds", "2", "--workers", "1",
         "--set", "ppo.timesteps=512", "--set", "ppo.eval_episodes=1", "--set", f"vlm.cache_path={root / 'c.sqlite'}",
         "--profiles", "default,llava-table1", "--flickers", "none", "--states", "4",
         "--alphas", "25", "--kin-scales", "0", "--query-flickers", "none",

@@ -22,7 +22,7 @@ def exported(tmp_path_factory: pytest.TempPathFactory) -> tuple[str, Path]:
     root = tmp_path_factory.mktemp("verify")
     uri = f"sqlite:///{root / 'm.db'}"
     result = runner.invoke(app, ["run", "--arms", "baseline,hybrid", "--seeds", "2", "--preset", "smoke",
-                                 "--workers", "2", "--set", "ppo.eval_episodes=1", "--timesteps", "2048",
+                                 "--workers", "1", "--set", "ppo.eval_episodes=1", "--timesteps", "2048",
                                  "--set", f"vlm.cache_path={root / 'c.sqlite'}", "--tracking-uri", uri,
                                  "--experiment", "src"])
     assert result.exit_code == 0, result.output + result.stderr

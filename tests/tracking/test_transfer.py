@@ -26,7 +26,7 @@ def source(tmp_path_factory: pytest.TempPathFactory) -> str:
     root = tmp_path_factory.mktemp("source")
     uri = f"sqlite:///{root / 'm.db'}"
     result = runner.invoke(app, ["run", "--arms", "baseline,hybrid-shuffled", "--seeds", "2", "--preset", "smoke",
-                                 "--workers", "2", "--set", "ppo.eval_episodes=2",
+                                 "--workers", "1", "--set", "ppo.eval_episodes=2",
                                  "--set", f"vlm.cache_path={root / 'c.sqlite'}", "--tracking-uri", uri,
                                  "--experiment", "src"])
     assert result.exit_code == 0, result.output + result.stderr
