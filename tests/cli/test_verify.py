@@ -37,6 +37,7 @@ def test_every_run_of_an_export_retrains_identically(exported: tuple[str, Path])
     assert result.exit_code == 0, result.output + result.stderr
     assert result.output.count("identical (") == 4 and "4 identical, 0 differ" in result.output
     assert "here: pin x86-64-v3/1" in result.output
+    assert result.output.count("    recorded: pin x86-64-v3/1") == 4  # the recorded side of each run, identical or not
 
 
 def test_a_sample_of_a_store_by_seed(exported: tuple[str, Path]) -> None:

@@ -68,3 +68,18 @@ def test_the_entry_point_pins_before_torch_loads() -> None:
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True,
                          timeout=120)
     assert out.stdout.strip().splitlines()[-1] == "AVX2 COMPATIBLE"
+
+
+_NAMES = st.text(alphabet=st.characters(blacklist_categories=("Cc", "Cs", "Zl", "Zp"), blacklist_characters=":"),
+                 min_size=1).filter(str.strip)
+
+
+@given(_NAMES, st.integers(0, 255), st.integers(0, 255))
+def test_a_cpu_is_named_with_its_family_and_model(name: str, family: int, model: int) -> None:
+    text = f"vendor_id\t: GenuineIntel\ncpu family\t: {family}\nmodel\t\t: {model}\nmodel name\t: {name}\n\n"
+    assert pin.describe_cpuinfo(text) == f"{name.strip()} (GenuineIntel family {family} model {model})"
+    assert pin.describe_cpuinfo(text + "model name\t: another CPU\n") == pin.describe_cpuinfo(text)  # the first one
+
+
+def test_this_machines_cpu_is_named() -> None:
+    assert pin.cpu_model() not in ("", "unknown")

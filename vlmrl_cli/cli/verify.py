@@ -87,8 +87,8 @@ def verify(
                 run = outcome.run
                 differ += not outcome.identical
                 console.print(f"{run.run_id[:12]}  {run.name}: {outcome.verdict()} in {outcome.wall_s:.0f} s")
+                console.print(f"    recorded: {lib.describe_paths(run.tags)}")  # both sides, run by run
                 if not outcome.identical or run.tags.get(schema.TAG_PIN) != here_tags[schema.TAG_PIN]:
-                    console.print(f"    recorded: {lib.describe_paths(run.tags)}")
                     console.print(f"    here:     {here}")
         console.print(f"{len(chosen) - differ} identical, {differ} differ")
     if differ:

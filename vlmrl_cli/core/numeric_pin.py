@@ -139,14 +139,38 @@ def apply(environ: MutableMapping[str, str] | None = None, *, warn: bool = True)
 
 
 def cpu_model() -> str:
-    """The CPU's model name (``/proc/cpuinfo``), or the platform's processor string."""
+    """The CPU's model name with its vendor, family, model and stepping (``/proc/cpuinfo``), or
+    the platform's processor string: a hypervisor may show only ``AMD EPYC`` as the name, which
+    the family tells apart (25 is Zen 3/4, 26 is Zen 5)."""
     try:
-        for line in Path("/proc/cpuinfo").read_text(encoding="utf-8", errors="replace").splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
+        text = Path("/proc/cpuinfo").read_text(encoding="utf-8", errors="replace")
     except OSError:
-        pass
-    return platform.processor() or platform.machine() or "unknown"
+        text = ""
+    return describe_cpuinfo(text) or platform.processor() or platform.machine() or "unknown"
+
+
+def describe_cpuinfo(text: str) -> str | None:
+    r"""The first processor of a ``/proc/cpuinfo`` text in one line, or None when it names no model (pure).
+
+    Example:
+        >>> describe_cpuinfo("vendor_id\t: AuthenticAMD\ncpu family\t: 26\nmodel\t\t: 2\n"
+        ...                  "model name\t: AMD EPYC\nstepping\t: 1\n\nvendor_id\t: AuthenticAMD\n")
+        'AMD EPYC (AuthenticAMD family 26 model 2 stepping 1)'
+        >>> describe_cpuinfo("model name : Intel Xeon"), describe_cpuinfo("flags : avx2")
+        ('Intel Xeon', None)
+    """
+    fields: dict[str, str] = {}
+    for line in text.split("\n\n", 1)[0].splitlines():
+        key, sep, value = line.partition(":")
+        if sep:
+            fields.setdefault(key.strip(), value.strip())
+    name = fields.get("model name")
+    if not name:
+        return None
+    ident = " ".join(f"{label}{fields[key]}" for key, label in
+                     (("vendor_id", ""), ("cpu family", "family "), ("model", "model "), ("stepping", "stepping "))
+                     if fields.get(key))
+    return f"{name} ({ident})" if ident else name
 
 
 def pin_record(environ: Mapping[str, str] | None = None) -> dict[str, str]:
