@@ -52,10 +52,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--reps", type=int, default=20_000, help="timed calls per shape and process")
     opts = parser.parse_args()
-    from vlmrl_cli.core.numeric_pin import APPLIED_MARK, PIN, USER_MARK
+    from vlmrl_cli.core.numeric_pin import unpinned_environ
 
-    clean = {k: v for k, v in os.environ.items() if k not in (*PIN, USER_MARK, APPLIED_MARK)}
-    clean |= {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    clean = unpinned_environ(os.environ) | {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     shapes = [f"{m}x{k}x{n}" for _, m, k, n in SHAPES]
     times: dict[str, list[list[float]]] = {"pinned": [], "unpinned": []}
     capability = {}

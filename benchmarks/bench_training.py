@@ -19,12 +19,12 @@
      identical runs spread by about 5%, so two pairs cannot judge a 5% target), measured twice:
      (a) a whole baseline run as a user types it, ``vlmrl run --arms baseline --seed-list 0
      --workers 1`` into a temporary MLflow store (start-up, training, the detached evaluation,
-     tracking): the issue's measure, a share of a baseline run's wall time (target <= 1.05); and
-     (b) the training loop alone (no MLflow, no evaluation), where the pin costs the most: MKL's
-     COMPATIBLE sgemm is all of the difference, so its share is largest there. Each prints the
-     ratio of the sums of wall and of CPU time (the verdict is on wall time, as the issue asks;
-     CPU time is the one to read on a busy machine), and from 3 pairs on a 95% t interval of the
-     pairs' geometric mean.
+     tracking): the target's measure, a share of a baseline run's wall time (target <= 1.05);
+     and (b) the training loop alone (no MLflow, no evaluation), the part that runs PPO's matrix
+     products, where MKL's COMPATIBLE sgemm makes most of the difference (bench_pin_gemm.py).
+     Each prints the ratio of the sums of wall and of CPU time (the verdict is on wall time, the
+     target's measure; CPU time is the one to read on a busy machine), and from 3 pairs on a 95%
+     t interval of the pairs' geometric mean.
 
 Usage: python benchmarks/bench_training.py [--timesteps 300000] [--pairs 2] [--pin-pairs 6] [--warmup 4096]
                                           [--worker-timesteps 100000] [--parts 01234]
@@ -184,13 +184,13 @@ def _probe_once(scope: str, which: str, timesteps: int, env: dict[str, str], roo
 def pin_cost(timesteps: int, pairs: int, scopes: list[str]) -> None:
     """[4]: pinned vs unpinned baseline runs, each in a fresh process, in ABBA pairs, for each scope
     (``run``: a whole ``vlmrl run``; ``loop``: the training loop alone)."""
-    from vlmrl_cli.core.numeric_pin import APPLIED_MARK, PIN, USER_MARK
+    from vlmrl_cli.core.numeric_pin import unpinned_environ
 
-    clean = {k: v for k, v in os.environ.items() if k not in (*PIN, USER_MARK, APPLIED_MARK)}
+    clean = unpinned_environ(os.environ)
     titles = {"run": f"(a) a whole `vlmrl run --arms baseline`, preset paper, {timesteps:,} steps, then its "
-                     "detached evaluation and MLflow (the issue's measure)",
+                     "detached evaluation and MLflow (the target's measure)",
               "loop": f"(b) the training loop alone, preset paper, {timesteps:,} steps, no MLflow or evaluation "
-                      "(where the pin's share is largest)"}
+                      "(PPO's matrix products and the rest of its loop)"}
     print(f"[4] the numeric pin's cost: baseline, {pairs} ABBA pair(s) each, one thread, a fresh process each",
           flush=True)
     for scope in scopes:

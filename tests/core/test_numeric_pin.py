@@ -26,6 +26,13 @@ def test_applying_twice_changes_nothing_and_keeps_the_users_list(user: dict[str,
     assert pin.pinned_environ(once) == once  # a child process re-applying it keeps the parent's record
 
 
+@given(st.dictionaries(st.text("ABCXYZ_", min_size=1), st.text(max_size=4)), _VALUES)
+def test_unpinning_removes_exactly_what_pinning_and_the_user_added(other: dict[str, str], user: dict[str, str]) -> None:
+    env = other | user
+    assert pin.unpinned_environ(pin.pinned_environ(env)) == other
+    assert not set(pin.unpinned_environ(pin.pinned_environ(env))) & set(pin.PIN_VARIABLES)
+
+
 def test_the_state_is_pinned_only_on_the_pins_values() -> None:
     assert pin.pin_state(pin.pinned_environ({})).pinned
     assert not pin.pin_state(pin.pinned_environ({"MKL_CBWR": "AVX2"})).pinned

@@ -9,7 +9,7 @@ import subprocess
 import sys
 
 from tests.training.test_pinned_returns import STEPS
-from vlmrl_cli.core.numeric_pin import APPLIED_MARK, PIN, USER_MARK
+from vlmrl_cli.core.numeric_pin import PIN_VARIABLES
 
 _PROBE = """
 import os, sys
@@ -22,7 +22,7 @@ from tests.training.test_pinned_returns import digest, short_run
 from vlmrl_cli.core.provenance import cpu_paths
 print(json.dumps({"paths": cpu_paths(), "digest": digest(short_run(sys.argv[1], int(sys.argv[2])))}))
 """
-_NUMERIC_VARS = (*PIN, USER_MARK, APPLIED_MARK, "NPY_DISABLE_CPU_FEATURES", "OPENBLAS_CORETYPE",
+_NUMERIC_VARS = (*PIN_VARIABLES, "NPY_DISABLE_CPU_FEATURES", "OPENBLAS_CORETYPE",
                  "MKL_ENABLE_INSTRUCTIONS")
 
 

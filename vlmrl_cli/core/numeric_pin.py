@@ -50,6 +50,8 @@ PIN: Mapping[str, str] = {
 USER_MARK = "VLMRL_PIN_USER"
 #: Set by ``apply``: the pin's id, so that a child knows its parent applied it.
 APPLIED_MARK = "VLMRL_PIN"
+#: Every variable the pin sets in a process's environment: its own and its two marks.
+PIN_VARIABLES: tuple[str, ...] = (*PIN, USER_MARK, APPLIED_MARK)
 #: Libraries whose presence in ``sys.modules`` means the pin may come too late for this process
 #: (numpy is not pinned, so an earlier numpy import does not matter).
 _NUMERIC_MODULES = ("torch",)
@@ -104,6 +106,18 @@ def pinned_environ(environ: Mapping[str, str]) -> dict[str, str]:
     return out
 
 
+def unpinned_environ(environ: Mapping[str, str]) -> dict[str, str]:
+    """``environ`` without the pin: none of its variables or marks, as if ``apply`` had never run
+    and the user had set none of them (pure; a fresh process started with it computes on whatever
+    path its libraries pick for the CPU).
+
+    Example:
+        >>> unpinned_environ(pinned_environ({"HOME": "/root", "MKL_CBWR": "AVX2"}))
+        {'HOME': '/root'}
+    """
+    return {k: v for k, v in environ.items() if k not in PIN_VARIABLES}
+
+
 def user_set(environ: Mapping[str, str]) -> list[str]:
     """The pin variables the user set, as recorded by the ``apply`` of this process or a parent."""
     return [k for k in environ.get(USER_MARK, "").split(",") if k in PIN]
@@ -128,7 +142,7 @@ def apply(environ: MutableMapping[str, str] | None = None, *, warn: bool = True)
     first = APPLIED_MARK not in env
     loaded = tuple(m for m in _NUMERIC_MODULES if m in sys.modules) if environ is None else ()
     new = pinned_environ(env)
-    for key in (*PIN, USER_MARK, APPLIED_MARK):
+    for key in PIN_VARIABLES:
         env[key] = new[key]
     state = pin_state(env)
     state = PinState(values=state.values, user=state.user, loaded_before=loaded if first else ())

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.core.numeric_pin import APPLIED_MARK, PIN, USER_MARK, pinned_environ
+from vlmrl_cli.core.numeric_pin import PIN_VARIABLES, pinned_environ
 from vlmrl_cli.sweep.executors import SHARED_STORE_NEEDED, JobFn, Polled, is_server_uri
 from vlmrl_cli.sweep.worker import init_worker
 from vlmrl_cli.training.config import TrainJob
@@ -87,8 +87,7 @@ def init_options() -> dict[str, Any]:
     import os
 
     pinned = pinned_environ(os.environ)
-    keep = (*PIN, USER_MARK, APPLIED_MARK)
-    return {**INIT_OPTIONS, "runtime_env": {"env_vars": {k: pinned[k] for k in keep}}}
+    return {**INIT_OPTIONS, "runtime_env": {"env_vars": {k: pinned[k] for k in PIN_VARIABLES}}}
 
 
 def start_local(num_cpus: int) -> None:
