@@ -98,3 +98,44 @@ def test_ppo_trains_on_the_hybrid_env() -> None:
     model.learn(total_timesteps=256)
     assert oracle is not None and oracle.stats()["vlm/queries"] > 0
     venv.close()
+
+
+def _as_uint8(env: gym.Env) -> gym.Env:
+    """MountainCar's observation quantised to a uint8 Box (as MiniGrid's image is)."""
+    low, high = env.observation_space.low, env.observation_space.high  # type: ignore[attr-defined]
+    space = gym.spaces.Box(0, 255, (2,), np.uint8)
+    return gym.wrappers.TransformObservation(
+        env, lambda o: np.round(255 * (o - low) / (high - low)).astype(np.uint8), space)
+
+
+UINT8_TASK = dataclasses.replace(MOUNTAIN_CAR, name="uint8-car", wrap=_as_uint8)
+
+
+def test_a_uint8_observation_reaches_ppo_as_float_under_vecnormalize() -> None:
+    """SB3's rollout buffer stores observations in the space's dtype: a uint8 Box under VecNormalize
+    would truncate every normalised observation to an integer (DoorKey's bug, issue 41)."""
+    from stable_baselines3 import PPO
+
+    assert UINT8_TASK.make_env().observation_space.dtype == np.uint8
+    venv, _ = make_train_env(ARMS["baseline"], SMOKE, ShapingConfig(), None, seed=0, task=UINT8_TASK)
+    assert isinstance(venv, VecNormalize) and venv.observation_space.dtype == np.float32
+    model = PPO("MlpPolicy", venv, n_steps=SMOKE.n_steps, batch_size=SMOKE.batch_size, n_epochs=1, seed=0,
+                device="cpu")
+    model.learn(total_timesteps=SMOKE.n_steps * SMOKE.n_envs)
+    stored = model.rollout_buffer.observations
+    assert stored.dtype == np.float32
+    assert np.any(stored != np.round(stored)), "normalised observations keep their fractions"
+    assert float(np.abs(stored).max()) < 11.0, "and are VecNormalize's (clipped at 10), not raw pixels"
+    venv.close()
+
+
+def test_a_float_observation_is_left_as_it_is() -> None:
+    venv, _ = make_train_env(ARMS["baseline"], SMOKE, ShapingConfig(), None, seed=0, task=MOUNTAIN_CAR)
+    base = venv.venv if isinstance(venv, VecNormalize) else venv
+    assert isinstance(base, DummyVecEnv)
+    env = base.envs[0]
+    while isinstance(env, gym.Wrapper):
+        assert not isinstance(env, gym.wrappers.DtypeObservation)
+        env = env.env
+    assert venv.observation_space == MOUNTAIN_CAR.make_env().observation_space
+    venv.close()

@@ -2,7 +2,7 @@
 
 Nothing like a car: a 5 x 5 grid world, 7 discrete actions, reward ``1 - 0.9 t / 250`` at the goal
 and 0 otherwise, 250 steps. The policy sees MiniGrid's egocentric 7 x 7 x 3 view, flattened to 147
-numbers (``ImgObsWrapper`` then ``FlattenObservation``; rl-baselines3-zoo uses ``FlatObsWrapper``,
+float32 numbers (``FlatImage``; rl-baselines3-zoo uses ``FlatObsWrapper``,
 which adds an encoding of the mission text, a constant here).
 
 Milestones, low to high: NO_KEY, HAS_KEY, DOOR_OPEN, AT_GOAL. The camera draws the whole grid from
@@ -18,12 +18,11 @@ with the defaults 2.0 and 0.4 it pays 0 before the key, 0.8 / 250 per step holdi
 than the goal's reward: lingering can pay (the hacking the paper's Eq. 1 has on MountainCar); this
 task has no position, so no hovering diagnostic measures it.
 
-Calibrated (``vlmrl calibrate --task minigrid-doorkey``, results/tasks/minigrid-doorkey/calibration):
-zoo's knobs (VecNormalize on observations and rewards) leave plain PPO at 0/5 seeds by 100,000
-steps, and so does SB3's default with VecNormalize; without it both reach 0.9 on 5/5. Plain SB3
-with zoo's wrapper and knobs (scripts/zoo_doorkey_check.py) also stays at 0: zoo's published
-0.964 does not reproduce with the packages installed here. The study's regime is ``zoo``, the
-candidate closest to the paper's baseline, chosen by the calibration's rule.
+The observation is float32 (``FlatImage``). Until issue 41 it was MiniGrid's ``uint8``, which
+SB3's rollout buffer kept under ``VecNormalize``: every normalised observation was truncated to an
+integer, so every run with ``normalize_obs`` (zoo's knobs among them) learnt from garbage. The
+calibration and study under results/tasks/minigrid-doorkey are retrained on the float observation.
+The study's regime is ``zoo``.
 """
 
 from __future__ import annotations
@@ -208,11 +207,35 @@ def describe_step(obs: tuple[float, ...], action: Any) -> tuple[dict[str, Any], 
     return {"has_key": has_key, "door_open_in_view": door_open}, caption
 
 
-def flat_image(env: gym.Env[Any, Any]) -> gym.Env[Any, Any]:
-    """MiniGrid's Dict observation as the flattened egocentric image (147 numbers)."""
-    from minigrid.wrappers import ImgObsWrapper
+class FlatImage(gym.ObservationWrapper[np.ndarray, Any, Any], gym.utils.RecordConstructorArgs):
+    """MiniGrid's Dict observation as its egocentric image, flattened to 147 float32 numbers
+    (MiniGrid's object, colour and state codes, 0 to 10). Float, because SB3's rollout buffer keeps
+    the observation space's dtype and ``VecNormalize`` would truncate a ``uint8`` one; recorded
+    (``RecordConstructorArgs``), so that ``env.spec.make()`` and gymnasium's env checker can build
+    the env again, as minigrid's ``ImgObsWrapper`` cannot."""
 
-    return gym.wrappers.FlattenObservation(ImgObsWrapper(env))
+    def __init__(self, env: gym.Env[Any, Any]) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.ObservationWrapper.__init__(self, env)
+        image = env.observation_space["image"]  # type: ignore[index]
+        self.observation_space = gym.spaces.Box(
+            np.asarray(image.low, dtype=np.float32).reshape(-1), np.asarray(image.high, dtype=np.float32).reshape(-1),
+            dtype=np.float32)
+
+    def observation(self, observation: Any) -> np.ndarray:
+        return np.asarray(observation["image"], dtype=np.float32).reshape(-1)
+
+
+def flat_image(env: gym.Env[Any, Any]) -> gym.Env[Any, Any]:
+    """MiniGrid's Dict observation as the flattened egocentric image (147 float32 numbers).
+
+    Example:
+        >>> env = flat_image(gym.make(ENV_ID))
+        >>> space = env.observation_space
+        >>> space.shape, space.dtype, env.spec.make().observation_space == space
+        ((147,), dtype('float32'), True)
+    """
+    return FlatImage(env)
 
 
 def make_doorkey_env(render_mode: str | None = None) -> gym.Env[Any, Any]:

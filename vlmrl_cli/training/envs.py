@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import gymnasium as gym
+import numpy as np
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecNormalize
 
@@ -50,7 +51,7 @@ def make_train_env(
               if arm.uses_vlm and client else None)
 
     def make_one() -> gym.Env:
-        env: gym.Env = task.make_env()
+        env: gym.Env = as_float(task.make_env())
         env = Monitor(env)
         return HybridReward(env, arm, shaping, gamma, task.scene, camera=camera, oracle=oracle)
 
@@ -60,3 +61,19 @@ def make_train_env(
     if ppo.vec_normalize:
         venv = VecNormalize(venv, norm_obs=ppo.normalize_obs, norm_reward=ppo.normalize_reward, gamma=ppo.gamma)
     return venv, oracle
+
+
+def as_float(env: gym.Env) -> gym.Env:
+    """``env`` with a non-float ``Box`` observation cast to float32 (gymnasium's
+    ``DtypeObservation``, which the env's spec can recreate); any other env as it is.
+
+    Example:
+        >>> space = gym.spaces.Box(0, 255, (3,), np.uint8)
+        >>> env = gym.wrappers.TransformObservation(gym.make("CartPole-v1"), lambda o: np.zeros(3, np.uint8), space)
+        >>> as_float(env).observation_space.dtype, as_float(gym.make("CartPole-v1")).observation_space.dtype
+        (dtype('float32'), dtype('float32'))
+    """
+    space = env.observation_space
+    if isinstance(space, gym.spaces.Box) and not np.issubdtype(space.dtype, np.floating):
+        return gym.wrappers.DtypeObservation(env, np.float32)
+    return env
