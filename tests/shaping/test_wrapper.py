@@ -30,7 +30,8 @@ def wrap(arm: ArmSpec, cfg: ShapingConfig | None = None, client: VLMClient | Non
     if arm.uses_vlm:
         camera = camera or Camera(cfg.render_quantum)
         oracle = mc_oracle(client or sim_client(), cfg, arm.potential, rbf=arm.rbf)
-    return HybridReward(Monitor(gym.make("MountainCar-v0")), arm, cfg, GAMMA, MC_SCENE, camera=camera, oracle=oracle)
+    return HybridReward(Monitor(gym.make("MountainCar-v0")), arm, cfg, GAMMA, MC_SCENE, camera=camera, oracle=oracle,
+                        horizon=200)
 
 
 def momentum_policy(obs: np.ndarray) -> int:
@@ -54,7 +55,8 @@ def test_check_env_passes_for_every_arm(name: str) -> None:
     arm, cfg = ARMS[name], ShapingConfig()
     camera = Camera(cfg.render_quantum) if arm.uses_vlm else None
     oracle = mc_oracle(sim_client(), cfg, arm.potential, rbf=arm.rbf) if arm.uses_vlm else None
-    env = HybridReward(gym.make("MountainCar-v0"), arm, cfg, GAMMA, MC_SCENE, camera=camera, oracle=oracle)
+    env = HybridReward(gym.make("MountainCar-v0"), arm, cfg, GAMMA, MC_SCENE, camera=camera, oracle=oracle,
+                       horizon=200)
     check_env(env)
     env.close()
 
@@ -203,3 +205,30 @@ def test_another_scene_brings_its_dense_term_observation_and_simulator() -> None
         HybridReward(gym.make("MountainCar-v0"), ARMS["hybrid"], ShapingConfig(), 0.99, moving, camera=Camera(),
                      oracle=oracle)
     client.close()
+
+
+def test_the_potential_form_dense_term_telescopes_and_pays_nothing_for_lingering() -> None:
+    """hybrid-dense-pbrs pays gamma Phi_kin(s') - Phi_kin(s), Phi_kin = horizon x R_kin: an episode's
+    dense part sums to gamma^T Phi_T - Phi_0 whatever the path, so staying still earns nothing."""
+    arm, cfg, horizon = ARMS["hybrid-dense-pbrs"], ShapingConfig(alpha=0.0), 200
+    env = HybridReward(gym.make("MountainCar-v0"), arm, cfg, 1.0, MC_SCENE, camera=Camera(cfg.render_quantum),
+                       oracle=mc_oracle(sim_client(), cfg, arm.potential, rbf=arm.rbf), horizon=horizon)
+    obs0, _ = env.reset(seed=5)
+    shaped = native = 0.0
+    obs = obs0
+    for a in [2] * 40 + [1] * 30:
+        obs, r, _, _, info = env.step(a)
+        shaped, native = shaped + float(r), native + info["native_reward"]
+    phi = [horizon * kinematic_reward(float(o[0]), cfg.kin_scale, cfg.kin_offset) for o in (obs0, obs)]
+    assert shaped - native == pytest.approx(phi[1] - phi[0], abs=1e-9)
+    eq1 = wrap(ARMS["kinematic"], cfg)
+    eq1.reset(seed=5)
+    paid = sum(float(eq1.step(a)[1]) + 1.0 for a in [2] * 40 + [1] * 30)
+    assert paid > 0 and paid != pytest.approx(shaped - native)
+
+
+def test_the_potential_form_dense_term_needs_the_horizon() -> None:
+    arm, cfg = ARMS["hybrid-dense-pbrs"], ShapingConfig()
+    with pytest.raises(ValueError, match="horizon"):
+        HybridReward(gym.make("MountainCar-v0"), arm, cfg, GAMMA, MC_SCENE, camera=Camera(cfg.render_quantum),
+                     oracle=mc_oracle(sim_client(), cfg, arm.potential, rbf=arm.rbf))

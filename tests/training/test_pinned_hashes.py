@@ -57,12 +57,30 @@ TASK_PINNED: dict[tuple[str, str], dict[str, str]] = {
                                            "semantic": "7ddfb9236310"},
 }
 
+#: DoorKey at its own scales (alpha 0.241, kin_scale 0.172) on the float observation: the study and
+#: dose-response of issue 41, printed at their launch; refactors must not move them.
+DOORKEY_PINNED = {"baseline": "f6edfe817bcc", "hybrid": "2602860e603b", "kinematic": "5fbf053716e9",
+                  "hybrid-shuffled": "f802929538af", "semantic": "072d42d13814", "hybrid-dense-pbrs": "a31ad98117c0"}
+
+
+def test_doorkey_hashes_at_its_own_scales_are_pinned() -> None:
+    cfg = RunConfig.from_sources(None, {"arms": list(DOORKEY_PINNED), "seeds": [0], "preset": "zoo",
+                                        "task": "minigrid-doorkey"})
+    assert {j.arm.name: j.config_hash for j in cfg.jobs()} == DOORKEY_PINNED
+
 
 @pytest.mark.parametrize(("task", "preset"), sorted(TASK_PINNED))
 def test_other_tasks_hashes_are_pinned(task: str, preset: str) -> None:
+    """Their committed runs used the paper's scales (alpha 5, kin_scale 2): given explicitly, they keep
+    their hashes. Since issue 41 a task's own scales are its default: the baseline's hash is unmoved
+    (no shaping knob enters it), every shaped arm's is new."""
     arms = list(TASK_PINNED[task, preset])
-    cfg = RunConfig.from_sources(None, {"arms": arms, "seeds": [0], "preset": preset, "task": task})
-    assert {j.arm.name: j.config_hash for j in cfg.jobs()} == TASK_PINNED[task, preset]
+    flags = {"arms": arms, "seeds": [0], "preset": preset, "task": task}
+    paper = RunConfig.from_sources(None, flags, ["shaping.alpha=5", "shaping.kin_scale=2"])
+    assert {j.arm.name: j.config_hash for j in paper.jobs()} == TASK_PINNED[task, preset]
+    own = {j.arm.name: j.config_hash for j in RunConfig.from_sources(None, flags).jobs()}
+    assert own["baseline"] == TASK_PINNED[task, preset]["baseline"]
+    assert all(own[a] != h for a, h in TASK_PINNED[task, preset].items() if a != "baseline")
 
 
 def test_label_map_overrides_keep_their_hashes() -> None:
@@ -73,5 +91,5 @@ def test_label_map_overrides_keep_their_hashes() -> None:
     assert partial.jobs()[0].config_hash == "9f70161ccb2b"
     whole = RunConfig.from_sources(None, {"arms": ["hybrid"], "seeds": [0], "preset": "smoke", "task": "acrobot"},
                                    ["shaping.label_potentials={HANGING=0.0, LOW_SWING=0.2, HIGH_SWING=0.5, "
-                                    "ABOVE_BAR=1.0}"])
+                                    "ABOVE_BAR=1.0}", "shaping.alpha=5", "shaping.kin_scale=2"])
     assert whole.jobs()[0].config_hash == "f781e52f2c48"

@@ -26,6 +26,7 @@ POTENTIAL_ONLY = "semantic"  # the VLM potential alone, no kinematic term
 NO_LOCK = "hybrid-no-lock"  # the method without the hysteresis lock
 PURE_VISION = "vision-float"  # PBRS on the VLM's float regression (the paper's failing setting)
 PLACEBO = "hybrid-shuffled"  # the method with its label map shuffled per seed
+DENSE_POTENTIAL = "hybrid-dense-pbrs"  # the method with Eq. 1's dense term in potential form
 #: The placebo of each arm that has one.
 PLACEBO_OF: Mapping[str, str] = {METHOD: PLACEBO}
 #: Position in the report of an arm that gives none: after every arm that does.
@@ -55,6 +56,9 @@ class ArmSpec:
     # Added after results existed: ``identity`` below leaves it out while False, so the seven
     # original arms keep their config hashes (tests/training/test_pinned_hashes.py).
     placebo: bool = False  # labels mapped through a per-seed shuffled label map (shaping/placebo.py)
+    # Added with issue 41, left out of ``identity`` while False as ``placebo`` is: the dense term
+    # as a potential, ``gamma Phi_kin(s') - Phi_kin(s)`` with ``Phi_kin = horizon x R_kin`` (shaping/wrapper.py)
+    dense_potential: bool = False
     # How the arm is reported, not how it is rewarded: ``identity`` always leaves these out.
     compared_with: tuple[Comparison, ...] = ()  # this arm against each reference, in the report's order
     report_order: int = LAST  # position in the report's tables and figures (lower first; ties: registry order)
@@ -73,8 +77,9 @@ class ArmSpec:
         """
         fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
                   if f.name not in ("compared_with", "report_order")}
-        if not self.placebo:
-            del fields["placebo"]
+        for late in ("placebo", "dense_potential"):  # fields added after results existed
+            if not fields[late]:
+                del fields[late]
         return {k: v.value if isinstance(v, PotentialSource) else v for k, v in fields.items()}
 
 
@@ -102,6 +107,11 @@ ARMS: dict[str, ArmSpec] = {
                 PotentialSource.FLOAT, rbf=False, lock=False, report_order=6),
         ArmSpec(PLACEBO, "placebo: the hybrid with its label map shuffled per seed (same labels, "
                 "no information)", True, PotentialSource.MCQ, placebo=True, report_order=7),
+        ArmSpec(DENSE_POTENTIAL, "the hybrid with the dense term in potential form (PBRS on Eq. 1's "
+                "coordinate, gamma-discounted: lingering cannot pay)", True, PotentialSource.MCQ,
+                dense_potential=True, report_order=8,
+                compared_with=(Comparison(BASELINE, "the method with a potential-form dense term"),
+                               Comparison(METHOD, "Eq. 1's non-potential form (what lingering is paid)"))),
     )
 }
 

@@ -35,6 +35,10 @@ class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.Reco
         gamma: PBRS discount in (0, 1], normally the learner's.
         scene: what the task's observation, dense term and simulator are (``Task.scene``).
         camera, oracle: required when ``arm.uses_vlm``; shared by the envs of one run.
+        horizon: the task's time limit, required when ``arm.dense_potential``: the dense term is
+            then paid as ``gamma Phi_kin(s') - Phi_kin(s)`` with ``Phi_kin = horizon x R_kin``
+            (what Eq. 1 would pay for staying in ``s`` a whole episode, so both forms have the
+            same largest episode total; 0 at a terminal state, as ``pbrs_term`` does).
 
     Example:
         >>> import gymnasium as gym
@@ -59,9 +63,10 @@ class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.Reco
         scene: Scene,
         camera: SceneCamera | None = None,
         oracle: SemanticOracle | None = None,
+        horizon: int | None = None,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
-            self, arm=arm, shaping=shaping, gamma=gamma, camera=camera, oracle=oracle, scene=scene
+            self, arm=arm, shaping=shaping, gamma=gamma, camera=camera, oracle=oracle, scene=scene, horizon=horizon
         )
         gym.Wrapper.__init__(self, env)
         shape = getattr(env.observation_space, "shape", None)
@@ -72,6 +77,9 @@ class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.Reco
             raise ValueError(f"gamma must be in (0, 1], got {gamma}; pass the learner's discount.")
         if not (math.isfinite(shaping.alpha) and shaping.alpha >= 0):
             raise ValueError(f"ShapingConfig.alpha must be a finite value >= 0, got {shaping.alpha}.")
+        if arm.dense_potential and not (isinstance(horizon, int) and horizon >= 1):
+            raise ValueError(f"arm '{arm.name}' pays the dense term as a potential; pass the task's time limit "
+                             f"as horizon (got {horizon}).")
         if arm.uses_vlm:
             if camera is None or oracle is None:
                 raise ValueError(f"arm '{arm.name}' shapes with the VLM; pass the run's camera and oracle.")
@@ -92,6 +100,8 @@ class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.Reco
         self._sim = env.unwrapped  # looked up once: this runs every step
         self._episode = EpisodePotential(oracle, arm.lock) if arm.uses_vlm and oracle is not None else None
         self._phi = 0.0
+        self._horizon = float(horizon or 0)
+        self._phi_kin = 0.0
         self._return = 0.0
 
     @property
@@ -114,13 +124,19 @@ class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.Reco
     ) -> tuple[np.ndarray, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
         self._return = 0.0
+        if self.arm.dense_potential:
+            self._phi_kin = self._horizon * self._dense(obs, self.shaping.kin_scale, self.shaping.kin_offset)
         self._phi = self._episode.reset(self._view()) if self._episode is not None else 0.0
         return obs, info
 
     def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, native, terminated, truncated, info = self.env.step(action)
         reward = float(native)
-        if self.arm.kinematic:
+        if self.arm.dense_potential:
+            phi_kin = self._horizon * self._dense(obs, self.shaping.kin_scale, self.shaping.kin_offset)
+            reward += pbrs_term(self._phi_kin, phi_kin, self.gamma, 1.0, terminated)
+            self._phi_kin = phi_kin
+        elif self.arm.kinematic:
             reward += self._dense(obs, self.shaping.kin_scale, self.shaping.kin_offset)
         if self._episode is not None:
             assert self.camera is not None  # with the episode: checked in __init__

@@ -18,6 +18,7 @@ from gymnasium.envs.classic_control.acrobot import AcrobotEnv
 
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.features import feature_dim
+from vlmrl_cli.shaping.scales import task_scales
 from vlmrl_cli.shaping.scene import Scene
 from vlmrl_cli.tasks.acrobot_scene import (
     DEFAULT_POTENTIALS,
@@ -118,6 +119,8 @@ ACROBOT = Task(
     calibration=tuple({"preset": p} for p in ("zoo-100k", "zoo-100k-lr1e-4", "zoo-100k-raw", "sb3-default-100k")),
     # the median of its 70 committed runs (calibration and study exports; quartiles 0.50-0.85 ms)
     step_seconds=0.61e-3,
+    # goal: zoo's -73.5 over a failure's -500; Eq. 1 pays at most 1.4 per step at scale 1 (h = 2)
+    scales=task_scales(goal_return=500 - 73.5, potential_span=1.0, dense_peak=1.4, horizon=500),
     # The closest regime of `vlmrl calibrate --task acrobot --seeds 5` (results/tasks/acrobot/
     # calibration/, 2026-12-02): distance 0.889 [0.831, 0.985]. Its baseline is slow (-100 at
     # 73,130 steps on average against the target's 90,816) but reaches -100 on 5/5 seeds: no

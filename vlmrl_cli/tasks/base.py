@@ -23,6 +23,7 @@ import numpy as np
 
 from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.shaping.config import ShapingConfig, label_problem
+from vlmrl_cli.shaping.scales import TaskScales
 from vlmrl_cli.shaping.scene import Scene, SceneCamera
 from vlmrl_cli.vlm.prompts import Milestones, NumberQuestions
 from vlmrl_cli.vlm.sim import MilestoneReader, NumberReader
@@ -93,6 +94,9 @@ class Task:
             dense term can pay more than finishing (None: a generic one).
         describe_step: a played step's observation and action as named fields (``vlmrl evaluate``'s
             JSON) and one caption line of its GIF (None: the raw observation and action).
+        scales: the task's alpha and kin_scale (``shaping.scales``: set by the stated rule from its
+            return range), the bottom layer of a run's ``[shaping]``; None: the paper's MountainCar-v0
+            scales (``ShapingConfig``'s defaults, alpha 5 and kin_scale 2).
         wrap: observation wrappers ``make_env`` puts around ``gym.make(env_id)`` (a grid world's
             Dict observation flattened for an MLP policy); None: the env as gymnasium makes it.
     """
@@ -130,6 +134,7 @@ class Task:
     # Seconds per environment step and worker (2 workers on 2 cores) of the task's committed runs: the
     # cost estimate's figure before a store has timed any run of it (None: MountainCar-v0's repro).
     step_seconds: float | None = None
+    scales: TaskScales | None = None
 
     @property
     def auc_margin(self) -> float:
@@ -193,6 +198,13 @@ class Task:
         if shaping.label_potentials:
             return shaping
         return dataclasses.replace(shaping, label_potentials=self.label_potentials)
+
+    def default_shaping(self) -> ShapingConfig:
+        """The shaping a run of this task takes when it sets none: its label map and its scales."""
+        shaping = self.shaping_for(ShapingConfig())
+        if self.scales is None:
+            return shaping
+        return dataclasses.replace(shaping, alpha=self.scales.alpha, kin_scale=self.scales.kin_scale)
 
     def labels_problem(self, label_potentials: LabelMap) -> str | None:
         """Why a label map does not fit this task (None when it does)."""

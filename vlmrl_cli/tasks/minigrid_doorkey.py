@@ -318,6 +318,7 @@ def _task() -> Any:
     from minigrid.envs import DoorKeyEnv  # the unwrapped env's class, without building an env at import
 
     from vlmrl_cli.shaping.features import feature_dim
+    from vlmrl_cli.shaping.scales import task_scales
     from vlmrl_cli.shaping.scene import Scene
     from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, Task
 
@@ -354,6 +355,8 @@ def _task() -> Any:
         study_preset="zoo",
         window=50,
         wrap=flat_image,
+        # goal: zoo's 0.964 over a failure's 0; Eq. 1 pays at most 1.4 / 250 per step at scale 1
+        scales=task_scales(goal_return=0.964, potential_span=1.0, dense_peak=1.4 / MAX_STEPS, horizon=MAX_STEPS),
         probe_states=probe_states,
         describe_step=describe_step,
     )

@@ -313,7 +313,7 @@ class TrainJob:
         """The knobs of this job that differ from its preset and the shaping/VLM defaults, as
         dotted keys (``{"ppo.n_envs": "1"}``); only knobs the job's identity depends on count."""
         reference = dataclasses.replace(self, ppo=preset_of(self.task, self.preset), vlm=VLMConfig(),
-                                        shaping=with_task_labels(ShapingConfig(), self.task))
+                                        shaping=self.task_plugin.default_shaping())
         ref = flatten(reference.identity())
         return {k: v for k, v in flatten(self.identity()).items() if ref.get(k) != v}
 

@@ -53,7 +53,8 @@ def make_train_env(
     def make_one() -> gym.Env:
         env: gym.Env = as_float(task.make_env())
         env = Monitor(env)
-        return HybridReward(env, arm, shaping, gamma, task.scene, camera=camera, oracle=oracle)
+        return HybridReward(env, arm, shaping, gamma, task.scene, camera=camera, oracle=oracle,
+                            horizon=task.max_steps)
 
     fns: list[Callable[[], gym.Env]] = [make_one] * ppo.n_envs
     venv: VecEnv = DummyVecEnv(fns)

@@ -21,6 +21,7 @@ from gymnasium.envs.classic_control.mountain_car import MountainCarEnv
 from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.features import FEATURE_DIM
+from vlmrl_cli.shaping.scales import task_scales
 from vlmrl_cli.shaping.scene import Scene
 from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, Task
 from vlmrl_cli.tasks.mountain_car import geometry
@@ -234,6 +235,8 @@ _MC_KNOBS: dict[str, Any] = {
     "ent_coef": 0.0, "learning_rate": 3e-4, "normalize_obs": True, "normalize_reward": True, "timesteps": 100_000,
 }
 
+_SPAN = max(p for _, p in ZONE_POTENTIALS) - min(p for _, p in ZONE_POTENTIALS)
+
 MOUNTAIN_CAR_CONTINUOUS = Task(
     name="mountain-car-continuous",
     env_id=CONTINUOUS_ENV_ID,
@@ -271,6 +274,9 @@ MOUNTAIN_CAR_CONTINUOUS = Task(
     calibration=tuple({"preset": p} for p in ("mc-zoo-100k", "mc-zoo-100k-raw-reward", "sb3-default-100k")),
     # the median of its 65 committed runs (calibration and study exports; quartiles 0.92-1.67 ms)
     step_seconds=1.21e-3,
+    # goal: zoo's 88.3 over a failure's 0 (standing still); Eq. 1 pays at most 1.0 per step at scale 1
+    # (x = 0.6); the label map spans 0 to 1
+    scales=task_scales(goal_return=88.3, potential_span=_SPAN, dense_peak=1.0, horizon=999),
     # The closest regime of `vlmrl calibrate --task mountain-car-continuous --seeds 5` (results/tasks/
     # mountain-car-continuous/calibration/, 2026-12-02): distance 0.877. Its baseline never reached
     # the flag (0/5 seeds, detached success 0%): the "exploration deadlock" of the paper.
