@@ -126,3 +126,35 @@ def test_a_file_that_is_not_an_export_is_refused(tmp_path: Path) -> None:
 
 def test_the_cli_lists_the_libraries_normalisations() -> None:
     assert tuple(NORMALISATIONS) == NORMALISE_CHOICES
+
+
+def test_a_run_two_exports_hold_counts_once(tmp_path: Path) -> None:
+    """A study's and a calibration's export of one task both hold baseline seeds 0 and 1 (same config
+    hash, different source runs): they count once, and the command says how many were dropped."""
+    files = _files(tmp_path)
+    calibration = _write(tmp_path / "acrobot-calibration.jsonl.gz",
+                         [{**_record("acrobot", "baseline", seed, s), "source_run_id": f"calib-{seed}"}
+                          for seed, s in enumerate([-100.0, -90.0])])
+    out = tmp_path / "cmp"
+    res = _compare(*files, str(calibration), "--out", str(out))
+    assert res.exit_code == 0, res.output
+    assert "counted once: 2 run(s)" in res.output
+    per_task = pd.read_csv(out / "per_task.csv")
+    base = per_task[(per_task["task"] == "acrobot") & (per_task["arm"] == "baseline")]
+    assert sorted(base["seed"]) == [0, 1, 2]
+    assert "2 run(s) held by a second file" in (out / "aggregate.md").read_text(encoding="utf-8")
+
+
+def test_every_task_weighs_the_same_in_the_iqm(tmp_path: Path) -> None:
+    """Acrobot's baseline with 6 runs (each of its 3 scores twice, other seeds) against mountain-car's 2:
+    the aggregates are those of the 3-run export, not pulled towards acrobot."""
+    doubled = {**SCORES, "acrobot": {**SCORES["acrobot"], "baseline": SCORES["acrobot"]["baseline"] * 2}}
+    a, b = tmp_path / "a", tmp_path / "b"
+    (a / "in").mkdir(parents=True)
+    (b / "in").mkdir(parents=True)
+    assert _compare(*_files(a / "in"), "--out", str(a / "cmp")).exit_code == 0
+    assert _compare(*_files(b / "in", doubled), "--out", str(b / "cmp")).exit_code == 0
+    one, two = (pd.read_csv(d / "cmp" / "aggregate.csv").set_index("arm") for d in (a, b))
+    for col in ("iqm", "mean"):
+        assert two.loc["baseline", col] == pytest.approx(one.loc["baseline", col], abs=1e-9)
+    assert "every task weighs the same" in (b / "cmp" / "aggregate.md").read_text(encoding="utf-8")

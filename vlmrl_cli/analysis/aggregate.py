@@ -78,7 +78,18 @@ def normalise(scores: TaskScores, lo: npt.ArrayLike, hi: npt.ArrayLike) -> list[
 # --- point estimates; the private forms take one array per task with resamples on axis 0 --------
 
 def _iqm_axis(*tasks: np.ndarray, axis: int = -1) -> np.ndarray:
-    return np.asarray(sps.trim_mean(np.concatenate(tasks, axis=axis), 0.25, axis=axis))
+    """The interquartile mean of the mixture of the tasks' run distributions, each task weighing
+    ``1 / n_tasks`` and each of its ``n_m`` runs ``1 / (n_tasks n_m)``: the mean of the weighted
+    quantile function over (0.25, 0.75), a run straddling a quartile counting for its share."""
+    values = np.concatenate([np.moveaxis(t, axis, -1) for t in tasks], axis=-1)
+    weights = np.concatenate([np.full(t.shape[axis], 1.0 / (len(tasks) * t.shape[axis])) for t in tasks])
+    order = np.argsort(values, axis=-1, kind="stable")
+    x = np.take_along_axis(values, order, axis=-1)
+    w = weights[order]
+    upper = np.cumsum(w, axis=-1)
+    overlap = np.clip(np.minimum(upper, 0.75) - np.maximum(upper - w, 0.25), 0.0, None)
+    mean = np.sum(x * overlap, axis=-1) / np.sum(overlap, axis=-1)  # the overlaps sum to 0.5, up to rounding
+    return np.asarray(np.clip(mean, x[..., 0], x[..., -1]))
 
 
 def _mean_axis(*tasks: np.ndarray, axis: int = -1) -> np.ndarray:
@@ -86,12 +97,17 @@ def _mean_axis(*tasks: np.ndarray, axis: int = -1) -> np.ndarray:
 
 
 def iqm(scores: TaskScores) -> float:
-    """Interquartile mean over all runs of all tasks: ``scipy.stats.trim_mean(all, 0.25)``, as
-    rliable's ``aggregate_iqm`` on a ``(n_runs, n_tasks)`` matrix (each run counts once).
+    """Interquartile mean over the runs of all tasks, **each task weighing the same**: the middle
+    half of the mixture of the tasks' score distributions. With the same number of runs on every
+    task and a run count that is a multiple of 4, it is rliable's ``aggregate_iqm``
+    (``scipy.stats.trim_mean(all, 0.25)``); with unequal counts, rliable (which needs equal ones)
+    would let a task with more runs weigh more, this does not.
 
-    Example (rliable's ``metrics_test``):
+    Example (rliable's ``metrics_test``; then a task with 3 runs against one with 1):
         >>> iqm(np.array([[1, 2], [2, 2], [1, 1], [2, 1]]))
         1.5
+        >>> round(iqm([[0.0, 0.0, 0.0], [1.0]]), 12)  # half the weight at 0, half at 1: the middle half averages 0.5
+        0.5
     """
     return float(_iqm_axis(*per_task(scores)))
 

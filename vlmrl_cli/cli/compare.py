@@ -56,6 +56,9 @@ def compare(
             poi = "" if r.arm == "baseline" else (f"; P(> baseline) {r.poi_over_baseline:.2f} "
                                                    f"[{r.poi_over_baseline_low:.2f}, {r.poi_over_baseline_high:.2f}]")
             typer.echo(f"  {r.arm:<16} IQM {r.iqm:.2f} [{r.iqm_low:.2f}, {r.iqm_high:.2f}]{poi}")
+        if result.counted_once:
+            typer.echo(f"counted once: {result.counted_once} run(s) that a second file also holds (same task, arm, "
+                       "seed and config hash)")
         for arm, tasks in result.left_out.items():
             typer.echo(f"left out: {arm} (missing on {', '.join(tasks)})")
         typer.echo(f"written to {result.out}/ (aggregate.md, aggregate.csv, per_task.csv, performance_profile.png)")

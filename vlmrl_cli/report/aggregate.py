@@ -8,7 +8,9 @@ min-max normalised per task, ``(score - lo) / (hi - lo)``, with a stated pair (`
 - ``zoo``: ``lo`` = the baseline arm's mean score, ``hi`` = rl-baselines3-zoo's published PPO
   score of the env (``tasks.zoo``): 1 is the zoo's tuned PPO.
 
-Which runs: the FINISHED training runs of the files (one run once, by its source run id), grouped
+Which runs: the FINISHED training runs of the files, each counted once: by its source run id, and
+by its (task, arm, seed, config hash), since a study's and a calibration's export of one task can
+hold the same baseline seed as two runs (``RUN_RULE``; the first file's run is kept). Grouped
 by task (tag ``vlmrl.task``, absent = mountain-car), arm and config hash. For each task and arm
 one configuration is kept: the one named by ``--config-hash`` when one is named for that task
 and arm, else the one with the most runs (a tie is refused: name one). Every task must have the
@@ -52,6 +54,11 @@ NORMALISATIONS: dict[str, str] = {
 SIMULATED_NOTE = "SIMULATED VLM, not a real model."
 REAL_NOTE = "no run used the simulated VLM"
 RUN_COLUMNS = ["task", "arm", "seed", "config_hash", "run_id", "score", "simulated", "numeric_path", "file"]
+#: How runs are counted, for the report.
+RUN_RULE = ("a run counts once per (task, arm, seed, config hash): when several export files hold it, the one in "
+            "the first file named is kept")
+WEIGHT_RULE = ("every task weighs the same in every aggregate, whatever its number of runs (IQM: the middle half "
+               "of the mixture of the tasks' run distributions, each task's runs sharing 1/n_tasks)")
 
 
 @dataclass(frozen=True)
@@ -81,6 +88,7 @@ class CompareResult:
     tasks: list[str]
     left_out: dict[str, list[str]] = field(default_factory=dict)
     simulated: bool = False
+    counted_once: int = 0  # runs held by more than one file, counted once (``RUN_RULE``)
 
 
 def _validate(cfg: CompareConfig) -> None:
@@ -125,6 +133,21 @@ def read_runs(files: Sequence[Path]) -> pd.DataFrame:
     if not rows:
         raise BadInput(f"the export files hold no training run: {', '.join(str(p) for p in files)}.")
     return pd.DataFrame(rows, columns=RUN_COLUMNS)
+
+
+def count_once(runs: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """``runs`` with each (task, arm, seed, config hash) once (``RUN_RULE``: the first row kept), and
+    the rows dropped.
+
+    Example:
+        >>> runs = pd.DataFrame({"task": ["t"] * 3, "arm": ["b"] * 3, "seed": [0, 0, 1],
+        ...                      "config_hash": ["h"] * 3, "file": ["study", "calibration", "study"]})
+        >>> kept, dropped = count_once(runs)
+        >>> kept["seed"].tolist(), dropped["file"].tolist()
+        ([0, 1], ['calibration'])
+    """
+    twice = runs.duplicated(["task", "arm", "seed", "config_hash"], keep="first")
+    return runs[~twice].reset_index(drop=True), runs[twice].reset_index(drop=True)
 
 
 def select_configs(runs: pd.DataFrame, config_hashes: Sequence[str] = ()) -> pd.DataFrame:
@@ -219,7 +242,8 @@ def compare(cfg: CompareConfig) -> CompareResult:
     """Read the export files, aggregate across tasks and write ``aggregate.md``, ``aggregate.csv``,
     ``per_task.csv`` and ``performance_profile.png`` to ``cfg.out``."""
     _validate(cfg)
-    runs = select_configs(read_runs(cfg.files), cfg.config_hashes)
+    runs, dropped = count_once(read_runs(cfg.files))
+    runs = select_configs(runs, cfg.config_hashes)
     check_paths(runs, cfg.allow_mixed_paths)  # one numeric path, as `vlmrl report` requires
     arms, left_out = compared_arms(runs)
     runs = runs[runs["arm"].isin(arms)].reset_index(drop=True)
@@ -260,10 +284,11 @@ def compare(cfg: CompareConfig) -> CompareResult:
     per_task = runs[["task", "arm", "seed", "config_hash", "run_id", "score", "lo", "hi", "normalised"]].copy()
     per_task["normalisation"], per_task["vlm"] = cfg.normalise, note
     per_task.sort_values(["task", "arm", "seed"]).to_csv(files[1], index=False)
-    files[2].write_text(_markdown(cfg, table, runs, pairs, left_out, simulated) + "\n", encoding="utf-8")
+    files[2].write_text(_markdown(cfg, table, runs, pairs, left_out, simulated, len(dropped)) + "\n",
+                        encoding="utf-8")
     fig = _profile_figure(scores, cfg, streams, note)
     fig.savefig(files[3], dpi=200)
-    return CompareResult(cfg.out, files, table, arms, tasks, left_out, simulated)
+    return CompareResult(cfg.out, files, table, arms, tasks, left_out, simulated, len(dropped))
 
 
 def profile_taus(scores: Mapping[str, Sequence[np.ndarray]], n: int) -> np.ndarray:
@@ -289,7 +314,7 @@ def _profile_figure(scores: Mapping[str, Sequence[np.ndarray]], cfg: CompareConf
 
 
 def _markdown(cfg: CompareConfig, table: pd.DataFrame, runs: pd.DataFrame, pairs: pd.DataFrame,
-              left_out: Mapping[str, Sequence[str]], simulated: bool) -> str:
+              left_out: Mapping[str, Sequence[str]], simulated: bool, counted_once: int = 0) -> str:
     pct = f"{100 * cfg.ci:g}%"
     lines = [f"# Across tasks{' (SIMULATED VLM)' if simulated else ''}", ""]
     if simulated:
@@ -320,8 +345,10 @@ def _markdown(cfg: CompareConfig, table: pd.DataFrame, runs: pd.DataFrame, pairs
         lines += ["Left out (not on every task): "
                   + "; ".join(f"{a} (missing on {', '.join(ts)})" for a, ts in left_out.items()) + ".", ""]
     lines += ["## Method", "",
-              "- IQM: the 25% trimmed mean of the normalised scores of all runs of all tasks (rliable's "
-              "`aggregate_iqm`); mean: the mean over tasks of each task's mean (`aggregate_mean`).",
+              f"- Weights: {WEIGHT_RULE}. IQM: the 25% trimmed mean of that mixture (rliable's `aggregate_iqm` when "
+              "every task has the same number of runs and their total is a multiple of 4); mean: the mean over "
+              "tasks of each task's mean (`aggregate_mean`).",
+              f"- Runs: {RUN_RULE}; {counted_once} run(s) held by a second file were not counted again.",
               f"- P(arm > {BASELINE}): per task, P(X > Y) + P(X = Y)/2 for a random run of each arm (the "
               "Mann-Whitney U over n_x n_y), then the mean over tasks (rliable's `probability_of_improvement`).",
               "- Performance profile (`performance_profile.png`): the fraction of runs whose normalised score is "
