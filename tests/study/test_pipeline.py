@@ -31,22 +31,31 @@ def test_anything_but_a_manifest_gives_no_history() -> None:
         assert earlier_invocations(previous, "vlmrl-study", "sqlite:///s.db") == []
 
 
-def test_the_power_spread_pools_finished_seeds_only() -> None:
-    """An arm that never finished (every seed a DNF at the budget) says nothing of the spread: it
-    must not pull the pooled sd towards 0 (the MountainCarContinuous study of 2026-12-03 printed
-    0.010 and "detects 1.03x" before this)."""
+def test_power_is_stated_per_comparison_from_its_own_reference_in_restricted_mean_ratios() -> None:
+    """Each comparison's power comes from its reference arm's own censored fit: a reference that never
+    finished (every seed a DNF) states no speedup power (it once pooled to an sd of 0.010 and "detects
+    1.03x"), a reference that finishes says its fit, its observed reliability and a restricted-mean ratio."""
     import math
 
     import numpy as np
     import pandas as pd
 
-    from vlmrl_cli.study.pipeline import pooled_sd_log
+    from vlmrl_cli.study.config import build_study
+    from vlmrl_cli.study.pipeline import power_lines
 
-    finished = [1000.0, 2000.0, 4000.0]
-    rows = [{"run_id": f"a{i}", "variant": "", "arm": "hybrid", "steps_90": s, "budget": 10_000.0}
-            for i, s in enumerate(finished)]
-    rows += [{"run_id": f"b{i}", "variant": "", "arm": "baseline", "steps_90": math.nan, "budget": 10_000.0}
-             for i in range(10)]
-    sd = pooled_sd_log(pd.DataFrame(rows), 90.0)
-    assert sd == np.std(np.log(finished), ddof=1)
-    assert math.isnan(pooled_sd_log(pd.DataFrame(rows[3:]), 90.0))  # no arm with two finishes
+    cfg = build_study([{"seeds": list(range(10)), "arms": ["baseline", "kinematic", "hybrid"]}],
+                      {"smoke": {"preset": "smoke"}}, profiles=(), flickers=(), alphas=(), kin_scales=(),
+                      query_flickers=())
+    budget = float(cfg.base.budget)
+    rng = np.random.default_rng(0)
+    rows = []
+    for arm, finish in (("baseline", 6), ("kinematic", 0), ("hybrid", 10)):
+        for seed in range(10):
+            steps = float(budget * 0.5 * math.exp(0.3 * rng.standard_normal())) if seed < finish else math.nan
+            rows.append({"regime": "smoke", "variant": "", "arm": arm, "seed": seed, "run_id": f"{arm}{seed}",
+                         "budget": budget, f"steps_{cfg.top:g}": steps, f"reached_{cfg.top:g}": seed < finish})
+    lines = power_lines(cfg, pd.DataFrame(rows))
+    assert "family of" in lines[0] and "restricted mean steps" in lines[0]
+    by_pair = {line.split(":")[0].lstrip("- "): line for line in lines[1:]}
+    assert "observed 6/10" in by_pair["hybrid vs baseline"] and "restricted-mean ratio" in by_pair["hybrid vs baseline"]
+    assert "too few finishes" in by_pair["hybrid vs kinematic"] and "Fisher power" in by_pair["hybrid vs kinematic"]

@@ -21,7 +21,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
 from vlmrl_cli.analysis import multiplicity, stats
@@ -37,7 +36,6 @@ from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
 from vlmrl_cli.report import hacking
 from vlmrl_cli.report.table2 import per_seed_table
 from vlmrl_cli.report.writer import check_paths
-from vlmrl_cli.shaping.arms import BASELINE
 from vlmrl_cli.study import verdicts
 from vlmrl_cli.study.config import StudyConfig
 from vlmrl_cli.sweep import cost as cost_model
@@ -246,68 +244,78 @@ def study_per_seed(frames: Sequence[pd.DataFrame], thresholds: Sequence[float]) 
 DEFAULT_SD_LOG = 0.2
 
 
-def pooled_sd_log(per_seed: pd.DataFrame, top: float) -> float:
-    """The pooled within-arm standard deviation of log steps to ``top`` over the seeds that reached
-    it within the budget (NaN without two finished seeds in some arm): a DNF, censored at the
-    budget, says nothing of the spread, and an arm of DNFs alone would pull the spread to 0."""
-    from vlmrl_cli.analysis import censored
-
-    key = f"steps_{top:g}"
-    ss, df = 0.0, 0
-    for _, d in per_seed.drop_duplicates("run_id").groupby(["variant", "arm"]):
-        steps, budgets = d[key].to_numpy(dtype=float), d["budget"].to_numpy(dtype=float)
-        done = censored.reached(steps, budgets)
-        if int(done.sum()) < 2:
-            continue
-        x = np.log(steps[done])
-        ss += float(((x - x.mean()) ** 2).sum())
-        df += len(x) - 1
-    return math.sqrt(ss / df) if df > 0 else math.nan
-
-
 def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None) -> list[str]:
-    """What the study can detect at 80% power, simulated on censored data as the verdict sees it
-    (``analysis.power``): log-normal steps with the spread of ``per_seed``'s finished runs (else
-    ``DEFAULT_SD_LOG``), the baseline's observed reliability (else the paper's 60%) as the share of
-    seeds reaching the top threshold by the budget, a DNF at the budget, the rank test at Holm's
-    first step over the study's family (``alpha / m``; ``--adjust none``: ``alpha``) and the 95%
-    interval above 1; then the seeds that tell 100% from the baseline's reliability (Fisher exact)."""
+    """What the study can detect at 80% power, per comparison, simulated on censored data as the
+    verdict sees it (``analysis.power``): each comparison's own reference arm's steps to the top
+    threshold, fitted as a log-normal with its DNFs right-censored at the budget
+    (``power.fit_censored_lognormal``), the rank test at Holm's first step over the study's family
+    (``alpha / m``; ``--adjust none``: ``alpha``) and the 95% interval above 1; each detectable
+    effect stated as a ratio of restricted mean steps (a DNF at the budget), the tables' unit, with
+    the median ratio it corresponds to. Before any run has finished (a dry run): one line on an
+    assumed spread (``DEFAULT_SD_LOG``) and the paper's 60% reliability, said as such."""
     from vlmrl_cli.analysis import censored, power
 
-    sd = pooled_sd_log(per_seed, cfg.top) if per_seed is not None and len(per_seed) else math.nan
-    source = (f"sd of log steps {sd:.3f} pooled over the finished runs" if sd > 0
-              else f"an assumed sd of log steps of {DEFAULT_SD_LOG} (no finished runs with any spread to measure)")
-    sd = sd if sd > 0 else DEFAULT_SD_LOG
     n = len(cfg.base.seeds)
-    base = per_seed[(per_seed["arm"] == BASELINE) & (per_seed["variant"] == "")] if per_seed is not None and len(
-        per_seed) else None
-    rate = float(base[f"reached_{cfg.top:g}"].mean()) if base is not None and len(base) else 0.6
-    what = "the baseline's observed" if base is not None and len(base) else "the paper's baseline"
-    comparisons = [f"{a} vs {b}" for a, b, _ in verdicts.MAP_PAIRS if a in cfg.base.arms and b in cfg.base.arms]
-    comparisons += [c.name for c in verdicts.controls(cfg.cells)]
-    family = max(1, len(comparisons)) if cfg.adjust != "none" else 1
+    comparisons = [(a, b) for a, b, _ in verdicts.MAP_PAIRS if a in cfg.base.arms and b in cfg.base.arms]
+    controls = [c.name for c in verdicts.controls(cfg.cells)]
+    family = max(1, len(comparisons) + len(controls)) if cfg.adjust != "none" else 1
     budget = float(cfg.base.budget)
-    level = f"alpha {cfg.alpha:g} / {family} (Holm's first step over {family} comparisons)" if family > 1 else (
-        f"alpha {cfg.alpha:g}")
-    lines = [f"Power (80%), simulated on censored steps to {cfg.top:g}: {source}; {what} reliability "
-             f"{100 * rate:.0f}% by the budget of {budget:,.0f} steps, a DNF at the budget; the rank test at {level} "
-             f"and the 95% interval above 1 ({power.DEFAULT_N_SIMS:,} simulated studies each):"]
-    mde = power.detectable_speedup(cfg.seed, n, sd, rate, budget, cfg.alpha, family)
-    if comparisons:
-        shown = f"{', '.join(comparisons[:4])}{', ...' if len(comparisons) > 4 else ''}"
-        lines.append(f"- each of {len(comparisons)} comparison(s) at {n} seeds per arm detects a speedup of "
-                     + (f"{mde:.2f}x or more ({shown})." if math.isfinite(mde) else
-                        f"none up to 4x: the budget censors too many seeds ({shown})."))
-    need = {s: power.seeds_for_speedup(cfg.seed, s, sd, rate, budget, cfg.alpha, family, n_sims=500, most=120)
-            for s in (1.2, 1.3)}
-    lines.append("- " + "; ".join(f"a {s:g}x speedup needs {v} seeds per arm" if v is not None
-                                  else f"a {s:g}x speedup needs more than 120 seeds per arm" for s, v in need.items())
-                 + " (500 simulated studies each).")
-    needed = censored.seeds_for_reliability(1.0, rate, cfg.alpha) if rate < 1 else None
-    lines.append(f"- reliability, 100% against {what} {100 * rate:.0f}% (Fisher exact, alpha {cfg.alpha:g}): power "
-                 f"{censored.fisher_power(1.0, rate, n, cfg.alpha):.2f} at {n} seeds per arm"
-                 + (f"; {needed} seeds per arm give 80%." if needed else "."))
+    level = (f"alpha {cfg.alpha:g} / {family} (Holm's first step over the family of {family} comparisons: "
+             f"{len(comparisons)} arm pairs and {len(controls)} controls)" if family > 1 else f"alpha {cfg.alpha:g}")
+    lines = [f"Power (80%) per comparison, simulated on censored steps to {cfg.top:g} "
+             f"({power.DEFAULT_N_SIMS:,} simulated studies each): the comparison's reference arm's steps fitted as "
+             f"a log-normal with its DNFs right-censored at the budget ({budget:,.0f} steps); the rank test at {level} "
+             "and the 95% interval above 1. Effects are ratios of restricted mean steps (a DNF at the budget), the "
+             "tables' unit, with the median ratio each corresponds to:"]
+    main = per_seed[per_seed["variant"] == ""] if per_seed is not None and len(per_seed) else None
+    if main is None or not len(main):
+        rate, sd = 0.6, DEFAULT_SD_LOG
+        mde = power.detectable_speedup(cfg.seed, n, sd, rate, budget, cfg.alpha, family)
+        mu = math.log(power.reference_median(rate, sd, budget, n))
+        ratio = f"{power.restricted_ratio(mu, sd, budget, mde):.2f}x" if math.isfinite(mde) else "none up to 4x"
+        lines.append(f"- no run has finished: assuming an sd of log steps of {DEFAULT_SD_LOG} and the paper's "
+                     f"baseline reliability 60% for every reference, each of the {family} comparison(s) at {n} seeds "
+                     f"per arm detects a restricted-mean ratio of {ratio}"
+                     + (f" (a median ratio of {mde:.2f}x)." if math.isfinite(mde) else "."))
+        return lines
+    key, hit = f"steps_{cfg.top:g}", f"reached_{cfg.top:g}"
+    regimes = list(dict.fromkeys(main["regime"]))
+    for regime in regimes:
+        rows = main[main["regime"] == regime]
+        where = f" [{regime}]" if len(regimes) > 1 else ""
+        for a, b in comparisons:
+            ref = rows[rows["arm"] == b].drop_duplicates("run_id")
+            if not len(ref):
+                lines.append(f"- {a} vs {b}{where}: no finished run of {b} yet.")
+                continue
+            reached = int(ref[hit].sum())
+            fit = power.fit_censored_lognormal(ref[key].to_numpy(dtype=float), ref["budget"].to_numpy(dtype=float))
+            rate = reached / len(ref)
+            fisher = (f"; reliability 100% against its {100 * rate:.0f}%: Fisher power "
+                      f"{censored.fisher_power(1.0, rate, n, cfg.alpha):.2f}" if rate < 1 else "")
+            if fit is None:
+                lines.append(f"- {a} vs {b}{where}: {b} reached {cfg.top:g} on {reached}/{len(ref)} seeds, too few "
+                             f"finishes to fit a spread: no speedup power stated{fisher}.")
+                continue
+            mu, sd = fit
+            fitted = float(sps_norm_cdf((math.log(budget) - mu) / sd))
+            mde = power.detectable_speedup(cfg.seed, n, sd, fitted, budget, cfg.alpha, family)
+            if math.isfinite(mde):
+                rm_ratio = power.restricted_ratio(mu, sd, budget, mde)
+                effect = f"a restricted-mean ratio of {rm_ratio:.2f}x or more (a median ratio of {mde:.2f}x)"
+            else:
+                effect = "no speedup up to a median ratio of 4x (the budget censors too many seeds)"
+            lines.append(f"- {a} vs {b}{where}: {b}'s fit: median {math.exp(mu):,.0f} steps, sd of log steps "
+                         f"{sd:.2f}, reliability {100 * fitted:.0f}% (observed {reached}/{len(ref)}); at {n} seeds per "
+                         f"arm it detects {effect}{fisher}.")
     return lines
+
+
+def sps_norm_cdf(z: float) -> float:
+    """The standard normal's distribution function (scipy's, imported when a power line is drawn)."""
+    from scipy import stats as sps
+
+    return float(sps.norm.cdf(z))
 
 
 def _probe_variants(cfg: StudyConfig) -> dict[str, float]:
