@@ -101,3 +101,17 @@ def test_bad_input_says_what_is_allowed() -> None:
         check_method("bonferroni")
     with pytest.raises(ValueError, match=r"\[0, 1\]"):
         adjust([0.2, 1.5])
+
+
+def test_a_family_too_large_for_its_seeds_is_said_to_be_unreachable() -> None:
+    from math import comb
+
+    from vlmrl_cli.analysis.multiplicity import reach_line, seeds_to_reach, smallest_exact_p
+
+    assert smallest_exact_p(5, 5) == 2 / comb(10, 5) == 2 / 252
+    line = reach_line("holm", 12, 5, 5)
+    assert line is not None and "2/252" in line and "0.05/12" in line and "at least 6 seeds" in line
+    assert reach_line("holm", 12, 10, 10) is None  # 2/184756 passes 0.05/12
+    assert reach_line("holm", 1, 5, 5) is None  # 0.0079 < 0.05 on its own
+    n = seeds_to_reach(12)
+    assert n is not None and smallest_exact_p(n, n) < 0.05 / 12 <= smallest_exact_p(n - 1, n - 1)

@@ -16,6 +16,7 @@ functions are pure.
 
 from __future__ import annotations
 
+import math
 from typing import Literal, get_args
 
 import numpy as np
@@ -89,3 +90,55 @@ def family_line(method: str, size: int, what: str) -> str:
         'The speedups form one family of 17 tests, adjusted by Benjamini-Hochberg (false discovery rate)'
     """
     return f"{what} form one family of {size} test{'s' if size != 1 else ''}, adjusted by {NAMES[check_method(method)]}"
+
+
+def smallest_exact_p(n_a: int, n_b: int) -> float:
+    """The smallest two-sided p an exact rank test of ``n_a`` against ``n_b`` seeds can give: every
+    seed of one arm ahead of every seed of the other, one split of ``C(n_a + n_b, n_a)`` on each side.
+
+    Example:
+        >>> smallest_exact_p(5, 5) == 2 / 252
+        True
+    """
+    return min(1.0, 2.0 / math.comb(n_a + n_b, n_a))
+
+
+def seeds_to_reach(size: int, alpha: float = 0.05, most: int = 100) -> int | None:
+    """The fewest seeds per arm at which the smallest exact p passes Holm's first step
+    (``alpha / size``); None above ``most``.
+
+    Example:
+        >>> seeds_to_reach(12), seeds_to_reach(1)
+        (6, 4)
+    """
+    for n in range(2, most + 1):
+        if smallest_exact_p(n, n) < alpha / max(1, size):
+            return n
+    return None
+
+
+def reach_line(method: str, size: int, n_a: int, n_b: int, alpha: float = 0.05) -> str | None:
+    """Whether a family of ``size`` exact rank tests at ``n_a`` vs ``n_b`` seeds can give any adjusted
+    p below ``alpha`` at all (None when it can: nothing to warn about).
+
+    Example:
+        >>> print(reach_line("holm", 12, 5, 5))  # doctest: +NORMALIZE_WHITESPACE
+        At 5 vs 5 seeds the rank test's smallest exact two-sided p is 2/252 = 0.0079;
+        Holm's first step compares it with 0.05/12 = 0.0042, so no test of this family can reach an
+        adjusted p below 0.05 whatever the data, and no speedup can be called faster: that takes at
+        least 6 seeds per arm (2/924 = 0.0022).
+    """
+    method = check_method(method)
+    p_min = smallest_exact_p(n_a, n_b)
+    level = alpha / size if method == "holm" else alpha  # BH's smallest adjusted p can equal the smallest raw p
+    if p_min < level or size < 1:
+        return None
+    need = seeds_to_reach(size if method == "holm" else 1, alpha)
+    total = math.comb(n_a + n_b, n_a)
+    step = f"Holm's first step compares it with {alpha:g}/{size} = {alpha / size:.2g}" if method == "holm" else (
+        f"it is not below {alpha:g} even unadjusted")
+    more = (f": that takes at least {need} seeds per arm (2/{math.comb(2 * need, need)} = "
+            f"{smallest_exact_p(need, need):.2g})" if need else "")
+    return (f"At {n_a} vs {n_b} seeds the rank test's smallest exact two-sided p is 2/{total} = {p_min:.2g}; {step}, "
+            f"so no test of this family can reach an adjusted p below {alpha:g} whatever the data, and no speedup "
+            f"can be called faster{more}.")

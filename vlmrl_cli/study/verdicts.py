@@ -52,8 +52,8 @@ def map_pairs(registry: Mapping[str, ArmSpec] = ARMS) -> tuple[tuple[str, str, s
     ``registry`` that the study makes (``Comparison.in_study``), in the report's order.
 
     Example:
-        >>> [f"{a}_vs_{b}" for a, b, _ in map_pairs()][-1]
-        'kinematic_vs_baseline'
+        >>> [f"{a}_vs_{b}" for a, b, _ in map_pairs()][-3:]
+        ['kinematic_vs_baseline', 'hybrid-dense-pbrs_vs_baseline', 'hybrid-dense-pbrs_vs_hybrid']
     """
     return tuple(comparisons(registry, study=True))
 
@@ -263,7 +263,15 @@ def family_size(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[
 
 def format_speedup(row: dict[str, Any], key: str) -> str:
     """``1.40x [1.10, 1.80], p = 0.01 (adj. 0.05); log-rank p = 0.02 (adj. 0.08) (faster)`` from a
-    map row; a note where the rank test and the log-rank disagree after adjustment."""
+    map row; a note where the rank test and the log-rank disagree after adjustment. Where neither arm
+    reached the threshold no test says anything (every seed ties as a DNF): no p is printed.
+
+    Example:
+        >>> format_speedup({"s.verdict": NEITHER, "s.p": 1.0}, "s")
+        '— (no test: every seed of both arms is a DNF at the budget) (neither arm reaches the threshold)'
+    """
+    if row.get(f"{key}.verdict") == NEITHER:
+        return f"— (no test: every seed of both arms is a DNF at the budget) ({NEITHER})"
     value = row.get(f"{key}.speedup", math.nan)
     text = f"{value:.2f}x" if math.isfinite(value) else "—"
     low, high = row.get(f"{key}.low", math.nan), row.get(f"{key}.high", math.nan)
