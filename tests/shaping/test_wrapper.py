@@ -99,6 +99,31 @@ def test_episode_end_infos_monitor_is_native_and_success_means_terminated(name: 
     env.close()
 
 
+@pytest.mark.parametrize("name", ["baseline", "hybrid"])
+def test_is_success_is_the_given_rule_on_the_episode_length_the_wrapper_counts(name: str) -> None:
+    calls: list[tuple[bool, int]] = []
+
+    def rule(terminated: bool, length: int) -> bool:
+        calls.append((terminated, length))
+        return length % 2 == 0  # any rule at all: the wrapper asks it, and nothing else
+
+    arm, cfg = ARMS[name], ShapingConfig()
+    camera = Camera(cfg.render_quantum) if arm.uses_vlm else None
+    oracle = mc_oracle(sim_client(), cfg, arm.potential, rbf=arm.rbf) if arm.uses_vlm else None
+    env = HybridReward(Monitor(gym.make("MountainCar-v0")), arm, cfg, GAMMA, MC_SCENE, camera=camera, oracle=oracle,
+                       horizon=200, success=rule)
+    for policy in (momentum_policy, lambda obs: 1, momentum_policy):  # goal, time limit, goal after a reset
+        obs, _ = env.reset(seed=1)
+        done = False
+        while not done:
+            obs, _, term, trunc, info = env.step(policy(obs))
+            done = term or trunc
+        assert calls[-1] == (term, info["episode"]["l"])  # Monitor's length: the episode's, counted from reset
+        assert info["is_success"] is (info["episode"]["l"] % 2 == 0)
+    assert [t for t, _ in calls] == [True, False, True] and calls[1][1] == 200
+    env.close()
+
+
 def test_the_hybrid_reward_is_eq2() -> None:
     cfg = ShapingConfig()
     env = wrap(ARMS["hybrid"], cfg)

@@ -16,8 +16,10 @@ def test_completed_episodes_become_native_and_shaped_records() -> None:
     events: list[ProgressEvent] = []
     tracker = EpisodeTracker("hybrid-s0", total=1000, progress=events.append, interval_s=0.0)
     _step(tracker, 16, [{}, {}])
-    _step(tracker, 32, [{"episode": {"r": -200.0, "l": 200}, "is_success": False, "shaped_return": 35.5}, {}])
-    _step(tracker, 48, [{}, {"episode": {"r": -150.0, "l": 150}, "is_success": True, "shaped_return": 80.0}])
+    _step(tracker, 32, [{"episode": {"r": -200.0, "l": 200}, "TimeLimit.truncated": True, "shaped_return": 35.5},
+                        {}])
+    _step(tracker, 48, [{}, {"episode": {"r": -150.0, "l": 150}, "TimeLimit.truncated": False,
+                             "shaped_return": 80.0}])
     assert [e["timestep"] for e in tracker.episodes] == [32.0, 48.0]
     assert [e["episode/native_return"] for e in tracker.episodes] == [-200.0, -150.0]
     assert [e["episode/success"] for e in tracker.episodes] == [0.0, 1.0]
@@ -61,7 +63,7 @@ def test_rollout_end_logs_the_mean_native_return_of_the_last_100_episodes() -> N
     assert figures["rollout/return_100"] == sum(range(-150, -50)) / 100  # episodes 50..149 only
 
 
-def test_without_is_success_the_tasks_own_rule_decides() -> None:
+def test_the_tasks_own_rule_decides() -> None:
     from vlmrl_cli.tasks.registry import get_task
 
     acrobot, car = get_task("acrobot"), get_task("mountain-car")
@@ -74,3 +76,14 @@ def test_without_is_success_the_tasks_own_rule_decides() -> None:
     on_car = EpisodeTracker("baseline-s0", total=1_000, success=car.success)
     _step(on_car, 300, long_finish)  # past MountainCar-v0's 200-step limit: not a success there
     assert on_car.episodes[0]["episode/success"] == 0.0
+
+
+def test_an_is_success_in_the_infos_does_not_overrule_the_tasks_rule() -> None:
+    """One rule: the tracker applies the task's, whatever another wrapper wrote as is_success."""
+    from vlmrl_cli.tasks.registry import get_task
+
+    car = get_task("mountain-car")
+    tracker = EpisodeTracker("baseline-s0", total=1_000, success=car.success)
+    _step(tracker, 200, [{"episode": {"r": -200.0, "l": 200}, "TimeLimit.truncated": True, "is_success": True}])
+    _step(tracker, 320, [{"episode": {"r": -120.0, "l": 120}, "is_success": False}])
+    assert [e["episode/success"] for e in tracker.episodes] == [0.0, 1.0]

@@ -12,6 +12,7 @@ from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.semantic import SemanticOracle
 from vlmrl_cli.shaping.wrapper import HybridReward
+from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
 from vlmrl_cli.training.envs import make_train_env
 from vlmrl_cli.training.presets import preset_of
@@ -139,3 +140,55 @@ def test_a_float_observation_is_left_as_it_is() -> None:
         env = env.env
     assert venv.observation_space == MOUNTAIN_CAR.make_env().observation_space
     venv.close()
+
+
+def _survived(terminated: bool, length: int) -> bool:
+    """A rule of another kind of task: lasting the whole time limit is the success."""
+    return not terminated and length >= MOUNTAIN_CAR.max_steps
+
+
+SURVIVE_TASK = dataclasses.replace(MOUNTAIN_CAR, name="survive-car", success_rule=_survived)
+
+
+def _push(obs: np.ndarray) -> int:
+    """Push in the direction of motion: MountainCar's goal in about 120 steps."""
+    return 2 if obs[1] >= 0 else 0
+
+
+def _idle(obs: np.ndarray) -> int:
+    return 1  # no push: the time limit ends it
+
+
+@pytest.mark.parametrize(("task", "expected"), [(MOUNTAIN_CAR, [True, False]), (SURVIVE_TASK, [False, True])],
+                         ids=["built-in-rule", "own-rule"])
+@pytest.mark.parametrize("arm", ["baseline", "hybrid"])
+def test_the_tasks_success_rule_decides_the_wrapper_the_tracker_and_the_evaluation(
+        task: Task, expected: list[bool], arm: str) -> None:
+    """One rule: ``is_success`` of the training env, the tracked ``episode/success`` and the
+    detached evaluation's successes are all the task's, for the goal (push) and the time limit (idle)."""
+    from vlmrl_cli.training.callbacks import EpisodeTracker
+    from vlmrl_cli.training.evaluation import evaluate_detached
+
+    preset = dataclasses.replace(SMOKE, n_envs=1, normalize_obs=False, normalize_reward=False)
+    spec = ARMS[arm]
+    venv, _ = make_train_env(spec, preset, ShapingConfig(), sim_client() if spec.uses_vlm else None, seed=0,
+                             task=task)
+    tracker = EpisodeTracker("rule-s0", total=1_000, success=task.success)
+    ends = []
+    obs = np.asarray(venv.reset())
+    for policy in (_push, _idle):
+        while True:
+            step_obs, _, dones, infos = venv.step(np.array([policy(obs[0])]))
+            obs = np.asarray(step_obs)
+            if dones[0]:
+                ends.append(infos[0])
+                tracker.num_timesteps += int(infos[0]["episode"]["l"])
+                tracker.locals = {"infos": infos}
+                tracker._on_step()
+                break
+    venv.close()
+    assert [info["episode"]["l"] < task.max_steps for info in ends] == [True, False]  # the goal, then the limit
+    assert [info["is_success"] for info in ends] == expected
+    assert [e["episode/success"] for e in tracker.episodes] == [float(ok) for ok in expected]
+    detached = [evaluate_detached(policy, 1, 0, task).successes.tolist() for policy in (_push, _idle)]
+    assert detached == [[float(ok)] for ok in expected]

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -13,7 +16,9 @@ from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
 from vlmrl_cli.tasks.mountain_car.camera import Camera
 from vlmrl_cli.tasks.mountain_car.geometry import Zone
-from vlmrl_cli.training.evaluate_trained import EvaluateConfig, label_frames, play_episode
+from vlmrl_cli.training.config import EVAL_SEED
+from vlmrl_cli.training.evaluate_trained import EvaluateConfig, _summary, label_frames, play_episode
+from vlmrl_cli.training.evaluation import evaluate_detached
 from vlmrl_cli.training.trained import TrainedRun
 from vlmrl_cli.vlm.config import VLMConfig
 
@@ -72,3 +77,20 @@ def test_bad_settings_are_bad_input(kwargs: dict[str, object], words: str) -> No
     cfg = EvaluateConfig(**{"run_id": "r", **kwargs})  # type: ignore[arg-type]
     with pytest.raises(BadInput, match=words):
         cfg.validate()
+
+
+@pytest.mark.parametrize("own_rule", [False, True])
+def test_the_gifs_success_is_the_tasks_rule_as_the_detached_evaluations(own_rule: bool, tmp_path: Path) -> None:
+    """An idle car never reaches the flag: a failure by MountainCar's rule, a success by a task's
+    own rule that counts lasting the time limit."""
+    task = (dataclasses.replace(MOUNTAIN_CAR, name="survive-car",
+                                success_rule=lambda terminated, length: not terminated and length >= 200)
+            if own_rule else MOUNTAIN_CAR)
+    run = dataclasses.replace(_run("baseline"), policy=lambda obs: 1, task=task)
+    cfg = EvaluateConfig("r", episodes=1, frame_every=50, use_cache=False)
+    result = evaluate_detached(run.policy, 1, EVAL_SEED, task)
+    steps = play_episode(run.policy, EVAL_SEED, run.shaping, task, cfg.frame_every)
+    shown = [s for s in steps if s.pixels is not None]
+    figures = _summary(run, result, cfg, steps, shown, None, tmp_path / "episode-0.gif")
+    assert steps[-1].t == 200 and not steps[-1].terminated
+    assert figures["gif"]["success"] is own_rule and figures["successes"] == [own_rule]

@@ -19,6 +19,22 @@ from vlmrl_cli.shaping.camera import FrameView
 #: observation only (``ShapingConfig.kin_scale`` and ``kin_offset``).
 DenseTerm = Callable[[np.ndarray, float, float], float]
 
+#: ``success(terminated, length)``: whether an episode that ended after ``length`` steps
+#: succeeded, ``terminated`` telling an end the env itself made (its goal) from a time-limit cut.
+#: A task's rule is ``Task.success``; the reward wrapper, the training callback and the detached
+#: evaluation all take that one.
+SuccessRule = Callable[[bool, int], bool]
+
+
+def ended_by_env(terminated: bool, length: int) -> bool:
+    """The success rule where no task gives one: the env itself ended the episode, at any length.
+
+    Example:
+        >>> ended_by_env(True, 5_000), ended_by_env(False, 10)
+        (True, False)
+    """
+    return bool(terminated)
+
 
 class SceneCamera(Protocol):
     """A run's camera: the one component that reads the simulator (``sim``, the unwrapped env)

@@ -12,7 +12,7 @@ from vlmrl_cli.shaping.arms import ArmSpec
 from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.pbrs import pbrs_term
-from vlmrl_cli.shaping.scene import Scene, SceneCamera
+from vlmrl_cli.shaping.scene import Scene, SceneCamera, SuccessRule, ended_by_env
 from vlmrl_cli.shaping.semantic import EpisodePotential, SemanticOracle
 
 
@@ -25,8 +25,8 @@ class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.Reco
     (exteroception), whose ``FrameView`` is all the
     ``oracle`` ever gets. Every step puts the env's own reward in ``info["native_reward"]``;
     the last step of an episode adds ``info["shaped_return"]`` (the sum of ``R_total``) and
-    ``info["is_success"]`` (terminated at the goal, not truncated by the time limit). An arm
-    without shaping (``baseline``) passes rewards through and still adds these keys.
+    ``info["is_success"]`` (``success(terminated, length)``, the episode's length counted here).
+    An arm without shaping (``baseline``) passes rewards through and still adds these keys.
 
     Args:
         env: an env of ``scene``'s task.
@@ -39,6 +39,8 @@ class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.Reco
             then paid as ``gamma Phi_kin(s') - Phi_kin(s)`` with ``Phi_kin = horizon x R_kin``
             (what Eq. 1 would pay for staying in ``s`` a whole episode, so both forms have the
             same largest episode total; 0 at a terminal state, as ``pbrs_term`` does).
+        success: the task's success rule (``Task.success``); None: the env itself ended the
+            episode (``scene.ended_by_env``), at any length.
 
     Example:
         >>> import gymnasium as gym
@@ -64,9 +66,11 @@ class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.Reco
         camera: SceneCamera | None = None,
         oracle: SemanticOracle | None = None,
         horizon: int | None = None,
+        success: SuccessRule | None = None,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
-            self, arm=arm, shaping=shaping, gamma=gamma, camera=camera, oracle=oracle, scene=scene, horizon=horizon
+            self, arm=arm, shaping=shaping, gamma=gamma, camera=camera, oracle=oracle, scene=scene, horizon=horizon,
+            success=success,
         )
         gym.Wrapper.__init__(self, env)
         shape = getattr(env.observation_space, "shape", None)
@@ -103,6 +107,8 @@ class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.Reco
         self._horizon = float(horizon or 0)
         self._phi_kin = 0.0
         self._return = 0.0
+        self.success = success if success is not None else ended_by_env
+        self._length = 0
 
     @property
     def potential(self) -> float:
@@ -124,6 +130,7 @@ class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.Reco
     ) -> tuple[np.ndarray, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
         self._return = 0.0
+        self._length = 0
         if self.arm.dense_potential:
             self._phi_kin = self._horizon * self._dense(obs, self.shaping.kin_scale, self.shaping.kin_offset)
         self._phi = self._episode.reset(self._view()) if self._episode is not None else 0.0
@@ -145,11 +152,12 @@ class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.Reco
             reward += pbrs_term(self._phi, phi_next, self.gamma, self.shaping.alpha, terminated)
             self._phi = phi_next
         self._return += reward
+        self._length += 1
         info = dict(info)
         info["native_reward"] = float(native)
         if terminated or truncated:
             info["shaped_return"] = self._return
-            info["is_success"] = bool(terminated)
+            info["is_success"] = bool(self.success(bool(terminated), self._length))
         return obs, reward, terminated, truncated, info
 
     def close(self) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import os
 import signal
 import tempfile
 import time
@@ -49,11 +50,14 @@ Body = Callable[[TrainJob, Any, str, Channels], JobResult]
 
 
 def init_worker(progress: Any, stop: Any, ignore_sigint: bool = True) -> None:
-    """Worker set-up: single-threaded torch, Ctrl-C left to the sweep, channels kept (the pool's
-    initializer; Ray tasks call it before each job)."""
+    """Worker set-up: single-threaded torch, Ctrl-C left to the sweep, a headless video driver
+    (SDL's dummy one unless the process has one), channels kept (the pool's initializer; Ray tasks
+    call it before each job)."""
     import torch
 
     torch.set_num_threads(1)
+    # the cameras render through gymnasium's rgb_array mode, whose pygame.display.init() needs a driver
+    os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     if ignore_sigint:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     _channels.progress = progress

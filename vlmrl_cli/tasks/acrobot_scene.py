@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import bisect
 import math
-import os
 from typing import Any
 
 import numpy as np
@@ -114,7 +113,6 @@ class AcrobotRenderer:
     def __init__(self) -> None:
         import gymnasium as gym
 
-        os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # harmless for rgb_array, needed by some SDL builds
         self._env: Any = gym.make("Acrobot-v1", render_mode="rgb_array").unwrapped
         self._env.reset(seed=0)
 

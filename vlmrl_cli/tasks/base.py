@@ -13,7 +13,6 @@ A user's own task is a ``Task`` value in the user's code, loaded by ``--task pac
 from __future__ import annotations
 
 import dataclasses
-import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -24,7 +23,7 @@ import numpy as np
 from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.shaping.config import ShapingConfig, label_problem
 from vlmrl_cli.shaping.scales import TaskScales
-from vlmrl_cli.shaping.scene import Scene, SceneCamera
+from vlmrl_cli.shaping.scene import Scene, SceneCamera, SuccessRule
 from vlmrl_cli.vlm.prompts import Milestones, NumberQuestions
 from vlmrl_cli.vlm.sim import MilestoneReader, NumberReader
 
@@ -61,7 +60,8 @@ class Task:
         reader: the simulated VLM's pixel reader (a ``NumberReader`` also answers ``numbers``).
         feature_dim: the size of the camera's frame features (``shaping.features.feature_dim``).
         thresholds: reward thresholds of reports (rolling mean native return), lowest first.
-        max_steps: the time limit; an episode succeeds when it terminates (``success``).
+        max_steps: the time limit; by default an episode succeeds when it terminates within it
+            (``success``).
         presets: PPO presets as ``PPOConfig`` keyword arguments; at least ``zoo`` and ``smoke``.
         default_preset: the preset a run takes when none is named.
         zoo_reference: rl-baselines3-zoo's published PPO result for the env, cited.
@@ -99,6 +99,10 @@ class Task:
             scales (``ShapingConfig``'s defaults, alpha 5 and kin_scale 2).
         wrap: observation wrappers ``make_env`` puts around ``gym.make(env_id)`` (a grid world's
             Dict observation flattened for an MLP policy); None: the env as gymnasium makes it.
+        success_rule: ``rule(terminated, length)``, whether an episode that ended after ``length``
+            steps (``terminated``: the env ended it, not the time limit) succeeded; the one rule of
+            training's ``is_success`` and episode records and of every evaluation (``success``).
+            None: it terminated within ``max_steps`` (every built-in task).
     """
 
     name: str
@@ -135,6 +139,7 @@ class Task:
     # cost estimate's figure before a store has timed any run of it (None: MountainCar-v0's repro).
     step_seconds: float | None = None
     scales: TaskScales | None = None
+    success_rule: SuccessRule | None = None
 
     @property
     def auc_margin(self) -> float:
@@ -172,10 +177,11 @@ class Task:
             raise ValueError(f"task '{self.name}': its study preset '{self.study_preset}' is not one of its presets")
 
     def make_env(self, render_mode: str | None = None) -> gym.Env[Any, Any]:
-        """A fresh env of this task (``gym.make(env_id)``, the time limit included); a rendering
-        one draws headless (SDL's dummy video driver unless one is set)."""
-        if render_mode is not None:
-            os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+        """A fresh env of this task (``gym.make(env_id)``, the time limit included).
+
+        ``render_mode="rgb_array"`` draws off screen and needs no display; the process chooses its
+        video driver where it starts (``vlmrl``'s entry point and the sweep's workers set SDL's
+        dummy one), never here."""
         env = gym.make(self.env_id, render_mode=render_mode, **dict(self.env_kwargs))
         return env if self.wrap is None else self.wrap(env)
 
@@ -190,7 +196,19 @@ class Task:
         return self.position is not None
 
     def success(self, terminated: bool, length: int) -> bool:
-        """The one success rule: the episode terminated (goal reached) within the time limit."""
+        """The one success rule of this task: its ``success_rule``, by default the episode
+        terminated (goal reached) within the time limit.
+
+        Example:
+            >>> from vlmrl_cli.tasks.registry import get_task
+            >>> car = get_task("mountain-car")
+            >>> car.success(True, 120), car.success(True, 201), car.success(False, 200)
+            (True, False, False)
+            >>> dataclasses.replace(car, success_rule=lambda terminated, length: length >= 150).success(False, 200)
+            True
+        """
+        if self.success_rule is not None:
+            return bool(self.success_rule(bool(terminated), int(length)))
         return bool(terminated) and length <= self.max_steps
 
     def shaping_for(self, shaping: ShapingConfig) -> ShapingConfig:

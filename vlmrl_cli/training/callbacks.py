@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from vlmrl_cli.shaping.scene import SuccessRule, ended_by_env
 from vlmrl_cli.tracking import schema
 from vlmrl_cli.tracking.store import BatchLogger
 from vlmrl_cli.training.events import ProgressEvent
@@ -21,8 +22,10 @@ class EpisodeTracker(BaseCallback):
     (``rollout/return_100``), VLM and throughput figures; and sends progress.
 
     ``should_stop`` is polled every step; when it returns True training ends cleanly. ``success`` is
-    the task's rule (``Task.success(terminated, length)``), used where the env stack reports no
-    ``is_success``; without it an episode succeeds when the env itself ended it.
+    the task's rule (``Task.success(terminated, length)``, the one ``HybridReward`` writes as
+    ``is_success``), applied to every episode here, on Monitor's length and on SB3's
+    ``TimeLimit.truncated`` (an episode the env ended itself is terminated), so that no other rule
+    in the env stack decides; without it an episode succeeds when the env itself ended it.
     """
 
     def __init__(
@@ -34,7 +37,7 @@ class EpisodeTracker(BaseCallback):
         should_stop: Callable[[], bool] | None = None,
         vlm_stats: Callable[[], dict[str, float]] | None = None,
         interval_s: float = 0.5,
-        success: Callable[[bool, int], bool] | None = None,
+        success: SuccessRule | None = None,
     ) -> None:
         super().__init__(verbose=0)
         self.job = job
@@ -44,7 +47,7 @@ class EpisodeTracker(BaseCallback):
         self.should_stop = should_stop
         self.vlm_stats = vlm_stats
         self.interval_s = interval_s
-        self.success = success if success is not None else (lambda terminated, length: bool(terminated))
+        self.success = success if success is not None else ended_by_env
         self.episodes: list[dict[str, float]] = []
         self.recent: deque[float] = deque(maxlen=100)
         self.stopped = False
@@ -64,10 +67,8 @@ class EpisodeTracker(BaseCallback):
             record = {
                 schema.METRIC_NATIVE_RETURN: float(ep["r"]),
                 schema.METRIC_LENGTH: float(length),
-                # HybridReward reports is_success on every arm; without it, SB3's TimeLimit.truncated tells
-                # a time-limit cut from the env's own end
-                schema.METRIC_SUCCESS: float(info.get("is_success", self.success(
-                    not info.get("TimeLimit.truncated", False), length))),
+                # SB3's VecEnvs mark a time-limit cut (truncated, not terminated) as TimeLimit.truncated
+                schema.METRIC_SUCCESS: float(self.success(not info.get("TimeLimit.truncated", False), length)),
                 schema.METRIC_SHAPED_RETURN: float(info.get("shaped_return", ep["r"])),
             }
             self.episodes.append({"timestep": float(self.num_timesteps), **record})

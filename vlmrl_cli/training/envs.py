@@ -31,13 +31,13 @@ def make_train_env(
     A ``shaping`` that names no label map takes the task's (``Task.shaping_for``).
 
     Per env: ``task.make_env()`` -> ``Monitor`` (SB3's episode stats are the NATIVE
-    return and length) -> ``HybridReward`` (the arm's reward; a pass-through adding the info
-    keys for ``baseline``). Then ``DummyVecEnv`` of ``preset.n_envs`` (one process, so the
-    camera and oracle are shared by all envs) -> ``VecNormalize`` (observations if
-    ``ppo.normalize_obs``, rewards if ``ppo.normalize_reward``, with the learner's gamma; no
-    wrapper when both are off). Env ``i`` is seeded ``seed + i``. A placebo arm's oracle maps
-    labels through ``placebo.oracle_shaping`` (the label map shuffled by ``seed``). The PBRS discount is
-    ``shaping.gamma``, or ``ppo.gamma`` when that is None.
+    return and length) -> ``HybridReward`` (the arm's reward and ``is_success`` by the task's rule,
+    ``task.success``; a pass-through adding the info keys for ``baseline``). Then ``DummyVecEnv`` of
+    ``preset.n_envs`` (one process, so the camera and oracle are shared by all envs) ->
+    ``VecNormalize`` (observations if ``ppo.normalize_obs``, rewards if ``ppo.normalize_reward``,
+    with the learner's gamma; no wrapper when both are off). Env ``i`` is seeded ``seed + i``. A
+    placebo arm's oracle maps labels through ``placebo.oracle_shaping`` (the label map shuffled by
+    ``seed``). The PBRS discount is ``shaping.gamma``, or ``ppo.gamma`` when that is None.
     """
     if arm.uses_vlm and client is None:
         raise ValueError(f"arm '{arm.name}' queries a VLM; pass a VLMClient (e.g. the simulated one).")
@@ -54,7 +54,7 @@ def make_train_env(
         env: gym.Env = as_float(task.make_env())
         env = Monitor(env)
         return HybridReward(env, arm, shaping, gamma, task.scene, camera=camera, oracle=oracle,
-                            horizon=task.max_steps)
+                            horizon=task.max_steps, success=task.success)
 
     fns: list[Callable[[], gym.Env]] = [make_one] * ppo.n_envs
     venv: VecEnv = DummyVecEnv(fns)

@@ -304,7 +304,7 @@ def _summary(
         "successes": [bool(ok) for ok in result.successes],
         "gif": {"file": gif.name, "episode_index": cfg.episode_index, "seed": EVAL_SEED + cfg.episode_index,
                 "frames": len(shown), "frame_every": cfg.frame_every, "width": cfg.width, "length": last.t,
-                "native_return": last.native_return, "success": last.terminated},
+                "native_return": last.native_return, "success": task.success(last.terminated, last.t)},
         "frames": frames,
     })
     return figures

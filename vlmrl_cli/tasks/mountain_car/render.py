@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from typing import Any
 
 import numpy as np
@@ -27,7 +26,6 @@ class FrameRenderer:
     def __init__(self, env_id: str = "MountainCar-v0") -> None:
         import gymnasium as gym
 
-        os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # harmless for rgb_array, needed by some SDL builds
         # env_id: MountainCar-v0 or MountainCarContinuous-v0 (same track and car, its flag at 0.45)
         self._env: Any = gym.make(env_id, render_mode="rgb_array").unwrapped
         self._env.reset(seed=0)
