@@ -63,3 +63,15 @@ def test_a_ctrl_c_in_a_finalizer_is_not_printed_and_other_unraisables_are(monkey
     other = types.SimpleNamespace(exc_value=ValueError("x"))
     _unraisable(other)
     assert seen == [other]
+
+
+def test_the_preset_help_states_the_tasks_own_default(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    for command in ("run", "calibrate"):
+        text = " ".join(CliRunner().invoke(app, [command, "--help"]).stdout.split())
+        assert "[default: the task's default preset; mountain-car's is paper]" in text, command
+        assert "[default: paper]" not in text and "e.g. zoo" not in text, command
+    # and that is what a run does: Acrobot's default preset is its own zoo
+    uri = f"sqlite:///{tmp_path / 'm.db'}"
+    dry = CliRunner().invoke(app, ["run", "--task", "acrobot", "--dry-run", "--tracking-uri", uri])
+    assert dry.exit_code == 0 and 'preset = "zoo"' in dry.stdout, dry.output
+    assert not list(tmp_path.iterdir())

@@ -1,9 +1,11 @@
-"""`vlmrl evaluate` end to end on a smoke hybrid run, and SB3's diagnostics in that run."""
+"""`vlmrl evaluate` end to end on a smoke hybrid run, and SB3's diagnostics in that run; the order of
+its output on a stand-in result."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 from mlflow.tracking import MlflowClient
@@ -12,7 +14,7 @@ from typer.testing import CliRunner
 
 from vlmrl_cli.cli.app import app
 
-pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
+slow = pytest.mark.slow  # the tests of a trained run
 
 runner = CliRunner()
 
@@ -42,12 +44,13 @@ def _evaluate(root: Path, *args: str):  # type: ignore[no-untyped-def]
                                "--cache-path", str(root / "cache.sqlite")])
 
 
+@slow
 def test_evaluate_writes_a_captioned_gif_and_logs_it_to_the_run(trained: tuple[Path, str]) -> None:
     root, run_id = trained
     out = root / "ev"
     result = _evaluate(root, run_id, "--episodes", "3", "--out", str(out))
     assert result.exit_code == 0, result.output + result.stderr
-    assert "SIMULATED VLM" in result.stderr
+    assert result.stdout.startswith("WARNING: SIMULATED VLM")
     assert "success rate" in result.output and "mean length" in result.output
     gif = out / "episode-0.gif"
     with Image.open(gif) as im:
@@ -66,6 +69,7 @@ def test_evaluate_writes_a_captioned_gif_and_logs_it_to_the_run(trained: tuple[P
     assert logged == {"evaluate/episode-0.gif", "evaluate/evaluation.json"}
 
 
+@slow
 def test_the_smoke_run_has_sb3_training_diagnostics(trained: tuple[Path, str]) -> None:
     root, run_id = trained
     client = MlflowClient(tracking_uri=_uri(root))
@@ -87,6 +91,7 @@ def _failed_run(root: Path) -> str:
     return str(run.info.run_id)
 
 
+@slow
 @pytest.mark.parametrize(("case", "words"), [
     ("unknown", "no run"),
     ("failed", "no model.zip"),
@@ -114,6 +119,7 @@ def test_errors_exit_2_with_one_sentence_and_create_no_folder(
     assert not out.exists() and not (tmp_path / "missing").exists()
 
 
+@slow
 def test_a_parent_run_id_names_its_children_and_arm_seed_pick_one(trained: tuple[Path, str]) -> None:
     root, child = trained
     client = MlflowClient(tracking_uri=_uri(root))
@@ -128,3 +134,28 @@ def test_a_parent_run_id_names_its_children_and_arm_seed_pick_one(trained: tuple
     assert child in picked.output
     wrong = _evaluate(root, child, "--arm", "hybrid")
     assert wrong.exit_code == 2 and "drop them" in wrong.stderr
+
+
+@pytest.mark.parametrize(("uses_vlm", "simulated"), [(True, True), (True, False), (False, True)])
+def test_the_simulated_vlm_notice_is_the_first_line_before_any_result(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, uses_vlm: bool, simulated: bool
+) -> None:
+    # it came after the summary lines: printed on stderr, beside results on stdout, it could land anywhere
+    import vlmrl_cli.cli.evaluate as command
+    from vlmrl_cli.training import evaluate_trained
+
+    run = SimpleNamespace(name="hybrid-s0", run_id="0123abcd", arm=SimpleNamespace(name="hybrid", uses_vlm=uses_vlm),
+                          status="FINISHED", simulated=simulated)
+    done = SimpleNamespace(run=run, result=SimpleNamespace(success_rate=0.5, mean_length=150.0, mean_return=-150.0),
+                           gif=tmp_path / "episode-0.gif", frames=10, gif_bytes=2048, summary=tmp_path / "e.json")
+    monkeypatch.setattr(command, "resolve_child", lambda run_id, *_: run_id)
+    monkeypatch.setattr(evaluate_trained, "evaluate_run", lambda cfg: done)
+    result = runner.invoke(app, ["evaluate", "0123abcd", "--episodes", "2"])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()  # stdout and stderr as a terminal shows them
+    if uses_vlm and simulated:
+        assert lines[0] == command.SIMULATED_NOTICE and result.stdout.splitlines()[0] == command.SIMULATED_NOTICE
+        assert lines[1].startswith("run:") and result.output.count("SIMULATED VLM") == 1
+    else:
+        assert lines[0].startswith("run:") and "SIMULATED" not in result.output
+    assert result.stderr == ""

@@ -8,12 +8,17 @@ print the same one line as ours.
 
 from __future__ import annotations
 
+import gzip
+import json
+import shlex
 import tempfile
+import time
 from pathlib import Path
 
 import pytest
 
 from vlmrl_cli.cli.app import cli
+from vlmrl_cli.tracking.transfer import FORMAT, FORMAT_VERSION
 
 #: (command line, a phrase the error line must contain); {tmp} is the test's folder, which holds
 #: a plain file ``file``, so that ``{tmp}/file/x`` cannot be created.
@@ -44,6 +49,19 @@ CASES: list[tuple[str, str]] = [
     ("run --set shaping.kin_scale=-2", "shaping.kin_scale"),
     ("run --set shaping.alpha=nan", "finite number"),
     ("run --set ppo.nenvs=1", "did you mean 'ppo.n_envs'"),
+    # minibatches SB3 would truncate (it only warns) or refuse mid-run (batch_size 1, a rollout of 1)
+    ("run --set ppo.batch_size=3", "does not divide ppo.n_envs x ppo.n_steps (16 x 16 = 256): SB3 would train on a "
+                                   "truncated last minibatch of 1; use a batch_size that divides 256, e.g. 2 or 4"),
+    ("run --set ppo.batch_size=100", "e.g. 64 or 128"),
+    ("run --set ppo.batch_size=1", "ppo.batch_size (1) must be at least 2"),
+    ("run --set ppo.n_envs=1 --set ppo.n_steps=1 --set ppo.batch_size=2", "exceeds ppo.n_envs x ppo.n_steps (1 x 1"),
+    ("run --preset smoke --set ppo.n_steps=1 --set ppo.batch_size=3", "exceeds ppo.n_envs x ppo.n_steps (2 x 1"),
+    ("run --task acrobot --set ppo.batch_size=48", "use a batch_size that divides"),
+    # a --task names a Task or a marked factory; nothing else is called (os.system ran, os.abort killed vlmrl)
+    ("run --task os:system", "is a builtin_function_or_method, not a vlmrl_cli.tasks.base.Task; give a Task, or a "
+                             "function marked @task_factory"),
+    ("run --task os.path:join", "is a function not marked @task_factory"),
+    ("run --task subprocess:Popen", "is a type, not a vlmrl_cli.tasks.base.Task"),
     ("run --set n_envs", "KEY=VALUE"),
     ("run --workers 0", "workers"),
     ("run --timesteps -5", "timesteps"),
@@ -68,6 +86,7 @@ CASES: list[tuple[str, str]] = [
     ("calibrate --grid ppo.n_envs=1,2 --grid ppo.n_envs=4", "ppo.n_envs"),
     ("calibrate --grid ppo.nenvs=1,2", "did you mean 'ppo.n_envs'"),
     ("calibrate --grid ppo.n_envs", "KEY=VALUE"),
+    ("calibrate --grid ppo.batch_size=48,64", "ppo.batch_size (48) does not divide"),
     ("calibrate --out {tmp}/file/out", "output folder"),
     ("calibrate --seeds 0", "seeds"),
     # evaluate
@@ -98,15 +117,13 @@ def _leftovers(root: Path) -> list[str]:
     return sorted(str(p.relative_to(root)) for p in root.rglob("*"))
 
 
-@pytest.mark.parametrize(("line", "needle"), CASES, ids=[line for line, _ in CASES])
-def test_bad_input_exits_2_with_one_line_and_leaves_nothing(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], line: str, needle: str
-) -> None:
-    import shlex
-
+def _refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], line: str,
+             needle: str) -> tuple[str, float]:
+    """Run ``vlmrl LINE`` as the table's cases run; check exit 2, one ``error:`` line holding
+    ``needle`` and nothing left behind; return its stdout and its wall time (seconds)."""
     work, temp = tmp_path / "work", tmp_path / "temp"
     for folder in (work, temp):
-        folder.mkdir()
+        folder.mkdir(exist_ok=True)
     (tmp_path / "file").write_text("not a folder")
     monkeypatch.chdir(work)
     monkeypatch.setattr(tempfile, "tempdir", str(temp))
@@ -114,9 +131,88 @@ def test_bad_input_exits_2_with_one_line_and_leaves_nothing(
         monkeypatch.setenv(name, str(value))
     monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
     before = _leftovers(tmp_path)
+    start = time.monotonic()
     code = cli(shlex.split(line.replace("{tmp}", str(tmp_path))))
-    err = capsys.readouterr().err
-    lines = [text for text in err.splitlines() if text.strip()]
-    assert code == 2, err
+    elapsed = time.monotonic() - start
+    captured = capsys.readouterr()
+    lines = [text for text in captured.err.splitlines() if text.strip()]
+    assert code == 2, captured.err
     assert len(lines) == 1 and lines[0].startswith("error: ") and needle in lines[0], lines
     assert _leftovers(tmp_path) == before  # no store, folder, cache or lock file anywhere
+    return captured.out, elapsed
+
+
+@pytest.mark.parametrize(("line", "needle"), CASES, ids=[line for line, _ in CASES])
+def test_bad_input_exits_2_with_one_line_and_leaves_nothing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], line: str, needle: str
+) -> None:
+    _refused(tmp_path, monkeypatch, capsys, line, needle)
+
+
+#: Every command that takes --tracking-uri, with the arguments it needs to reach the store.
+STORE_COMMANDS = ["run", "run --arms baseline --seeds 1 --preset smoke", "calibrate", "study", "taxonomy",
+                  "taxonomy --task acrobot", "report", "evaluate 0123abcd", "export --out {tmp}/x.jsonl.gz", "verify",
+                  "import {tmp}/runs.jsonl.gz"]
+UNUSABLE_STORES = [
+    # MLflow retried this one for 25 s and 51 s, printing some 40 lines, after the run's 3-line header
+    ("sqlite:////proc/vlmrl.db", ("no file can be written in /proc", "no tracking database at /proc/vlmrl.db")),
+    ("sqlite:///{tmp}/file/mlflow.db", ("{tmp}/file is a file, not a folder", "no tracking database at")),
+    ("nope://x", ("MLflow has no store for the scheme 'nope'",) * 2),
+]
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc")
+@pytest.mark.parametrize("command", STORE_COMMANDS)
+@pytest.mark.parametrize(("uri", "needles"), UNUSABLE_STORES, ids=[uri for uri, _ in UNUSABLE_STORES])
+def test_an_unusable_store_is_one_line_within_2_s_before_any_header(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], command: str, uri: str,
+    needles: tuple[str, str]
+) -> None:
+    if command.startswith("import"):
+        _export(tmp_path / "runs.jsonl.gz", [_record(0)])
+    reads = command.split()[0] in ("report", "evaluate", "export", "verify")  # a store that must exist already
+    needle = needles[1] if reads else needles[0]
+    out, elapsed = _refused(tmp_path, monkeypatch, capsys, f"{command} --tracking-uri {uri}",
+                            needle.replace("{tmp}", str(tmp_path)))
+    assert out == ""  # no header, banner or cost line before the refusal
+    assert elapsed < 2.0
+
+
+# --- export files: a sample larger than the file, a newer format ----------------------------
+
+
+def _record(seed: int, fmt: str = FORMAT) -> dict[str, object]:
+    return {"format": fmt, "source_run_id": f"run{seed:04d}abcdef", "run_name": f"baseline-s{seed}",
+            "start_time": 0, "end_time": 1, "tags": {"vlmrl.kind": "train", "vlmrl.arm": "baseline",
+                                                     "vlmrl.seed": str(seed)},
+            "params": {}, "latest": {},
+            "histories": {"episode/native_return": {"step": [1], "ts": [1], "value": [-200.0]}},
+            "artifacts": {"config.json": json.dumps({"seed": seed, "arm": {"name": "baseline"}})}, "binary": {}}
+
+
+def _export(path: Path, records: list[dict[str, object]]) -> Path:
+    with gzip.open(path, "wt", encoding="utf-8") as out:
+        out.writelines(json.dumps(r) + "\n" for r in records)
+    return path
+
+
+def test_a_sample_larger_than_the_file_is_refused_with_its_run_count(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # verifying the whole file instead took 13 minutes, unannounced
+    _export(tmp_path / "runs.jsonl.gz", [_record(seed) for seed in range(3)])
+    _refused(tmp_path, monkeypatch, capsys, "verify {tmp}/runs.jsonl.gz --sample 999",
+             f"--sample 999 is more than the 3 run(s) {tmp_path}/runs.jsonl.gz holds; pass --sample 3 or fewer")
+    _refused(tmp_path, monkeypatch, capsys, "verify {tmp}/runs.jsonl.gz --seed 1 --sample 2",
+             "more than the 3 run(s)")
+
+
+@pytest.mark.parametrize("command", ["verify {tmp}/runs.jsonl.gz", "import {tmp}/runs.jsonl.gz --tracking-uri "
+                                     "sqlite:///{tmp}/store.db", "compare {tmp}/runs.jsonl.gz --out {tmp}/cmp"])
+def test_an_export_of_a_newer_format_says_to_upgrade(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], command: str
+) -> None:
+    newer = FORMAT_VERSION + 1
+    _export(tmp_path / "runs.jsonl.gz", [_record(0, f"vlmrl-runs/{newer}")])
+    _refused(tmp_path, monkeypatch, capsys, command,
+             f"written by a newer vlmrl (format {newer}; this one reads up to {FORMAT_VERSION}): upgrade vlmrl")

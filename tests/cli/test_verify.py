@@ -1,5 +1,6 @@
 """`vlmrl verify` end to end: smoke runs trained by `vlmrl run`, exported, retrained from the
-export and from the store, then a tampered export that must be caught."""
+export and from the store, then a tampered export that must be caught; its cost estimate on a
+synthetic export."""
 
 from __future__ import annotations
 
@@ -11,8 +12,11 @@ import pytest
 from typer.testing import CliRunner
 
 from vlmrl_cli.cli.app import app
+from vlmrl_cli.sweep.cost import FALLBACK_S_PER_STEP
+from vlmrl_cli.tracking.transfer import FORMAT
+from vlmrl_cli.training.config import RunConfig
 
-pytestmark = pytest.mark.slow  # trains
+slow = pytest.mark.slow  # the tests that train
 
 runner = CliRunner()
 
@@ -32,6 +36,7 @@ def exported(tmp_path_factory: pytest.TempPathFactory) -> tuple[str, Path]:
     return uri, path
 
 
+@slow
 def test_every_run_of_an_export_retrains_identically(exported: tuple[str, Path]) -> None:
     result = runner.invoke(app, ["verify", str(exported[1]), "--workers", "2"])
     assert result.exit_code == 0, result.output + result.stderr
@@ -40,6 +45,7 @@ def test_every_run_of_an_export_retrains_identically(exported: tuple[str, Path])
     assert result.output.count("    recorded: pin x86-64-v3/1") == 4  # the recorded side of each run, identical or not
 
 
+@slow
 def test_a_sample_of_a_store_by_seed(exported: tuple[str, Path]) -> None:
     result = runner.invoke(app, ["verify", "--experiment", "src", "--tracking-uri", exported[0], "--seed", "1",
                                  "--sample", "1"])
@@ -47,6 +53,7 @@ def test_a_sample_of_a_store_by_seed(exported: tuple[str, Path]) -> None:
     assert "verifying 1 of 4 run(s)" in result.output and "-s1: identical" in result.output
 
 
+@slow
 def test_a_dry_run_lists_the_runs_and_the_cost_and_trains_nothing(exported: tuple[str, Path]) -> None:
     result = runner.invoke(app, ["verify", str(exported[1]), "--arm", "hybrid", "--dry-run"])
     assert result.exit_code == 0, result.output
@@ -54,6 +61,7 @@ def test_a_dry_run_lists_the_runs_and_the_cost_and_trains_nothing(exported: tupl
     assert "identical" not in result.output
 
 
+@slow
 def test_a_tampered_return_is_caught_at_its_episode(exported: tuple[str, Path], tmp_path: Path) -> None:
     with gzip.open(exported[1], "rt", encoding="utf-8") as lines:
         records = [json.loads(line) for line in lines]
@@ -68,6 +76,7 @@ def test_a_tampered_return_is_caught_at_its_episode(exported: tuple[str, Path], 
     assert "did not reproduce" in result.stderr
 
 
+@slow
 def test_a_config_this_code_would_hash_differently_is_refused_before_training(exported: tuple[str, Path],
                                                                                tmp_path: Path) -> None:
     with gzip.open(exported[1], "rt", encoding="utf-8") as lines:
@@ -80,3 +89,34 @@ def test_a_config_this_code_would_hash_differently_is_refused_before_training(ex
         out.write(json.dumps(records[0]) + "\n")
     result = runner.invoke(app, ["verify", str(bad)])
     assert result.exit_code == 2 and "would train another experiment" in result.stderr
+
+
+def _synthetic_export(path: Path, walls: list[float | None]) -> Path:
+    """An export of smoke baseline runs (seeds 0, 1, ...) whose configs rebuild here, one per wall time
+    recorded (None: the run recorded none); nothing in it was trained."""
+    jobs = RunConfig.from_sources(None, {"arms": ["baseline"], "seeds": list(range(len(walls))),
+                                         "preset": "smoke"}).jobs()
+    records = []
+    for job, wall in zip(jobs, walls, strict=True):
+        records.append({"format": FORMAT, "source_run_id": f"{job.seed:08d}deadbeef", "run_name": job.name,
+                        "start_time": 0, "end_time": 1, "tags": {"vlmrl.kind": "train"}, "params": {},
+                        "latest": {} if wall is None else {"perf/wall_s": [0, 1, wall]},
+                        "histories": {"episode/native_return": {"step": [200], "ts": [1], "value": [-200.0]}},
+                        "artifacts": {"config.json": json.dumps({"config_hash": job.config_hash, **job.params()})},
+                        "binary": {}})
+    with gzip.open(path, "wt", encoding="utf-8") as out:
+        out.writelines(json.dumps(r) + "\n" for r in records)
+    return path
+
+
+def test_the_cost_estimate_rests_on_the_runs_steps_and_per_step_costs(tmp_path: Path) -> None:
+    path = _synthetic_export(tmp_path / "runs.jsonl.gz", [60.0, None])
+    result = runner.invoke(app, ["verify", str(path), "--dry-run", "--workers", "1"])
+    assert result.exit_code == 0, result.output
+    text = " ".join(result.output.split())
+    minutes = (60.0 + 1_024 * FALLBACK_S_PER_STEP) / 60  # the recorded run, then 1,024 steps at the task's figure
+    assert f"verifying 2 of 2 run(s) of {path}: about {minutes:,.1f} min on 1 worker(s)" in text
+    assert "2,048 steps in all: 1 run(s) at the wall time per step they recorded" in text
+    assert f"1 run(s), which recorded no wall time, at their task's mountain-car {FALLBACK_S_PER_STEP * 1e3:.2f} ms" \
+        in text
+    assert result.output.count("1 episodes, 1,024 steps") == 2 and "identical" not in result.output

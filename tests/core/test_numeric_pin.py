@@ -4,6 +4,7 @@ import os
 import subprocess
 import sys
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -90,3 +91,25 @@ def test_a_cpu_is_named_with_its_family_and_model(name: str, family: int, model:
 
 def test_this_machines_cpu_is_named() -> None:
     assert pin.cpu_model() not in ("", "unknown")
+
+
+@given(st.sampled_from(pin.MKL_CBWR_BRANCHES), st.booleans(), st.booleans())
+def test_every_documented_mkl_cbwr_value_is_known(branch: str, strict: bool, lower: bool) -> None:
+    value = branch + (",STRICT" if strict else "")
+    assert pin.mkl_knows(value.lower() if lower else value)
+    assert not pin.mkl_knows(value + "X") and not pin.mkl_knows(f"{branch},FAST")
+
+
+def test_an_mkl_cbwr_value_mkl_does_not_know_is_said_in_the_one_warning_line(
+    capsys: pytest.CaptureFixture[str]
+) -> None:
+    env: dict[str, str] = {"MKL_CBWR": "garbage"}
+    pin.apply(env)  # the entry point's call, on a copy of the environment
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("warning: ")
+    assert "MKL_CBWR=garbage is not a value MKL knows (it takes one of AUTO, COMPATIBLE, SSE2" in lines[0]
+    assert "AVX512_E4, optionally with ,STRICT" in lines[0] and "replaces vlmrl's numeric pin" in lines[0]
+    assert pin.pin_record(env)["pin"] == "unpinned"
+    for known in ("AVX2", "AVX512_E1,STRICT"):
+        message = pin.pin_state(pin.pinned_environ({"MKL_CBWR": known})).warning()
+        assert message is not None and "not a value MKL knows" not in message

@@ -4,7 +4,9 @@ way a name can be wrong."""
 
 from __future__ import annotations
 
+import importlib.metadata
 import re
+import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -20,7 +22,7 @@ from vlmrl_cli.shaping.camera import CellCamera
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
 from vlmrl_cli.tasks.base import Task
-from vlmrl_cli.tasks.registry import BUILTIN, get_task, task_names
+from vlmrl_cli.tasks.registry import BUILTIN, ENTRY_POINT_GROUP, get_task, task_factory, task_names
 from vlmrl_cli.tracking import store
 from vlmrl_cli.training.config import DEFAULT_TASK, RunConfig
 
@@ -70,12 +72,104 @@ def test_every_builtin_task_loads_and_mountain_car_is_the_default() -> None:
     ("acrobat", "did you mean 'acrobot'"),
     ("no_such_module_xyz:TASK", "cannot import no_such_module_xyz"),
     ("math:pi", "is a float, not a vlmrl_cli.tasks.base.Task"),
+    ("os:system", "is a builtin_function_or_method, not a vlmrl_cli.tasks.base.Task; give a Task, or a function "
+                  "marked @task_factory (vlmrl_cli.tasks.registry) that returns one; vlmrl calls nothing else"),
+    ("os.path:join", "is a function not marked @task_factory"),
+    ("vlmrl_cli.tasks.base:Task", "is a type, not a vlmrl_cli.tasks.base.Task"),
     ("math:nothing_here", "math has no nothing_here"),
     (":TASK", "give package.module:NAME"),
 ])
 def test_a_bad_task_name_says_why(name: str, words: str) -> None:
     with pytest.raises(BadInput, match=re.escape(words)):
         get_task(name)
+
+
+USER_CODE = """
+from vlmrl_cli.tasks.registry import get_task, task_factory
+
+CALLS = []
+
+
+@task_factory
+def marked():
+    CALLS.append("marked")
+    return get_task("acrobot")
+
+
+def unmarked():
+    CALLS.append("unmarked")
+    return get_task("acrobot")
+
+
+@task_factory
+def not_a_task():
+    CALLS.append("not_a_task")
+    return 42
+
+
+@task_factory
+def broken():
+    raise RuntimeError("no such env")
+
+
+class Maker:
+    def __call__(self):
+        CALLS.append("Maker")
+        return get_task("acrobot")
+
+
+instance = Maker()
+"""
+
+
+@pytest.fixture
+def factories(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
+    (tmp_path / "mytasks_factories.py").write_text(USER_CODE, encoding="utf-8")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    yield "mytasks_factories"
+    sys.modules.pop("mytasks_factories", None)
+
+
+def test_a_marked_factory_is_called_and_nothing_unmarked_ever_is(factories: str) -> None:
+    calls = __import__(factories).CALLS
+    assert get_task(f"{factories}:marked").name == "acrobot" and calls == ["marked"]
+    for name, words in (("unmarked", "is a function not marked @task_factory"),
+                        ("Maker", "is a type, not a vlmrl_cli.tasks.base.Task"),
+                        ("instance", "is a Maker, not a vlmrl_cli.tasks.base.Task")):
+        with pytest.raises(BadInput, match=re.escape(words)):
+            get_task(f"{factories}:{name}")
+    assert calls == ["marked"]  # the type is checked first: none of them was called
+    with pytest.raises(BadInput, match=re.escape("its factory returned a int, not a vlmrl_cli.tasks.base.Task")):
+        get_task(f"{factories}:not_a_task")
+    with pytest.raises(BadInput, match="its factory failed: RuntimeError: no such env"):
+        get_task(f"{factories}:broken")
+
+
+def test_task_factory_marks_functions_only() -> None:
+    with pytest.raises(TypeError, match="marks a function"):
+        task_factory(print)  # type: ignore[type-var]
+
+
+def test_an_entry_point_follows_the_same_rule(factories: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    installed = [importlib.metadata.EntryPoint(name, value, ENTRY_POINT_GROUP) for name, value in
+                 (("shell", "os:system"), ("made", f"{factories}:marked"), ("plain", f"{factories}:unmarked"))]
+    monkeypatch.setattr(importlib.metadata, "entry_points",
+                        lambda group=None: [ep for ep in installed if ep.group == group])
+    assert get_task("made").name == "acrobot" and "shell" in task_names()
+    with pytest.raises(BadInput, match=re.escape("entry point 'shell' (os:system) is a builtin_function_or_method")):
+        get_task("shell")
+    with pytest.raises(BadInput, match="is a function not marked @task_factory"):
+        get_task("plain")
+    assert __import__(factories).CALLS == ["marked"]
+
+
+def test_os_abort_is_refused_not_called() -> None:
+    # os.abort, called, killed vlmrl with SIGABRT (exit 134): run it where a regression cannot kill the suite
+    code = ("from vlmrl_cli.core.errors import BadInput\nfrom vlmrl_cli.tasks.registry import get_task\n"
+            "try:\n    get_task('os:abort')\nexcept BadInput as exc:\n    print(exc)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "task 'os:abort' is a builtin_function_or_method, not a vlmrl_cli.tasks.base.Task" in done.stdout
 
 
 def test_the_docs_example_task_loads_from_a_user_module(user_module: str) -> None:
@@ -155,4 +249,4 @@ def test_the_grid_world_example_runs_study_and_evaluate_end_to_end(tmp_path: Pat
     evaluated = runner.invoke(app, ["evaluate", hybrid.info.run_id, "--episodes", "1", "--tracking-uri", uri,
                                     "--out", str(tmp_path / "ev"), "--cache-path", str(tmp_path / "c.sqlite")])
     assert evaluated.exit_code == 0, evaluated.output + evaluated.stderr
-    assert (tmp_path / "ev" / "episode-0.gif").is_file() and "SIMULATED VLM" in evaluated.stderr
+    assert (tmp_path / "ev" / "episode-0.gif").is_file() and evaluated.stdout.startswith("WARNING: SIMULATED VLM")

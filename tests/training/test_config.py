@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 import tomllib
 from pathlib import Path
 
@@ -165,7 +166,8 @@ def test_to_toml_reads_back_to_the_same_config(
     ppo = {
         "n_envs": n_envs,
         "n_steps": n_steps,
-        "batch_size": min(64, n_envs * n_steps),
+        # a minibatch size SB3 takes whole: one that divides the rollout (at least 2)
+        "batch_size": math.gcd(64, n_envs * n_steps) if math.gcd(64, n_envs * n_steps) > 1 else n_envs * n_steps,
         "learning_rate": lr,
         "lr_schedule": schedule,
         "normalize_obs": norm[0],
@@ -238,3 +240,35 @@ def test_the_default_preset_is_the_default_tasks_own() -> None:
 
     assert get_task(DEFAULT_TASK).default_preset == DEFAULT_PRESET == RunConfig().preset
     assert RunConfig().task == DEFAULT_TASK
+
+
+@given(n_envs=st.integers(1, 8), n_steps=st.integers(1, 64), batch_size=st.integers(1, 600))
+def test_a_ppo_config_is_accepted_exactly_when_sb3_takes_whole_minibatches(n_envs: int, n_steps: int,
+                                                                           batch_size: int) -> None:
+    # SB3's PPO asserts batch_size > 1 and a rollout > 1 (it normalises advantages) and only warns on
+    # a batch_size that does not divide the rollout, training then on a truncated last minibatch
+    rollout = n_envs * n_steps
+    whole = 2 <= batch_size <= rollout and rollout % batch_size == 0
+    sets = [f"ppo.n_envs={n_envs}", f"ppo.n_steps={n_steps}", f"ppo.batch_size={batch_size}"]
+    try:
+        RunConfig.from_sources(None, {}, sets)
+    except BadInput as exc:
+        assert not whole, exc
+        assert "inconsistent [ppo]" in str(exc)
+        if batch_size <= rollout and rollout >= 2:  # the fix is named: sizes that divide the rollout
+            assert f"use a batch_size that divides {rollout}, e.g. " in str(exc)
+    else:
+        assert whole
+
+
+def test_every_builtin_tasks_presets_and_calibration_grid_pass_the_ppo_rules() -> None:
+    from vlmrl_cli.tasks.registry import BUILTIN, get_task
+
+    for name in BUILTIN:
+        task = get_task(name)
+        for preset in task.presets:
+            preset_of(name, preset)  # checked like a config file, the consistency rules included
+        for regime in task.calibration:
+            sets = [f"{key}={str(value).lower() if isinstance(value, bool) else value}"
+                    for key, value in regime.items()]
+            RunConfig.from_sources(None, {"task": name}, sets)

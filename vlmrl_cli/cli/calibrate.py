@@ -37,7 +37,7 @@ def calibrate(
     seed_list: opt.SeedList = None,
     task: opt.TaskOpt = None,
     timesteps: opt.Timesteps = None,
-    preset: opt.Preset = "paper",
+    preset: opt.Preset = None,
     workers: opt.Workers = None,
     executor: opt.ExecutorOpt = None,
     ray_address: opt.RayAddress = None,
@@ -52,9 +52,8 @@ def calibrate(
 ) -> None:
     """Train the baseline arm under each PPO regime of a grid (resumable MLflow runs tagged vlmrl.regime)
     and rank the regimes by their distance to the paper's baseline learning profile."""
-    from vlmrl_cli.calibration.pipeline import calibrate as run_calibration
     from vlmrl_cli.calibration.regimes import Regime, build_regimes, calibrate_config, calibrate_section, grid_flags
-    from vlmrl_cli.sweep.cost import estimate_sweeps
+    from vlmrl_cli.tracking.store import check_store
 
     console = Console()
     with exit_codes():
@@ -62,6 +61,11 @@ def calibrate(
         file_grid = calibrate_section(file_layer.pop("calibrate", {}))
         cfg = calibrate_config(build_regimes([file_layer, *upper], file_grid | grid_flags(grid or [])), out=out)
         base = cfg.base
+        check_store(base.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
+        # these load torch and MLflow (seconds): only once the store is known to be usable
+        from vlmrl_cli.calibration.pipeline import calibrate as run_calibration
+        from vlmrl_cli.sweep.cost import estimate_sweeps
+
         console.print(
             f"[bold]vlmrl calibrate[/]: {len(cfg.regimes)} regime(s) x seeds {list(base.seeds)} of the "
             f"baseline, task {base.task}, preset {base.preset}, {base.budget:,} steps each, experiment "

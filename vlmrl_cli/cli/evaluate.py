@@ -10,6 +10,10 @@ from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import CachePath, NoCache, OutDir, TrackingUri
 from vlmrl_cli.vlm.config import DEFAULT_CACHE
 
+#: The first line of the output of a run that used the simulated VLM.
+SIMULATED_NOTICE = ("WARNING: SIMULATED VLM (not a real model): the GIF's VLM labels come from a pixel reader "
+                    "with noise.")
+
 
 def resolve_child(run_id: str, tracking_uri: str | None, arm: str | None, seed: int | None) -> str:
     """``run_id`` itself for a training run; for a sweep's parent run, its child of ``--arm``/``--seed``,
@@ -68,9 +72,8 @@ def evaluate(
         done = evaluate_run(cfg)
 
     run = done.run
-    if run.arm.uses_vlm and run.simulated:
-        typer.secho("WARNING: SIMULATED VLM (not a real model): the GIF's VLM labels come from a pixel reader "
-                    "with noise.", fg=typer.colors.YELLOW, err=True)
+    if run.arm.uses_vlm and run.simulated:  # first, and on the results' own stream: no capture can reorder them
+        typer.secho(SIMULATED_NOTICE, fg=typer.colors.YELLOW)
     typer.echo(f"run:       {run.name} ({run.run_id}, arm {run.arm.name}, {run.status})")
     typer.echo(f"evaluated: {cfg.episodes} native episodes: success rate {done.result.success_rate:.0%}, "
                f"mean length {done.result.mean_length:.1f}, mean return {done.result.mean_return:.1f}")

@@ -16,7 +16,7 @@ import typer
 from vlmrl_cli.analysis.multiplicity import METHODS
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.shaping.arms import ARMS
-from vlmrl_cli.training.config import DEFAULT_TASK, source_layers
+from vlmrl_cli.training.config import DEFAULT_PRESET, DEFAULT_TASK, source_layers
 from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.presets import preset_names
 from vlmrl_cli.vlm.config import BACKENDS, DEFAULT_SIM_PROFILE, SIM_PROFILES, SimKnobs, VLMConfig
@@ -193,9 +193,12 @@ Arms = Annotated[str, typer.Option("--arms", help=f"Comma-separated arms, any of
 Seeds = Annotated[int, typer.Option("--seeds", help="Number of seeds: 0..N-1.")]
 SeedList = Annotated[str | None, typer.Option("--seed-list", help="Explicit seeds, e.g. 3,7,11.")]
 Timesteps = Annotated[int | None, typer.Option("--timesteps", help="Budget per run (= --set ppo.timesteps=N).")]
-Preset = Annotated[str, typer.Option("--preset", metavar=choices(preset_names(DEFAULT_TASK)),
-                                     help="PPO preset (the bottom layer of [ppo]); another task's presets "
-                                          "are its own (default: the task's, e.g. zoo).")]
+# No default of its own: a run that names no preset takes its task's (``Task.default_preset``), so
+# the help states that rather than one task's name (``[default: paper]`` is false for Acrobot).
+Preset = Annotated[str | None, typer.Option(
+    "--preset", metavar=choices(preset_names(DEFAULT_TASK)), show_default=False,
+    help=f"PPO preset, the bottom layer of [ppo]: one of the task's own presets (listed: {DEFAULT_TASK}'s) "
+         f"[default: the task's default preset; {DEFAULT_TASK}'s is {DEFAULT_PRESET}].")]
 TaskOpt = Annotated[str | None, typer.Option(
     "--task", metavar="mountain-car|mountain-car-continuous|acrobot|minigrid-doorkey|MODULE:NAME",
     help="The environment (default mountain-car): a built-in task, or a Task in your code as "

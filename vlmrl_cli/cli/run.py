@@ -45,7 +45,7 @@ def run(
     seeds: Seeds = 5,
     seed_list: SeedList = None,
     timesteps: Timesteps = None,
-    preset: Preset = "paper",
+    preset: Preset = None,
     workers: Workers = None,
     executor: ExecutorOpt = None,
     ray_address: RayAddress = None,
@@ -60,12 +60,16 @@ def run(
 
     Settings resolve in layers: the --preset < --config FILE < --set KEY=VALUE < other flags.
     """
-    from vlmrl_cli.sweep.preflight import preflight
-    from vlmrl_cli.sweep.runner import run_sweep
+    from vlmrl_cli.tracking.store import check_store
 
     console = Console(stderr=False)
     with exit_codes():
         cfg = RunConfig.from_sources(config, typed_flags(ctx, vlm_cfg), sets or [])
+        check_store(cfg.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
+        # the sweep's modules load torch and MLflow (seconds): only once the store is known to be usable
+        from vlmrl_cli.sweep.preflight import preflight
+        from vlmrl_cli.sweep.runner import run_sweep
+
         if dry_run:
             typer.echo(dry_run_text(cfg), nl=False)
             return

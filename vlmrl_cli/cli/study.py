@@ -138,7 +138,7 @@ def study(
         study_section,
         task_of,
     )
-    from vlmrl_cli.study.pipeline import estimate_cost, finished_per_seed, power_lines, run_study
+    from vlmrl_cli.tracking.store import check_store
 
     console = Console()
     with exit_codes():
@@ -159,6 +159,10 @@ def study(
             **({} if states is None else {"states": states}),
         )
         base = cfg.base
+        check_store(base.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
+        # the pipeline loads torch and MLflow (seconds): only once the store is known to be usable
+        from vlmrl_cli.study.pipeline import estimate_cost, finished_per_seed, power_lines, run_study
+
         console.print(f"[bold]vlmrl study[/]: {len(cfg.regimes)} regime(s) x arms {', '.join(base.arms)} x seeds "
                       f"{list(base.seeds)}, + {len(cfg.variants)} VLM variant(s) of the hybrid and "
                       f"{len(cfg.cells)} control cell(s) (dose-response, query flicker) in "

@@ -57,6 +57,7 @@ def taxonomy(
     from vlmrl_cli.probe.scoring import DEFAULT_STATES
     from vlmrl_cli.probe.table1 import with_ci
     from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
+    from vlmrl_cli.tracking.store import check_store
 
     console = Console(stderr=True)
     if task is not None and not _is_papers_task(task):  # the paper's Table 1 is MountainCar's probe
@@ -71,6 +72,7 @@ def taxonomy(
             tracking_uri=tracking_uri,
             experiment=experiment,
         )
+        check_store(cfg.tracking_uri)  # before MLflow, the VLM or any file
         with _probe_progress(console) as progress:
             result = run_taxonomy(cfg, progress=progress)
 
@@ -101,9 +103,11 @@ def _other_task(name: str, vlm_cfg: VLMConfig, states: int | None, out: Path | N
     from vlmrl_cli.probe.milestones import run_milestone_taxonomy
     from vlmrl_cli.probe.scoring import DEFAULT_STATES
     from vlmrl_cli.tasks.registry import get_task
+    from vlmrl_cli.tracking.store import check_store
 
     with exit_codes():
         task = get_task(name)
+        check_store(tracking_uri)  # before MLflow, the VLM or any file
         folder = out if out is not None else Path("results") / "taxonomy" / f"{task.name}-{vlm_cfg.backend}"
         with _probe_progress(console) as progress:
             result = run_milestone_taxonomy(task, vlm_cfg, states or DEFAULT_STATES, folder, tracking_uri,

@@ -44,6 +44,7 @@ def export(
         if missing:
             raise BadInput(f"--skip-exported {missing[0]}: no such export file.")
         skip = exported_ids(skip_exported or [])
+        store.check_store(tracking_uri, write=False, existing=True)
         client = store.connect_existing(tracking_uri)
         summary = export_runs(client, experiment, out, models=models, skip=skip)
         typer.echo(f"exported {summary.written} FINISHED training run(s) of '{experiment}' to {out} "
@@ -65,6 +66,7 @@ def import_(
         problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
         if problem:
             raise BadInput(problem + ".")
+        store.check_store(tracking_uri)  # before MLflow or any file
         for path in paths:
             if not path.is_file():
                 raise BadInput(f"there is no export file {path}; write one with `vlmrl export --out FILE`.")

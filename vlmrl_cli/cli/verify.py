@@ -43,9 +43,10 @@ def verify(
     their per-episode native returns bit for bit: prints `identical` or `differs from episode k` per
     run, with both sides' CPU and pin tags, and exits 1 when any run differs."""
     from rich.console import Console
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
+    from vlmrl_cli.sweep.cost import retrain_estimate
     from vlmrl_cli.tracking import schema
     from vlmrl_cli.training import verify as lib
 
@@ -63,27 +64,28 @@ def verify(
             runs = lib.runs_of_export(source)
             where = str(source)
         chosen = lib.choose(runs, run_ids=run_id or (), seeds=seed or (), arms=arm or (), sample=sample,
-                            sample_seed=sample_seed)
-        for run in chosen:  # every config is rebuilt before anything trains
-            lib.rebuild_job(run)
-        known = [r.wall_s for r in chosen if r.wall_s is not None]
-        estimate = sum(known) / max(1, min(workers, len(chosen))) if known else None
-        cost = (f"about {estimate / 60:.0f} min on {min(workers, len(chosen))} worker(s) (the recorded training "
-                "times; no evaluation is rerun)") if estimate is not None else "cost unknown (no wall time recorded)"
-        console.print(f"verifying {len(chosen)} of {len(runs)} run(s) of {where}: {cost}")
+                            sample_seed=sample_seed, source=where)
+        jobs = [lib.rebuild_job(run) for run in chosen]  # every config is rebuilt before anything trains
+        cost = retrain_estimate([(job, run.wall_s) for job, run in zip(jobs, chosen, strict=True)], workers)
+        console.print(f"verifying {len(chosen)} of {len(runs)} run(s) of {where}: about {cost.total_s / 60:,.1f} min "
+                      f"on {cost.workers} worker(s) ({cost.how})")
         here_tags = lib.here_paths()  # once: this process's path does not change while it runs
         here = lib.describe_paths(here_tags)
         console.print(f"here: {here}")
-        for run in chosen:
-            console.print(f"  {run.run_id[:12]}  {run.name:<28} {len(run.native_returns)} episodes")
+        for run, job in zip(chosen, jobs, strict=True):
+            console.print(f"  {run.run_id[:12]}  {run.name:<28} {len(run.native_returns)} episodes, "
+                          f"{job.timesteps:,} steps")
         if dry_run:
             return
         differ = 0
-        with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                      TimeElapsedColumn(), console=console, transient=True) as bar:
-            task = bar.add_task("retraining", total=len(chosen))
+        steps = {run.run_id: job.timesteps for run, job in zip(chosen, jobs, strict=True)}
+        # the bar counts steps, not runs, so that its time remaining weighs a long run as long
+        with Progress(TextColumn("{task.description}"), BarColumn(),
+                      TextColumn("{task.completed:,.0f}/{task.total:,.0f} steps"), TimeElapsedColumn(),
+                      TimeRemainingColumn(), console=console, transient=True) as bar:
+            task = bar.add_task(f"retraining {len(chosen)} run(s)", total=sum(steps.values()))
             for outcome in lib.verify_many(chosen, workers=workers):
-                bar.advance(task)
+                bar.advance(task, steps[outcome.run.run_id])
                 run = outcome.run
                 differ += not outcome.identical
                 console.print(f"{run.run_id[:12]}  {run.name}: {outcome.verdict()} in {outcome.wall_s:.0f} s")

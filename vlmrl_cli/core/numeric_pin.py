@@ -52,6 +52,12 @@ USER_MARK = "VLMRL_PIN_USER"
 APPLIED_MARK = "VLMRL_PIN"
 #: Every variable the pin sets in a process's environment: its own and its two marks.
 PIN_VARIABLES: tuple[str, ...] = (*PIN, USER_MARK, APPLIED_MARK)
+#: MKL_CBWR's branches as Intel documents them (oneMKL developer guide, "Specifying Code
+#: Branches"); each may be followed by ``,STRICT``.
+MKL_CBWR_BRANCHES: tuple[str, ...] = (
+    "AUTO", "COMPATIBLE", "SSE2", "SSSE3", "SSE4_1", "SSE4_2", "AVX", "AVX2", "AVX512", "AVX512_MIC",
+    "AVX512_E1", "AVX2_E1", "AVX512_MIC_E1", "AVX512_E2", "AVX512_E3", "AVX512_E4",
+)
 #: Libraries whose presence in ``sys.modules`` means the pin may come too late for this process
 #: (numpy is not pinned, so an earlier numpy import does not matter).
 _NUMERIC_MODULES = ("torch",)
@@ -80,12 +86,27 @@ class PinState:
             given = ", ".join(f"{k}={v}" for k, v in sorted(off.items()))
             ours = ", ".join(f"{k}={PIN[k]}" for k in sorted(off))
             parts.append(f"your {given} replaces vlmrl's numeric pin ({ours})")
+        if "MKL_CBWR" in off and not mkl_knows(off["MKL_CBWR"]):  # a typo MKL would not take as a branch
+            parts.append(f"MKL_CBWR={off['MKL_CBWR']} is not a value MKL knows (it takes one of "
+                         f"{', '.join(MKL_CBWR_BRANCHES)}, optionally with ,STRICT)")
         if self.loaded_before:
             parts.append(f"{' and '.join(self.loaded_before)} loaded before vlmrl could pin its kernels")
         if not parts:
             return None
         return ("warning: " + "; ".join(parts) + ": runs record it (vlmrl.pin.*), and their numbers may differ "
                 "from the committed ones on other CPUs.")
+
+
+def mkl_knows(value: str) -> bool:
+    """Whether ``value`` is an ``MKL_CBWR`` setting Intel documents: a branch of
+    ``MKL_CBWR_BRANCHES``, optionally followed by ``,STRICT`` (case aside).
+
+    Example:
+        >>> mkl_knows("AVX2"), mkl_knows("avx512_e1,STRICT"), mkl_knows("garbage"), mkl_knows("AVX2,FAST")
+        (True, True, False, False)
+    """
+    branch, comma, rest = value.partition(",")
+    return branch.strip().upper() in MKL_CBWR_BRANCHES and (not comma or rest.strip().upper() == "STRICT")
 
 
 def pinned_environ(environ: Mapping[str, str]) -> dict[str, str]:

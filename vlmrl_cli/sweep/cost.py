@@ -120,6 +120,40 @@ def estimate(pending: Sequence[TrainJob], done: int, workers: int, timings: Timi
     return CostEstimate(len(pending), done, seconds / len(pending) if pending else 0.0, total, workers, how)
 
 
+def retrain_estimate(runs: Sequence[tuple[TrainJob, float | None]], workers: int,
+                     cores: int | None = None) -> CostEstimate:
+    """The wall time of retraining recorded runs (``vlmrl verify``) with ``workers`` workers on
+    ``cores`` (this machine's): ``runs`` pairs each rebuilt job with the wall time its run recorded
+    (None: none recorded). A run's steps are costed at its own recorded seconds per step (its
+    set-up and evaluation included, which a retrain skips: an upper bound), else at its task's
+    declared figure (``unmeasured``); workers beyond the cores slow every run (``contention``).
+
+    Example:
+        >>> from vlmrl_cli.training.config import RunConfig
+        >>> job = RunConfig.from_sources(None, {"preset": "smoke", "seeds": [0], "arms": ["baseline"]}).jobs()[0]
+        >>> cost = retrain_estimate([(job, 10.24), (job, None)], workers=1, cores=2)
+        >>> job.timesteps, round(cost.total_s, 2)  # 1,024 steps at 10 ms, then at MountainCar-v0's 0.22 ms
+        (1024, 10.47)
+    """
+    cores = cores or os.cpu_count() or 1
+    workers = max(1, min(workers, len(runs)))
+    measured = [(job, wall) for job, wall in runs if wall is not None and wall > 0]
+    declared = [job for job, wall in runs if wall is None or wall <= 0]
+    seconds = sum(wall for _, wall in measured) + sum(job.timesteps * unmeasured(job) for job in declared)
+    total = seconds * contention(workers, cores) / workers
+    parts = []
+    if measured:
+        parts.append(f"{len(measured)} run(s) at the wall time per step they recorded (with their set-up and "
+                     "evaluation, which a retrain skips)")
+    if declared:
+        by_task = {job.task_plugin.name: unmeasured(job) for job in declared}
+        figures = ", ".join(f"{t} {s * 1e3:.2f} ms" for t, s in sorted(by_task.items()))
+        parts.append(f"{len(declared)} run(s), which recorded no wall time, at their task's {figures} per step")
+    how = (f"{sum(job.timesteps for job, _ in runs):,} steps in all: " + "; ".join(parts) +
+           f"; {cores} core(s)")
+    return CostEstimate(len(runs), 0, seconds / len(runs) if runs else 0.0, total, workers, how)
+
+
 def estimate_sweeps(cfgs: Sequence[RunConfig]) -> CostEstimate:
     """The cost of training what ``cfgs`` (sweeps into one experiment, e.g. a calibration's or a
     study's regimes) still miss, read without writing; a job two sweeps share counts once."""

@@ -1,6 +1,10 @@
 """Find a task by name: a built-in one, ``package.module:NAME`` in the user's code, or an entry
 point of the ``vlmrl.tasks`` group (a package declaring ``[project.entry-points."vlmrl.tasks"]``).
 
+What ``NAME`` (or an entry point) names must be a ``Task``, or a plain function marked with
+``@task_factory`` that returns one. The object is checked before anything is called: vlmrl calls
+no other object it is pointed at (``--task os:system`` is refused, not run).
+
 Example:
     >>> get_task("mountain-car").env_id
     'MountainCar-v0'
@@ -15,12 +19,39 @@ from __future__ import annotations
 
 import importlib
 import importlib.metadata
+import inspect
 from collections.abc import Callable
+from typing import TypeVar
 
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.tasks.base import Task
 
 ENTRY_POINT_GROUP = "vlmrl.tasks"
+#: The attribute ``task_factory`` sets on a function: the one mark that lets vlmrl call what a
+#: ``--task`` string or an entry point names.
+FACTORY_MARK = "__vlmrl_task_factory__"
+#: What a ``--task package.module:NAME`` or an entry point may name, said in every refusal.
+_ACCEPTED = ("give a Task, or a function marked @task_factory (vlmrl_cli.tasks.registry) that returns one; "
+             "vlmrl calls nothing else")
+
+_Factory = TypeVar("_Factory", bound=Callable[[], Task])
+
+
+def task_factory(fn: _Factory) -> _Factory:
+    """Mark ``fn``, a function of no arguments that returns a ``Task``, as a task factory: a
+    ``--task package.module:fn`` or an entry point naming it calls it. Nothing unmarked is called.
+
+    Example:
+        >>> @task_factory
+        ... def acrobot_again() -> Task:
+        ...     return get_task("acrobot")
+        >>> _resolved(acrobot_again, "'doc:acrobot_again'").env_id
+        'Acrobot-v1'
+    """
+    if not inspect.isfunction(fn):
+        raise TypeError(f"@task_factory marks a function (def), not a {type(fn).__name__}")
+    setattr(fn, FACTORY_MARK, True)
+    return fn
 
 
 def _mountain_car() -> Task:
@@ -83,7 +114,8 @@ def get_task(name: str) -> Task:
         return _from_module(name)
     for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
         if ep.name == name:
-            return _checked(_load(ep.load, f"entry point '{name}' ({ep.value})"), name)
+            where = f"entry point '{name}' ({ep.value})"
+            return _resolved(_load(ep.load, where), where)
     known = task_names()
     raise BadInput(f"unknown task '{name}'{did_you_mean(name, known)}; choose from {', '.join(known)}, "
                    "or give package.module:NAME")
@@ -102,20 +134,45 @@ def _from_module(spec: str) -> Task:
         raise BadInput(f"task '{spec}': importing {module_name} failed: {type(exc).__name__}: {exc}") from None
     if not hasattr(module, attr):
         raise BadInput(f"task '{spec}': {module_name} has no {attr}")
-    return _checked(_load(lambda: getattr(module, attr), f"{spec}"), spec)
+    return _resolved(_load(lambda: getattr(module, attr), f"'{spec}'"), f"'{spec}'")
 
 
 def _load(get: Callable[[], object], where: str) -> object:
+    """The object ``get`` fetches (an attribute, an entry point's target), never called."""
     try:
-        value = get()
-        return value() if callable(value) and not isinstance(value, Task) else value
-    except BadInput:
-        raise
+        return get()
     except Exception as exc:
         raise BadInput(f"task {where} failed to load: {type(exc).__name__}: {exc}") from None
 
 
-def _checked(value: object, name: str) -> Task:
-    if not isinstance(value, Task):
-        raise BadInput(f"task '{name}' is a {type(value).__name__}, not a vlmrl_cli.tasks.base.Task")
-    return value
+def is_task_factory(value: object) -> bool:
+    """Whether ``value`` is a plain function marked with ``@task_factory``; read from the
+    function's own ``__dict__``, so that checking runs none of the object's code.
+
+    Example:
+        >>> import os
+        >>> is_task_factory(os.system), is_task_factory(task_factory(lambda: get_task("acrobot")))
+        (False, True)
+    """
+    return inspect.isfunction(value) and value.__dict__.get(FACTORY_MARK) is True
+
+
+def _resolved(value: object, where: str) -> Task:
+    """``value`` if it is a ``Task``, the ``Task`` a marked factory returns, else ``BadInput``:
+    the type is checked before anything is called."""
+    if isinstance(value, Task):
+        return value
+    if not is_task_factory(value):
+        kind = "function not marked @task_factory" if inspect.isfunction(value) else type(value).__name__
+        raise BadInput(f"task {where} is a {kind}, not a vlmrl_cli.tasks.base.Task; {_ACCEPTED}")
+    assert callable(value)  # a function, checked above
+    try:
+        made = value()
+    except BadInput:
+        raise
+    except Exception as exc:  # the user's factory failed: say where
+        raise BadInput(f"task {where}: its factory failed: {type(exc).__name__}: {exc}") from None
+    if not isinstance(made, Task):
+        raise BadInput(f"task {where}: its factory returned a {type(made).__name__}, not a "
+                       "vlmrl_cli.tasks.base.Task")
+    return made

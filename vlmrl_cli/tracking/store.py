@@ -34,10 +34,109 @@ def resolve_tracking_uri(uri: str | None) -> str:
     return uri or os.environ.get("MLFLOW_TRACKING_URI") or DEFAULT_TRACKING_URI
 
 
-def connect(uri: str | None, wait_s: float = 0.0) -> Any:
+#: The URI schemes MLflow's own tracking stores take (``mlflow.tracking._tracking_service.utils``);
+#: a plug-in adds its own through the ``mlflow.tracking_store`` entry point group.
+MLFLOW_SCHEMES = ("", "file", "databricks", "databricks-uc", "uc", "http", "https", "sqlite", "postgresql",
+                  "mysql", "mssql")
+
+
+def _scheme(uri: str) -> str:
+    """The store scheme of ``uri`` as MLflow reads it: ``postgresql+psycopg2`` is ``postgresql``,
+    a Windows drive letter is a path.
+
+    Example:
+        >>> _scheme("sqlite:///m.db"), _scheme("postgresql+psycopg2://h/db"), _scheme("mlruns"), _scheme("nope://x")
+        ('sqlite', 'postgresql', '', 'nope')
+    """
+    import urllib.parse
+
+    scheme = urllib.parse.urlparse(uri).scheme.lower()
+    if len(scheme) == 1:
+        return ""
+    return scheme.split("+", 1)[0]
+
+
+def _unreachable(uri: str, why: str) -> str:
+    return f"the MLflow tracking store '{uri}' cannot be reached: {why}"
+
+
+def _sqlite_problem(uri: str, write: bool, existing: bool) -> str | None:
+    """Why this process cannot use the sqlite database of ``uri`` (read, or read and write), or
+    None; ``existing``: a missing database is refused rather than created. Read from the file
+    system alone: a folder is probed with an anonymous temporary file, which leaves nothing."""
+    db_path = Path(uri.removeprefix("sqlite:///").split("?", 1)[0])
+    if str(db_path) in ("", ".", ":memory:"):
+        return None
+    if existing and not db_path.is_file():
+        return f"there is no tracking database at {db_path}; pass the --tracking-uri the runs were made with"
+    if db_path.exists():
+        if not db_path.is_file():
+            return _unreachable(uri, f"{db_path} is not a file; pass --tracking-uri sqlite:///PATH/mlflow.db")
+        try:
+            with open(db_path, "r+b" if write else "rb"):
+                pass
+        except OSError as exc:
+            return _unreachable(uri, f"{db_path} cannot be {'written' if write else 'read'} here ({exc.strerror})")
+    if not write:
+        return None
+    folder = db_path.absolute().parent
+    while not folder.exists():  # connect creates the missing folders under the nearest existing one
+        folder = folder.parent
+    if not folder.is_dir():
+        return _unreachable(uri, f"{folder} is a file, not a folder; pass --tracking-uri sqlite:///PATH/mlflow.db")
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        return _unreachable(uri, f"no file can be written in {folder} ({exc.strerror}); pass --tracking-uri "
+                                 "sqlite:///PATH/mlflow.db in a folder you can write")
+    return None
+
+
+def store_problem(uri: str | None, write: bool = True, existing: bool = False) -> str | None:
+    """Why the tracking store of ``uri`` (resolved by ``resolve_tracking_uri``) cannot be used,
+    or None, found without MLflow: a scheme no MLflow store takes, or a sqlite database that
+    this process cannot read (``write`` False) or write, or that is missing (``existing``).
+    A server's URI is not contacted here (``check_store`` does).
+
+    Example:
+        >>> store_problem("nope://x").endswith("MLflow has no store for the scheme 'nope' (a typo?); pass "
+        ...     "sqlite:///PATH/mlflow.db or http://HOST:PORT")
+        True
+        >>> "cannot be reached: no file can be written in /proc" in store_problem("sqlite:////proc/vlmrl.db")
+        True
+    """
+    import importlib.metadata
+
+    resolved = resolve_tracking_uri(uri)
+    scheme = _scheme(resolved)
+    plugins = {ep.name for ep in importlib.metadata.entry_points(group="mlflow.tracking_store")}
+    if scheme not in MLFLOW_SCHEMES and scheme not in plugins:
+        return _unreachable(resolved, f"MLflow has no store for the scheme '{scheme}' (a typo?); pass "
+                                      "sqlite:///PATH/mlflow.db or http://HOST:PORT")
+    if resolved.startswith("sqlite:///"):
+        return _sqlite_problem(resolved, write, existing)
+    return None
+
+
+def check_store(uri: str | None, write: bool = True, existing: bool = False) -> None:
+    """``BadInput`` for a tracking store a command cannot use (``store_problem``; a server that
+    does not answer), in well under a second and before MLflow is imported: commands call it
+    before they print anything or create any file (MLflow itself retries a sqlite file it cannot
+    open for over a minute, with some 40 lines of warnings)."""
+    problem = store_problem(uri, write, existing)
+    if problem:
+        raise BadInput(problem + ".")
+    resolved = resolve_tracking_uri(uri)
+    if resolved.startswith(("http://", "https://")):
+        _check_server(resolved)
+
+
+def connect(uri: str | None, wait_s: float = 0.0, write: bool = True) -> Any:
     """An ``MlflowClient`` for ``uri``, checked to answer; unreachable stores are ``BadInput``.
     A tracking server that does not answer is retried for up to ``wait_s`` seconds first
-    (workers wait out a server restart; commands typed by a user fail fast)."""
+    (workers wait out a server restart; commands typed by a user fail fast). A sqlite database
+    is checked first to be writable (``write``; readable only, when False) without MLflow."""
     import logging
 
     from mlflow.tracking import MlflowClient
@@ -45,6 +144,9 @@ def connect(uri: str | None, wait_s: float = 0.0) -> Any:
     logging.getLogger("alembic").setLevel(logging.WARNING)
     logging.getLogger("mlflow").setLevel(logging.WARNING)
     resolved = resolve_tracking_uri(uri)
+    problem = store_problem(resolved, write=write)
+    if problem:
+        raise BadInput(problem + ".")
     lock: contextlib.AbstractContextManager[object] = contextlib.nullcontext()
     if resolved.startswith("sqlite:///"):
         db_path = Path(resolved.removeprefix("sqlite:///"))
@@ -95,12 +197,10 @@ def connect_existing(uri: str | None) -> Any:
     """``connect`` for commands that read runs: a sqlite database that does not exist is
     ``BadInput`` instead of a new empty store (``connect`` would create it and its folder)."""
     resolved = resolve_tracking_uri(uri)
-    if resolved.startswith("sqlite:///"):
-        db_path = Path(resolved.removeprefix("sqlite:///"))
-        if not db_path.is_file():
-            raise BadInput(f"there is no tracking database at {db_path}; pass the --tracking-uri the runs were "
-                           "made with.")
-    return connect(resolved)
+    problem = store_problem(resolved, write=False, existing=True)
+    if problem:
+        raise BadInput(problem + ".")
+    return connect(resolved, write=False)
 
 
 def init_lock(db_path: Path) -> filelock.FileLock:

@@ -35,7 +35,11 @@ from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
 
-FORMAT = "vlmrl-runs/1"
+FORMAT_NAME = "vlmrl-runs"
+#: The version of the format this package writes and reads; a file of a newer one is refused with
+#: "upgrade vlmrl".
+FORMAT_VERSION = 1
+FORMAT = f"{FORMAT_NAME}/{FORMAT_VERSION}"
 HISTORY_KEYS: tuple[str, ...] = (
     schema.METRIC_NATIVE_RETURN, schema.METRIC_LENGTH, schema.METRIC_SUCCESS, schema.METRIC_SHAPED_RETURN,
     schema.METRIC_EVAL_EPISODE_RETURN, schema.METRIC_EVAL_EPISODE_LENGTH, schema.METRIC_EVAL_EPISODE_SUCCESS,
@@ -120,14 +124,32 @@ def export_runs(client: Any, experiment: str, path: Path, models: bool = False,
     return TransferSummary(len(runs), before - len(runs))
 
 
+def format_problem(tag: object) -> str | None:
+    """Why a record whose ``format`` field is ``tag`` cannot be read here, or None.
+
+    Example:
+        >>> format_problem(FORMAT) is None, format_problem("vlmrl-runs/7")
+        (True, 'written by a newer vlmrl (format 7; this one reads up to 1): upgrade vlmrl')
+        >>> format_problem("mlflow-export")
+        'not a vlmrl run export (vlmrl-runs/1)'
+    """
+    if tag == FORMAT:
+        return None
+    name, _, version = str(tag).partition("/")
+    if name == FORMAT_NAME and version.isdigit() and int(version) > FORMAT_VERSION:
+        return f"written by a newer vlmrl (format {int(version)}; this one reads up to {FORMAT_VERSION}): upgrade vlmrl"
+    return f"not a vlmrl run export ({FORMAT})"
+
+
 def read_records(path: Path) -> Iterator[dict[str, Any]]:
     """The records of an export file, each checked for its format; ``BadInput`` for anything else."""
     try:
         with gzip.open(path, "rt", encoding="utf-8") as lines:
             for n, line in enumerate(lines, start=1):
                 record = json.loads(line)
-                if not isinstance(record, dict) or record.get("format") != FORMAT:
-                    raise BadInput(f"{path}, line {n}: not a vlmrl run export ({FORMAT}).")
+                problem = format_problem(record.get("format") if isinstance(record, dict) else None)
+                if problem:
+                    raise BadInput(f"{path}, line {n}: {problem}.")
                 yield record
     except (OSError, EOFError, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise BadInput(f"cannot read the run export {path}: {exc}.") from None

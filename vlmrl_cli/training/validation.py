@@ -29,15 +29,38 @@ from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.core.fields import rules_of
 
 
+def batch_sizes_near(rollout: int, batch_size: int) -> list[int]:
+    """The minibatch sizes SB3's PPO takes whole for a rollout of ``rollout`` samples (divisors of
+    it, at least 2) nearest to ``batch_size``: the largest below it and the smallest above it.
+
+    Example:
+        >>> batch_sizes_near(256, 3), batch_sizes_near(128, 100), batch_sizes_near(128, 1)
+        ([2, 4], [64, 128], [2])
+    """
+    sizes = [d for d in range(2, rollout + 1) if rollout % d == 0]
+    below = [d for d in sizes if d < batch_size]
+    above = [d for d in sizes if d > batch_size]
+    return [*below[-1:], *above[:1]]
+
+
 def _ppo_consistent(ppo: Any) -> Any:
+    """The rules SB3's PPO sets over several knobs, refused here rather than warned about or
+    asserted once a run has started: its rollout (n_envs x n_steps samples) must be at least 2,
+    and its minibatches (it normalises the advantages of each) at least 2 samples each, all whole."""
     rollout = ppo.n_envs * ppo.n_steps
+    product = f"ppo.n_envs x ppo.n_steps ({ppo.n_envs} x {ppo.n_steps} = {rollout})"
     if ppo.batch_size > rollout:
-        raise ValueError(
-            f"ppo.batch_size ({ppo.batch_size}) exceeds ppo.n_envs x ppo.n_steps "
-            f"({ppo.n_envs} x {ppo.n_steps} = {rollout}); lower batch_size or raise n_steps"
-        )
+        raise ValueError(f"ppo.batch_size ({ppo.batch_size}) exceeds {product}; lower batch_size or raise n_steps")
     if rollout < 2:
         raise ValueError("ppo.n_envs x ppo.n_steps must be at least 2 (PPO needs two samples per rollout)")
+    fits = " or ".join(map(str, batch_sizes_near(rollout, ppo.batch_size)))
+    if ppo.batch_size < 2:
+        raise ValueError(f"ppo.batch_size ({ppo.batch_size}) must be at least 2 (SB3's PPO normalises the "
+                         f"advantages of each minibatch); use a batch_size that divides {rollout}, e.g. {fits}")
+    if rollout % ppo.batch_size:
+        raise ValueError(f"ppo.batch_size ({ppo.batch_size}) does not divide {product}: SB3 would train on a "
+                         f"truncated last minibatch of {rollout % ppo.batch_size}; use a batch_size that divides "
+                         f"{rollout}, e.g. {fits}, or n_envs x n_steps a multiple of {ppo.batch_size}")
     return ppo
 
 

@@ -144,10 +144,13 @@ def runs_of_store(client: Any, experiment: str) -> list[RecordedRun]:
 
 
 def choose(runs: Sequence[RecordedRun], *, run_ids: Iterable[str] = (), seeds: Iterable[int] = (),
-           arms: Iterable[str] = (), sample: int | None = None, sample_seed: int = 0) -> list[RecordedRun]:
+           arms: Iterable[str] = (), sample: int | None = None, sample_seed: int = 0,
+           source: str = "the source") -> list[RecordedRun]:
     """The runs to verify: those named by id (a prefix of 8 or more characters will do), else
     those of the given seeds and arms; then ``sample`` of them drawn with ``sample_seed``
-    (the same draw on every machine), in their recorded order.
+    (the same draw on every machine), in their recorded order. A ``sample`` larger than what
+    there is to draw from is ``BadInput`` naming how many runs ``source`` holds: verifying them
+    all is another order of cost, and never a silent one.
 
     Example:
         >>> rs = [RecordedRun(f"id{i}", f"r{i}", {"seed": i % 2, "arm": {"name": "a"}}, {}, []) for i in range(6)]
@@ -155,6 +158,10 @@ def choose(runs: Sequence[RecordedRun], *, run_ids: Iterable[str] = (), seeds: I
         ['id1', 'id3', 'id5']
         >>> [r.run_id for r in choose(rs, sample=2)] == [r.run_id for r in choose(rs, sample=2)]
         True
+        >>> choose(rs, sample=9, source="runs.jsonl.gz")
+        Traceback (most recent call last):
+        ...
+        vlmrl_cli.core.errors.BadInput: --sample 9 is more than the 6 run(s) runs.jsonl.gz holds; pass --sample 6 ...
     """
     ids, wanted_seeds, wanted_arms = list(run_ids), set(seeds), set(arms)
     if ids:
@@ -170,6 +177,10 @@ def choose(runs: Sequence[RecordedRun], *, run_ids: Iterable[str] = (), seeds: I
                   and (not wanted_arms or r.arm in wanted_arms)]
     if not picked:
         raise BadInput("no run of the source matches --seed/--arm; drop them to verify any run.")
+    if sample is not None and sample > len(picked):
+        among = "" if len(picked) == len(runs) else f", {len(picked)} of them of the runs asked for"
+        raise BadInput(f"--sample {sample} is more than the {len(runs)} run(s) {source} holds{among}; pass --sample "
+                       f"{len(picked)} or fewer, or leave it out to verify all {len(picked)}.")
     if sample is not None and sample < len(picked):
         keep = set(random.Random(sample_seed).sample(range(len(picked)), sample))
         picked = [r for i, r in enumerate(picked) if i in keep]
