@@ -103,9 +103,13 @@ def test_a_task_without_a_baseline_is_refused_in_one_line(tmp_path: Path) -> Non
 
 def test_tied_configurations_are_refused_until_one_is_named(tmp_path: Path) -> None:
     files = _files(tmp_path)
-    other = _write(tmp_path / "other.jsonl.gz", [_record(None, "baseline", s, -199.0, "otherconfig1") for s in (0, 1)])
+    tagged = [_record(None, "baseline", s, -199.0, "otherconfig1") for s in (0, 1)]
+    for r in tagged:
+        r["tags"]["vlmrl.regime"] = "hard"  # type: ignore[index]
+    other = _write(tmp_path / "other.jsonl.gz", tagged)
     res = _compare(*files, str(other), "--out", str(tmp_path / "tie"))
-    assert res.exit_code == 2 and "--config-hash" in res.output and "otherconfig1" in res.output
+    assert res.exit_code == 2 and "--config-hash" in res.output
+    assert "otherconfig1 (hard)" in res.output and "None-baseline-hash (no regime tag)" in res.output
     res = _compare(*files, str(other), "--out", str(tmp_path / "named"), "--config-hash", "otherconf")
     assert res.exit_code == 0, res.output
     per_task = pd.read_csv(tmp_path / "named" / "per_task.csv")

@@ -53,7 +53,7 @@ NORMALISATIONS: dict[str, str] = {
 }
 SIMULATED_NOTE = "SIMULATED VLM, not a real model."
 REAL_NOTE = "no run used the simulated VLM"
-RUN_COLUMNS = ["task", "arm", "seed", "config_hash", "run_id", "score", "simulated", "numeric_path", "file"]
+RUN_COLUMNS = ["task", "arm", "seed", "config_hash", "run_id", "score", "simulated", "numeric_path", "file", "regime"]
 #: How runs are counted, for the report.
 RUN_RULE = ("a run counts once per (task, arm, seed, config hash): when several export files hold it, the one in "
             "the first file named is kept")
@@ -129,7 +129,8 @@ def read_runs(files: Sequence[Path]) -> pd.DataFrame:
                          "config_hash": tags.get(schema.TAG_CONFIG_HASH, ""),
                          "run_id": record["source_run_id"], "score": float(latest[2]),
                          "simulated": tags.get(schema.TAG_SIMULATED) == "true",
-                         "numeric_path": numeric_path(tags), "file": str(path)})
+                         "numeric_path": numeric_path(tags), "file": str(path),
+                         "regime": tags.get(schema.TAG_REGIME, "")})
     if not rows:
         raise BadInput(f"the export files hold no training run: {', '.join(str(p) for p in files)}.")
     return pd.DataFrame(rows, columns=RUN_COLUMNS)
@@ -182,10 +183,21 @@ def select_configs(runs: pd.DataFrame, config_hashes: Sequence[str] = ()) -> pd.
             tied = [h for h, n in counts if n == counts[0][1]]
             if len(tied) > 1:
                 raise BadInput(f"{arm} on {task} has {len(tied)} configurations with {counts[0][1]} runs each "
-                               f"({', '.join(sorted(tied))}); name the one to compare with --config-hash.")
+                               f"({_with_regimes(cell, sorted(tied))}); name the one to compare with --config-hash.")
             chosen[key] = counts[0][0]
         keep.append(cell[cell["config_hash"] == chosen[key]])
     return pd.concat(keep, ignore_index=True)
+
+
+def _with_regimes(cell: pd.DataFrame, hashes: Sequence[str]) -> str:
+    """Each hash with the regimes (``vlmrl.regime`` tags) its runs were trained in, e.g. ``ab12 (zoo)``."""
+    def regimes(h: str) -> str:
+        if "regime" not in cell:
+            return ""
+        named = sorted({str(r) for r in cell.loc[cell["config_hash"] == h, "regime"] if r})
+        return f" ({', '.join(named)})" if named else " (no regime tag)"
+
+    return ", ".join(f"{h}{regimes(h)}" for h in hashes)
 
 
 def compared_arms(runs: pd.DataFrame) -> tuple[list[str], dict[str, list[str]]]:
