@@ -56,11 +56,11 @@ def test_bad_study_tables(raw: dict) -> None:  # type: ignore[type-arg]
 
 
 def test_a_study_of_another_task_takes_its_study_preset_thresholds_and_window() -> None:
-    from vlmrl_cli.study.config import task_of
+    from vlmrl_cli.study.config import task_name_of
     from vlmrl_cli.tasks.registry import get_task
 
     layers = [{"task": "acrobot"}]
-    assert task_of(layers) == "acrobot" and task_of([]) == "mountain-car"
+    assert task_name_of(layers) == "acrobot" and task_name_of([]) == "mountain-car"
     task = get_task("acrobot")
     chosen, notes = choose_regimes([], None, "acrobot")
     preset = task.study_preset or task.default_preset

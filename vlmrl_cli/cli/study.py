@@ -136,7 +136,7 @@ def study(
         build_study,
         choose_regimes,
         study_section,
-        task_of,
+        task_name_of,
     )
     from vlmrl_cli.tracking.store import check_store
 
@@ -144,7 +144,7 @@ def study(
     with exit_codes():
         file_layer, *upper = opt.config_layers(ctx, config, sets, vlm_cfg)
         section = study_section(file_layer.pop("study", {}))
-        chosen, notes = choose_regimes(regime or [], section.get("regimes"), task_of([file_layer, *upper]))
+        chosen, notes = choose_regimes(regime or [], section.get("regimes"), task_name_of([file_layer, *upper]))
         profile_list, flicker_list = _names(profiles, "--profiles"), _numbers(flickers)
         cfg = build_study(
             [file_layer, *upper], chosen,

@@ -222,7 +222,7 @@ def _bad_regime(name: str) -> dict[str, Any]:
     raise BadInput(f"study.regimes.{name} must be a preset name or a table of overrides.")
 
 
-def task_of(layers: Sequence[Mapping[str, Any]]) -> str:
+def task_name_of(layers: Sequence[Mapping[str, Any]]) -> str:
     """The task the layers (file, ``--set``, flags) name: the ``task`` key, or MountainCar."""
     return resolve([*layers]).task
 
