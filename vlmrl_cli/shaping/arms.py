@@ -133,8 +133,9 @@ def comparisons(registry: Mapping[str, ArmSpec] = ARMS, study: bool = False
     study's regime map makes too.
 
     Example:
-        >>> [f"{a} vs {b}" for a, b, _ in comparisons(study=True)]
-        ['hybrid vs baseline', 'hybrid vs kinematic', 'hybrid vs hybrid-shuffled', 'kinematic vs baseline']
+        >>> [f"{a} vs {b}" for a, b, _ in comparisons(study=True)]  # doctest: +NORMALIZE_WHITESPACE
+        ['hybrid vs baseline', 'hybrid vs kinematic', 'hybrid vs hybrid-shuffled', 'kinematic vs baseline',
+         'hybrid-dense-pbrs vs baseline', 'hybrid-dense-pbrs vs hybrid']
     """
     return [(name, c.reference, c.isolates) for name in report_order(registry)
             for c in registry[name].compared_with if c.in_study or not study]
