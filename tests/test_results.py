@@ -1,24 +1,32 @@
-"""The committed results are on the numeric pin: every run in every export under results/ was
-trained on the pin this package applies (issue 27), so `vlmrl verify` can reproduce it anywhere."""
+"""The committed results: each manifest names the clean commit its numbers came from."""
+
 from __future__ import annotations
 
-from collections import Counter
+import json
+import re
+from collections.abc import Iterator
 from pathlib import Path
-
-import pytest
-
-from vlmrl_cli.core.numeric_pin import PIN_ID
-from vlmrl_cli.tracking.transfer import read_records
+from typing import Any
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
-EXPORTS = sorted(RESULTS.rglob("*.jsonl.gz"))
+COMMIT = re.compile(r"[0-9a-f]{40}")
 
 
-def test_there_are_committed_exports() -> None:
-    assert len(EXPORTS) >= 10, [str(p) for p in EXPORTS]
+def _commits(tree: Any) -> Iterator[str]:
+    if isinstance(tree, dict):
+        for key, value in tree.items():
+            if key == "git_commit" and isinstance(value, str):
+                yield value
+            else:
+                yield from _commits(value)
+    elif isinstance(tree, list):
+        for value in tree:
+            yield from _commits(value)
 
 
-@pytest.mark.parametrize("export", EXPORTS, ids=[str(p.relative_to(RESULTS)) for p in EXPORTS])
-def test_every_committed_run_is_on_the_pin(export: Path) -> None:
-    pins = Counter((r["tags"].get("vlmrl.pin"), r["tags"].get("vlmrl.pin.user")) for r in read_records(export))
-    assert pins and set(pins) == {(PIN_ID, "none")}, f"{export}: runs by (pin, user override) {dict(pins)}"
+def test_every_committed_manifest_names_a_clean_commit() -> None:
+    manifests = sorted(RESULTS.rglob("manifest.json"))
+    assert manifests, "results/ holds manifests"
+    bad = [(str(m.relative_to(RESULTS)), c) for m in manifests
+           for c in _commits(json.loads(m.read_text(encoding="utf-8"))) if not COMMIT.fullmatch(c)]
+    assert not bad, f"manifests naming no clean commit (e.g. '-dirty'): {bad}"
