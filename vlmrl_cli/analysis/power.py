@@ -180,6 +180,17 @@ def fit_censored_lognormal(steps: np.ndarray, budgets: np.ndarray) -> tuple[floa
     return float(mu), float(sd)
 
 
+def lognormal_reliability(mu: float, sd: float, budget: float) -> float:
+    """The fraction of log-normal steps (log mean ``mu``, sd ``sd``) within ``budget``: the fitted
+    reliability, the inverse of ``reference_median``.
+
+    Example:
+        >>> round(lognormal_reliability(math.log(reference_median(0.7, 0.3, 1e5, 20)), 0.3, 1e5), 6)
+        0.7
+    """
+    return float(sps.norm.cdf((math.log(budget) - mu) / sd))
+
+
 def restricted_mean_steps(mu: float, sd: float, budget: float) -> float:
     """``E[min(T, budget)]`` of log-normal steps ``T`` (log mean ``mu``, sd ``sd``): the tables'
     restricted mean, a DNF counted at the budget.

@@ -298,7 +298,7 @@ def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None) -> list[
                              f"finishes to fit a spread: no speedup power stated{fisher}.")
                 continue
             mu, sd = fit
-            fitted = float(sps_norm_cdf((math.log(budget) - mu) / sd))
+            fitted = power.lognormal_reliability(mu, sd, budget)
             mde = power.detectable_speedup(cfg.seed, n, sd, fitted, budget, cfg.alpha, family)
             if math.isfinite(mde):
                 rm_ratio = power.restricted_ratio(mu, sd, budget, mde)
@@ -309,13 +309,6 @@ def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None) -> list[
                          f"{sd:.2f}, reliability {100 * fitted:.0f}% (observed {reached}/{len(ref)}); at {n} seeds per "
                          f"arm it detects {effect}{fisher}.")
     return lines
-
-
-def sps_norm_cdf(z: float) -> float:
-    """The standard normal's distribution function (scipy's, imported when a power line is drawn)."""
-    from scipy import stats as sps
-
-    return float(sps.norm.cdf(z))
 
 
 def _probe_variants(cfg: StudyConfig) -> dict[str, float]:
