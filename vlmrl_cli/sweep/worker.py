@@ -64,6 +64,16 @@ def init_worker(progress: Any, stop: Any, ignore_sigint: bool = True) -> None:
     _channels.stop = stop
 
 
+def scales_tag(job: TrainJob) -> str:
+    """A shaped run's alpha and kin_scale and where they came from: the task's rule
+    (``Task.scales``), the paper's (MountainCar-v0's defaults), or the run's own settings."""
+    task, shaping = job.task_plugin, job.shaping
+    own = task.default_shaping()
+    source = ("set for this run" if (shaping.alpha, shaping.kin_scale) != (own.alpha, own.kin_scale)
+              else "the task's rule: " + task.scales.rule if task.scales is not None else "the paper's")
+    return f"alpha {shaping.alpha:g}, kin_scale {shaping.kin_scale:g} ({source})"
+
+
 def run_tags(job: TrainJob, parent_run_id: str | None, vlm_label: str, simulated: bool) -> dict[str, str]:
     if not job.arm.uses_vlm:
         vlm_label, simulated = "none (this arm queries no VLM)", False
@@ -80,6 +90,8 @@ def run_tags(job: TrainJob, parent_run_id: str | None, vlm_label: str, simulated
     }
     if job.regime is not None:
         tags[schema.TAG_REGIME] = job.regime
+    if job.arm.kinematic or job.arm.uses_vlm:
+        tags[schema.TAG_SCALES] = scales_tag(job)
     if job.arm.uses_vlm and job.vlm.backend == "sim":
         tags[schema.TAG_SIM_PROFILE] = job.vlm.sim.profile
     if job.arm.uses_vlm and job.vlm.backend == "sim" and job.vlm.sim.query_flicker > 0:

@@ -47,6 +47,7 @@ TAG_CONFIG_HASH = f"{TAG_PREFIX}config_hash"
 TAG_PRESET = f"{TAG_PREFIX}preset"
 TAG_OVERRIDES = f"{TAG_PREFIX}overrides"  # "key=value ..." or "none"
 TAG_REGIME = f"{TAG_PREFIX}regime"
+TAG_SCALES = f"{TAG_PREFIX}scales"  # a shaped arm's alpha and kin_scale and where they came from (issue 41)
 TAG_TASK = f"{TAG_PREFIX}task"  # the run's task (--task); runs from before tasks have none: mountain-car
 TAG_SIM_PROFILE = f"{TAG_PREFIX}sim_profile"
 TAG_PLACEBO_MAP = f"{TAG_PREFIX}placebo_map"  # a placebo arm's shuffled label map, "LABEL=phi ..."
