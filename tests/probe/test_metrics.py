@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from vlmrl_cli.probe import metrics
+from vlmrl_cli.probe.scoring import LABEL_MAP, TRACK
 from vlmrl_cli.tasks.mountain_car.geometry import Zone, zone_of
 from vlmrl_cli.vlm.parsers import ParseStatus
 
@@ -118,7 +119,8 @@ def test_delta_phi_fractions_are_bounded(vlm: list[float], data: st.DataObject) 
 @given(st.lists(st.floats(-1.2, 0.6), min_size=2, max_size=40))
 def test_perfect_answers_have_no_dphi_error(xs: list[float]) -> None:
     xs = sorted(xs)
-    for phi in ([metrics.position_potential(x) for x in xs], [metrics.label_potential(zone_of(x)) for x in xs]):
+    for phi in ([metrics.position_potential(x, *TRACK) for x in xs],
+                [metrics.label_potential(zone_of(x), LABEL_MAP) for x in xs]):
         s = metrics.delta_phi_stats(phi, phi)
         assert s.sign_disagreement == 0.0
         assert s.mean_abs_dphi_error == 0.0
@@ -127,8 +129,8 @@ def test_perfect_answers_have_no_dphi_error(xs: list[float]) -> None:
 
 
 def test_paper_mcq_pair_is_a_dead_zone() -> None:
-    vlm = [metrics.label_potential(Zone.BOTTOM), metrics.label_potential(Zone.BOTTOM)]
-    true = [metrics.label_potential(zone_of(-0.50)), metrics.label_potential(zone_of(-0.69))]
+    vlm = [metrics.label_potential(Zone.BOTTOM, LABEL_MAP), metrics.label_potential(Zone.BOTTOM, LABEL_MAP)]
+    true = [metrics.label_potential(zone_of(-0.50), LABEL_MAP), metrics.label_potential(zone_of(-0.69), LABEL_MAP)]
     s = metrics.delta_phi_stats(vlm, true)
     assert s.dead_zone == 1.0 and s.dead_zone_while_truth_moves == 1.0
 
@@ -139,9 +141,10 @@ def test_unparsed_answers_make_phi_unavailable() -> None:
 
 
 def test_potentials_span_the_unit_interval() -> None:
-    assert metrics.position_potential(-1.2) == 0.0 and metrics.position_potential(0.6) == pytest.approx(1.0)
-    assert metrics.box_potential((0, 0, 600, 10)) == 0.5
-    assert math.isnan(metrics.box_potential(None)) and math.isnan(metrics.label_potential(None))
+    assert metrics.position_potential(-1.2, *TRACK) == 0.0
+    assert metrics.position_potential(0.6, *TRACK) == pytest.approx(1.0)
+    assert metrics.box_potential((0, 0, 600, 10), 600) == 0.5
+    assert math.isnan(metrics.box_potential(None, 600)) and math.isnan(metrics.label_potential(None, LABEL_MAP))
 
 
 def test_absolute_error_shape() -> None:

@@ -13,8 +13,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from vlmrl_cli.tasks.mountain_car.geometry import MAX_POSITION, MIN_POSITION, SCREEN_WIDTH
-from vlmrl_cli.tasks.mountain_car.task import ZONE_POTENTIALS
 from vlmrl_cli.vlm.parsers import Box, ParseStatus
 
 # Statuses where the model's text itself failed (NO_ANSWER is the transcript's gap, not the model's).
@@ -122,21 +120,30 @@ def mcq_accuracy(predicted: Sequence[str | None], truth: Sequence[str]) -> float
 
 # --- the consequence on the potential ------------------------------------------------------
 
-def label_potential(label: str | None, mapping: Mapping[str, float] | None = None) -> float:
-    """Raw potential Phi_raw of an MCQ label (MountainCar's ``ZONE_POTENTIALS`` unless ``mapping``);
-    NaN for None."""
-    table = dict(ZONE_POTENTIALS) if mapping is None else mapping
-    return math.nan if label is None else float(table[label])
+def label_potential(label: str | None, mapping: Mapping[str, float]) -> float:
+    """Raw potential Phi_raw of an MCQ label under the task's label ``mapping``; NaN for None.
+
+    Example:
+        >>> label_potential("HIGH", {"LOW": 0.0, "HIGH": 1.0}), math.isnan(label_potential(None, {}))
+        (1.0, True)
+    """
+    return math.nan if label is None else float(mapping[label])
 
 
-def position_potential(x: float | None) -> float:
-    """A float answer's potential: x normalised to [0, 1] over the track; NaN for None."""
-    return math.nan if x is None else (x - MIN_POSITION) / (MAX_POSITION - MIN_POSITION)
+def position_potential(x: float | None, low: float, high: float) -> float:
+    """A float answer's potential: ``x`` normalised to [0, 1] over the range ``[low, high]`` (the
+    task's track); NaN for None.
+
+    Example:
+        >>> position_potential(-0.3, -1.2, 0.6)
+        0.5
+    """
+    return math.nan if x is None else (x - low) / (high - low)
 
 
-def box_potential(box: Box | None) -> float:
-    """A box answer's potential: the box centre column normalised to [0, 1] by the frame width."""
-    return math.nan if box is None else box_centre(box)[0] / SCREEN_WIDTH
+def box_potential(box: Box | None, width: float) -> float:
+    """A box answer's potential: the box centre column normalised to [0, 1] by the frame ``width``."""
+    return math.nan if box is None else box_centre(box)[0] / width
 
 
 @dataclass(frozen=True)

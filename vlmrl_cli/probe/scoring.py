@@ -16,9 +16,10 @@ import numpy as np
 from vlmrl_cli.core.errors import MissingAnswer
 from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.probe import metrics
-from vlmrl_cli.tasks.mountain_car.geometry import MAX_POSITION, MIN_POSITION, GroundTruth
+from vlmrl_cli.tasks.mountain_car.geometry import MAX_POSITION, MIN_POSITION, SCREEN_WIDTH, GroundTruth
 from vlmrl_cli.tasks.mountain_car.prompts import NUMBERS, PROMPTS, ZONE_MILESTONES
 from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
+from vlmrl_cli.tasks.mountain_car.task import ZONE_POTENTIALS
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.parsers import (
@@ -37,6 +38,10 @@ from vlmrl_cli.vlm.prompts import PromptKind
 # one), and no position falls within 2 px of a zone edge, where a reader off by a fraction of a
 # pixel flips the label (25 positions put three frames exactly on edges).
 DEFAULT_STATES = 101
+#: Table 1's potentials of each answer kind, MountainCar's: the track of a float answer, the frame
+#: width of a box's centre, the label map of an MCQ answer.
+TRACK = (MIN_POSITION, MAX_POSITION)
+LABEL_MAP = dict(ZONE_POTENTIALS)
 # The paper's Figure 1 pair: (panel, x, caption). Always probed, whatever the sweep.
 PAPER_FRAMES: tuple[tuple[str, float, str], ...] = (
     ("a", -0.50, "Absolute valley"),
@@ -162,14 +167,14 @@ def phi_series(probes: list[FrameProbe] | tuple[FrameProbe, ...], kind: PromptKi
     vlm, true = [], []
     for p in probes:
         if kind is PromptKind.FLOAT:
-            vlm.append(metrics.position_potential(p.float_result.value if p.float_result.ok else None))
-            true.append(metrics.position_potential(p.truth.x))
+            vlm.append(metrics.position_potential(p.float_result.value if p.float_result.ok else None, *TRACK))
+            true.append(metrics.position_potential(p.truth.x, *TRACK))
         elif kind is PromptKind.BOX:
-            vlm.append(metrics.box_potential(p.box_result.box if p.box_result.ok else None))
-            true.append(metrics.box_potential(p.truth.box_px))
+            vlm.append(metrics.box_potential(p.box_result.box if p.box_result.ok else None, SCREEN_WIDTH))
+            true.append(metrics.box_potential(p.truth.box_px, SCREEN_WIDTH))
         else:
-            vlm.append(metrics.label_potential(p.mcq_result.label if p.mcq_result.ok else None))
-            true.append(metrics.label_potential(p.truth.zone))
+            vlm.append(metrics.label_potential(p.mcq_result.label if p.mcq_result.ok else None, LABEL_MAP))
+            true.append(metrics.label_potential(p.truth.zone, LABEL_MAP))
     return np.asarray(vlm, dtype=float), np.asarray(true, dtype=float)
 
 
