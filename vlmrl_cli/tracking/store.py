@@ -132,11 +132,12 @@ def check_store(uri: str | None, write: bool = True, existing: bool = False) -> 
         _check_server(resolved)
 
 
-def connect(uri: str | None, wait_s: float = 0.0, write: bool = True) -> Any:
+def connect(uri: str | None, wait_s: float = 0.0, write: bool = True, existing: bool = False) -> Any:
     """An ``MlflowClient`` for ``uri``, checked to answer; unreachable stores are ``BadInput``.
     A tracking server that does not answer is retried for up to ``wait_s`` seconds first
     (workers wait out a server restart; commands typed by a user fail fast). A sqlite database
-    is checked first to be writable (``write``; readable only, when False) without MLflow."""
+    is checked first, without MLflow, to be writable (``write``; readable only, when False) and,
+    with ``existing``, to exist (``store_problem``)."""
     import logging
 
     from mlflow.tracking import MlflowClient
@@ -144,7 +145,7 @@ def connect(uri: str | None, wait_s: float = 0.0, write: bool = True) -> Any:
     logging.getLogger("alembic").setLevel(logging.WARNING)
     logging.getLogger("mlflow").setLevel(logging.WARNING)
     resolved = resolve_tracking_uri(uri)
-    problem = store_problem(resolved, write=write)
+    problem = store_problem(resolved, write=write, existing=existing)
     if problem:
         raise BadInput(problem + ".")
     lock: contextlib.AbstractContextManager[object] = contextlib.nullcontext()
@@ -196,11 +197,7 @@ def _remove_lock_file(lock: object) -> None:
 def connect_existing(uri: str | None) -> Any:
     """``connect`` for commands that read runs: a sqlite database that does not exist is
     ``BadInput`` instead of a new empty store (``connect`` would create it and its folder)."""
-    resolved = resolve_tracking_uri(uri)
-    problem = store_problem(resolved, write=False, existing=True)
-    if problem:
-        raise BadInput(problem + ".")
-    return connect(resolved, write=False)
+    return connect(uri, write=False, existing=True)
 
 
 def init_lock(db_path: Path) -> filelock.FileLock:

@@ -30,7 +30,9 @@ def make_train_env(
     """The training VecEnv of one run of ``task`` and its oracle (None for arms without a VLM).
     A ``shaping`` that names no label map takes the task's (``Task.shaping_for``).
 
-    Per env: ``task.make_env()`` -> ``Monitor`` (SB3's episode stats are the NATIVE
+    Per env: ``task.make_env()`` -> ``as_float`` (a non-float Box observation cast to float32: SB3's
+    rollout buffer keeps the space's dtype, so a ``uint8`` one under ``VecNormalize`` would be
+    truncated to integers) -> ``Monitor`` (SB3's episode stats are the NATIVE
     return and length) -> ``HybridReward`` (the arm's reward and ``is_success`` by the task's rule,
     ``task.success``; a pass-through adding the info keys for ``baseline``). Then ``DummyVecEnv`` of
     ``preset.n_envs`` (one process, so the camera and oracle are shared by all envs) ->
