@@ -19,6 +19,7 @@ from vlmrl_cli.analysis.learning_profile import (
     scaled_target,
     seed_steps,
 )
+from vlmrl_cli.paper import REPORTED
 
 THRESHOLDS = (-190.0, -160.0, -130.0)
 
@@ -105,8 +106,8 @@ def test_one_seed_has_no_ci() -> None:
     assert est.value == pytest.approx(0.0) and not est.has_ci and "fewer than 2" in est.note
 
 
-def test_the_default_target_is_the_papers_baseline() -> None:
-    t = paper_baseline()
+def test_the_papers_reported_baseline_is_read_from_its_table2() -> None:
+    t = paper_baseline(REPORTED)
     assert t.thresholds == THRESHOLDS and t.steps == (196_717.0, 219_679.0, 272_448.0) and t.reliability == 0.6
 
 
@@ -117,8 +118,8 @@ def test_a_target_needs_one_step_per_threshold() -> None:
 
 @given(k=st.integers(1, 6), budget=st.integers(1_000, 10_000_000))
 def test_a_scaled_target_keeps_the_paper_profile_shape_within_the_budget(k: int, budget: int) -> None:
-    paper = paper_baseline()
-    t = scaled_target(tuple(float(i) for i in range(k)), budget)
+    paper = paper_baseline(REPORTED)
+    t = scaled_target(tuple(float(i) for i in range(k)), budget, paper, 300_000)
     assert len(t.steps) == k and t.reliability == paper.reliability
     assert list(t.steps) == sorted(t.steps) and all(0 < s < budget for s in t.steps)
     # the last threshold sits where the paper's last one does, as a fraction of the budget

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from vlmrl_cli.analysis.learning_profile import PAPER_BUDGET, paper_baseline
+from vlmrl_cli.analysis.learning_profile import paper_baseline
 from vlmrl_cli.calibration.regimes import build_regimes, calibrate_config
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.paper import REPORTED
 from vlmrl_cli.tasks.registry import get_task
 
 
@@ -14,7 +15,7 @@ def test_the_default_grid_builds_baseline_regimes_of_mountain_car() -> None:
     regimes = build_regimes([], {})
     assert regimes and all(r.run.arms == ("baseline",) and r.run.task == "mountain-car" for r in regimes)
     cfg = calibrate_config(regimes)
-    assert cfg.target == paper_baseline() and cfg.window == 100
+    assert cfg.target == paper_baseline(REPORTED) and cfg.window == 100
 
 
 @pytest.mark.parametrize("name", ["acrobot", "mountain-car-continuous"])
@@ -24,12 +25,12 @@ def test_another_task_calibrates_its_own_grid_against_the_scaled_paper_profile(n
     assert [dict(r.overrides) for r in regimes] == [dict(p) for p in task.calibration]
     assert all(r.run.task == name and r.run.arms == ("baseline",) for r in regimes)
     cfg = calibrate_config(regimes)
-    paper = paper_baseline()
+    paper = paper_baseline(REPORTED)
     assert cfg.target.thresholds == task.thresholds and cfg.window == task.window
     assert cfg.target.reliability == paper.reliability
     # each threshold at the paper's fraction of the budget (three thresholds each: no interpolation)
     for mine, theirs in zip(cfg.target.steps, paper.steps, strict=True):
-        assert mine == pytest.approx(theirs / PAPER_BUDGET * cfg.base.budget)
+        assert mine == pytest.approx(theirs / 300_000 * cfg.base.budget)
 
 
 def test_a_grid_over_two_tasks_is_refused() -> None:

@@ -10,9 +10,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from vlmrl_cli.probe import metrics
-from vlmrl_cli.probe.scoring import LABEL_MAP, TRACK
+from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
 from vlmrl_cli.tasks.mountain_car.geometry import Zone, zone_of
 from vlmrl_cli.vlm.parsers import ParseStatus
+
+# MountainCar's potentials of Table 1: its label map, the track of a float answer
+LABEL_MAP = dict(MOUNTAIN_CAR.label_potentials)
+TRACK = (-1.2, 0.6)
 
 _coord = st.floats(-50, 700, allow_nan=False)
 _box = st.tuples(_coord, _coord, _coord, _coord)

@@ -9,12 +9,14 @@ import pytest
 
 from tests.mountain_car_helpers import parse_float, sim_vlm
 from vlmrl_cli.probe import metrics
-from vlmrl_cli.probe.scoring import DEFAULT_STATES, PAPER_FRAMES, sweep_positions
+from vlmrl_cli.probe.scoring import DEFAULT_STATES, sweep_positions
 from vlmrl_cli.probe.taxonomy import TaxonomyConfig, TaxonomyResult, run_taxonomy
+from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
 from vlmrl_cli.tasks.mountain_car.geometry import SCALE, ZONE_EDGES, Zone
+from vlmrl_cli.tasks.mountain_car.probe import NUMBER_PROBE, PAPER_FRAMES
 from vlmrl_cli.tasks.mountain_car.prompts import PROMPTS
 from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
-from vlmrl_cli.vlm.config import SIM_PROFILES, SimKnobs, VLMConfig
+from vlmrl_cli.vlm.config import SimKnobs, VLMConfig, sim_profiles
 from vlmrl_cli.vlm.parsers import ParseStatus
 from vlmrl_cli.vlm.prompts import PromptKind
 
@@ -27,8 +29,8 @@ STATES = 12
 def results(tmp_path_factory: pytest.TempPathFactory) -> dict[str, TaxonomyResult]:
     root = tmp_path_factory.mktemp("profiles")
     out = {}
-    for name in SIM_PROFILES:
-        vlm = VLMConfig(sim=SimKnobs.of_profile(name), cache_path=root / "cache.sqlite")
+    for name in sim_profiles(MOUNTAIN_CAR):  # the generic profiles and MountainCar's llava-table1
+        vlm = VLMConfig(sim=SimKnobs.of_profile(name, MOUNTAIN_CAR), cache_path=root / "cache.sqlite")
         out[name] = run_taxonomy(TaxonomyConfig(vlm=vlm, states=STATES, out=root / name,
                                                 tracking_uri=f"sqlite:///{root}/mlflow.db"))
     return out
@@ -76,7 +78,7 @@ def test_flicker_still_works_on_a_profile(results: dict[str, TaxonomyResult], tm
 
 def test_the_default_sweep_keeps_clear_of_zone_edges() -> None:
     # a frame on an edge gets either label from a reader off by a fraction of a pixel
-    gaps = [abs(x - edge) * SCALE for x in sweep_positions(DEFAULT_STATES) for edge in ZONE_EDGES]
+    gaps = [abs(x - edge) * SCALE for x in sweep_positions(DEFAULT_STATES, NUMBER_PROBE) for edge in ZONE_EDGES]
     assert min(gaps) >= 1.5  # pixels
 
 
@@ -84,13 +86,13 @@ def test_llava_table1_float_answers_carry_no_rank_signal_on_the_default_sweep() 
     """Over 20 simulator seeds the float Spearman scatters around 0 as a null correlation does:
     mean within +-0.06 (3 standard errors of 0.1 / sqrt(20)), and 95% intervals that hold 0 for at
     least 17 of 20 seeds. A reader whose answers followed the position would fail both."""
-    xs = sweep_positions(DEFAULT_STATES) + [x for _, x, _ in PAPER_FRAMES]
+    xs = sweep_positions(DEFAULT_STATES, NUMBER_PROBE) + [x for _, x, _ in PAPER_FRAMES]
     prompt = PROMPTS[PromptKind.FLOAT]
     with FrameRenderer() as renderer:
         frames = [renderer.render(x) for x in xs]
     rhos, covered = [], 0
     for seed in range(20):
-        vlm = sim_vlm(SimKnobs.of_profile("llava-table1", seed=seed))
+        vlm = sim_vlm(SimKnobs.of_profile("llava-table1", MOUNTAIN_CAR, seed=seed))
         values = [parse_float(vlm.answer(prompt, f)).value for f in frames]
         rho = metrics.spearman([np.nan if v is None else v for v in values], xs)
         lo, hi = metrics.spearman_ci(rho, len(xs))

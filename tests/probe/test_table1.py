@@ -8,8 +8,10 @@ import pytest
 
 from vlmrl_cli.core.tables import latex_escape
 from vlmrl_cli.core.tables import markdown as markdown_table
-from vlmrl_cli.probe.scoring import PAPER_FRAMES, FrameProbe, _Planned, empty_sweep_statistics, probe_frame
+from vlmrl_cli.probe.scoring import FrameProbe, _Planned, empty_sweep_statistics, probe_frame
 from vlmrl_cli.probe.table1 import pair_consequence, taxonomy_frame, write_tables
+from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
+from vlmrl_cli.tasks.mountain_car.probe import NUMBER_PROBE, PAPER_FRAMES
 from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.config import VLMConfig
@@ -21,7 +23,8 @@ from vlmrl_cli.vlm.replay import ReplayBackend
 def paper_pair() -> tuple[FrameProbe, FrameProbe]:
     client = VLMClient(ReplayBackend.from_config(VLMConfig(backend="replay")))
     with FrameRenderer() as renderer:
-        a, b = (probe_frame(client, renderer, _Planned(x, f"x={x:.2f}", panel, cap)) for panel, x, cap in PAPER_FRAMES)
+        a, b = (probe_frame(client, MOUNTAIN_CAR, renderer, _Planned(x, f"x={x:.2f}", panel, cap))
+                for panel, x, cap in PAPER_FRAMES)
     return a, b
 
 
@@ -37,7 +40,7 @@ def test_paper_consequences_are_computed(paper_pair: tuple[FrameProbe, FrameProb
 
 
 def test_tables_hold_the_raw_outputs(paper_pair: tuple[FrameProbe, FrameProbe], tmp_path: Path) -> None:
-    paths = write_tables(list(paper_pair), empty_sweep_statistics(), tmp_path, label="replay:m",
+    paths = write_tables(list(paper_pair), empty_sweep_statistics(), tmp_path, NUMBER_PROBE, label="replay:m",
                          provenance="replayed", simulated=False)
     md = paths[0].read_text()
     for snippet in ("0.378", "0.386", "Error [0, 0, 0, 0]", "Box [450, 210, 480, 230]", "BOTTOM", "ΔΦ = 0.0",
@@ -46,11 +49,11 @@ def test_tables_hold_the_raw_outputs(paper_pair: tuple[FrameProbe, FrameProbe], 
     assert "SIMULATED" not in md
     tex = paths[2].read_text()
     assert r"\begin{tabular}" in tex and "LEFT\\_SLOPE" in tex
-    assert len(taxonomy_frame(*paper_pair)) == 3
+    assert len(taxonomy_frame(*paper_pair, NUMBER_PROBE)) == 3
 
 
 def test_simulated_tables_say_so(paper_pair: tuple[FrameProbe, FrameProbe], tmp_path: Path) -> None:
-    write_tables(list(paper_pair), empty_sweep_statistics(), tmp_path, label="sim:x", provenance="p",
+    write_tables(list(paper_pair), empty_sweep_statistics(), tmp_path, NUMBER_PROBE, label="sim:x", provenance="p",
                  simulated=True)
     assert "SIMULATED VLM (not a real model)" in (tmp_path / "table1.md").read_text()
 

@@ -12,6 +12,7 @@ from tests.mountain_car_helpers import sim_vlm
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.probe.scoring import frame_id_of, plan_frames, sweep_statistics, x_of_frame_id
 from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
+from vlmrl_cli.tasks.mountain_car.probe import NUMBER_PROBE
 from vlmrl_cli.vlm.config import SimKnobs, VLMConfig
 from vlmrl_cli.vlm.parsers import ParseStatus
 from vlmrl_cli.vlm.replay import ReplayBackend
@@ -29,12 +30,12 @@ def _cfg(tmp_path: Path, **vlm: object) -> VLMConfig:
 
 def test_frame_ids_round_trip() -> None:
     for x in (-0.5, -0.69, -1.125, 0.6, -1.2):
-        assert x_of_frame_id(frame_id_of(x)) == pytest.approx(x)
-    assert x_of_frame_id("frame-7") is None and x_of_frame_id("x=5") is None
+        assert x_of_frame_id(frame_id_of(x), NUMBER_PROBE) == pytest.approx(x)
+    assert x_of_frame_id("frame-7", NUMBER_PROBE) is None and x_of_frame_id("x=5", NUMBER_PROBE) is None
 
 
 def test_plan_always_includes_the_paper_frames() -> None:
-    planned, is_sweep = plan_frames(5, sim_vlm())
+    planned, is_sweep = plan_frames(5, sim_vlm(), NUMBER_PROBE)
     assert is_sweep and len(planned) == 7
     assert [p.panel for p in planned if p.panel] == ["b", "a"]  # sorted by x: -0.69 first
     xs = [p.x for p in planned]
@@ -43,7 +44,7 @@ def test_plan_always_includes_the_paper_frames() -> None:
 
 def test_replay_without_states_probes_only_its_frames() -> None:
     backend = ReplayBackend.from_config(VLMConfig(backend="replay"))
-    planned, is_sweep = plan_frames(None, backend)
+    planned, is_sweep = plan_frames(None, backend, NUMBER_PROBE)
     assert not is_sweep and [p.frame_id for p in planned] == ["x=-0.69", "x=-0.50"]
 
 

@@ -21,7 +21,7 @@ def sim_client(flicker: float = 0.1, seed: int = 0) -> VLMClient:
 def mc_oracle(client: VLMClient, cfg: ShapingConfig, source: PotentialSource, rbf: bool = True) -> SemanticOracle:
     """A ``SemanticOracle`` of MountainCar-v0 (its labels, features and float question)."""
     return SemanticOracle(client, MOUNTAIN_CAR.shaping_for(cfg), source, MOUNTAIN_CAR.milestones,
-                          MOUNTAIN_CAR.feature_dim, rbf=rbf, numbers=MOUNTAIN_CAR.numbers)
+                          MOUNTAIN_CAR.camera.feature_dim, rbf=rbf, numbers=MOUNTAIN_CAR.numbers)
 
 
 class ScriptedBackend:

@@ -63,7 +63,7 @@ def test_only_the_placebo_arm_changes_the_oracle_map() -> None:
 
 def test_the_placebo_run_builds_its_oracle_with_the_shuffled_map() -> None:
     arm = ARMS["hybrid-shuffled"]
-    env, oracle = make_train_env(arm, preset_of("mountain-car", "smoke"), ShapingConfig(), sim_client(), seed=4,
+    env, oracle = make_train_env(arm, preset_of(MOUNTAIN_CAR, "smoke"), ShapingConfig(), sim_client(), seed=4,
                                  task=MOUNTAIN_CAR)
     try:
         assert oracle is not None

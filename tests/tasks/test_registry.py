@@ -175,7 +175,8 @@ def test_os_abort_is_refused_not_called() -> None:
 def test_the_docs_example_task_loads_from_a_user_module(user_module: str) -> None:
     task = get_task(user_module)
     assert task.name == "valley" and task.milestones.labels == ("VALLEY", "HILL")
-    cfg = RunConfig.from_sources(None, {"task": user_module, "arms": ["hybrid"], "seeds": [0], "preset": "smoke"})
+    cfg = RunConfig.from_sources(None, {"task": user_module, "arms": ["hybrid"], "seeds": [0], "preset": "smoke"},
+                                 tasks=get_task)
     job = cfg.jobs()[0]
     assert dict(job.shaping.label_potentials) == {"VALLEY": 0.0, "HILL": 1.0}  # the task's map, not MountainCar's
     assert job.identity()["task"] == user_module and job.ppo.timesteps == 1_024
@@ -185,7 +186,7 @@ def test_the_docs_example_task_loads_from_a_user_module(user_module: str) -> Non
 def test_a_user_task_runs_a_smoke_sweep(tmp_path: Path, user_module: str) -> None:
     uri = f"sqlite:///{tmp_path / 'm.db'}"
     cfg = RunConfig.from_sources(None, {"task": user_module, "arms": ["baseline", "hybrid"], "seeds": [0],
-                                        "preset": "smoke", "workers": 1, "tracking_uri": uri})
+                                        "preset": "smoke", "workers": 1, "tracking_uri": uri}, tasks=get_task)
     summary = run_sweep(cfg, SilentReporter())
     assert len(summary.finished) == 2 and not summary.failed
     client = store.connect(uri)
@@ -200,7 +201,7 @@ def test_a_user_task_runs_a_smoke_sweep(tmp_path: Path, user_module: str) -> Non
 
 def test_the_grid_world_example_reads_every_frame_of_random_episodes_as_the_truth(room_module: str) -> None:
     task = get_task(room_module)
-    camera = task.make_camera(ShapingConfig())
+    camera = task.camera.make(ShapingConfig())
     assert isinstance(camera, CellCamera)
     env = task.make_env()
     rng = np.random.default_rng(0)

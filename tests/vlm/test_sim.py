@@ -115,28 +115,38 @@ def test_is_fast(renderer: FrameRenderer) -> None:
 
 
 def test_default_profile_is_todays_knobs_and_keeps_its_digest() -> None:
-    from vlmrl_cli.vlm.config import SIM_PROFILES
+    from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
+    from vlmrl_cli.vlm.config import sim_profiles
     from vlmrl_cli.vlm.sim import knobs_digest
 
     assert SimKnobs.of_profile("default") == SimKnobs()
     assert (SimKnobs().flicker, SimKnobs().float_noise, SimKnobs().box_noise_px, SimKnobs().box_failure,
             SimKnobs().patch_px) == (0.1, 0.25, 20.0, 0.2, 28)
     assert knobs_digest(SimKnobs()) == "144d03c0"  # the digest before profiles existed: cached answers stay valid
-    digests = {knobs_digest(SimKnobs.of_profile(name)) for name in SIM_PROFILES}
-    assert len(digests) == len(SIM_PROFILES)
+    offered = sim_profiles(MOUNTAIN_CAR)
+    digests = {knobs_digest(SimKnobs.of_profile(name, MOUNTAIN_CAR)) for name in offered}
+    assert len(digests) == len(offered) == 3
+    # llava-table1's digest (so its cached answers) as when the profile lived in vlm/config.py
+    assert knobs_digest(SimKnobs.of_profile("llava-table1", MOUNTAIN_CAR)) == "042db052"
 
 
 def test_explicit_knobs_beat_the_profile_and_unknown_profiles_fail() -> None:
-    knobs = SimKnobs.of_profile("llava-table1", flicker=0.3)
+    from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
+
+    knobs = SimKnobs.of_profile("llava-table1", MOUNTAIN_CAR, flicker=0.3)
     assert knobs.flicker == 0.3 and knobs.float_anchor == 0.38 and knobs.profile == "llava-table1"
-    with pytest.raises(ValueError, match="choose from"):
-        SimKnobs.of_profile("lava")
-    with pytest.raises(ValueError, match="choose from"):
-        SimKnobs(profile="lava")
+    with pytest.raises(ValueError, match="choose from ideal, default, llava-table1"):
+        SimKnobs.of_profile("lava", MOUNTAIN_CAR)
+    with pytest.raises(ValueError, match=r"choose from ideal, default\.$"):  # a task's own profile needs its task
+        SimKnobs.of_profile("llava-table1")
+    with pytest.raises(ValueError, match="a simulated-VLM profile is a name"):
+        SimKnobs(profile="")
 
 
 def test_widened_bottom_zone_and_anchors(renderer: FrameRenderer) -> None:
-    vlm = sim_vlm(SimKnobs.of_profile("llava-table1"))
+    from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
+
+    vlm = sim_vlm(SimKnobs.of_profile("llava-table1", MOUNTAIN_CAR))
     for x in (-0.69, -0.5, -0.3):
         frame = renderer.render(x)
         assert parse_mcq(vlm.answer(PROMPTS[PromptKind.MCQ], frame)).label == geometry.Zone.BOTTOM

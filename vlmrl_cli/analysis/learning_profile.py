@@ -33,13 +33,10 @@ import numpy.typing as npt
 import pandas as pd
 from scipy import stats as sps
 
-from vlmrl_cli import paper
 from vlmrl_cli.analysis import censored
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, reliability
 from vlmrl_cli.analysis.thresholds import steps_to_threshold
 from vlmrl_cli.core.errors import BadInput
-
-PAPER_REPORTED = paper.REPORTED
 
 
 @dataclass(frozen=True)
@@ -58,11 +55,13 @@ class TargetProfile:
             raise ValueError("target steps must be > 0 and the target reliability in [0, 1].")
 
 
-def paper_baseline(path: Path = PAPER_REPORTED) -> TargetProfile:
-    """The paper's baseline (Table 2): steps to -190/-160/-130 and its final reliability.
+def paper_baseline(path: Path) -> TargetProfile:
+    """The baseline of a paper's reported Table 2 (``path``, the paper's task's ``PaperTask.reported``):
+    steps to each threshold and its final reliability.
 
     Example:
-        >>> t = paper_baseline()
+        >>> from vlmrl_cli import paper
+        >>> t = paper_baseline(paper.REPORTED)
         >>> t.thresholds, t.steps, t.reliability
         ((-190.0, -160.0, -130.0), (196717.0, 219679.0, 272448.0), 0.6)
     """
@@ -79,24 +78,19 @@ def paper_baseline(path: Path = PAPER_REPORTED) -> TargetProfile:
         raise BadInput(f"cannot read the paper's baseline profile from {path}; check the file ({exc}).") from exc
 
 
-#: The paper's training budget (its Figure 2 runs to 300,000 steps), against which its baseline's
-#: steps are read as fractions of a budget by ``scaled_target``.
-PAPER_BUDGET = 300_000
-
-
-def scaled_target(thresholds: Sequence[float], budget: int, paper: TargetProfile | None = None,
-                  paper_budget: int = PAPER_BUDGET) -> TargetProfile:
-    """The paper's baseline profile carried to another task: the same *shape* (each threshold crossed
-    at the same fraction of the budget as the paper's baseline crossed its k-th, interpolated when the
-    task has another number of thresholds; the same reliability) on ``thresholds`` and ``budget``.
-    A regime close to it is slow and fails on some seeds, as the paper's baseline does.
+def scaled_target(thresholds: Sequence[float], budget: int, paper: TargetProfile, paper_budget: int) -> TargetProfile:
+    """The paper's baseline profile (``paper``, trained for ``paper_budget`` steps: the paper's task's
+    ``PaperTask.budget``) carried to another task: the same *shape* (each threshold crossed at the same
+    fraction of the budget as the paper's baseline crossed its k-th, interpolated when the task has
+    another number of thresholds; the same reliability) on ``thresholds`` and ``budget``. A regime
+    close to it is slow and fails on some seeds, as the paper's baseline does.
 
     Example:
-        >>> t = scaled_target((0.0, 50.0, 90.0), 100_000)
+        >>> from vlmrl_cli import paper
+        >>> t = scaled_target((0.0, 50.0, 90.0), 100_000, paper_baseline(paper.REPORTED), 300_000)
         >>> [round(s) for s in t.steps], t.reliability
         ([65572, 73226, 90816], 0.6)
     """
-    paper = paper or paper_baseline()
     fractions = np.asarray(paper.steps, dtype=float) / paper_budget
     k = len(thresholds)
     if k == 0:

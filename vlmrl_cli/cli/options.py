@@ -16,10 +16,11 @@ import typer
 from vlmrl_cli.analysis.multiplicity import METHODS
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.shaping.arms import ARMS
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import DEFAULT_PRESET, DEFAULT_TASK, source_layers
 from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.presets import preset_names
-from vlmrl_cli.vlm.config import BACKENDS, DEFAULT_SIM_PROFILE, SIM_PROFILES, SimKnobs, VLMConfig
+from vlmrl_cli.vlm.config import BACKENDS, DEFAULT_SIM_PROFILE, SimKnobs, VLMConfig, sim_profiles
 
 TrackingUri = Annotated[
     str | None,
@@ -45,8 +46,11 @@ Adjust = Annotated[str, typer.Option(
 
 _DEFAULT = VLMConfig()
 _SIM = SimKnobs()
-#: The profiles as a choice typer validates and lists in the help.
-SimProfileName = enum.StrEnum("SimProfileName", [(name, name) for name in SIM_PROFILES])  # type: ignore[misc]
+#: The profiles as a choice typer validates and lists in the help: the generic ones and the default
+#: task's own (a run of another task is checked against its own where its layers are resolved).
+_PROFILE_TASK = get_task(DEFAULT_TASK)
+SimProfileName = enum.StrEnum(  # type: ignore[misc]
+    "SimProfileName", [(name, name) for name in sim_profiles(_PROFILE_TASK)])
 
 
 @dataclass(frozen=True)
@@ -139,7 +143,7 @@ def vlm_config(**values: Any) -> VLMConfig:
         else:
             top[option.target] = value
     profile = str(sim.pop("profile"))
-    return VLMConfig(**top, sim=SimKnobs.of_profile(profile, **sim))
+    return VLMConfig(**top, sim=SimKnobs.of_profile(profile, _PROFILE_TASK, **sim))
 
 
 def with_vlm_options(command: Callable[..., None]) -> Callable[..., None]:
@@ -196,7 +200,7 @@ Timesteps = Annotated[int | None, typer.Option("--timesteps", help="Budget per r
 # No default of its own: a run that names no preset takes its task's (``Task.default_preset``), so
 # the help states that rather than one task's name (``[default: paper]`` is false for Acrobot).
 Preset = Annotated[str | None, typer.Option(
-    "--preset", metavar=choices(preset_names(DEFAULT_TASK)), show_default=False,
+    "--preset", metavar=choices(preset_names(get_task(DEFAULT_TASK))), show_default=False,
     help=f"PPO preset, the bottom layer of [ppo]: one of the task's own presets (listed: {DEFAULT_TASK}'s) "
          f"[default: the task's default preset; {DEFAULT_TASK}'s is {DEFAULT_PRESET}].")]
 TaskOpt = Annotated[str | None, typer.Option(

@@ -40,7 +40,7 @@ def _is_papers_task(name: str) -> bool:
     from vlmrl_cli.tasks.registry import get_task
 
     with exit_codes():
-        return get_task(name).reported_in_paper
+        return get_task(name).paper is not None
     return False  # exit_codes() has exited
 
 
@@ -57,6 +57,7 @@ def taxonomy(
     from vlmrl_cli.probe.scoring import DEFAULT_STATES
     from vlmrl_cli.probe.table1 import with_ci
     from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
+    from vlmrl_cli.tasks.registry import get_task
     from vlmrl_cli.tracking.store import check_store
 
     console = Console(stderr=True)
@@ -74,7 +75,7 @@ def taxonomy(
         )
         check_store(cfg.tracking_uri)  # before MLflow, the VLM or any file
         with _probe_progress(console) as progress:
-            result = run_taxonomy(cfg, progress=progress)
+            result = run_taxonomy(cfg, progress=progress, task=None if task is None else get_task(task))
 
     if result.simulated:
         typer.secho("WARNING: SIMULATED VLM (not a real model): the answers come from a pixel reader with "

@@ -69,27 +69,28 @@ def _float_verdict(probe: FrameProbe) -> str:
 
 
 def _box_verdict(probe: FrameProbe) -> str:
-    """Whether the box parsed and, if so, whether it holds the car's true centre."""
+    """Whether the box parsed and, if so, whether it holds the agent's true centre."""
     r = probe.box_result
     if not r.ok or r.box is None:
         return _parsed(r.status)
     cx, cy = probe.truth.centre_px
     x0, y0, x1, y1 = r.box
     inside = x0 <= cx <= x1 and y0 <= cy <= y1
-    return "parsed; " + ("holds the car's centre" if inside else "misses the car's centre")
+    return "parsed; " + ("holds the true centre" if inside else "misses the true centre")
 
 
 def _mcq_verdict(probe: FrameProbe) -> str:
-    """Whether the label parsed and, if so, whether it is the true zone."""
+    """Whether the label parsed and, if so, whether it is the true label."""
     r = probe.mcq_result
     if not r.ok or r.label is None:
         return _parsed(r.status)
-    correct = r.label is probe.truth.zone
-    return f"parsed; {'correct' if correct else 'wrong'} (true {probe.truth.zone.value})"
+    correct = r.label == probe.truth.label
+    return f"parsed; {'correct' if correct else 'wrong'} (true {probe.truth.label})"
 
 
 def figure1(probes: Sequence[FrameProbe], *, label: str, simulated: bool, note: str = "") -> Any:
-    """A ``matplotlib.figure.Figure`` with the paper's two frames (panels a and b) side by side.
+    """A ``matplotlib.figure.Figure`` with the task's panel frames (MountainCar: the paper's a
+    and b) side by side.
 
     ``label`` names the backend (``name:model``); ``note`` is appended to the suptitle.
     """
@@ -98,7 +99,7 @@ def figure1(probes: Sequence[FrameProbe], *, label: str, simulated: bool, note: 
 
     panels = sorted((p for p in probes if p.panel is not None), key=lambda p: p.panel or "")
     if not panels:
-        raise ValueError("Figure 1 needs the paper's frames (a) x=-0.50 and (b) x=-0.69 among the probes.")
+        raise ValueError("Figure 1 needs the task's panel frames (NumberProbe.panels) among the probes.")
     fig = Figure(figsize=(6.0 * len(panels), 5.2), layout="constrained")
     axes = fig.subplots(1, len(panels), squeeze=False)[0]
     for ax, probe in zip(axes, panels, strict=True):

@@ -24,6 +24,7 @@ import pandas as pd
 from scipy import stats
 
 from vlmrl_cli.core import tables
+from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, flatten
 from vlmrl_cli.probe import metrics
@@ -31,6 +32,7 @@ from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
+from vlmrl_cli.vlm.config import profile_problem
 from vlmrl_cli.vlm.parsers import ParseStatus, parse_mcq
 from vlmrl_cli.vlm.preflight import check_vlm
 from vlmrl_cli.vlm.registry import build_client
@@ -95,14 +97,15 @@ def run_milestone_taxonomy(task: Task, vlm: Any, states: int, out: Path, trackin
     ``probes.csv``, ``figure1.png`` and ``metrics.json`` into ``out``, log one MLflow run; return
     the metrics. Nothing is created before the folder, the VLM and the store are checked."""
     if task.probe_states is None:
-        from vlmrl_cli.core.errors import BadInput
-
         raise BadInput(f"task '{task.name}' names no probe states; give its Task a probe_states function.")
+    problem = profile_problem(vlm.sim.profile, task) if vlm.backend == "sim" else None
+    if problem:  # a profile another task offers: its knobs mean nothing to this task's reader
+        raise BadInput(problem + ".")
     check_out_folder(out)
     check_vlm(vlm)
     tracker = store.connect(tracking_uri)
     client = build_client(vlm, reader=task.reader)
-    camera = task.make_camera(ShapingConfig(label_potentials=task.label_potentials))
+    camera = task.camera.make(ShapingConfig(label_potentials=task.label_potentials))
     potentials = {str(label): float(p) for label, p in task.label_potentials}
     made_out = not out.exists()  # only a folder this probe made is removed when it fails
     try:

@@ -1,5 +1,11 @@
 """Scoring a VLM on frames (paper Section 2): which frames, asking, parsing, and the statistics.
 
+Everything that depends on the environment comes from the task: ``Task.numbers`` (a
+``NumberProbe``: the float and box questions, the range of a float answer and the frame a box must
+fit, a renderer at any reading, the answer key there, Figure 1's frames) and ``Task.milestones``
+and ``Task.label_potentials`` for the MCQ. Each probed frame keeps the potentials its answers and
+its truth give, so the statistics need no task.
+
 Shared by the taxonomy probe (``taxonomy.py``), Table 1 (``table1.py``) and Figure 1
 (``figure1.py``), which import this module and never each other in a circle.
 """
@@ -13,13 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vlmrl_cli.core.errors import MissingAnswer
+from vlmrl_cli.core.errors import BadInput, MissingAnswer
 from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.probe import metrics
-from vlmrl_cli.tasks.mountain_car.geometry import MAX_POSITION, MIN_POSITION, SCREEN_WIDTH, GroundTruth
-from vlmrl_cli.tasks.mountain_car.prompts import NUMBERS, PROMPTS, ZONE_MILESTONES
-from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
-from vlmrl_cli.tasks.mountain_car.task import ZONE_POTENTIALS
+from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.parsers import (
@@ -31,46 +34,57 @@ from vlmrl_cli.vlm.parsers import (
     parse_float,
     parse_mcq,
 )
-from vlmrl_cli.vlm.prompts import PromptKind
+from vlmrl_cli.vlm.prompts import NumberProbe, NumberQuestions, NumberRenderer, NumberTruth, Prompt, PromptKind
 
 # 101 sweep positions (+ the paper's two frames): a rank correlation of 0 over 103 frames has a 95%
 # interval of about +-0.2 (25 positions gave +-0.4, too wide to tell "no rank signal" from a weak
-# one), and no position falls within 2 px of a zone edge, where a reader off by a fraction of a
-# pixel flips the label (25 positions put three frames exactly on edges).
+# one), and on MountainCar no position falls within 2 px of a zone edge, where a reader off by a
+# fraction of a pixel flips the label (25 positions put three frames exactly on edges).
 DEFAULT_STATES = 101
-#: Table 1's potentials of each answer kind, MountainCar's: the track of a float answer, the frame
-#: width of a box's centre, the label map of an MCQ answer.
-TRACK = (MIN_POSITION, MAX_POSITION)
-LABEL_MAP = dict(ZONE_POTENTIALS)
-# The paper's Figure 1 pair: (panel, x, caption). Always probed, whatever the sweep.
-PAPER_FRAMES: tuple[tuple[str, float, str], ...] = (
-    ("a", -0.50, "Absolute valley"),
-    ("b", -0.69, "Lower left slope"),
-)
+
 
 @dataclass(frozen=True)
 class FrameProbe:
-    """One probed frame: its ground truth, the three raw answers (None: no answer) and parses.
+    """One probed frame: its ground truth, the three raw answers (None: no answer), their parses
+    and the potentials ``phi[kind] = (VLM's, truth's)`` they give (NaN: unparsed answer).
 
     ``panel`` is "a"/"b" for the paper's Figure 1 frames, else None; ``frame`` is kept only
     for those (the figure draws them).
     """
 
     frame_id: str
-    truth: GroundTruth
+    truth: NumberTruth
     answers: Mapping[PromptKind, str | None]
     float_result: FloatResult
     box_result: BoxResult
     mcq_result: MCQResult
+    phi: Mapping[PromptKind, tuple[float, float]]
     panel: str | None = None
     caption: str | None = None
     frame: Frame | None = None
 
 
+def number_probe(task: Task) -> NumberProbe:
+    """The task's number probe (``Task.numbers``); ``BadInput`` for a task that asks for no number."""
+    if task.numbers is None:
+        raise BadInput(f"task {task.name} asks for no number (its Task has no numbers), so Table 1's float and "
+                       f"box probe is not defined for it; its taxonomy is the milestone MCQ (vlmrl taxonomy "
+                       f"--task {task.name}).")
+    return task.numbers
+
+
+def table1_prompts(task: Task) -> dict[PromptKind, Prompt]:
+    """The three prompts Table 1 asks of each frame, in its rows' order: the task's float and
+    box questions and its milestone MCQ."""
+    numbers = number_probe(task)
+    return {PromptKind.FLOAT: numbers.float_prompt, PromptKind.BOX: numbers.box_prompt,
+            PromptKind.MCQ: task.milestones.prompt}
+
+
 # --- which frames ----------------------------------------------------------------------------
 
 def frame_id_of(x: float) -> str:
-    """A readable id for position ``x``: two decimals unless more are needed (``x=-0.50``).
+    """A readable id for reading ``x``: two decimals unless more are needed (``x=-0.50``).
 
     Example:
         >>> frame_id_of(-0.5), frame_id_of(-1.125)
@@ -85,18 +99,20 @@ def frame_id_of(x: float) -> str:
 _FRAME_ID = re.compile(r"^\s*x\s*=\s*([-+]?(?:\d+(?:\.\d*)?|\.\d+))\s*$")
 
 
-def x_of_frame_id(frame_id: str) -> float | None:
-    """The position in a frame id written by ``frame_id_of``, or None if it holds none."""
+def x_of_frame_id(frame_id: str, numbers: NumberQuestions) -> float | None:
+    """The reading in a frame id written by ``frame_id_of``, or None if it holds none in the
+    range ``[numbers.low, numbers.high]``."""
     match = _FRAME_ID.match(frame_id)
     if match is None:
         return None
     x = float(match.group(1))
-    return x if MIN_POSITION <= x <= MAX_POSITION else None
+    return x if numbers.low <= x <= numbers.high else None
 
 
-def sweep_positions(states: int) -> list[float]:
-    """``states`` positions evenly spaced over the track, ends included (x units)."""
-    return [float(x) for x in np.linspace(MIN_POSITION, MAX_POSITION, states)]
+def sweep_positions(states: int, numbers: NumberQuestions) -> list[float]:
+    """``states`` readings evenly spaced over ``[numbers.low, numbers.high]``, ends included
+    (the task's units; MountainCar: positions on the track)."""
+    return [float(x) for x in np.linspace(numbers.low, numbers.high, states)]
 
 
 @dataclass(frozen=True)
@@ -107,22 +123,23 @@ class _Planned:
     caption: str | None = None
 
 
-def plan_frames(states: int | None, backend: Backend) -> tuple[list[_Planned], bool]:
-    """The frames to probe, sorted by x, and whether they form a sweep.
+def plan_frames(states: int | None, backend: Backend, numbers: NumberProbe) -> tuple[list[_Planned], bool]:
+    """The frames to probe, sorted by reading, and whether they form a sweep.
 
-    A sweep is ``states`` evenly spaced positions plus the paper's two frames. Without
-    ``states`` a replay backend probes its transcript's frames (plus the paper's two) and
-    there is no sweep; any other backend sweeps ``DEFAULT_STATES`` positions.
+    A sweep is ``states`` evenly spaced readings plus the task's panels (``numbers.panels``,
+    the paper's two frames on MountainCar). Without ``states`` a replay backend probes its
+    transcript's frames (plus the panels) and there is no sweep; any other backend sweeps
+    ``DEFAULT_STATES`` readings.
     """
     planned: dict[float, _Planned] = {}
-    for panel, x, caption in PAPER_FRAMES:
+    for panel, x, caption in numbers.panels:
         planned[round(x, 9)] = _Planned(x, frame_id_of(x), panel, caption)
     recorded_ids = getattr(backend, "frame_ids", None)
     if states is None and callable(recorded_ids):
-        positions = [x for x in (x_of_frame_id(f) for f in recorded_ids()) if x is not None]
+        positions = [x for x in (x_of_frame_id(f, numbers) for f in recorded_ids()) if x is not None]
         is_sweep = False
     else:
-        positions = sweep_positions(states or DEFAULT_STATES)
+        positions = sweep_positions(states or DEFAULT_STATES, numbers)
         is_sweep = True
     for x in positions:
         planned.setdefault(round(x, 9), _Planned(x, frame_id_of(x)))
@@ -131,24 +148,43 @@ def plan_frames(states: int | None, backend: Backend) -> tuple[list[_Planned], b
 
 # --- probing ---------------------------------------------------------------------------------
 
-def _ask(client: VLMClient, kind: PromptKind, frame: Frame) -> str | None:
+def _ask(client: VLMClient, prompt: Prompt, frame: Frame) -> str | None:
     try:
-        return client.ask(PROMPTS[kind], frame).text
+        return client.ask(prompt, frame).text
     except MissingAnswer:
         return None  # replay has no record: scored as NO_ANSWER, never a crash
 
 
-def probe_frame(client: VLMClient, renderer: FrameRenderer, planned: _Planned) -> FrameProbe:
-    """Render one frame, ask all three prompts, parse the answers."""
+def probe_frame(client: VLMClient, task: Task, renderer: NumberRenderer, planned: _Planned) -> FrameProbe:
+    """Render one frame of ``task`` (``renderer``: its ``NumberProbe``'s), ask all three
+    prompts, parse the answers and turn them and the truth into potentials: MCQ label -> the
+    task's raw potential; float: the reading normalised over the task's range; box: the centre
+    column normalised by the frame width. Unparsed answers are NaN."""
+    numbers = number_probe(task)
     frame = renderer.render(planned.x, frame_id=planned.frame_id)
-    answers = {kind: _ask(client, kind, frame) for kind in PromptKind}
+    answers = {kind: _ask(client, prompt, frame) for kind, prompt in table1_prompts(task).items()}
+    truth = numbers.truth(planned.x)
+    float_result = parse_float(answers[PromptKind.FLOAT], numbers.low, numbers.high)
+    box_result = parse_box(answers[PromptKind.BOX], numbers.width, numbers.height)
+    mcq_result = parse_mcq(answers[PromptKind.MCQ], task.milestones.labels)
+    label_map = dict(task.label_potentials)
+    phi = {
+        PromptKind.FLOAT: (
+            metrics.position_potential(float_result.value if float_result.ok else None, numbers.low, numbers.high),
+            metrics.position_potential(truth.x, numbers.low, numbers.high)),
+        PromptKind.BOX: (metrics.box_potential(box_result.box if box_result.ok else None, numbers.width),
+                         metrics.box_potential(truth.box_px, numbers.width)),
+        PromptKind.MCQ: (metrics.label_potential(mcq_result.label if mcq_result.ok else None, label_map),
+                         metrics.label_potential(truth.label, label_map)),
+    }
     return FrameProbe(
         frame_id=planned.frame_id,
-        truth=GroundTruth.of(planned.x),
+        truth=truth,
         answers=answers,
-        float_result=parse_float(answers[PromptKind.FLOAT], NUMBERS.low, NUMBERS.high),
-        box_result=parse_box(answers[PromptKind.BOX], NUMBERS.width, NUMBERS.height),
-        mcq_result=parse_mcq(answers[PromptKind.MCQ], ZONE_MILESTONES.labels),
+        float_result=float_result,
+        box_result=box_result,
+        mcq_result=mcq_result,
+        phi=phi,
         panel=planned.panel,
         caption=planned.caption,
         frame=frame if planned.panel is not None else None,
@@ -158,30 +194,16 @@ def probe_frame(client: VLMClient, renderer: FrameRenderer, planned: _Planned) -
 # --- statistics ------------------------------------------------------------------------------
 
 def phi_series(probes: list[FrameProbe] | tuple[FrameProbe, ...], kind: PromptKind) -> tuple[np.ndarray, np.ndarray]:
-    """(VLM potential, true potential) of each probe for one prompt kind, shapes (n,), (n,).
-
-    MCQ: label -> raw potential; float: x normalised over the track; box: centre column
-    normalised by the frame width. The truth applies the same mapping to the ground truth;
-    unparsed answers are NaN.
-    """
-    vlm, true = [], []
-    for p in probes:
-        if kind is PromptKind.FLOAT:
-            vlm.append(metrics.position_potential(p.float_result.value if p.float_result.ok else None, *TRACK))
-            true.append(metrics.position_potential(p.truth.x, *TRACK))
-        elif kind is PromptKind.BOX:
-            vlm.append(metrics.box_potential(p.box_result.box if p.box_result.ok else None, SCREEN_WIDTH))
-            true.append(metrics.box_potential(p.truth.box_px, SCREEN_WIDTH))
-        else:
-            vlm.append(metrics.label_potential(p.mcq_result.label if p.mcq_result.ok else None, LABEL_MAP))
-            true.append(metrics.label_potential(p.truth.zone, LABEL_MAP))
-    return np.asarray(vlm, dtype=float), np.asarray(true, dtype=float)
+    """(VLM potential, true potential) of each probe for one prompt kind, shapes (n,), (n,): the
+    ``phi`` each probe was scored with (``probe_frame``); unparsed answers are NaN."""
+    pairs = [p.phi[kind] for p in probes]
+    return (np.asarray([v for v, _ in pairs], dtype=float), np.asarray([t for _, t in pairs], dtype=float))
 
 
 def sweep_statistics(probes: list[FrameProbe] | tuple[FrameProbe, ...]) -> dict[str, float]:
     """All sweep statistics as flat ``kind.metric`` -> value (NaN: not computable), over the
-    probes sorted by x. Units: ``float.mae_x`` x units, ``box.centre_error_px`` pixels,
-    fractions in [0, 1]."""
+    probes sorted by reading. Units: ``float.mae_x`` the task's (MountainCar: x units),
+    ``box.centre_error_px`` pixels, fractions in [0, 1]."""
     ordered = sorted(probes, key=lambda p: p.truth.x)
     out: dict[str, float] = {"states": float(len(ordered))}
 
@@ -216,7 +238,7 @@ def sweep_statistics(probes: list[FrameProbe] | tuple[FrameProbe, ...]) -> dict[
     out["mcq.ok_fraction"] = nanmean([float(m.ok) for m in mcqs])
     out["mcq.format_failure_rate"] = metrics.format_failure_rate(m.status for m in mcqs)
     out["mcq.accuracy"] = metrics.mcq_accuracy([m.label if m.ok else None for m in mcqs],
-                                               [p.truth.zone for p in ordered])
+                                               [p.truth.label for p in ordered])
 
     for kind in PromptKind:
         vlm, true = phi_series(ordered, kind)

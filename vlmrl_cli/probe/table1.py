@@ -1,9 +1,10 @@
 """Table 1 of the paper, recomputed: raw outputs, ground truth and the consequence on dPhi.
 
 One row per error taxonomy (I float regression, II box grounding, III semantic MCQ) for the
-paper's frame pair (a) x=-0.50 -> (b) x=-0.69, with the dPhi each kind of answer would give
-PBRS computed from the parsed answers, and a second table of the same statistics over the
-whole sweep. Written as Markdown, CSV and LaTeX (``core.tables``).
+task's frame pair (a) -> (b) (its ``NumberProbe.panels``; MountainCar's are the paper's
+x=-0.50 -> x=-0.69), with the dPhi each kind of answer would give PBRS computed from the parsed
+answers, and a second table of the same statistics over the whole sweep. Written as Markdown,
+CSV and LaTeX (``core.tables``).
 """
 
 from __future__ import annotations
@@ -19,21 +20,12 @@ from vlmrl_cli.core import tables
 from vlmrl_cli.probe import metrics
 from vlmrl_cli.probe.scoring import FrameProbe, phi_series
 from vlmrl_cli.vlm.parsers import ParseStatus
-from vlmrl_cli.vlm.prompts import PromptKind
+from vlmrl_cli.vlm.prompts import NumberProbe, PromptKind
 
 TAXONOMY_ROWS: tuple[tuple[PromptKind, str], ...] = (
     (PromptKind.FLOAT, "I. Float Regression"),
     (PromptKind.BOX, "II. Box Grounding"),
     (PromptKind.MCQ, "III. Semantic MCQ"),
-)
-PAPER_TRUE_CENTRES_NOTE = (
-    "The paper prints the box truth as 'True Center: (120px,450px) -> (108px,446px)', which does not "
-    "fit the 600x400 MountainCar frame; the centres shown here are computed from gymnasium's drawing "
-    "geometry (column, row) in our 600x400 renders."
-)
-MCQ_TRUTH_NOTE = (
-    "The paper's MCQ truth is 'Velocity v > 0 but x < 0'; a single frame shows no velocity, so the "
-    "truth shown is the velocity-free zone of each position."
 )
 
 
@@ -100,16 +92,17 @@ def _answer_error(probe: FrameProbe, kind: PromptKind) -> str:
     m = probe.mcq_result
     if not m.ok:
         return "n/a"
-    return "correct" if m.label == probe.truth.zone else f"wrong (true {probe.truth.zone.value})"
+    return "correct" if m.label == probe.truth.label else f"wrong (true {probe.truth.label})"
 
 
-def _truth(kind: PromptKind, a: FrameProbe, b: FrameProbe) -> str:
+def _truth(kind: PromptKind, a: FrameProbe, b: FrameProbe, numbers: NumberProbe) -> str:
     if kind is PromptKind.FLOAT:
         return f"x = {a.truth.x:.2f} → {b.truth.x:.2f}"
     if kind is PromptKind.BOX:
         (ca, ra), (cb, rb) = metrics.box_centre(a.truth.box_px), metrics.box_centre(b.truth.box_px)
-        return f"True box centre (col, row): ({ca:.0f}px, {ra:.0f}px) → ({cb:.0f}px, {rb:.0f}px) [our 600x400 frame]"
-    return f"True zone: {a.truth.zone.value} → {b.truth.zone.value} (velocity-free)"
+        return (f"True box centre (col, row): ({ca:.0f}px, {ra:.0f}px) → ({cb:.0f}px, {rb:.0f}px) "
+                f"[our {numbers.width}x{numbers.height} frame]")
+    return f"True zone: {a.truth.label} → {b.truth.label} (velocity-free)"
 
 
 def _raw(probe: FrameProbe, kind: PromptKind) -> str:
@@ -117,8 +110,9 @@ def _raw(probe: FrameProbe, kind: PromptKind) -> str:
     return "(no answer recorded)" if text is None else " ".join(text.split())
 
 
-def taxonomy_frame(a: FrameProbe, b: FrameProbe) -> pd.DataFrame:
-    """Table 1's rows for the pair (a) -> (b): one row per error taxonomy, cells as strings."""
+def taxonomy_frame(a: FrameProbe, b: FrameProbe, numbers: NumberProbe) -> pd.DataFrame:
+    """Table 1's rows for the pair (a) -> (b) of a task's ``numbers``: one row per error
+    taxonomy, cells as strings."""
     label_a = f"VLM raw output (a) {a.caption or ''} ({a.frame_id})".replace("  ", " ")
     label_b = f"VLM raw output (b) {b.caption or ''} ({b.frame_id})".replace("  ", " ")
     rows = []
@@ -129,7 +123,7 @@ def taxonomy_frame(a: FrameProbe, b: FrameProbe) -> pd.DataFrame:
             label_b: _raw(b, kind),
             "Parsed (a) → (b)": f"{_parsed(a, kind)} → {_parsed(b, kind)}",
             "Answer error (a); (b)": f"{_answer_error(a, kind)}; {_answer_error(b, kind)}",
-            "Kinematic truth / grounding": _truth(kind, a, b),
+            "Kinematic truth / grounding": _truth(kind, a, b, numbers),
             "Consequence on PBRS ΔΦ (computed, Φ(b) − Φ(a))": pair_consequence(kind, a, b).describe(),
         })
     return pd.DataFrame(rows)
@@ -190,12 +184,14 @@ def latex_table(df: pd.DataFrame, caption: str, label: str) -> str:
                         rules=tables.HLINES)
 
 
-def captions(label: str, provenance: str, simulated: bool) -> tuple[str, str]:
-    """(Table 1 caption, sweep table caption); ``provenance`` says plainly when the VLM is simulated."""
+def captions(label: str, provenance: str, simulated: bool, pair: tuple[FrameProbe, FrameProbe]) -> tuple[str, str]:
+    """(Table 1 caption, sweep table caption) for the frame ``pair`` (a), (b); ``provenance``
+    says plainly when the VLM is simulated."""
+    a, b = pair
     table = (f"Table 1 (recomputed). Taxonomy of pure vision failures on the consecutive micro-states "
-             f"(a) x = -0.50 -> (b) x = -0.69. Backend {label}. {provenance}")
+             f"(a) x = {a.truth.x:.2f} -> (b) x = {b.truth.x:.2f}. Backend {label}. {provenance}")
     flag = " SIMULATED VLM (not a real model)." if simulated else ""
-    sweep = (f"Table 1b. The same statistics over a sweep of positions sorted along the track "
+    sweep = (f"Table 1b. The same statistics over a sweep of readings sorted along the task's range "
              f"(consecutive pairs). Backend {label}.{flag}")
     return table, sweep
 
@@ -204,22 +200,26 @@ def write_tables(
     probes: Sequence[FrameProbe],
     sweep: Mapping[str, float],
     folder: Path,
+    numbers: NumberProbe,
     *,
     label: str,
     provenance: str,
     simulated: bool,
 ) -> list[Path]:
-    """Write table1.md, table1.csv, table1.tex, table1_sweep.csv and probes.csv into ``folder``."""
-    a = next((p for p in probes if p.panel == "a"), None)
-    b = next((p for p in probes if p.panel == "b"), None)
+    """Write table1.md, table1.csv, table1.tex, table1_sweep.csv and probes.csv into ``folder``;
+    ``numbers``: the task's number probe the probes were scored with (its pair, frame and notes)."""
+    (first, _, _), (second, _, _) = numbers.panels[:2]
+    a = next((p for p in probes if p.panel == first), None)
+    b = next((p for p in probes if p.panel == second), None)
     if a is None or b is None:
-        raise ValueError("Table 1 needs the paper's frames (a) x=-0.50 and (b) x=-0.69 among the probes.")
-    main, stats = taxonomy_frame(a, b), sweep_frame(sweep)
-    cap_main, cap_sweep = captions(label, provenance, simulated)
-    notes = [PAPER_TRUE_CENTRES_NOTE, MCQ_TRUTH_NOTE,
-             "Φ mappings: MCQ label -> raw potential (tasks/mountain_car ZONE_POTENTIALS); float: x "
-             "normalised to [0, 1] over the track; box: box centre column / 600. The truth applies the same "
-             "mapping to the ground truth."]
+        raise ValueError(f"Table 1 needs the task's frames ({first}) and ({second}) (NumberProbe.panels) among "
+                         "the probes.")
+    main, stats = taxonomy_frame(a, b, numbers), sweep_frame(sweep)
+    cap_main, cap_sweep = captions(label, provenance, simulated, (a, b))
+    notes = [*numbers.notes,
+             f"Φ mappings: MCQ label -> raw potential (the task's label_potentials); float: x "
+             f"normalised to [0, 1] over [{numbers.low:g}, {numbers.high:g}]; box: box centre column / "
+             f"{numbers.width}. The truth applies the same mapping to the ground truth."]
     md = [f"**{cap_main}**", "", tables.markdown(main), "", *(f"- {n}" for n in notes), "",
           f"**{cap_sweep}**", "", tables.markdown(stats), ""]
     if simulated:
@@ -243,7 +243,7 @@ def probes_frame(probes: Sequence[FrameProbe]) -> pd.DataFrame:
     rows = []
     for p in sorted(probes, key=lambda q: q.truth.x):
         rows.append({
-            "frame_id": p.frame_id, "x": p.truth.x, "true_zone": p.truth.zone.value,
+            "frame_id": p.frame_id, "x": p.truth.x, "true_zone": p.truth.label,
             "true_box": list(p.truth.box_px), "panel": p.panel or "",
             "float_raw": p.answers.get(PromptKind.FLOAT), "float_status": p.float_result.status.value,
             "float_value": p.float_result.value,

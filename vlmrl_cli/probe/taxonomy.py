@@ -5,8 +5,10 @@ the answers are parsed, compared with the geometric ground truth, and turned int
 potential Phi each answer would give PBRS, so that the paper's consequences (noise, ROI
 instability, the MCQ dead zone) are computed rather than asserted.
 
-``run_taxonomy`` is the one entry point. It validates everything the user can get wrong
-(output folder, backend, transcript, tracking store) before probing, writes its files into a
+``run_taxonomy`` is the one entry point. It takes the task whose frames it probes (its
+``Task.numbers``, a ``NumberProbe``; MountainCar-v0's, the paper's, by default) and validates
+everything the user can get wrong (the task, the simulated VLM's profile, output folder, backend,
+transcript, tracking store) before probing, writes its files into a
 temporary sibling folder that is moved into place only when everything succeeded, and logs
 exactly one MLflow run, marked FAILED if the probe fails after it was created.
 """
@@ -19,6 +21,7 @@ import os
 import shutil
 import tempfile
 from collections.abc import Callable, Mapping
+from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,18 +35,18 @@ from vlmrl_cli.probe.scoring import (
     FrameProbe,
     _Planned,
     empty_sweep_statistics,
+    number_probe,
     plan_frames,
     probe_frame,
     sweep_statistics,
+    table1_prompts,
 )
-from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
-from vlmrl_cli.tasks.mountain_car.prompts import PROMPTS
-from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
+from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.client import VLMClient
-from vlmrl_cli.vlm.config import VLMConfig
+from vlmrl_cli.vlm.config import VLMConfig, profile_problem
 from vlmrl_cli.vlm.preflight import check_vlm
 from vlmrl_cli.vlm.registry import build_client
 
@@ -57,7 +60,7 @@ class TaxonomyConfig:
     vlm: VLMConfig = field(default_factory=VLMConfig, metadata={"help": "which VLM answers"})
     states: int | None = field(
         default=DEFAULT_STATES,
-        metadata={"help": "sweep positions evenly spaced over the track (>= 2); None: replay's frames only"},
+        metadata={"help": "sweep readings evenly spaced over the task's range (>= 2); None: replay's frames only"},
     )
     out: Path = field(default=Path("results/taxonomy/sim"), metadata={"help": "output folder"})
     tracking_uri: str | None = field(default=None, metadata={"help": "MLflow tracking URI"})
@@ -146,25 +149,40 @@ def _jsonable(values: Mapping[str, float]) -> dict[str, float | None]:
 
 # --- the probe -------------------------------------------------------------------------------
 
-def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None) -> TaxonomyResult:
-    """Probe, score, write Table 1 and Figure 1 into ``cfg.out`` and log one MLflow run.
+def _default_task() -> Task:
+    """The task of a taxonomy that names none: the paper's (a ``TaxonomyConfig`` records no task,
+    as the runs from before tasks did, so its hash is unchanged)."""
+    from vlmrl_cli.tasks.registry import paper_task
+
+    return paper_task()
+
+
+def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None, task: Task | None = None) -> TaxonomyResult:
+    """Probe ``task``'s frames (None: the paper's task), score, write Table 1 and
+    Figure 1 into ``cfg.out`` and log one MLflow run.
 
     ``progress(done, total)`` is called after each frame. User errors are ``BadInput``,
-    raised before any result file exists in ``cfg.out``.
+    raised before any result file exists in ``cfg.out``: a task without ``numbers`` and a
+    simulated-VLM profile the task does not offer among them.
     """
     from vlmrl_cli.probe.figure1 import save_figure1
     from vlmrl_cli.probe.table1 import write_tables
 
+    task = _default_task() if task is None else task
+    numbers = number_probe(task)
+    problem = profile_problem(cfg.vlm.sim.profile, task) if cfg.vlm.backend == "sim" else None
+    if problem:
+        raise BadInput(problem + ".")
     check_out_folder(cfg.out)
     check_vlm(cfg.vlm)  # cache path, model, server, transcript: before the store and folders exist
     tracker = store.connect(cfg.tracking_uri)
     staging = _staging_folder(cfg.out)
     client: VLMClient | None = None
     try:
-        client = build_client(cfg.vlm, transcript=staging / "transcript.jsonl", reader=MOUNTAIN_CAR.reader)
+        client = build_client(cfg.vlm, transcript=staging / "transcript.jsonl", reader=task.reader)
         backend = client.backend
         experiment_id = store.ensure_experiment(tracker, cfg.experiment)
-        planned, is_sweep = plan_frames(cfg.states, backend)
+        planned, is_sweep = plan_frames(cfg.states, backend, numbers)
         run_name = f"taxonomy-{backend.name}-{cfg.states if is_sweep else 'transcript'}-{config_hash(cfg)[:6]}"
         run = tracker.create_run(experiment_id, run_name=run_name)
         run_id = str(run.info.run_id)
@@ -174,13 +192,14 @@ def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None) -> Tax
                 schema.TAG_COMMAND: schema.COMMAND_TAXONOMY,
                 schema.TAG_CONFIG_HASH: config_hash(cfg),
             })
-            store.log_params(tracker, run_id, _params(cfg, backend, len(planned), is_sweep))
-            probes = _probe_all(client, planned, progress)
+            store.log_params(tracker, run_id, _params(cfg, task, backend, len(planned), is_sweep))
+            probes = _probe_all(client, task, planned, progress)
             sweep = sweep_statistics(probes) if is_sweep else empty_sweep_statistics()
             label = client.label
             provenance = provenance_line(backend)
             plain = f"{backend.name}:{backend.model}"
-            write_tables(probes, sweep, staging, label=plain, provenance=provenance, simulated=backend.simulated)
+            write_tables(probes, sweep, staging, numbers, label=plain, provenance=provenance,
+                         simulated=backend.simulated)
             save_figure1(probes, staging / "figure1.png", label=plain, simulated=backend.simulated,
                          note=_figure_note(backend))
             stats = client.stats
@@ -213,17 +232,18 @@ def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None) -> Tax
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def _probe_all(client: VLMClient, planned: list[_Planned], progress: ProgressFn | None) -> list[FrameProbe]:
+def _probe_all(client: VLMClient, task: Task, planned: list[_Planned], progress: ProgressFn | None
+               ) -> list[FrameProbe]:
     probes = []
-    with FrameRenderer() as renderer:
+    with closing(number_probe(task).renderer()) as renderer:
         for i, item in enumerate(planned, start=1):
-            probes.append(probe_frame(client, renderer, item))
+            probes.append(probe_frame(client, task, renderer, item))
             if progress is not None:
                 progress(i, len(planned))
     return probes
 
 
-def _params(cfg: TaxonomyConfig, backend: Backend, frames: int, is_sweep: bool) -> dict[str, str]:
+def _params(cfg: TaxonomyConfig, task: Task, backend: Backend, frames: int, is_sweep: bool) -> dict[str, str]:
     params = flatten(cfg)
     params.update({
         "backend": backend.name,
@@ -232,6 +252,6 @@ def _params(cfg: TaxonomyConfig, backend: Backend, frames: int, is_sweep: bool) 
         "frames": str(frames),
         "sweep": str(is_sweep).lower(),
     })
-    for kind, prompt in PROMPTS.items():
+    for kind, prompt in table1_prompts(task).items():
         params[f"prompt.{kind.value}"] = prompt.text
     return params

@@ -27,7 +27,7 @@ NO_DIAGNOSTIC = (
 
 def definition(hover_from: float | None) -> str:
     """What the section's columns mean: the hovering diagnostic past ``hover_from`` (the task's
-    ``Task.hover_from``), or (None: the task's plug-in names no position) only the columns that apply.
+    ``Hover.start``), or (None: the task gives no ``Hover``) only the columns that apply.
 
     Example:
         >>> definition(0.3)[:64]

@@ -1,6 +1,6 @@
 """The simulator's camera: the only component of the visual pipeline that knows the state.
 
-A task's camera (``Task.make_camera``) snaps the simulator's state to a grid of cells, renders
+A task's camera (``Task.camera``) snaps the simulator's state to a grid of cells, renders
 each cell once and memoises the cell's SHA-256 and features (``CellCamera``). Pixels are kept
 in a small LRU and re-rendered on demand. Everything downstream (features, VLM, RBF, lock)
 receives a ``FrameView`` that carries no state: this is the modality separation of paper

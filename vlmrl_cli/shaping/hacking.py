@@ -3,8 +3,8 @@
 A dense term that grows towards the goal can pay more per step near it than the native step
 cost, so an agent can earn more by parking there than by finishing the episode (MountainCar's
 Eq. 1 is the paper's case). These pure functions measure that on recorded trajectories of the
-task's position (``Task.position``: one array per episode, the position after each step) against
-``x_min``, where hovering starts (``Task.hover_from``). A policy that drives to the goal spends
+task's position (``Task.hover``'s position: one array per episode, the position after each step) against
+``x_min``, where hovering starts (``Hover.start``). A policy that drives to the goal spends
 only its last few steps past ``x_min``; one that hovers stays there without finishing.
 """
 

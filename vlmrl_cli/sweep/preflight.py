@@ -18,9 +18,9 @@ def preflight(cfg: RunConfig) -> None:
         return
     check_vlm(cfg.vlm)
     task = cfg.task_plugin
-    if cfg.vlm.backend == "replay" and task.grid_frames is not None:  # else replay refuses the frames at once
+    if cfg.vlm.backend == "replay" and task.camera.frames is not None:  # else replay refuses the frames at once
         prompts = [task.milestones.prompt if job.arm.potential is PotentialSource.MCQ or task.numbers is None
                    else task.numbers.float_prompt for job in shaped]
         shapings = {job.shaping.render_quantum: job.shaping for job in shaped}
-        frames = [frame for _, shaping in sorted(shapings.items()) for frame in task.grid_frames(shaping)]
+        frames = [frame for _, shaping in sorted(shapings.items()) for frame in task.camera.frames(shaping)]
         check_coverage(cfg.vlm, prompts, frames)

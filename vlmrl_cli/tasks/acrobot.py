@@ -29,6 +29,7 @@ from vlmrl_cli.tasks.acrobot_scene import (
     label_of_state,
 )
 from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, Task
+from vlmrl_cli.tasks.capabilities import TaskCamera
 
 BINS_PER_JOINT = 48
 
@@ -93,9 +94,8 @@ ACROBOT = Task(
     milestones=MILESTONES,
     label_potentials=DEFAULT_POTENTIALS,
     truth=_truth,
-    make_camera=_camera,
+    camera=TaskCamera(_camera, feature_dim(FRAME_SHAPE)),
     reader=AcrobotReader(),
-    feature_dim=feature_dim(FRAME_SHAPE),
     thresholds=(-400.0, -200.0, -100.0),  # -500: never above the bar; zoo's PPO reaches about -74
     max_steps=500,
     presets={
@@ -111,7 +111,6 @@ ACROBOT = Task(
         "sb3-default-100k": SB3_DEFAULT_100K,
         "smoke": SMOKE,
     },
-    default_preset="zoo",
     zoo_reference="rl-baselines3-zoo benchmark.md, PPO Acrobot-v1: -73.506 +/- 18.201 (1M steps)",
     probe_states=probe_states,
     # early episodes last 500 steps: 100 of them would be half a 100,000-step budget

@@ -18,16 +18,19 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 
-from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.shaping.config import ShapingConfig, label_problem
 from vlmrl_cli.shaping.scales import TaskScales
-from vlmrl_cli.shaping.scene import Scene, SceneCamera, SuccessRule
-from vlmrl_cli.vlm.prompts import Milestones, NumberQuestions
+from vlmrl_cli.shaping.scene import Scene, SuccessRule
+from vlmrl_cli.tasks.capabilities import Hover, PaperTask, StepCaption, TaskCamera
+from vlmrl_cli.vlm.config import SimProfile
+from vlmrl_cli.vlm.prompts import Milestones, NumberProbe
 from vlmrl_cli.vlm.sim import MilestoneReader, NumberReader
 
 LabelMap = tuple[tuple[str, float], ...]
+#: How a command turns a task's name into its ``Task`` (``tasks.registry.get_task``, or a test's
+#: own table): passed down to where a config is built, so nothing below looks a task up itself.
+TaskLookup = Callable[[str], "Task"]
 
 #: A preset that only checks the plumbing (seconds per run), as MountainCar's ``smoke``: a task's
 #: ``presets["smoke"]`` may take it whole.
@@ -55,21 +58,21 @@ class Task:
         milestones: the MCQ vocabulary (labels in order) and its prompt.
         label_potentials: the default raw potential of every label.
         truth: the true label of a simulator (the unwrapped env), for probes and diagnostics.
-        make_camera: the run's camera for a shaping config, quantised so that distinct frames
-            (and a real VLM's queries per run) are bounded.
+        camera: the run's camera (``TaskCamera``: its maker for a shaping config, the size of its
+            frames' features, and optionally every frame it can show, for replay checks).
         reader: the simulated VLM's pixel reader (a ``NumberReader`` also answers ``numbers``).
-        feature_dim: the size of the camera's frame features (``shaping.features.feature_dim``).
         thresholds: reward thresholds of reports (rolling mean native return), lowest first.
         max_steps: the time limit; by default an episode succeeds when it terminates within it
             (``success``).
         presets: PPO presets as ``PPOConfig`` keyword arguments; at least ``zoo`` and ``smoke``.
-        default_preset: the preset a run takes when none is named.
-        zoo_reference: rl-baselines3-zoo's published PPO result for the env, cited.
-        position: the coordinate of the hovering diagnostic, read from an observation (None:
-            no diagnostic), and ``hover_from``, where hovering starts.
+        default_preset: the preset a run takes when none is named (``zoo``).
+        zoo_reference: rl-baselines3-zoo's published PPO result for the env, cited (empty: none).
+        hover: the hovering diagnostic (``Hover``: the coordinate read from an observation, and
+            where hovering starts); None: no diagnostic.
         numbers: the float and box questions of Table 1's rows I and II and of the
-            ``vision-float`` arm (None: the picture has no number to ask for; its reader must be
-            a ``NumberReader`` to answer them).
+            ``vision-float`` arm, with what Table 1 needs to ask them of any reading (``NumberProbe``:
+            a renderer, the answer key, Figure 1's frames; None: the picture has no number to ask
+            for; its reader must be a ``NumberReader`` to answer them).
         probe_states: about ``n`` simulator states for ``vlmrl taxonomy``'s milestone table of
             this task, each drawn by the task's camera: state vectors (the probe sets them as
             ``sim.state``) or simulators themselves, for a task whose state is no vector (None:
@@ -83,17 +86,14 @@ class Task:
             the baseline is slow or unreliable (None: the default preset).
         area_margin: the equivalence margin of a learning-curve area difference, in return units
             (None: ``auc_margin``'s default, scaled to the task's return range).
-        name_in_identity: whether the task's name enters its runs' config hashes (False only for
-            MountainCar-v0, whose runs predate tasks and keep their hashes).
-        reported_in_paper: whether the paper reports this task (its Table 2, ``paper/reported.json``):
-            calibration aims at the paper's baseline itself and reports set their numbers beside
-            the paper's (MountainCar-v0 only).
-        grid_frames: every frame the task's camera can show under a shaping config, so that a
-            replay transcript is checked to answer them all before training (None: not checked).
+        paper: the paper's own task (``PaperTask``: its reported figures and budget; MountainCar-v0
+            alone): calibration aims at the paper's baseline itself, reports set their numbers
+            beside the paper's, and its runs' config hashes name no task (they predate tasks).
         hacking_note: the report's reward-hacking heading and the sentence saying how the task's
             dense term can pay more than finishing (None: a generic one).
-        describe_step: a played step's observation and action as named fields (``vlmrl evaluate``'s
-            JSON) and one caption line of its GIF (None: the raw observation and action).
+        caption: a played step's observation and action as named fields (``vlmrl evaluate``'s
+            JSON) and one caption line of its GIF (``StepCaption``; None: the raw observation and
+            action).
         scales: the task's alpha and kin_scale (``shaping.scales``: set by the stated rule from its
             return range), the bottom layer of a run's ``[shaping]``; None: the paper's MountainCar-v0
             scales (``ShapingConfig``'s defaults, alpha 5 and kin_scale 2).
@@ -103,6 +103,9 @@ class Task:
             steps (``terminated``: the env ended it, not the time limit) succeeded; the one rule of
             training's ``is_success`` and episode records and of every evaluation (``success``).
             None: it terminated within ``max_steps`` (every built-in task).
+        sim_profiles: the simulated-VLM profiles the task offers beside the generic ``ideal`` and
+            ``default`` (``SimProfile``: a name and ``SimKnobs`` values in its reader's units;
+            MountainCar's ``llava-table1``); a run may name only these (``vlm.sim.profile``).
     """
 
     name: str
@@ -112,34 +115,31 @@ class Task:
     milestones: Milestones
     label_potentials: LabelMap
     truth: Callable[[Any], str]
-    make_camera: Callable[[ShapingConfig], SceneCamera]
+    camera: TaskCamera
     reader: MilestoneReader
-    feature_dim: int
     thresholds: tuple[float, ...]
     max_steps: int
     presets: Mapping[str, Mapping[str, Any]]
-    default_preset: str
-    zoo_reference: str
-    position: Callable[[np.ndarray], float] | None = None
-    hover_from: float | None = None
-    numbers: NumberQuestions | None = None
+    default_preset: str = "zoo"
+    zoo_reference: str = ""
+    hover: Hover | None = None
+    numbers: NumberProbe | None = None
     probe_states: Callable[[int], list[Any]] | None = None
     env_kwargs: Mapping[str, Any] = field(default_factory=dict)
     window: int = 100
     calibration: tuple[Mapping[str, Any], ...] = ()
     study_preset: str | None = None
     area_margin: float | None = None
-    name_in_identity: bool = True
-    reported_in_paper: bool = False
-    grid_frames: Callable[[ShapingConfig], list[Frame]] | None = None
+    paper: PaperTask | None = None
     hacking_note: tuple[str, str] | None = None
-    describe_step: Callable[[tuple[float, ...], Any], tuple[dict[str, Any], str]] | None = None
+    caption: StepCaption | None = None
     wrap: Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None = None
     # Seconds per environment step and worker (2 workers on 2 cores) of the task's committed runs: the
     # cost estimate's figure before a store has timed any run of it (None: MountainCar-v0's repro).
     step_seconds: float | None = None
     scales: TaskScales | None = None
     success_rule: SuccessRule | None = None
+    sim_profiles: tuple[SimProfile, ...] = ()
 
     @property
     def auc_margin(self) -> float:
@@ -192,8 +192,19 @@ class Task:
 
     @property
     def hover_diagnostic(self) -> bool:
-        """Whether its runs carry the hovering diagnostic (the plug-in names a ``position``)."""
-        return self.position is not None
+        """Whether its runs carry the hovering diagnostic (the plug-in gives a ``Hover``)."""
+        return self.hover is not None
+
+    @property
+    def hover_from(self) -> float | None:
+        """Where hovering starts (``Hover.start``); None without the diagnostic."""
+        return None if self.hover is None else self.hover.start
+
+    @property
+    def name_in_identity(self) -> bool:
+        """Whether the task's name enters its runs' config hashes: not for the paper's task, whose
+        runs predate tasks and keep their hashes."""
+        return self.paper is None
 
     def success(self, terminated: bool, length: int) -> bool:
         """The one success rule of this task: its ``success_rule``, by default the episode

@@ -325,6 +325,7 @@ def _task() -> Any:
     from vlmrl_cli.shaping.scales import task_scales
     from vlmrl_cli.shaping.scene import Scene
     from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, Task
+    from vlmrl_cli.tasks.capabilities import TaskCamera
 
     return Task(
         name="minigrid-doorkey",
@@ -334,9 +335,8 @@ def _task() -> Any:
         milestones=MILESTONES,
         label_potentials=POTENTIALS,
         truth=label_of_sim,
-        make_camera=_camera,
+        camera=TaskCamera(_camera, feature_dim((5 * TILE, 5 * TILE, 3))),
         reader=StageReader(),
-        feature_dim=feature_dim((5 * TILE, 5 * TILE, 3)),
         thresholds=(0.5, 0.8, 0.9),
         max_steps=MAX_STEPS,
         presets={
@@ -349,7 +349,6 @@ def _task() -> Any:
             "sb3-default-100k-norm": {**SB3_DEFAULT_100K, "normalize_obs": True, "normalize_reward": True},
             "smoke": SMOKE,
         },
-        default_preset="zoo",
         calibration=tuple({"preset": p} for p in ("zoo", "zoo-100k-raw", "sb3-default-100k", "sb3-default-100k-norm")),
         # the median of its 120 committed runs (calibration and study exports; quartiles 0.83-1.29 ms),
         # five times MountainCar-v0's repro figure
@@ -362,7 +361,7 @@ def _task() -> Any:
         # goal: zoo's 0.964 over a failure's 0; Eq. 1 pays at most 1.4 / 250 per step at scale 1
         scales=task_scales(goal_return=0.964, potential_span=1.0, dense_peak=1.4 / MAX_STEPS, horizon=MAX_STEPS),
         probe_states=probe_states,
-        describe_step=describe_step,
+        caption=describe_step,
     )
 
 

@@ -89,7 +89,7 @@ BUILTIN: dict[str, Callable[[], Task]] = {
 def recorded_task(name: object) -> str:
     """The task a run recorded (its ``vlmrl.task`` tag, its config's ``task``): runs from before
     tasks existed record none; they are the built-in task that keeps its name out of its config
-    hashes for them (``Task.name_in_identity`` False).
+    hashes for them (the paper's task, ``paper_task``).
 
     Example:
         >>> recorded_task("acrobot"), recorded_task(None)
@@ -97,7 +97,33 @@ def recorded_task(name: object) -> str:
     """
     if name:
         return str(name)
-    return next(key for key, load in BUILTIN.items() if not load().name_in_identity)
+    return paper_task().name
+
+
+def builtin_task(name: str) -> Task:
+    """The built-in task ``name`` (no module or entry point is loaded): the lookup of a config
+    built without the command's registry; anything else is a ``BadInput`` saying so.
+
+    Example:
+        >>> builtin_task("acrobot").env_id
+        'Acrobot-v1'
+    """
+    if name in BUILTIN:
+        return BUILTIN[name]()
+    if ":" in name or name in task_names():
+        raise BadInput(f"task '{name}' is not built in; this config was built without the command's task "
+                       "registry (pass tasks=get_task)")
+    return get_task(name)  # unknown: its BadInput names the tasks there are
+
+
+def paper_task() -> Task:
+    """The built-in task the paper reports (the one with a ``PaperTask``: MountainCar-v0).
+
+    Example:
+        >>> paper_task().name, paper_task().paper.budget
+        ('mountain-car', 300000)
+    """
+    return next(task for task in (load() for load in BUILTIN.values()) if task.paper is not None)
 
 
 def task_names() -> list[str]:

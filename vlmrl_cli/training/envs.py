@@ -47,9 +47,9 @@ def make_train_env(
         raise ValueError(f"n_envs={ppo.n_envs}; a run needs at least one env.")
     shaping = task.shaping_for(shaping)
     gamma = shaping.gamma if shaping.gamma is not None else ppo.gamma
-    camera = task.make_camera(shaping) if arm.uses_vlm else None
+    camera = task.camera.make(shaping) if arm.uses_vlm else None
     oracle = (SemanticOracle(client, oracle_shaping(arm, shaping, seed), arm.potential, task.milestones,
-                             task.feature_dim, rbf=arm.rbf, numbers=task.numbers)
+                             task.camera.feature_dim, rbf=arm.rbf, numbers=task.numbers)
               if arm.uses_vlm and client else None)
 
     def make_one() -> gym.Env:

@@ -20,7 +20,7 @@ class EvalResult:
 
     ``positions``: one array of shape ``(length_i,)`` per episode, the task's position after each
     step (for the hovering diagnostic; empty when not recorded), ``hover_from`` where hovering
-    starts (``Task.hover_from``).
+    starts (``Task.hover``).
     """
 
     returns: np.ndarray
@@ -64,7 +64,7 @@ def evaluate_detached(policy: Policy, episodes: int, seed: int, task: Task) -> E
         (1.0, True)
     """
     env = task.make_env()
-    position = task.position
+    position = None if task.hover is None else task.hover.position
     returns, lengths, successes, positions = [], [], [], []
     try:
         for i in range(episodes):

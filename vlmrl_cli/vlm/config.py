@@ -6,12 +6,13 @@ import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from annotated_types import Ge, Gt, Interval
 from pydantic import AfterValidator
 
 from vlmrl_cli import paper
+from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.core.fields import one_of
 
 BACKENDS: tuple[str, ...] = ("sim", "hf", "openai", "replay")
@@ -23,8 +24,11 @@ DEFAULT_CACHE = Path(".vlmrl-cache") / "responses.sqlite"
 DEFAULT_SIM_PROFILE = "default"
 
 
-def _known_profile(value: str) -> str:
-    return one_of(lambda: SIM_PROFILES, "simulated-VLM profile")(value)
+def _profile_name(value: str) -> str:
+    """A profile's name as written; which names a run may use is its task's (``profile_problem``)."""
+    if not value or value != value.strip():
+        raise ValueError(f"a simulated-VLM profile is a name such as '{DEFAULT_SIM_PROFILE}', got {value!r}")
+    return value
 
 
 @dataclass(frozen=True)
@@ -34,34 +38,46 @@ class SimKnobs:
     ``query_flicker > 0`` makes the VLM stochastic (a fresh draw per query, from a stream seeded
     by (seed, the run's seed)), and its answers then bypass every cache.
 
-    ``profile`` names the set of knob values the others were resolved from (``SIM_PROFILES``);
-    build a profile's knobs with ``SimKnobs.of_profile``. The dataclass defaults are the
-    ``default`` profile, today's simulated VLM, whose answers never change."""
+    ``profile`` names the set of knob values the others were resolved from: a generic one
+    (``SIM_PROFILES``) or one of the run's task (``Task.sim_profiles``); build a profile's knobs
+    with ``SimKnobs.of_profile``. The name is checked against the task where the task is known
+    (``resolve_sim_profile``, ``profile_problem``), not here: this layer knows no task. The
+    dataclass defaults are the ``default`` profile, today's simulated VLM, whose answers never
+    change.
+
+    ``float_anchor``, ``mcq_bottom_halfwidth`` and ``box_anchor_x`` are read by a
+    ``NumberReader`` (vlm/sim.py), in the units of its reading; what they mean for a task is its
+    reader's (MountainCar's: ``tasks/mountain_car/profiles.py``). Their names and values stay as
+    they were when they were MountainCar's, because both enter config hashes."""
 
     flicker: float = field(default=0.1, metadata={"rules": (Interval(ge=0, le=1),),
                                                   "help": "P(answer a neighbouring MCQ label)"})
     float_noise: float = field(default=0.25, metadata={"rules": (Ge(0),),
-                                                       "help": "std of the float answer, in x units"})
+                                                       "help": "std of the float answer, in the task's units"})
     box_noise_px: float = field(default=20.0, metadata={"rules": (Ge(0),), "help": "std of box corner jitter, pixels"})
     box_failure: float = field(default=0.2, metadata={"rules": (Interval(ge=0, le=1),),
                                                       "help": "P(box format collapse)"})
     patch_px: int = field(default=28, metadata={"rules": (Ge(1),),
-                                                "help": "spatial resolution: car seen on this pixel grid"})
+                                                "help": "spatial resolution: agent seen on this pixel grid"})
     latency_s: float = field(default=0.0, metadata={"rules": (Ge(0),), "help": "fixed latency per query (benchmarks)"})
     seed: int = field(default=0, metadata={"help": "seed of the simulated answers"})
-    profile: str = field(default=DEFAULT_SIM_PROFILE, metadata={"rules": (AfterValidator(_known_profile),),
-                                                                "help": "named profile the knobs come from"})
+    profile: str = field(default=DEFAULT_SIM_PROFILE, metadata={
+        "rules": (AfterValidator(_profile_name),),
+        "help": "named profile the knobs come from: a generic one or one of the run's task"})
     float_anchor: float | None = field(
         default=None,
-        metadata={"help": "float answers are this value (+ float_noise) whatever the frame; None: read the car"},
+        metadata={"help": "float answers are this reading (+ float_noise) whatever the frame, in the task's "
+                          "units; None: read the frame"},
     )
     mcq_bottom_halfwidth: float | None = field(
         default=None,
         metadata={"rules": (Ge(0),),
-                  "help": "MCQ answers BOTTOM within this distance (x units) of the valley; None: true zones"},
+                  "help": "a reader's MCQ dead zone: readings within this distance of its resting point get its "
+                          "resting label (the task's units, its reader's label_at); None: true labels"},
     )
     box_anchor_x: float | None = field(
-        default=None, metadata={"help": "boxes are drawn around the car at this x, not the frame's; None: read it"}
+        default=None, metadata={"help": "boxes are drawn around the agent at this reading, not the frame's (the "
+                                        "task's units); None: read it"}
     )
     query_flicker: float = field(
         default=0.0,
@@ -71,13 +87,12 @@ class SimKnobs:
     )
 
     def __post_init__(self) -> None:
-        if self.profile not in SIM_PROFILES:
-            raise ValueError(f"unknown simulated-VLM profile '{self.profile}'; choose from {', '.join(SIM_PROFILES)}.")
+        _profile_name(self.profile)
 
     @classmethod
-    def of_profile(cls, name: str, **overrides: Any) -> SimKnobs:
-        """The knobs of profile ``name`` with ``overrides`` laid over them: an explicit knob beats
-        the profile's value.
+    def of_profile(cls, name: str, task: ProfileOwner | None = None, **overrides: Any) -> SimKnobs:
+        """The knobs of profile ``name``, a generic one or one ``task`` offers, with ``overrides``
+        laid over them: an explicit knob beats the profile's value.
 
         Example:
             >>> k = SimKnobs.of_profile("ideal", flicker=0.3)
@@ -86,31 +101,101 @@ class SimKnobs:
             >>> SimKnobs.of_profile("default") == SimKnobs()
             True
         """
-        if name not in SIM_PROFILES:
-            raise ValueError(f"unknown simulated-VLM profile '{name}'; choose from {', '.join(SIM_PROFILES)}.")
-        return cls(**{**SIM_PROFILES[name], **overrides, "profile": name})
+        problem = profile_problem(name, task)
+        if problem:
+            raise ValueError(problem + ".")
+        return cls(**{**sim_profiles(task)[name], **overrides, "profile": name})
 
 
-#: Named sets of ``SimKnobs`` values (knobs not named keep their dataclass default).
-#: ``ideal``: no noise and a one-pixel grid. ``default``: today's knobs (the results so far).
-#: ``llava-table1``: the failure pattern of the paper's Table 1 (LLaVA-1.5-7B): the float answer
-#: is nearly constant (0.378, 0.386 for x = -0.50, -0.69), the MCQ answers BOTTOM on both frames
-#: (a dead zone around the valley reaching past x = -0.69), and boxes either collapse to
-#: ``Error [0, 0, 0, 0]`` or sit far from the car (columns 450-480, i.e. x ~ 0.2).
+#: The generic profiles, which every task offers: named sets of ``SimKnobs`` values (knobs not
+#: named keep their dataclass default). ``ideal``: no noise and a one-pixel grid. ``default``:
+#: today's knobs (the results so far). A task adds its own (``Task.sim_profiles``: MountainCar's
+#: ``llava-table1``, the failures of the paper's Table 1).
 SIM_PROFILES: dict[str, Mapping[str, Any]] = {
     "ideal": {"flicker": 0.0, "float_noise": 0.0, "box_noise_px": 0.0, "box_failure": 0.0, "patch_px": 1},
     DEFAULT_SIM_PROFILE: {},
-    "llava-table1": {
-        "flicker": 0.0,
-        "float_noise": 0.005,
-        "float_anchor": 0.38,
-        "mcq_bottom_halfwidth": 0.45,
-        "box_failure": 0.5,
-        "box_noise_px": 10.0,
-        "box_anchor_x": 0.2,
-        "patch_px": 56,
-    },
 }
+
+#: The knobs a profile may set: every ``SimKnobs`` field but ``profile`` itself.
+_PROFILE_KNOBS = tuple(f.name for f in dataclasses.fields(SimKnobs) if f.name != "profile")
+
+
+@dataclass(frozen=True)
+class SimProfile:
+    """A named set of ``SimKnobs`` values that a task offers beside the generic ``SIM_PROFILES``
+    (``Task.sim_profiles``): the knobs' values in its reader's units, e.g. MountainCar's
+    ``llava-table1``. Knobs it does not name keep their dataclass default.
+
+    Example:
+        >>> stuck = SimProfile("stuck", {"flicker": 0.0, "float_anchor": 0.5})
+        >>> SimKnobs(**stuck.knobs, profile=stuck.name).float_anchor
+        0.5
+        >>> SimProfile("ideal", {})
+        Traceback (most recent call last):
+        ...
+        ValueError: simulated-VLM profile 'ideal' is a generic one; give the task's profile another name
+    """
+
+    name: str
+    knobs: Mapping[str, Any]
+
+    def __post_init__(self) -> None:
+        _profile_name(self.name)
+        if self.name in SIM_PROFILES:
+            raise ValueError(f"simulated-VLM profile '{self.name}' is a generic one; give the task's profile "
+                             "another name")
+        unknown = [k for k in self.knobs if k not in _PROFILE_KNOBS]
+        if unknown:
+            raise ValueError(f"simulated-VLM profile '{self.name}': unknown knob '{unknown[0]}'"
+                             f"{did_you_mean(unknown[0], _PROFILE_KNOBS)}; a profile sets SimKnobs fields "
+                             f"({', '.join(_PROFILE_KNOBS)})")
+
+
+class ProfileOwner(Protocol):
+    """What the profile lookup needs of a task (``tasks.base.Task``, which this layer may not
+    import): its name, for the errors, and the profiles it adds to the generic ones."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def sim_profiles(self) -> tuple[SimProfile, ...]: ...
+
+
+def sim_profiles(task: ProfileOwner | None = None) -> dict[str, Mapping[str, Any]]:
+    """The profiles a run of ``task`` may name, in order: the generic ``SIM_PROFILES``, then the
+    task's own (no task: the generic ones alone).
+
+    Example:
+        >>> list(sim_profiles())
+        ['ideal', 'default']
+    """
+    table = dict(SIM_PROFILES)
+    if task is not None:
+        for profile in task.sim_profiles:
+            if profile.name in table:  # a SimProfile is never named as a generic one: a task's twice
+                raise ValueError(f"task '{task.name}' offers the simulated-VLM profile '{profile.name}' twice")
+            table[profile.name] = profile.knobs
+    return table
+
+
+def profile_problem(name: str, task: ProfileOwner | None = None) -> str | None:
+    """Why ``name`` is not a profile a run of ``task`` may name (None when it is): one sentence
+    naming the task and its profiles.
+
+    Example:
+        >>> profile_problem("ideal") is None
+        True
+        >>> profile_problem("idael")
+        "unknown simulated-VLM profile 'idael' (did you mean 'ideal'?); choose from ideal, default"
+    """
+    offered = sim_profiles(task)
+    if name in offered:
+        return None
+    where = "" if task is None else f" for task {task.name}"
+    return (f"unknown simulated-VLM profile '{name}'{where}{did_you_mean(name, offered)}; "
+            f"choose from {', '.join(offered)}")
+
 
 #: Knobs added after results were produced with the default ones, and the values that leave the
 #: answers as before: while they hold these values they stay out of every hash and cache key,
@@ -132,9 +217,12 @@ def sim_identity(knobs: SimKnobs) -> dict[str, Any]:
     return {k: v for k, v in values.items() if k not in NEUTRAL_SIM_KNOBS or NEUTRAL_SIM_KNOBS[k] != v}
 
 
-def resolve_sim_profile(sim: Mapping[str, Any]) -> dict[str, Any]:
+def resolve_sim_profile(sim: Mapping[str, Any], task: ProfileOwner | None = None) -> dict[str, Any]:
     """A raw ``[vlm.sim]`` table (the keys some layer set) with its profile's values beneath the
-    keys set explicitly; unchanged when it names no profile or an unknown one (the schema says so).
+    keys set explicitly. The profile is looked up among those ``task``, the run's, offers
+    (``sim_profiles``): one it does not offer is a ``BadInput`` naming the task. Without a task
+    (the run's task is not known yet: its own check says why), or when the table names no
+    profile, the table comes back unchanged.
 
     Example:
         >>> resolve_sim_profile({"profile": "ideal", "flicker": 0.3})["flicker"]
@@ -143,9 +231,15 @@ def resolve_sim_profile(sim: Mapping[str, Any]) -> dict[str, Any]:
         1
     """
     name = sim.get("profile")
-    if not isinstance(name, str) or name not in SIM_PROFILES:
-        return dict(sim)
-    return {**SIM_PROFILES[name], **sim}
+    if not isinstance(name, str):
+        return dict(sim)  # the schema says what is wrong with a profile that is no string
+    offered = sim_profiles(task)
+    if name not in offered:
+        problem = profile_problem(name, task)
+        if task is None or problem is None:
+            return dict(sim)
+        raise BadInput(f"vlm.sim.profile: {problem}.")
+    return {**offered[name], **sim}
 
 
 @dataclass(frozen=True)

@@ -1,11 +1,19 @@
 """The three prompt kinds of the taxonomy probe (paper Table 1), and what a task asks with them:
 its MCQ vocabulary (``Milestones``) and, where the picture has a number to read, its float and box
-questions (``NumberQuestions``). MountainCar's prompts are ``tasks/mountain_car/prompts.py``."""
+questions (``NumberQuestions``), with what Table 1 needs to ask them of any reading and score the
+answers (``NumberProbe``: a renderer, the answer key, Figure 1's frames). MountainCar's are
+``tasks/mountain_car/prompts.py`` and ``tasks/mountain_car/probe.py``."""
 
 from __future__ import annotations
 
+import dataclasses
+import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Protocol
+
+from vlmrl_cli.frames.render import Frame
 
 
 class PromptKind(StrEnum):
@@ -85,3 +93,79 @@ class NumberQuestions:
     def potential(self, value: float) -> float:
         """A float answer mapped linearly onto [0, 1] over ``[low, high]``, clipped."""
         return min(max((value - self.low) / (self.high - self.low), 0.0), 1.0)
+
+
+class NumberTruth(Protocol):
+    """The answer key of one frame of a task's number probe, in the units its prompts ask for:
+    ``x`` the number the frame shows (MountainCar: the car's position), ``box_px`` the agent's
+    box (x0, y0, x1, y1) and ``centre_px`` its centre (column, row) in image pixels, ``label``
+    the true MCQ label."""
+
+    @property
+    def x(self) -> float: ...
+
+    @property
+    def box_px(self) -> tuple[float, float, float, float]: ...
+
+    @property
+    def centre_px(self) -> tuple[float, float]: ...
+
+    @property
+    def label(self) -> str: ...
+
+
+class NumberRenderer(Protocol):
+    """Draws a task's frame at any reading ``x`` (its ``NumberProbe``'s range); closed when done."""
+
+    def render(self, x: float, *, frame_id: str | None = None) -> Frame: ...
+
+    def close(self) -> None: ...
+
+
+#: One of Figure 1's frames: (panel, reading, caption), e.g. ("a", -0.50, "Absolute valley").
+Panel = tuple[str, float, str]
+
+
+@dataclass(frozen=True)
+class NumberProbe(NumberQuestions):
+    """A task's float and box questions (``NumberQuestions``, so the ``vision-float`` arm reads
+    them as before) with what Table 1 needs to ask them of any reading and to score the answers
+    (``Task.numbers``; probe/scoring.py):
+
+    - ``renderer``: makes a ``NumberRenderer``, which draws the frame at a reading in
+      ``[low, high]``;
+    - ``truth``: the answer key of the frame at a reading (``NumberTruth``);
+    - ``panels``: Figure 1's frames (panel, reading, caption), always probed, the first two the
+      pair (a) -> (b) of Table 1's rows;
+    - ``notes``: sentences printed under Table 1 (how the task's truths differ from the paper's).
+
+    Example:
+        >>> q = NumberQuestions(Prompt(PromptKind.FLOAT, "x?"), Prompt(PromptKind.BOX, "box?"), -1.0, 1.0, 64, 48)
+        >>> probe = NumberProbe.of(q, renderer=lambda: None, truth=lambda x: None,
+        ...                        panels=(("a", 0.0, "centre"), ("b", 0.5, "right")))
+        >>> probe.low, probe.panels[1][1], probe.prompt(PromptKind.FLOAT).text
+        (-1.0, 0.5, 'x?')
+    """
+
+    renderer: Callable[[], NumberRenderer]
+    truth: Callable[[float], NumberTruth]
+    panels: tuple[Panel, ...]
+    notes: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        names = [name for name, _, _ in self.panels]
+        if len(names) < 2 or len(set(names)) != len(names):
+            raise ValueError(f"a NumberProbe needs at least two panels with distinct names (Table 1's pair), "
+                             f"got {names}")
+        outside = [x for _, x, _ in self.panels if not (math.isfinite(x) and self.low <= x <= self.high)]
+        if outside:
+            raise ValueError(f"panel reading {outside[0]} lies outside the range [{self.low}, {self.high}]")
+
+    @classmethod
+    def of(cls, questions: NumberQuestions, *, renderer: Callable[[], NumberRenderer],
+           truth: Callable[[float], NumberTruth], panels: tuple[Panel, ...],
+           notes: tuple[str, ...] = ()) -> NumberProbe:
+        """``questions`` with the probe's renderer, answer key, panels and notes."""
+        asked = {f.name: getattr(questions, f.name) for f in dataclasses.fields(NumberQuestions)}
+        return cls(**asked, renderer=renderer, truth=truth, panels=panels, notes=notes)

@@ -84,7 +84,7 @@ def knobs_digest(knobs: SimKnobs) -> str:
     Example:
         >>> knobs_digest(SimKnobs()) == knobs_digest(SimKnobs(latency_s=1.0)) != knobs_digest(SimKnobs(seed=1))
         True
-        >>> knobs_digest(SimKnobs()) != knobs_digest(SimKnobs.of_profile("llava-table1"))
+        >>> knobs_digest(SimKnobs()) != knobs_digest(SimKnobs(float_anchor=0.38))
         True
     """
     shaping: tuple[object, ...] = (knobs.flicker, knobs.float_noise, knobs.box_noise_px, knobs.box_failure,
@@ -113,8 +113,9 @@ class SimulatedVLM:
     ``float_noise``, the task's units), in one of a few chatty formats; BOX: with probability
     ``box_failure`` a format collapse ``"Error [0, 0, 0, 0]"``, else the agent's box at the
     reading (or at ``box_anchor_x``) with corner jitter (std ``box_noise_px``). Another reader
-    gets no number (a format failure). No agent in the pixels: a refusal. ``SIM_PROFILES``
-    (vlm/config.py) names sets of these knobs.
+    gets no number (a format failure). No agent in the pixels: a refusal. The knobs' units are
+    the reader's (a task's ``NumberReader`` reads a position, an angle); named sets of them are
+    the generic ``SIM_PROFILES`` (vlm/config.py) and a task's own (``Task.sim_profiles``).
 
     Answers are a pure function of (seed, prompt text, image bytes): the response cache and
     replay transcripts rely on that. The one exception is ``query_flicker > 0``: then each MCQ
@@ -148,7 +149,8 @@ class SimulatedVLM:
         if knobs.float_noise < 0 or knobs.box_noise_px < 0 or knobs.latency_s < 0:
             raise ValueError("SimKnobs noise and latency must be >= 0.")
         if knobs.mcq_bottom_halfwidth is not None and knobs.mcq_bottom_halfwidth < 0:
-            raise ValueError(f"SimKnobs.mcq_bottom_halfwidth={knobs.mcq_bottom_halfwidth} must be >= 0 (x units).")
+            raise ValueError(f"SimKnobs.mcq_bottom_halfwidth={knobs.mcq_bottom_halfwidth} must be >= 0 (a distance "
+                             "in the reader's units).")
         if knobs.patch_px < 1:
             raise ValueError(f"SimKnobs.patch_px={knobs.patch_px} must be >= 1 pixel.")
         self.knobs = knobs

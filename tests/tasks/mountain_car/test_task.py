@@ -18,17 +18,18 @@ from vlmrl_cli.tasks.mountain_car.task import (
     geometry,
 )
 from vlmrl_cli.tasks.mountain_car.task import MOUNTAIN_CAR_SCENE as MC_SCENE
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.presets import preset_of
 
 
 def test_mountain_car_is_the_paper_task_as_before() -> None:
     assert MOUNTAIN_CAR.scene is MC_SCENE and isinstance(MOUNTAIN_CAR.reader, WheelReader)
-    assert MOUNTAIN_CAR.probes_floats and not MOUNTAIN_CAR.name_in_identity and MOUNTAIN_CAR.reported_in_paper
+    assert MOUNTAIN_CAR.probes_floats and not MOUNTAIN_CAR.name_in_identity and MOUNTAIN_CAR.paper is not None
     assert MOUNTAIN_CAR.thresholds == (-190.0, -160.0, -130.0) and MOUNTAIN_CAR.max_steps == 200
     job = RunConfig.from_sources(None, {"arms": ["hybrid"], "seeds": [0]}).jobs()[0]
     assert "task" not in job.identity()  # MountainCar's hashes predate tasks (test_pinned_hashes.py)
-    assert job.preset == "paper" and job.ppo == preset_of("mountain-car", "paper")
+    assert job.preset == "paper" and job.ppo == preset_of(get_task("mountain-car"), "paper")
 
 
 def test_the_continuous_reader_reads_the_true_zone_off_the_pixels() -> None:
@@ -52,7 +53,7 @@ def test_the_continuous_reader_reads_the_true_zone_off_the_pixels() -> None:
 
 
 def test_the_continuous_zoo_preset_is_rl_zoos() -> None:
-    zoo = preset_of("mountain-car-continuous", "zoo")
+    zoo = preset_of(get_task("mountain-car-continuous"), "zoo")
     assert (zoo.n_envs, zoo.n_steps, zoo.gamma, zoo.learning_rate, zoo.use_sde, zoo.log_std_init, zoo.ortho_init) == (
         1, 8, 0.9999, 7.77e-05, True, -3.29, False)
     assert zoo.timesteps == 20_000

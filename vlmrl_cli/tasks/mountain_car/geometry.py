@@ -131,13 +131,19 @@ def x_from_column(column: float) -> float:
 
 @dataclass(frozen=True)
 class GroundTruth:
-    """The answer key for one frame, in the units a VLM is asked for."""
+    """The answer key for one frame, in the units a VLM is asked for (a ``NumberTruth`` of
+    MountainCar's ``NumberProbe``: ``label`` is the zone's name)."""
 
     x: float
     velocity: float
     centre_px: tuple[float, float]
     box_px: tuple[float, float, float, float]
     zone: Zone
+
+    @property
+    def label(self) -> str:
+        """The MCQ's correct answer: the zone's name."""
+        return str(self.zone)
 
     @classmethod
     def of(cls, x: float, velocity: float = 0.0) -> GroundTruth:

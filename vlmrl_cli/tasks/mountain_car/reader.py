@@ -84,7 +84,8 @@ class WheelReader:
 
     def label_at(self, estimate: float, knobs: SimKnobs) -> str:
         """The zone of a reading before flicker: its true zone, or BOTTOM anywhere within
-        ``knobs.mcq_bottom_halfwidth`` of the valley (a profile's widened dead zone)."""
+        ``knobs.mcq_bottom_halfwidth`` x units of the valley (a profile's widened dead zone:
+        ``llava-table1``'s 0.45 reaches past x = -0.69, profiles.py)."""
         width = knobs.mcq_bottom_halfwidth
         if width is not None and abs(estimate - geometry.VALLEY_X) <= width:
             return str(geometry.Zone.BOTTOM)

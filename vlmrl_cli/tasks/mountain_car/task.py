@@ -24,9 +24,12 @@ from vlmrl_cli.shaping.features import FEATURE_DIM
 from vlmrl_cli.shaping.scales import task_scales
 from vlmrl_cli.shaping.scene import Scene
 from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, Task
+from vlmrl_cli.tasks.capabilities import Hover, PaperTask, TaskCamera
 from vlmrl_cli.tasks.mountain_car import geometry
 from vlmrl_cli.tasks.mountain_car.camera import Camera
-from vlmrl_cli.tasks.mountain_car.prompts import NUMBERS, ZONE_MILESTONES
+from vlmrl_cli.tasks.mountain_car.probe import NUMBER_PROBE
+from vlmrl_cli.tasks.mountain_car.profiles import SIM_PROFILES
+from vlmrl_cli.tasks.mountain_car.prompts import ZONE_MILESTONES
 from vlmrl_cli.tasks.mountain_car.reader import WheelReader, wheel_column
 from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 
@@ -195,27 +198,24 @@ MOUNTAIN_CAR = Task(
     milestones=ZONE_MILESTONES,
     label_potentials=ZONE_POTENTIALS,
     truth=_zone_of_sim,
-    make_camera=_camera,
+    camera=TaskCamera(_camera, FEATURE_DIM, frames=_grid_frames),
     reader=WheelReader(),  # the wheels' column: the zone, and the float and box answers
-    feature_dim=FEATURE_DIM,
     thresholds=(-190.0, -160.0, -130.0),
     max_steps=200,
     presets=PRESETS,
     default_preset="paper",
     zoo_reference="rl-baselines3-zoo benchmark.md, PPO MountainCar-v0: -110.423 +/- 19.473 (1M steps)",
-    position=_position,
-    hover_from=0.3,
-    numbers=NUMBERS,
+    hover=Hover(_position, start=0.3),
+    numbers=NUMBER_PROBE,  # Table 1's float and box probe (probe.py)
     calibration=CALIBRATION,
     # the regime of `vlmrl study`: a baseline that fails on some seeds (see PRESETS above)
     study_preset="paper-unreliable",
-    name_in_identity=False,  # its runs predate tasks: their config hashes name no task
-    reported_in_paper=True,  # paper/reported.json: its Table 2 is this task's
-    grid_frames=_grid_frames,
-    describe_step=describe_step,
+    paper=PaperTask(),  # paper/reported.json is its Table 2; its runs predate tasks: their hashes name no task
+    caption=describe_step,
     hacking_note=("hovering short of the flag",
                   "R_kin = max(0, 2(x + 0.4)) pays up to +1.8 per step just left of the flag, more than the -1 "
                   "step cost, so parking near x = 0.45 can pay more than finishing."),
+    sim_profiles=SIM_PROFILES,  # llava-table1, the paper's Table 1 failures (profiles.py)
 )
 
 # rl-baselines3-zoo, hyperparams/ppo.yml, MountainCarContinuous-v0 ("Tuned"; n_timesteps 2e4,
@@ -245,9 +245,8 @@ MOUNTAIN_CAR_CONTINUOUS = Task(
     milestones=ZONE_MILESTONES,
     label_potentials=ZONE_POTENTIALS,
     truth=_continuous_zone_of_sim,
-    make_camera=_continuous_camera,
+    camera=TaskCamera(_continuous_camera, FEATURE_DIM),
     reader=ContinuousZoneReader(),
-    feature_dim=FEATURE_DIM,
     thresholds=(0.0, 50.0, 90.0),  # 90: gymnasium's "solved"; below 0 the car never reached the flag
     max_steps=999,
     presets={
@@ -264,10 +263,8 @@ MOUNTAIN_CAR_CONTINUOUS = Task(
         "sb3-default-100k": SB3_DEFAULT_100K,
         "smoke": SMOKE,
     },
-    default_preset="zoo",
     zoo_reference="rl-baselines3-zoo benchmark.md, PPO MountainCarContinuous-v0: 88.343 +/- 2.572 (20k steps)",
-    position=_position,
-    hover_from=0.3,
+    hover=Hover(_position, start=0.3),
     probe_states=continuous_probe_states,
     # an episode that never reaches the flag lasts 999 steps: 100 of them would be a whole budget
     window=10,
