@@ -121,6 +121,8 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     (["--tracking-uri", "sqlite:///{tmp}/file/mlflow.db"], "cannot be reached"),
     (["--tracking-uri", "nope://x"], "cannot be reached"),
     (["--dry-run", "--arms", "teleport"], "unknown arm 'teleport'"),
+    (["--set", "study.margin=0.9"], "--margin is a ratio above 1"),  # the [study] table takes --set too
+    (["--set", "study.vlm_regime=other"], "not a regime of this study"),
 ])
 def test_a_bad_study_exits_2_before_anything_exists(tmp_path: Path, args: list[str], needle: str) -> None:
     (tmp_path / "file").write_text("not a folder")
@@ -152,3 +154,35 @@ def test_the_taxonomy_sweep_defaults_to_the_taxonomy_commands(tmp_path: Path) ->
                                  "--out", str(tmp_path / "out")])
     assert result.exit_code == 0, result.output
     assert f"taxonomy: {DEFAULT_STATES} sweep positions" in " ".join(result.output.split())
+
+
+def test_every_study_option_is_a_config_field_a_run_option_or_a_documented_cli_one() -> None:
+    """The study's own options come from ``StudySettings``' fields; a new option must be a new field
+    (or a run's option, or say why it is neither in ``CLI_ONLY``)."""
+    import dataclasses
+
+    import typer
+
+    from vlmrl_cli.cli import options as opt
+    from vlmrl_cli.cli import study as cmd
+    from vlmrl_cli.core.fields import help_of
+    from vlmrl_cli.study.settings import StudySettings
+    from vlmrl_cli.training.config import RunConfig
+
+    command = typer.main.get_command(app).commands["study"]  # type: ignore[attr-defined]
+    options = {p.name: p for p in command.params}
+    fields = {f.name: f for f in dataclasses.fields(StudySettings)}
+    vlm = {o.param for o in opt.VLM_OPTIONS}
+    assert set(options) == set(fields) | set(cmd.RUN_OPTIONS) | vlm | set(cmd.CLI_ONLY)
+    assert not set(fields) & (set(cmd.RUN_OPTIONS) | vlm | set(cmd.CLI_ONLY))
+    # each study option is its field's: the field's flag and help, or the alias the field shares
+    for name, f in fields.items():
+        flag = f.metadata.get("flag", "--" + name.replace("_", "-"))
+        assert options[name].opts == [flag], name
+        shared = cmd.SHARED.get(name)
+        help_text = shared.__metadata__[0].help if shared is not None else help_of(f)  # type: ignore[attr-defined]
+        assert options[name].help == help_text and help_text, name
+    # each run option sets a key of the runs' own config
+    run_fields = {f.name for f in dataclasses.fields(RunConfig)}
+    keys = opt._RUN_KEYS | {"seeds": "seeds", "seed_list": "seeds"}
+    assert {keys[name].split(".")[0] for name in cmd.RUN_OPTIONS} <= run_fields

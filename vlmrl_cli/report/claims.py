@@ -25,7 +25,7 @@ Verdict rule (``VERDICT_RULE`` is printed in the report):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -175,82 +175,152 @@ def evaluate_claims(
         comparisons = compare_arms(per_seed, table.thresholds, rng, n_boot, ci)
     arms = set(table.arms)
     results = []
-    for spec in reported.get("claims", []):
-        cid, paper = spec["id"], spec.get("value")
-        paper_f = None if paper is None else float(paper)
-        need: set[str] = set()
-        est = stats.Estimate(float("nan"))
-        null: float | None = None
-        direction, unit, n_seeds, p_value, p_raw, pair = ">", "", None, float("nan"), float("nan"), ""
-        comparison: tuple[str, str, str] | None = None  # (a, b, metric) of a comparative claim
-        if "vs" in spec:
-            comparison = (METHOD, str(spec["vs"]), str(spec["metric"]))
-        elif cid.startswith("speedup_"):
-            comparison = (METHOD, BASELINE, cid)
-        elif cid == "reliability_gap":
-            comparison = (METHOD, BASELINE, "reliability_diff")
+    for spec in reported.get("claims", []):  # in order: a claim's draws come after the one before
+        comparison = _comparison_of(spec)
         if comparison is not None:
-            a, b, metric = comparison
-            need, unit, pair = {a, b}, _comparison_unit(metric), f"{a} vs {b}"
-            null = _NULLS[unit]
-            if metric.startswith("speedup_") and float(metric.removeprefix("speedup_")) not in table.thresholds:
-                results.append(ClaimResult(cid, spec["section"], spec["text"], paper_f, est, unit, NOT_TESTED,
-                                           f"threshold {metric.removeprefix('speedup_')} not in this report's "
-                                           "thresholds", arms=pair))
-                continue
-            found = lookup(comparisons, a, b, metric) if need <= arms else None
-            if found is not None:
-                est, p_raw, p_value = found
-            if metric.startswith("speedup_") and need <= arms:
-                t = float(metric.removeprefix("speedup_"))
-                n_seeds = min(_n_reached(table, t, a), _n_reached(table, t, b))
-        elif cid in ("reliability_hybrid", "reliability_baseline"):
-            arm = cid.removeprefix("reliability_")
-            need, unit = {arm}, "%"
-            est = _est_from_cell(table.cell("reliability", arm))
-        elif cid.startswith("detached_success_"):
-            arm = cid.removeprefix("detached_success_")
-            need, unit = {arm}, "%"
-            est = _est_from_cell(table.cell("eval_success", arm))
-        elif cid == "detached_length_hybrid":
-            need, unit = {METHOD}, " steps"
-            est = _est_from_cell(table.cell("eval_length", METHOD))
-            n_seeds = int((per_seed["arm"] == METHOD).sum())
-        elif cid == "narrower_variance":
-            need, null, direction, unit = {METHOD, BASELINE}, 0.0, "<", ""
-            if need <= arms:
-                a_ret = per_seed.loc[per_seed["arm"] == METHOD, "final_return"].to_numpy(dtype=float)
-                b_ret = per_seed.loc[per_seed["arm"] == BASELINE, "final_return"].to_numpy(dtype=float)
-                est = stats.std_difference(a_ret, b_ret, stats.stream(rng, "claims/narrower_variance"), n_boot, ci)
-        elif cid == "zero_convergence":
-            need, unit = {PURE_VISION}, "%"
-            est = _est_from_cell(table.cell("reliability", PURE_VISION))
-        missing = need - arms
-        if missing:
-            reason = f"arm {', '.join(sorted(missing))} not in this experiment"
-            if cid == "zero_convergence":
-                reason += "; see `vlmrl taxonomy` for the pure-vision failure modes"
-            results.append(ClaimResult(cid, spec["section"], spec["text"], paper_f, est, unit, NOT_TESTED, reason,
-                                       arms=pair))
-            continue
-        if n_seeds is None:
-            n_seeds = min(int((per_seed["arm"] == a).sum()) for a in need)
-        v, reason = verdict(est, paper_f, null, direction, bool(spec.get("approximate")), n_seeds, p_value,
-                            1.0 - ci)
-        if comparison is not None and comparison[2].startswith("speedup_") and v == INCONCLUSIVE:
-            judged, low, high = lookup_verdict(comparisons, *comparison)
-            if judged.startswith("equivalent"):  # "no effect" is a claim too: judged by TOST, not by a large p
-                v, reason = NOT_REPRODUCED, (f"{judged} by two one-sided tests (interval [{low:.3g}, {high:.3g}]): no "
-                                             f"speedup as large as the margin; {reason}")
-        if cid == "narrower_variance":
-            reason = "measure: std across seeds of the final return, hybrid minus baseline; " + reason
-        if math.isfinite(p_raw) and p_raw != p_value:
-            reason += f" (p adjusted within the report's family of speedups; raw p={p_raw:.2g})"
-        if pair:
-            reason = f"judged on {pair}; " + reason
-        results.append(ClaimResult(cid, spec["section"], spec["text"], paper_f, est, unit, v, reason, p_value, pair,
-                                   p_raw))
+            measure = _measure_comparison(comparison, table, comparisons, arms)
+        else:
+            measure = _measure_value(spec["id"], table, per_seed, arms, rng, n_boot, ci)
+        results.append(_judge(spec, measure, per_seed, comparisons, arms, ci))
     return results
+
+
+@dataclass(frozen=True)
+class _Measure:
+    """What one claim is judged on: the arms it needs, our estimate and its unit, the null and the
+    paper's side of it (comparative claims only), the seeds behind it, the test's adjusted and raw
+    p, the comparison (a, b, metric) of a comparative claim, and why it cannot be tested, if known
+    before its arms are looked at."""
+
+    need: frozenset[str] = frozenset()
+    est: stats.Estimate = field(default_factory=lambda: stats.Estimate(float("nan")))
+    unit: str = ""
+    null: float | None = None
+    direction: str = ">"
+    n_seeds: int | None = None
+    p_value: float = float("nan")
+    p_raw: float = float("nan")
+    comparison: tuple[str, str, str] | None = None
+    untestable: str = ""
+
+    @property
+    def pair(self) -> str:
+        return "" if self.comparison is None else f"{self.comparison[0]} vs {self.comparison[1]}"
+
+
+def _comparison_of(spec: dict[str, Any]) -> tuple[str, str, str] | None:
+    """The (a, b, metric) a comparative claim is judged on; None for a claim about one arm's value.
+
+    Example:
+        >>> _comparison_of({"id": "speedup_-130"}), _comparison_of({"id": "x", "vs": "kinematic", "metric": "m"})
+        (('hybrid', 'baseline', 'speedup_-130'), ('hybrid', 'kinematic', 'm'))
+    """
+    if "vs" in spec:
+        return METHOD, str(spec["vs"]), str(spec["metric"])
+    if spec["id"].startswith("speedup_"):
+        return METHOD, BASELINE, spec["id"]
+    if spec["id"] == "reliability_gap":
+        return METHOD, BASELINE, "reliability_diff"
+    return None
+
+
+def _measure_comparison(comparison: tuple[str, str, str], table: Table2, comparisons: pd.DataFrame,
+                        arms: set[str]) -> _Measure:
+    """A comparative claim's estimate and p from the attribution table; for a speedup, the fewest
+    seeds that reached its threshold in either arm."""
+    a, b, metric = comparison
+    unit = _comparison_unit(metric)
+    measure = _Measure(need=frozenset({a, b}), unit=unit, null=_NULLS[unit], comparison=comparison)
+    speedup = metric.startswith("speedup_")
+    if speedup and float(metric.removeprefix("speedup_")) not in table.thresholds:
+        return replace(measure, untestable=f"threshold {metric.removeprefix('speedup_')} not in this report's "
+                                           "thresholds")
+    if not measure.need <= arms:
+        return measure
+    found = lookup(comparisons, a, b, metric)
+    if found is not None:
+        est, p_raw, p_value = found
+        measure = replace(measure, est=est, p_raw=p_raw, p_value=p_value)
+    if speedup:
+        t = float(metric.removeprefix("speedup_"))
+        measure = replace(measure, n_seeds=min(_n_reached(table, t, a), _n_reached(table, t, b)))
+    return measure
+
+
+def _measure_value(cid: str, table: Table2, per_seed: pd.DataFrame, arms: set[str],
+                   rng: np.random.Generator | stats.Streams, n_boot: int, ci: float) -> _Measure:
+    """A claim about one arm's value (reliability, detached success or length), or the spread of
+    the hybrid's final returns against the baseline's (``narrower_variance``)."""
+    if cid in ("reliability_hybrid", "reliability_baseline"):
+        arm = cid.removeprefix("reliability_")
+        return _Measure(frozenset({arm}), _est_from_cell(table.cell("reliability", arm)), "%")
+    if cid.startswith("detached_success_"):
+        arm = cid.removeprefix("detached_success_")
+        return _Measure(frozenset({arm}), _est_from_cell(table.cell("eval_success", arm)), "%")
+    if cid == "detached_length_hybrid":
+        return _Measure(frozenset({METHOD}), _est_from_cell(table.cell("eval_length", METHOD)), " steps",
+                        n_seeds=int((per_seed["arm"] == METHOD).sum()))
+    if cid == "narrower_variance":
+        need = frozenset({METHOD, BASELINE})
+        est = stats.Estimate(float("nan"))
+        if need <= arms:
+            a_ret = per_seed.loc[per_seed["arm"] == METHOD, "final_return"].to_numpy(dtype=float)
+            b_ret = per_seed.loc[per_seed["arm"] == BASELINE, "final_return"].to_numpy(dtype=float)
+            est = stats.std_difference(a_ret, b_ret, stats.stream(rng, "claims/narrower_variance"), n_boot, ci)
+        return _Measure(need, est, "", null=0.0, direction="<")
+    if cid == "zero_convergence":
+        return _Measure(frozenset({PURE_VISION}), _est_from_cell(table.cell("reliability", PURE_VISION)), "%")
+    return _Measure()
+
+
+def _judge(spec: dict[str, Any], m: _Measure, per_seed: pd.DataFrame, comparisons: pd.DataFrame, arms: set[str],
+           ci: float) -> ClaimResult:
+    """One claim's result: not tested (an arm missing, or a threshold this report has not), else
+    ``verdict`` on its measure, an inconclusive speedup re-judged by the equivalence test."""
+    cid, paper = spec["id"], spec.get("value")
+    paper_f = None if paper is None else float(paper)
+    missing = m.need - arms
+    if m.untestable or missing:
+        reason = m.untestable or _missing_reason(cid, missing)
+        return ClaimResult(cid, spec["section"], spec["text"], paper_f, m.est, m.unit, NOT_TESTED, reason,
+                           arms=m.pair)
+    n_seeds = m.n_seeds if m.n_seeds is not None else min(int((per_seed["arm"] == a).sum()) for a in m.need)
+    v, reason = verdict(m.est, paper_f, m.null, m.direction, bool(spec.get("approximate")), n_seeds, m.p_value,
+                        1.0 - ci)
+    v, reason = _by_equivalence(v, reason, m.comparison, comparisons)
+    return ClaimResult(cid, spec["section"], spec["text"], paper_f, m.est, m.unit, v, _explained(reason, cid, m),
+                       m.p_value, m.pair, m.p_raw)
+
+
+def _missing_reason(cid: str, missing: set[str] | frozenset[str]) -> str:
+    reason = f"arm {', '.join(sorted(missing))} not in this experiment"
+    if cid == "zero_convergence":
+        reason += "; see `vlmrl taxonomy` for the pure-vision failure modes"
+    return reason
+
+
+def _by_equivalence(v: str, reason: str, comparison: tuple[str, str, str] | None, comparisons: pd.DataFrame
+                    ) -> tuple[str, str]:
+    """An inconclusive speedup claim whose arms are equivalent within the margin (two one-sided
+    tests) is not reproduced: "no effect" is a claim too, judged by TOST, not by a large p."""
+    if comparison is None or not comparison[2].startswith("speedup_") or v != INCONCLUSIVE:
+        return v, reason
+    judged, low, high = lookup_verdict(comparisons, *comparison)
+    if not judged.startswith("equivalent"):
+        return v, reason
+    return NOT_REPRODUCED, (f"{judged} by two one-sided tests (interval [{low:.3g}, {high:.3g}]): no speedup as "
+                            f"large as the margin; {reason}")
+
+
+def _explained(reason: str, cid: str, m: _Measure) -> str:
+    """``reason`` with what the claim measures, the adjustment of its p and the comparison judged."""
+    if cid == "narrower_variance":
+        reason = "measure: std across seeds of the final return, hybrid minus baseline; " + reason
+    if math.isfinite(m.p_raw) and m.p_raw != m.p_value:
+        reason += f" (p adjusted within the report's family of speedups; raw p={m.p_raw:.2g})"
+    if m.pair:
+        reason = f"judged on {m.pair}; " + reason
+    return reason
 
 
 def _n_reached(table: Table2, threshold: float, arm: str) -> int:

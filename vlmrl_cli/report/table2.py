@@ -200,13 +200,36 @@ def build_table2(
     depends on which other cells exist. ``registry``: the arms whose report order the columns follow.
     """
     arms = tuple(order_arms(per_seed["arm"].unique().tolist(), registry))
+    labels = table2_labels(thresholds, window, detached_cut)
+    cells: list[dict[str, Any]] = []
+    for arm in arms:  # one arm's cells in the order they draw from a shared generator
+        d = per_seed[per_seed["arm"] == arm]
+        ev = eval_episodes[eval_episodes["arm"] == arm] if len(eval_episodes) else eval_episodes
+        cells += _steps_cells(d, arm, reported, thresholds, rng, n_boot, ci)
+        cells += _success_cells(d, arm, reported, thresholds, ci, detached_cut)
+        cells.append(_length_cell(d, ev, arm, reported, thresholds, rng, n_boot, ci))
+        cells += _final_cells(d, arm, window, rng, n_boot, ci)
+    speed_rows = _speedup_rows(per_seed, arms, reported, thresholds, rng, n_boot, ci, n_perm)
+    paper_values = {m: _paper_values(reported, m, thresholds) for m in labels}
+    return Table2(arms, tuple(thresholds), pd.DataFrame(cells), pd.DataFrame(speed_rows, columns=list(SPEED_COLUMNS)),
+                  labels, ci, paper_values)
+
+
+def table2_labels(thresholds: Sequence[float], window: int = 100, detached_cut: float = DETACHED_SUCCESS_CUT
+                  ) -> dict[str, str]:
+    """The row label of every metric of Table 2, in its rows' order.
+
+    Example:
+        >>> table2_labels([-130.0])["steps_-130"]
+        'Steps to reach -130 (restricted mean, DNF at the budget)'
+    """
     top = max(thresholds)
     labels = {threshold_key(t): f"Steps to reach {t:g} (restricted mean, DNF at the budget)" for t in thresholds}
     labels |= {full_window_key(t): f"Steps to reach {t:g}, full {window}-episode window (restricted mean)"
                for t in thresholds}
     labels |= {finishers_key(t): f"Steps to reach {t:g}, mean over the seeds that finished (the paper's "
                                  "convention; no verdict rests on it)" for t in thresholds}
-    labels |= {
+    return labels | {
         "reliability": f"Final reliability (seeds reaching {top:g})",
         "eval_success": f"Detached eval: seeds succeeding (success rate >= {100 * detached_cut:g}%)",
         "eval_success_mean": "Detached eval success rate (mean over seeds, no CI)",
@@ -214,58 +237,89 @@ def build_table2(
         "final_iqm": f"Final return IQM (last {window} episodes)",
         "final_std": "Final return std across seeds",
     }
-    cells: list[dict[str, Any]] = []
-    for arm in arms:
-        d = per_seed[per_seed["arm"] == arm]
-        n = len(d)
-        budget = d["budget"].to_numpy(dtype=float)
-        for t in thresholds:
-            for key in (threshold_key(t), full_window_key(t)):
-                if key not in d:
-                    continue
-                s = d[key].to_numpy(dtype=float)
-                est = censored.restricted_mean(s, budget, stats.stream(rng, f"table2/{key}/{arm}"), n_boot, ci)
-                hits = int(censored.reached(s, budget).sum())
-                c = _cell(key, arm, est, None, n, hits)
-                summ = stats.summarize_steps(s, budget, stats.stream(rng, f"table2/finishers/{key}/{arm}"), n_boot,
-                                             ci)
-                c |= {"median": summ.median, "censored_mean": summ.censored_mean, "std": summ.std, "iqr": summ.iqr}
-                cells.append(c)
-                if key == threshold_key(t):  # the paper's own convention, beside ours, for its table
-                    cells.append(_cell(finishers_key(t), arm, summ.mean,
-                                       _paper_values(reported, key, thresholds).get(arm), n, summ.n_reached))
-        reached = censored.reached(d[threshold_key(top)].to_numpy(dtype=float), budget)
-        rel = stats.reliability(reached, ci)
-        cells.append(_cell("reliability", arm, rel, _paper_values(reported, "reliability", thresholds).get(arm), n,
-                           int(reached.sum())))
-        rates = d["eval_success_rate"].to_numpy(dtype=float)
-        per_seed_ok = detached_successes(rates, detached_cut)
-        per_seed_ok = per_seed_ok[np.isfinite(per_seed_ok)]
-        succ = stats.reliability(per_seed_ok > 0.5, ci)
-        cells.append(_cell("eval_success", arm, succ, _paper_values(reported, "eval_success", thresholds).get(arm),
-                           succ.n, int(per_seed_ok.sum())))
-        finite_rates = rates[np.isfinite(rates)]
-        mean_rate = stats.Estimate(float(finite_rates.mean()) if finite_rates.size else float("nan"),
-                                   n=int(finite_rates.size), note="per-episode rates averaged over seeds")
-        cells.append(_cell("eval_success_mean", arm, mean_rate, None, mean_rate.n))
-        ev = eval_episodes[eval_episodes["arm"] == arm] if len(eval_episodes) else eval_episodes
-        length_rng = stats.stream(rng, f"table2/eval_length/{arm}")
-        if len(ev):
-            length = stats.mean_ci(ev["length"].to_numpy(dtype=float), length_rng, n_boot, ci)
-            length = stats.Estimate(length.value, length.low, length.high, length.n,
-                                    f"{len(ev)} episodes pooled over {ev['seed'].nunique()} seeds")
-        else:
-            length = stats.mean_ci(d["eval_mean_length"].to_numpy(dtype=float), length_rng, n_boot, ci)
-        cells.append(_cell("eval_length", arm, length, _paper_values(reported, "eval_length", thresholds).get(arm),
-                           length.n))
-        final = d["final_return"].to_numpy(dtype=float)
-        cells.append(_cell("final_iqm", arm, stats.iqm_ci(final, stats.stream(rng, f"table2/final_iqm/{arm}"), n_boot,
-                                                          ci), None, n))
-        fin = final[np.isfinite(final)]
-        std = float(fin.std(ddof=1)) if fin.size >= 2 else float("nan")
-        cells.append(_cell("final_std", arm, stats.Estimate(std, n=int(fin.size)), None, n))
 
-    speed_rows: list[dict[str, Any]] = []
+
+def _steps_cells(d: pd.DataFrame, arm: str, reported: dict[str, Any], thresholds: Sequence[float],
+                 rng: np.random.Generator | stats.Streams, n_boot: int, ci: float) -> list[dict[str, Any]]:
+    """One arm's steps to each threshold (``d``: its seeds' rows): the restricted mean with DNF at
+    the budget, the same with a full window, and the paper's mean over the seeds that finished."""
+    cells = []
+    budget = d["budget"].to_numpy(dtype=float)
+    for t in thresholds:
+        for key in (threshold_key(t), full_window_key(t)):
+            if key not in d:
+                continue
+            s = d[key].to_numpy(dtype=float)
+            est = censored.restricted_mean(s, budget, stats.stream(rng, f"table2/{key}/{arm}"), n_boot, ci)
+            c = _cell(key, arm, est, None, len(d), int(censored.reached(s, budget).sum()))
+            summ = stats.summarize_steps(s, budget, stats.stream(rng, f"table2/finishers/{key}/{arm}"), n_boot, ci)
+            cells.append(c | {"median": summ.median, "censored_mean": summ.censored_mean, "std": summ.std,
+                              "iqr": summ.iqr})
+            if key == threshold_key(t):  # the paper's own convention, beside ours, for its table
+                cells.append(_cell(finishers_key(t), arm, summ.mean,
+                                   _paper_values(reported, key, thresholds).get(arm), len(d), summ.n_reached))
+    return cells
+
+
+def _success_cells(d: pd.DataFrame, arm: str, reported: dict[str, Any], thresholds: Sequence[float], ci: float,
+                   detached_cut: float) -> list[dict[str, Any]]:
+    """One arm's reliability (seeds reaching the top threshold), detached success (seeds whose
+    detached success rate reaches ``detached_cut``), both with Wilson intervals, and the mean rate."""
+    budget = d["budget"].to_numpy(dtype=float)
+    reached = censored.reached(d[threshold_key(max(thresholds))].to_numpy(dtype=float), budget)
+    rel = stats.reliability(reached, ci)
+    rates = d["eval_success_rate"].to_numpy(dtype=float)
+    per_seed_ok = detached_successes(rates, detached_cut)
+    per_seed_ok = per_seed_ok[np.isfinite(per_seed_ok)]
+    succ = stats.reliability(per_seed_ok > 0.5, ci)
+    finite_rates = rates[np.isfinite(rates)]
+    mean_rate = stats.Estimate(float(finite_rates.mean()) if finite_rates.size else float("nan"),
+                               n=int(finite_rates.size), note="per-episode rates averaged over seeds")
+    return [
+        _cell("reliability", arm, rel, _paper_values(reported, "reliability", thresholds).get(arm), len(d),
+              int(reached.sum())),
+        _cell("eval_success", arm, succ, _paper_values(reported, "eval_success", thresholds).get(arm), succ.n,
+              int(per_seed_ok.sum())),
+        _cell("eval_success_mean", arm, mean_rate, None, mean_rate.n),
+    ]
+
+
+def _length_cell(d: pd.DataFrame, ev: pd.DataFrame, arm: str, reported: dict[str, Any], thresholds: Sequence[float],
+                 rng: np.random.Generator | stats.Streams, n_boot: int, ci: float) -> dict[str, Any]:
+    """One arm's detached mean episode length: over its logged episodes ``ev`` pooled over seeds,
+    else over its seeds' means."""
+    length_rng = stats.stream(rng, f"table2/eval_length/{arm}")
+    if len(ev):
+        length = stats.mean_ci(ev["length"].to_numpy(dtype=float), length_rng, n_boot, ci)
+        length = stats.Estimate(length.value, length.low, length.high, length.n,
+                                f"{len(ev)} episodes pooled over {ev['seed'].nunique()} seeds")
+    else:
+        length = stats.mean_ci(d["eval_mean_length"].to_numpy(dtype=float), length_rng, n_boot, ci)
+    return _cell("eval_length", arm, length, _paper_values(reported, "eval_length", thresholds).get(arm), length.n)
+
+
+def _final_cells(d: pd.DataFrame, arm: str, window: int, rng: np.random.Generator | stats.Streams, n_boot: int,
+                 ci: float) -> list[dict[str, Any]]:
+    """One arm's final return (the last ``window`` episodes of each seed): its IQM over seeds with a
+    bootstrap CI, and its standard deviation across seeds."""
+    final = d["final_return"].to_numpy(dtype=float)
+    iqm = stats.iqm_ci(final, stats.stream(rng, f"table2/final_iqm/{arm}"), n_boot, ci)
+    fin = final[np.isfinite(final)]
+    std = float(fin.std(ddof=1)) if fin.size >= 2 else float("nan")
+    return [_cell("final_iqm", arm, iqm, None, len(d)), _cell("final_std", arm, stats.Estimate(std, n=int(fin.size)),
+                                                              None, len(d))]
+
+
+#: The columns of ``Table2.speedups``.
+SPEED_COLUMNS = ("metric", "arm", "value", "ci_low", "ci_high", "n", "paper", "note", "p_value", "p_faster")
+
+
+def _speedup_rows(per_seed: pd.DataFrame, arms: Sequence[str], reported: dict[str, Any], thresholds: Sequence[float],
+                  rng: np.random.Generator | stats.Streams, n_boot: int, ci: float, n_perm: int
+                  ) -> list[dict[str, Any]]:
+    """Every other arm's speedup over the baseline to each threshold, with its censored rank test
+    (NaN, and a note saying so, without a baseline); the paper's speedup beside the hybrid's."""
+    rows: list[dict[str, Any]] = []
     for t in thresholds:
         paper = _paper_steps(reported, t).get("speedup")
         for arm in arms:
@@ -275,15 +329,12 @@ def build_table2(
                 est, test = compare_steps(per_seed, arm, BASELINE, t, rng, n_boot, ci, n_perm)
             else:
                 est, test = stats.Estimate(float("nan"), note=NEEDS_BASELINE), None
-            speed_rows.append({"metric": threshold_key(t), "arm": arm, "value": est.value, "ci_low": est.low,
-                               "ci_high": est.high, "n": est.n,
-                               "paper": float(paper) if paper is not None and arm == METHOD else float("nan"),
-                               "note": est.note, "p_value": test.p_value if test else float("nan"),
-                               "p_faster": test.p_faster if test else float("nan")})
-    speed_cols = ["metric", "arm", "value", "ci_low", "ci_high", "n", "paper", "note", "p_value", "p_faster"]
-    paper_values = {m: _paper_values(reported, m, thresholds) for m in labels}
-    return Table2(arms, tuple(thresholds), pd.DataFrame(cells), pd.DataFrame(speed_rows, columns=speed_cols),
-                  labels, ci, paper_values)
+            rows.append({"metric": threshold_key(t), "arm": arm, "value": est.value, "ci_low": est.low,
+                         "ci_high": est.high, "n": est.n,
+                         "paper": float(paper) if paper is not None and arm == METHOD else float("nan"),
+                         "note": est.note, "p_value": test.p_value if test else float("nan"),
+                         "p_faster": test.p_faster if test else float("nan")})
+    return rows
 
 
 def speedup_key(threshold: float, arm: str, ref: str) -> str:

@@ -1,0 +1,103 @@
+"""What a user chooses about `vlmrl study`, declared once: ``StudySettings``.
+
+Each field is a key of a config file's ``[study]`` table, of ``--set study.KEY=VALUE`` and an
+option of `vlmrl study` (``cli/study.py`` builds the options from these fields: their help, their
+checks, a flag of the field's name). The layers resolve as a run's do, each over the one below:
+the config file < ``--set`` < the flags typed (``study/config.py``, ``StudyConfig.from_sources``);
+a key replaces the lower one whole, so ``--regime`` replaces the file's ``regimes`` table.
+
+Light on purpose: `vlmrl --help` reads this module, so it loads no pandas, scipy or torch; the
+grid itself is built in ``study/config.py``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from annotated_types import Ge
+
+from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST, METHODS
+from vlmrl_cli.shaping.arms import BASELINE, DENSE, METHOD, PLACEBO_OF, POTENTIAL_ONLY
+
+DEFAULT_EXPERIMENT = "vlmrl-study"
+DEFAULT_SEEDS = 20
+PLACEBO_ARM = PLACEBO_OF[METHOD]
+# hybrid and its placebo first: a study stopped part-way has the comparison it exists for
+DEFAULT_ARMS = (BASELINE, METHOD, PLACEBO_ARM, DENSE, POTENTIAL_ONLY)
+#: The dose-response grid (issue 18): PBRS scales x kinematic scales, in the VLM regime. alpha 0 is
+#: the dense term alone (the kinematic arm; with kin_scale 0 the baseline), kin_scale 0 the VLM's
+#: potential alone (the semantic arm: the paper's "deadlock" case where only the VLM can help). At
+#: alpha 100 the potential pays about as much per episode as R_kin at its default scale (~45).
+DEFAULT_ALPHAS: tuple[float, ...] = (5.0, 25.0, 100.0)
+DEFAULT_KIN_SCALES: tuple[float, ...] = (0.0, 0.5, 2.0)
+#: Per-query (temporal) flicker rates at which the hybrid and hybrid-no-lock are compared: what
+#: the hysteresis lock is for.
+DEFAULT_QUERY_FLICKERS: tuple[float, ...] = (0.3,)
+#: The VLM-quality variants are off by default since the dose-response and placebo controls came:
+#: the study of 2026-11-29 (results/study/2026-11-29/) ran them at 10 seeds and found no dependence
+#: it could detect; ``--profiles ideal,default,llava-table1 --flickers 0,0.1,0.3,0.5`` runs them again.
+DEFAULT_PROFILES: tuple[str, ...] = ()
+DEFAULT_FLICKERS: tuple[float, ...] = ()
+#: ``probe.scoring.DEFAULT_STATES``, the taxonomy commands' sweep, not imported from there: that
+#: module loads scipy, and this one is read by `vlmrl --help` (tests/study/test_settings.py checks
+#: that the two agree).
+DEFAULT_STATES = 101
+DEFAULT_MARGIN = 1.15
+DEFAULT_OUT = Path("results/study")
+
+#: A study's regimes: name -> overrides (dotted keys, as ``--set`` takes them).
+Regimes = dict[str, dict[str, Any]] | None
+
+
+def listed(values: Sequence[float | str]) -> str:
+    """Values as a flag takes them: ``5,25,100``; ``none`` for no value.
+
+    Example:
+        >>> listed((5.0, 25.0, 100.0)), listed(("ideal",)), listed(())
+        ('5,25,100', 'ideal', 'none')
+    """
+    return ",".join(v if isinstance(v, str) else f"{v:g}" for v in values) or "none"
+
+
+@dataclass(frozen=True)
+class StudySettings:
+    """Everything a user sets about a study beyond its runs' own configuration: the regimes, the
+    hybrid's VLM-quality variants, the control cells, the verdicts' knobs and the output folder.
+    ``help`` is the option's help text; ``flag`` the option's name where it is not the field's."""
+
+    regimes: Regimes = field(default=None, metadata={"flag": "--regime", "help": (
+        "A regime, repeatable: NAME (the preset of that name), NAME=PRESET, or NAME='KEY=VALUE KEY=VALUE' "
+        "(--set assignments, e.g. hard='preset=paper ppo.normalize_obs=false ppo.normalize_reward=false'). "
+        "Replaces the study.regimes table of --config and the default (the task's study preset, else its "
+        "default preset).")})
+    profiles: tuple[str, ...] = field(default=DEFAULT_PROFILES, metadata={"help": (
+        "Simulated-VLM profiles of the hybrid's VLM-quality runs, comma-separated, or 'none' "
+        f"(default: {listed(DEFAULT_PROFILES)}).")})
+    flickers: tuple[float, ...] = field(default=DEFAULT_FLICKERS, metadata={"help": (
+        f"Flicker rates of the hybrid's VLM-quality runs (default profile), or 'none' "
+        f"(default: {listed(DEFAULT_FLICKERS)}).")})
+    alphas: tuple[float, ...] = field(default=DEFAULT_ALPHAS, metadata={"help": (
+        f"PBRS scales of the dose-response cells, comma-separated, or 'none' (default: {listed(DEFAULT_ALPHAS)}; "
+        "alpha 0, the dense term alone, is always included).")})
+    kin_scales: tuple[float, ...] = field(default=DEFAULT_KIN_SCALES, metadata={"help": (
+        f"Kinematic scales of the dose-response cells, or 'none' (default: {listed(DEFAULT_KIN_SCALES)}; "
+        "0 is the VLM's potential alone).")})
+    query_flickers: tuple[float, ...] = field(default=DEFAULT_QUERY_FLICKERS, metadata={"help": (
+        "Per-query (temporal) flicker rates at which hybrid and hybrid-no-lock are compared, or 'none' "
+        f"(default: {listed(DEFAULT_QUERY_FLICKERS)}).")})
+    vlm_regime: str | None = field(default=None, metadata={"help": (
+        "Regime of the VLM-quality runs and the control cells (default: the task's study preset when it is "
+        "a regime of the study, else the first).")})
+    states: int = field(default=DEFAULT_STATES, metadata={"rules": (Ge(2),), "help": (
+        f"Taxonomy sweep positions per VLM variant (default {DEFAULT_STATES}).")})
+    margin: float = field(default=DEFAULT_MARGIN, metadata={"help": (
+        "equivalence margin of a speedup, a ratio above 1: 'equivalent' when the 90% interval lies inside "
+        "[1/margin, margin]")})
+    adjust: str = field(default=DEFAULT_ADJUST, metadata={"help": (
+        f"multiplicity adjustment of the study's family of comparisons: {', '.join(METHODS)}")})
+    out: Path = field(default=DEFAULT_OUT, metadata={"help": (
+        f"Output folder of the regime map, figure, report and manifest (default: {DEFAULT_OUT}).")})
+
