@@ -28,6 +28,7 @@ from typing import Any
 from vlmrl_cli.sweep.ray_executor import start_local
 from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
 from vlmrl_cli.sweep.worker import Channels, run_claimed, train_job
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig, TrainJob
 from vlmrl_cli.training.events import JobResult
 from vlmrl_cli.training.presets import preset_of
@@ -47,7 +48,7 @@ def _sweep(cfg: RunConfig, job_fn: Any = None) -> tuple[float, int]:
 
 
 def _short_jobs(root: Path, timesteps: int, executor: str) -> RunConfig:
-    ppo = dataclasses.replace(preset_of("mountain-car", "smoke"), timesteps=timesteps)
+    ppo = dataclasses.replace(preset_of(get_task("mountain-car"), "smoke"), timesteps=timesteps)
     return RunConfig(arms=("baseline", "hybrid"), seeds=(0, 1, 2, 3), preset="smoke", ppo=ppo, workers=2,
                      tracking_uri=f"sqlite:///{root / 'short.db'}", experiment=f"short-{executor}", executor=executor)
 

@@ -55,6 +55,7 @@ from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
 from vlmrl_cli.tasks.mountain_car.prompts import PROMPTS, ZONE_MILESTONES
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.presets import preset_of
 from vlmrl_cli.vlm.config import VLMConfig
@@ -68,7 +69,7 @@ def train(arm: str, timesteps: int, seed: int, cache: Path) -> dict[str, Any]:
     from vlmrl_cli.training.envs import make_train_env
     from vlmrl_cli.training.model import make_model
 
-    preset = dataclasses.replace(preset_of("mountain-car", "paper"), timesteps=timesteps)
+    preset = dataclasses.replace(preset_of(get_task("mountain-car"), "paper"), timesteps=timesteps)
     spec = ARMS[arm]
     client = build_client(VLMConfig(cache_path=cache), reader=MOUNTAIN_CAR.reader) if spec.uses_vlm else None
     start, cpu_start = time.perf_counter(), time.process_time()
@@ -111,7 +112,7 @@ def label_agreement(run: dict[str, Any]) -> tuple[int, int, int]:
 def sweep_throughput(workers: int, timesteps: int, root: Path) -> float:
     from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
 
-    ppo = dataclasses.replace(preset_of("mountain-car", "paper"), timesteps=timesteps, eval_episodes=1)
+    ppo = dataclasses.replace(preset_of(get_task("mountain-car"), "paper"), timesteps=timesteps, eval_episodes=1)
     cfg = RunConfig(arms=("baseline",), seeds=(0, 1), preset="paper", ppo=ppo, workers=workers,
                     experiment=f"bench-{workers}", tracking_uri=f"sqlite:///{root / f'w{workers}.db'}")
     summary = run_sweep(cfg, SilentReporter())
@@ -138,8 +139,10 @@ import dataclasses, torch
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.presets import preset_of
 from vlmrl_cli.training.trace import native_returns
+from vlmrl_cli.tasks.registry import get_task
+paper = preset_of(get_task("mountain-car"), "paper")
 cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="paper",
-                ppo=dataclasses.replace(preset_of("mountain-car", "paper"), timesteps=int(sys.argv[1])), workers=1)
+                ppo=dataclasses.replace(paper, timesteps=int(sys.argv[1])), workers=1)
 job = cfg.jobs()[0]
 native_returns(dataclasses.replace(job, ppo=dataclasses.replace(job.ppo, timesteps=4096)))  # warm-up
 cpu, wall = time.process_time(), time.perf_counter()

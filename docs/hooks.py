@@ -43,6 +43,8 @@ def _rows(cls: type, section: str) -> list[str]:
     hints = typing.get_type_hints(cls)
     rows = []
     for f in dataclasses.fields(cls):
+        if f.metadata.get("carried"):  # resolved from the other keys, never written in a file
+            continue
         if dataclasses.is_dataclass(hints[f.name]) or f.name in ("ppo", "vlm", "shaping", "sim"):
             continue
         if f.default is not dataclasses.MISSING:

@@ -55,6 +55,8 @@ from typing import Any
 
 import numpy as np
 
+from vlmrl_cli.tasks.registry import get_task
+
 
 def _perturbed(fn: Any) -> Any:
     @functools.wraps(fn)
@@ -98,7 +100,7 @@ def main() -> int:
     from vlmrl_cli.training.presets import preset_of
     from vlmrl_cli.training.trace import native_returns
 
-    ppo = dataclasses.replace(preset_of("mountain-car", args.preset), timesteps=args.timesteps)
+    ppo = dataclasses.replace(preset_of(get_task("mountain-car"), args.preset), timesteps=args.timesteps)
     cfg = RunConfig(arms=(args.arm,), seeds=(args.seed,), preset=args.preset, ppo=ppo, workers=1)
     history = native_returns(cfg.jobs()[0])
     digest = hashlib.sha256(json.dumps(history).encode()).hexdigest()[:12]

@@ -149,7 +149,7 @@ def test_the_simulated_vlm_notice_is_the_first_line_before_any_result(
     done = SimpleNamespace(run=run, result=SimpleNamespace(success_rate=0.5, mean_length=150.0, mean_return=-150.0),
                            gif=tmp_path / "episode-0.gif", frames=10, gif_bytes=2048, summary=tmp_path / "e.json")
     monkeypatch.setattr(command, "resolve_child", lambda run_id, *_: run_id)
-    monkeypatch.setattr(evaluate_trained, "evaluate_run", lambda cfg: done)
+    monkeypatch.setattr(evaluate_trained, "evaluate_run", lambda cfg, tasks: done)
     result = runner.invoke(app, ["evaluate", "0123abcd", "--episodes", "2"])
     assert result.exit_code == 0, result.output
     lines = result.output.splitlines()  # stdout and stderr as a terminal shows them

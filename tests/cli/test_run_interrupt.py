@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from vlmrl_cli.sweep.runner import plan
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.tracking import store
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.presets import preset_of
@@ -64,7 +65,7 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_resumes(tmp_path: Path, executor: li
     assert statuses == {"sweep": "KILLED", "train": "KILLED"}
 
     # the killed job is pending again: rerunning the same command trains it
-    ppo = dataclasses.replace(preset_of("mountain-car", "smoke"), timesteps=2_000_000)
+    ppo = dataclasses.replace(preset_of(get_task("mountain-car"), "smoke"), timesteps=2_000_000)
     cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="smoke", ppo=ppo, tracking_uri=uri)
     client = store.connect(uri)
     exp = client.get_experiment_by_name("vlmrl")

@@ -19,6 +19,7 @@ from vlmrl_cli.report.writer import ReportConfig, ReportResult, write_report
 from vlmrl_cli.shaping import arms as arms_mod
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec, Comparison, PotentialSource
 from vlmrl_cli.study import verdicts
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.tracking import store
 
 HALF = ArmSpec("hybrid-half", "the hybrid at half the potential (a test arm)", True, PotentialSource.MCQ,
@@ -80,7 +81,7 @@ def fake_uri(tmp_path_factory: pytest.TempPathFactory) -> str:
 def report(fake_uri: str, tmp_path_factory: pytest.TempPathFactory) -> ReportResult:
     cfg = ReportConfig(experiment="HALF", tracking_uri=fake_uri, out=tmp_path_factory.mktemp("rep"), window=WINDOW,
                        n_boot=50, log_to_mlflow=False)
-    return write_report(cfg, registry=REGISTRY)
+    return write_report(cfg, get_task, registry=REGISTRY)
 
 
 def test_the_report_s_files_show_the_new_arm_and_its_pair(report: ReportResult) -> None:

@@ -14,6 +14,7 @@ from vlmrl_cli.analysis.stats import Streams
 from vlmrl_cli.report.claims import INCONCLUSIVE
 from vlmrl_cli.report.table2 import build_table2
 from vlmrl_cli.report.writer import ReportConfig, write_report
+from vlmrl_cli.tasks.registry import get_task
 
 REPORTED = json.loads(paper.REPORTED.read_text())
 
@@ -25,7 +26,7 @@ def report(tmp_path_factory):
     build_fake_experiment(uri, "ALL", arms=("hybrid", "baseline", "kinematic"), runs=ALL_SUCCEED)
     cfg = ReportConfig(experiment="ALL", tracking_uri=uri, out=root / "rep", window=WINDOW, n_boot=100,
                        log_to_mlflow=False)
-    return write_report(cfg)
+    return write_report(cfg, get_task)
 
 
 def _claim(result, cid: str):

@@ -6,15 +6,16 @@ import pytest
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.study.config import build_study, choose_regimes, study_section
+from vlmrl_cli.tasks.registry import get_task
 
 
 def test_the_default_regime_is_the_unreliable_calibrated_one() -> None:
-    regimes, notes = choose_regimes([], None, "mountain-car")
+    regimes, notes = choose_regimes([], None, get_task("mountain-car"))
     assert regimes == {"paper-unreliable": {"preset": "paper-unreliable"}} and notes == []
 
 
 def test_the_default_grid_has_the_placebo_the_dose_response_and_the_lock_test() -> None:
-    regimes, _ = choose_regimes([], None, "mountain-car")
+    regimes, _ = choose_regimes([], None, get_task("mountain-car"))
     cfg = build_study([], regimes)
     assert cfg.base.seeds == tuple(range(20)) and "hybrid-shuffled" in cfg.base.arms
     doses = [c for c in cfg.cells if c.kind == "dose"]
@@ -37,7 +38,7 @@ def test_the_default_grid_has_the_placebo_the_dose_response_and_the_lock_test() 
 
 def test_file_regimes_and_variants() -> None:
     section = study_section({"regimes": {"a": "smoke", "b": {"preset": "smoke", "ppo": {"normalize_obs": False}}}})
-    regimes, _ = choose_regimes([], section["regimes"], "mountain-car")
+    regimes, _ = choose_regimes([], section["regimes"], get_task("mountain-car"))
     cfg = build_study([], regimes, profiles=["ideal", "default"], flickers=[0.1, 0.5])
     assert [r.id for r in cfg.regimes] == ["a", "b"] and cfg.vlm_regime == "a"
     assert not cfg.regimes[1].run.ppo_config.normalize_obs
@@ -56,13 +57,13 @@ def test_bad_study_tables(raw: dict) -> None:  # type: ignore[type-arg]
 
 
 def test_a_study_of_another_task_takes_its_study_preset_thresholds_and_window() -> None:
-    from vlmrl_cli.study.config import task_name_of
+    from vlmrl_cli.study.config import task_in
     from vlmrl_cli.tasks.registry import get_task
 
     layers = [{"task": "acrobot"}]
-    assert task_name_of(layers) == "acrobot" and task_name_of([]) == "mountain-car"
+    assert task_in(layers).name == "acrobot" and task_in([]).name == "mountain-car"
     task = get_task("acrobot")
-    chosen, notes = choose_regimes([], None, "acrobot")
+    chosen, notes = choose_regimes([], None, get_task("acrobot"))
     preset = task.study_preset or task.default_preset
     assert chosen == {preset: {"preset": preset}} and notes == []
     cfg = build_study(layers, chosen, profiles=(), flickers=(), alphas=(), kin_scales=(), query_flickers=())
@@ -72,3 +73,30 @@ def test_a_study_of_another_task_takes_its_study_preset_thresholds_and_window() 
         build_study(layers, chosen, profiles=("ideal",), flickers=())
     with pytest.raises(BadInput, match="a study covers one task"):
         build_study([], {"a": {"preset": "smoke"}, "b": {"preset": "smoke", "task": "acrobot"}})
+
+
+def test_the_study_table_layers_file_then_set_then_flags(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from vlmrl_cli.study.config import StudyConfig
+
+    path = tmp_path / "study.toml"
+    path.write_text('seeds = [0, 1]\n[study]\nalphas = [25]\nkin_scales = [0, 2]\nquery_flickers = []\n'
+                    'margin = 1.2\nstates = 7\nout = "elsewhere"\n'
+                    '[study.regimes]\npaper = "smoke"\nhard = { preset = "smoke", ppo = { normalize_obs = false } }\n')
+    cfg = StudyConfig.from_sources(path)
+    assert [r.id for r in cfg.regimes] == ["paper", "hard"] and not cfg.regimes[1].run.ppo_config.normalize_obs
+    assert cfg.base.seeds == (0, 1) and (cfg.margin, cfg.states, str(cfg.out)) == (1.2, 7, "elsewhere")
+    assert {c.alpha for c in cfg.cells if not c.placebo} == {0.0, 25} and not [c for c in cfg.cells
+                                                                              if c.kind == "query-flicker"]
+    # --set beats the file, a flag beats both; a flag's regimes replace the file's table whole
+    over = StudyConfig.from_sources(path, {"study.regimes": {"x": {"preset": "smoke"}}, "study.margin": 1.3},
+                                    ["study.margin=1.25", "study.kin_scales=[]"])
+    assert [r.id for r in over.regimes] == ["x"] and over.margin == 1.3 and not over.cells
+
+
+@pytest.mark.parametrize(("raw", "needle"), [({"states": 1}, "study.states must be an integer >= 2"),
+                                             ({"states": 2.5}, "study.states"), ({"margin": "big"}, "study.margin"),
+                                             ({"adjust": 3}, "study.adjust"), ({"out": 3}, "study.out"),
+                                             ({"margn": 1.2}, "did you mean 'margin'")])
+def test_bad_study_settings(raw: dict, needle: str) -> None:  # type: ignore[type-arg]
+    with pytest.raises(BadInput, match=needle):
+        study_section(raw)

@@ -7,12 +7,13 @@ import dataclasses
 import pytest
 
 from vlmrl_cli.sweep.cost import FALLBACK_S_PER_STEP, Timings, contention, estimate, estimate_sweeps
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.presets import preset_of
 
 
 def _jobs(arms: tuple[str, ...], seeds: int, steps: int = 100_000) -> list:  # type: ignore[type-arg]
-    ppo = dataclasses.replace(preset_of("mountain-car", "smoke"), timesteps=steps)
+    ppo = dataclasses.replace(preset_of(get_task("mountain-car"), "smoke"), timesteps=steps)
     return RunConfig(arms=arms, seeds=tuple(range(seeds)), preset="smoke", ppo=ppo).jobs()
 
 
@@ -46,8 +47,8 @@ def test_an_arm_never_measured_takes_the_median_and_an_empty_store_the_fallback(
 
 def test_an_empty_store_estimates_each_task_from_its_own_measured_step_time(tmp_path) -> None:  # type: ignore[no-untyped-def]
     # DoorKey's steps cost about five times MountainCar's: its figure, not MountainCar's, is used
-    cfg = RunConfig(task="minigrid-doorkey", preset="zoo", arms=("baseline",), seeds=(0,),
-                    tracking_uri=f"sqlite:///{tmp_path}/none.db")
+    cfg = RunConfig(task="minigrid-doorkey", plugin=get_task("minigrid-doorkey"), preset="zoo", arms=("baseline",),
+                    seeds=(0,), tracking_uri=f"sqlite:///{tmp_path}/none.db")
     step_s = cfg.task_plugin.step_seconds
     assert step_s is not None and step_s > 3 * FALLBACK_S_PER_STEP
     cost = estimate_sweeps([cfg])

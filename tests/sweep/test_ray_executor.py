@@ -17,6 +17,7 @@ from mlflow.tracking import MlflowClient
 
 from vlmrl_cli.sweep.ray_executor import start_local
 from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.events import ProgressEvent
 from vlmrl_cli.training.presets import preset_of
@@ -77,7 +78,7 @@ def test_ray_gives_the_same_histories_as_the_local_pool(tmp_path: Path, local_ra
 
 def test_a_killed_ray_worker_is_retried_and_finishes_once(tmp_path: Path, local_ray: None) -> None:
     uri = f"sqlite:///{tmp_path / 'm.db'}"
-    ppo = dataclasses.replace(preset_of("mountain-car", "smoke"), timesteps=30_000)
+    ppo = dataclasses.replace(preset_of(get_task("mountain-car"), "smoke"), timesteps=30_000)
     cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="smoke", ppo=ppo, workers=2, tracking_uri=uri,
                     executor="ray", max_retries=2)
     box: dict[str, Any] = {}

@@ -13,6 +13,7 @@ from mlflow.tracking import MlflowClient
 
 from tests.sweep.tracking_server import TrackingServer
 from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.presets import preset_of
 
@@ -22,7 +23,7 @@ pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wh
 def test_the_server_stopped_and_restarted_mid_sweep(tmp_path: Path) -> None:
     server = TrackingServer(tmp_path)
     server.start()
-    ppo = dataclasses.replace(preset_of("mountain-car", "smoke"), timesteps=40_000)
+    ppo = dataclasses.replace(preset_of(get_task("mountain-car"), "smoke"), timesteps=40_000)
     cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="smoke", ppo=ppo, workers=1, tracking_uri=server.uri)
     box: dict[str, Any] = {}
     thread = threading.Thread(target=lambda: box.update(summary=run_sweep(cfg, SilentReporter())))

@@ -5,13 +5,16 @@ import itertools
 import math
 import tomllib
 from pathlib import Path
+from typing import Any
 
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.core.provenance import to_jsonable
 from vlmrl_cli.tasks.mountain_car.geometry import Zone
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig, load_config_file, resolve, to_toml
 from vlmrl_cli.training.presets import preset_of
 from vlmrl_cli.vlm.config import SimKnobs, VLMConfig
@@ -94,7 +97,7 @@ def test_missing_config_file_is_bad_input(tmp_path: Path) -> None:
         ({"preset": "huge"}, "unknown preset 'huge'"),
         ({"seeds": ()}, "no seed"),
         ({"seeds": (1, 1)}, "twice"),
-        ({"ppo": dataclasses.replace(preset_of("mountain-car", "smoke"), timesteps=0)}, "ppo.timesteps"),
+        ({"ppo": dataclasses.replace(preset_of(get_task("mountain-car"), "smoke"), timesteps=0)}, "ppo.timesteps"),
         ({"workers": 0}, "invalid workers"),
         ({"vlm": VLMConfig(backend="gpt9")}, "unknown VLM backend"),
     ],
@@ -122,17 +125,18 @@ def test_config_hash_ignores_the_seed_and_knobs_an_arm_does_not_use() -> None:
     assert oh0.config_hash != h0.config_hash  # the hybrid does
     no_cache = dataclasses.replace(base, vlm=VLMConfig(use_cache=False))
     assert no_cache.jobs()[2].config_hash == h0.config_hash  # the cache changes speed, not answers
-    longer = dataclasses.replace(base, ppo=dataclasses.replace(preset_of("mountain-car", "smoke"), timesteps=2_048))
+    smoke = preset_of(get_task("mountain-car"), "smoke")
+    longer = dataclasses.replace(base, ppo=dataclasses.replace(smoke, timesteps=2_048))
     assert longer.jobs()[0].config_hash != b0.config_hash
 
 
 def test_the_preset_name_is_a_label_the_resolved_values_are_the_identity() -> None:
     paper = RunConfig(arms=("baseline",), seeds=(0,), preset="paper")
-    zoo_cut = dataclasses.replace(paper, preset="zoo", ppo=preset_of("mountain-car", "paper"))
+    zoo_cut = dataclasses.replace(paper, preset="zoo", ppo=preset_of(get_task("mountain-car"), "paper"))
     assert paper.jobs()[0].config_hash == zoo_cut.jobs()[0].config_hash
     assert zoo_cut.jobs()[0].overrides() == {"ppo.timesteps": "300000"}
     assert paper.jobs()[0].overrides() == {}
-    one_env = dataclasses.replace(paper, ppo=dataclasses.replace(preset_of("mountain-car", "paper"), n_envs=1,
+    one_env = dataclasses.replace(paper, ppo=dataclasses.replace(preset_of(get_task("mountain-car"), "paper"), n_envs=1,
                                                                  n_steps=256))
     assert one_env.jobs()[0].config_hash != paper.jobs()[0].config_hash
     assert one_env.jobs()[0].overrides() == {"ppo.n_envs": "1", "ppo.n_steps": "256"}
@@ -197,7 +201,7 @@ def test_from_sources_lets_flags_beat_set_beat_the_file_beat_the_preset(
     sets = ["ppo.n_epochs=3"] if in_set else []
     flags = {"ppo.n_epochs": 4} if in_flag else {}
     cfg = RunConfig.from_sources(path, flags, sets)
-    smoke = preset_of("mountain-car", "smoke")
+    smoke = preset_of(get_task("mountain-car"), "smoke")
     expected = 4 if in_flag else 3 if in_set else 2 if in_file else smoke.n_epochs
     assert cfg.preset == "smoke" and cfg.ppo_config == dataclasses.replace(smoke, n_epochs=expected)
 
@@ -205,11 +209,11 @@ def test_from_sources_lets_flags_beat_set_beat_the_file_beat_the_preset(
 def test_from_sources_takes_the_preset_of_the_highest_source_that_names_one(tmp_path: Path) -> None:
     path = _write(tmp_path, 'preset = "smoke"\nseeds = [7]\n')
     by_set = RunConfig.from_sources(path, {}, ["preset=sb3-default"])
-    assert by_set.preset == "sb3-default" and by_set.ppo_config == preset_of("mountain-car", "sb3-default")
+    assert by_set.preset == "sb3-default" and by_set.ppo_config == preset_of(get_task("mountain-car"), "sb3-default")
     by_flag = RunConfig.from_sources(path, {"preset": "zoo", "arms": ["hybrid"]}, ["preset=sb3-default"])
-    assert by_flag.ppo_config == preset_of("mountain-car", "zoo")
+    assert by_flag.ppo_config == preset_of(get_task("mountain-car"), "zoo")
     assert by_flag.arms == ("hybrid",) and by_flag.seeds == (7,)
-    assert RunConfig.from_sources(None).ppo_config == preset_of("mountain-car", RunConfig.preset)
+    assert RunConfig.from_sources(None).ppo_config == preset_of(get_task("mountain-car"), RunConfig.preset)
 
 
 @pytest.mark.parametrize(
@@ -267,8 +271,44 @@ def test_every_builtin_tasks_presets_and_calibration_grid_pass_the_ppo_rules() -
     for name in BUILTIN:
         task = get_task(name)
         for preset in task.presets:
-            preset_of(name, preset)  # checked like a config file, the consistency rules included
+            preset_of(get_task(name), preset)  # checked like a config file, the consistency rules included
         for regime in task.calibration:
             sets = [f"{key}={str(value).lower() if isinstance(value, bool) else value}"
                     for key, value in regime.items()]
             RunConfig.from_sources(None, {"task": name}, sets)
+
+
+def test_the_task_is_resolved_once_and_carried_whole() -> None:
+    """A config's task name becomes its Task where the config is built (by the command's lookup), and
+    the config and its jobs carry that same object; a pickled job crosses as the name alone."""
+    import pickle
+
+    calls: list[str] = []
+
+    def lookup(name: str) -> Any:
+        calls.append(name)
+        return get_task(name)
+
+    cfg = RunConfig.from_sources(None, {"task": "acrobot", "arms": ["baseline", "hybrid"], "seeds": [0, 1],
+                                        "preset": "smoke"}, tasks=lookup)
+    assert calls == ["acrobot"]
+    jobs = cfg.jobs()
+    assert all(job.task_plugin is cfg.task_plugin for job in jobs) and cfg.task_plugin.name == "acrobot"
+    assert "plugin" not in to_jsonable(cfg) and calls == ["acrobot"]  # serialised as its name; no lookup again
+    crossed = pickle.loads(pickle.dumps(jobs[1]))
+    assert crossed.plugin is None
+    with pytest.raises(RuntimeError, match="resolves a job's task at its entry"):
+        crossed.task_plugin  # noqa: B018
+    from vlmrl_cli.sweep.worker import with_task
+
+    assert with_task(crossed).task_plugin.name == "acrobot" and with_task(crossed).config_hash == jobs[1].config_hash
+
+
+def test_a_config_built_without_the_registry_names_what_to_pass() -> None:
+    with pytest.raises(BadInput, match=r"not built in; .*pass tasks=get_task"):
+        RunConfig.from_sources(None, {"task": "mytasks.valley:TASK"})
+
+
+def test_a_config_cannot_carry_another_task_than_it_names() -> None:
+    with pytest.raises(ValueError, match="names task 'acrobot' but carries task 'mountain-car'"):
+        RunConfig(task="acrobot")

@@ -51,7 +51,7 @@ def no_findings() -> Iterator[None]:
 def training_env(task: Task, arm: ArmSpec) -> tuple[gym.Env, DummyVecEnv]:
     """The first env of a smoke-sized run of ``task`` under ``arm`` (the simulated VLM), as
     ``make_train_env`` builds it, and its VecEnv (to close)."""
-    ppo = dataclasses.replace(preset_of(task.name, "smoke"), n_envs=1)
+    ppo = dataclasses.replace(preset_of(task, "smoke"), n_envs=1)
     client = build_client(VLMConfig(backend="sim", use_cache=False), reader=task.reader) if arm.uses_vlm else None
     venv, _ = make_train_env(arm, ppo, task.default_shaping(), client, seed=0, task=task)
     base = venv.venv if isinstance(venv, VecNormalize) else venv

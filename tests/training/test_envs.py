@@ -14,10 +14,11 @@ from vlmrl_cli.shaping.semantic import SemanticOracle
 from vlmrl_cli.shaping.wrapper import HybridReward
 from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.envs import make_train_env
 from vlmrl_cli.training.presets import preset_of
 
-SMOKE = preset_of("mountain-car", "smoke")  # 2 envs, VecNormalize on
+SMOKE = preset_of(get_task("mountain-car"), "smoke")  # 2 envs, VecNormalize on
 
 
 def wrappers(venv: VecEnv) -> list[HybridReward]:

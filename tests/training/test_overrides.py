@@ -10,6 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import resolve
 from vlmrl_cli.training.overrides import dotted, merge, nest, parse_assignment, parse_value, parse_values
 from vlmrl_cli.training.presets import PPOConfig, preset_of
@@ -103,16 +104,17 @@ def test_precedence_is_preset_then_file_then_set_then_flags(
     cfg = resolve(layers)
     expected = next(
         (v for v, on in zip(reversed(values), reversed(present), strict=True) if on),
-        getattr(preset_of("mountain-car", "smoke"), key)
+        getattr(preset_of(get_task("mountain-car"), "smoke"), key)
     )
     assert getattr(cfg.ppo_config, key) == expected
-    assert cfg.ppo_config.n_envs == preset_of("mountain-car", "smoke").n_envs  # untouched knobs keep the preset's value
+    smoke = preset_of(get_task("mountain-car"), "smoke")
+    assert cfg.ppo_config.n_envs == smoke.n_envs  # untouched knobs keep the preset's value
 
 
 def test_the_highest_layer_that_names_a_preset_chooses_the_base() -> None:
     cfg = resolve([{"preset": "sb3-default"}, {}, {"preset": "smoke", "ppo": {"n_envs": 1, "n_steps": 128}}])
     assert cfg.preset == "smoke"
-    assert cfg.ppo_config == dataclasses.replace(preset_of("mountain-car", "smoke"), n_envs=1, n_steps=128)
+    assert cfg.ppo_config == dataclasses.replace(preset_of(get_task("mountain-car"), "smoke"), n_envs=1, n_steps=128)
 
 
 @pytest.mark.parametrize("text", ["ppo.n_envs", "=3", "ppo..n_envs=3", ""])

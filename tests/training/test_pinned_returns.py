@@ -20,6 +20,7 @@ import pytest
 
 from vlmrl_cli.core.numeric_pin import pin_record, pin_state
 from vlmrl_cli.core.provenance import cpu_paths
+from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.presets import preset_of
 from vlmrl_cli.training.trace import native_returns
@@ -45,7 +46,7 @@ def digest(returns: list[float]) -> tuple[int, str]:
 
 
 def short_run(arm: str, steps: int = STEPS) -> list[float]:
-    ppo = dataclasses.replace(preset_of("mountain-car", "paper"), timesteps=steps)
+    ppo = dataclasses.replace(preset_of(get_task("mountain-car"), "paper"), timesteps=steps)
     cfg = RunConfig(arms=(arm,), seeds=(0,), preset="paper", ppo=ppo, workers=1, vlm=VLMConfig(use_cache=False))
     return native_returns(cfg.jobs()[0])
 

@@ -8,7 +8,7 @@ schema. A grid is given as a list of values per key (``[calibrate.grid]`` in TOM
 solves", SB3's defaults on one env).
 
 The target is the paper's baseline (Table 2) for the task the paper reports
-(``Task.reported_in_paper``), and that profile's shape scaled to the task's thresholds and budget
+(``Task.paper``), and that profile's shape scaled to the task's thresholds and budget
 for another task (``analysis.learning_profile.scaled_target``).
 """
 
@@ -24,8 +24,9 @@ from typing import Any
 from vlmrl_cli.analysis.learning_profile import TargetProfile, paper_baseline, scaled_target
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
 from vlmrl_cli.core.errors import BadInput, did_you_mean
-from vlmrl_cli.tasks.registry import get_task
-from vlmrl_cli.training.config import RunConfig, resolve
+from vlmrl_cli.tasks.base import Task, TaskLookup
+from vlmrl_cli.tasks.registry import paper_task
+from vlmrl_cli.training.config import RunConfig, once, resolve
 from vlmrl_cli.training.overrides import dotted, nest, parse_assignment, parse_values
 
 DEFAULT_EXPERIMENT = "vlmrl-calibrate"
@@ -52,7 +53,7 @@ class CalibrateConfig:
     """Everything one `vlmrl calibrate` does, as one value."""
 
     regimes: tuple[Regime, ...]
-    target: TargetProfile = field(default_factory=paper_baseline)
+    target: TargetProfile = field(default_factory=lambda: papers_baseline())
     out: Path = Path("results/calibration")
     window: int = 100  # episodes in the rolling mean return
     n_boot: int = DEFAULT_N_BOOT
@@ -124,18 +125,22 @@ def calibrate_section(raw: Mapping[str, Any]) -> dict[str, list[Any]]:
     return flatten_grid(grid)
 
 
-def build_regimes(layers: Sequence[Mapping[str, Any]], grid: Mapping[str, Sequence[Any]]) -> tuple[Regime, ...]:
+def build_regimes(layers: Sequence[Mapping[str, Any]], grid: Mapping[str, Sequence[Any]],
+                  tasks: TaskLookup | None = None) -> tuple[Regime, ...]:
     """One validated ``RunConfig`` per regime: ``layers`` (file, ``--set``, flags) with the
-    calibration's defaults below them, the regime's overrides and the baseline arm above them.
-    Any invalid regime is ``BadInput`` before anything runs."""
+    calibration's defaults below them, the regime's overrides and the baseline arm above them; the
+    task they name is looked up once, by ``tasks`` (the command's registry; None: the built-in
+    tasks alone), and carried by every regime. Any invalid regime is ``BadInput`` before anything
+    runs."""
     empty = [key for key, values in grid.items() if not values]
     if empty:
         raise BadInput(f"the grid of {empty[0]} lists no value; give at least one (e.g. --grid {empty[0]}=1,4).")
     base = {"experiment": DEFAULT_EXPERIMENT, "seeds": list(range(DEFAULT_SEEDS))}
-    points = grid_product(grid) if grid else default_grid(resolve([base, *layers]).task)
+    tasks = once(tasks)
+    points = grid_product(grid) if grid else default_grid(resolve([base, *layers], tasks).task_plugin)
     _refuse_shadowed(layers, points, given_grid=bool(grid))
     return tuple(
-        resolve_regime(f"R{i}", point, [base, *layers], {"arms": [CALIBRATED_ARM], "regime": _label(point)})
+        resolve_regime(f"R{i}", point, [base, *layers], {"arms": [CALIBRATED_ARM], "regime": _label(point)}, tasks)
         for i, point in enumerate(points, start=1)
     )
 
@@ -159,22 +164,23 @@ def _refuse_shadowed(layers: Sequence[Mapping[str, Any]], points: Sequence[Mappi
 
 
 def resolve_regime(
-    rid: str, point: Mapping[str, Any], layers: Sequence[Mapping[str, Any]], top: Mapping[str, Any]
+    rid: str, point: Mapping[str, Any], layers: Sequence[Mapping[str, Any]], top: Mapping[str, Any],
+    tasks: TaskLookup | None = None,
 ) -> Regime:
     """The validated ``Regime`` ``rid``: ``layers`` (lowest first), then the point's overrides (dotted
-    keys), then ``top`` (top-level keys such as ``arms`` and the ``regime`` tag). An invalid regime is
-    ``BadInput`` naming it."""
+    keys), then ``top`` (top-level keys such as ``arms`` and the ``regime`` tag); its task looked up
+    by ``tasks`` (``training.config.resolve``). An invalid regime is ``BadInput`` naming it."""
     try:
-        run = resolve([*layers, nest(point.items()) | dict(top)])
+        run = resolve([*layers, nest(point.items()) | dict(top)], tasks)
     except BadInput as exc:
         raise BadInput(f"regime {rid} ({_label(point)}): {exc}") from None
     return Regime(rid, tuple(point.items()), run)
 
 
-def default_grid(task: str) -> list[dict[str, Any]]:
+def default_grid(task: Task) -> list[dict[str, Any]]:
     """The regimes `vlmrl calibrate` tries without a grid: the task's ``Task.calibration`` (its
     default preset alone when that is empty)."""
-    regimes = get_task(task).calibration or ({},)
+    regimes = task.calibration or ({},)
     return [dict(r) for r in regimes]
 
 
@@ -190,13 +196,23 @@ def calibrate_config(regimes: tuple[Regime, ...], **settings: Any) -> CalibrateC
     return CalibrateConfig(regimes, **settings)
 
 
+def papers_baseline() -> TargetProfile:
+    """The paper's baseline profile (its task's Table 2, ``PaperTask.reported``)."""
+    paper = paper_task().paper
+    assert paper is not None  # paper_task() is the task that has one
+    return paper_baseline(paper.reported)
+
+
 def calibration_target(run: RunConfig) -> TargetProfile:
     """What a regime's baseline is scored against: the paper's baseline for the task it reports,
-    else its shape on the task's thresholds and the run's budget (``scaled_target``)."""
+    else its shape on the task's thresholds and the run's budget (``scaled_target``), the paper's
+    budget (``PaperTask.budget``) read as the paper's baseline's."""
     task = run.task_plugin
-    if task.reported_in_paper:
-        return paper_baseline()
-    return scaled_target(task.thresholds, run.budget)
+    if task.paper is not None:
+        return paper_baseline(task.paper.reported)
+    paper = paper_task().paper
+    assert paper is not None
+    return scaled_target(task.thresholds, run.budget, paper_baseline(paper.reported), paper.budget)
 
 
 def _label(point: Mapping[str, Any]) -> str:

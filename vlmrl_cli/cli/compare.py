@@ -44,12 +44,13 @@ def compare(
     performance_profile.png."""
     from vlmrl_cli.report.aggregate import CompareConfig
     from vlmrl_cli.report.aggregate import compare as run_compare
+    from vlmrl_cli.tasks.registry import get_task
 
     with exit_codes():
         cfg = CompareConfig(files=tuple(files), out=out, normalise=normalise,
                             config_hashes=tuple(config_hash or ()), n_boot=n_boot, seed=seed,
                             allow_mixed_paths=allow_mixed_paths)
-        result = run_compare(cfg)
+        result = run_compare(cfg, get_task)
         typer.echo(f"{len(result.arms)} arm(s) on {len(result.tasks)} task(s) ({', '.join(result.tasks)}); "
                    f"normalisation {normalise}" + ("; SIMULATED VLM" if result.simulated else ""))
         for r in result.table.itertuples(index=False):

@@ -63,13 +63,14 @@ def evaluate(
     Outputs go to --out (default results/evaluate/RUN_ID/) and to the run's MLflow artifacts
     under evaluate/.
     """
+    from vlmrl_cli.tasks.registry import get_task
     from vlmrl_cli.training.evaluate_trained import EvaluateConfig, evaluate_run
 
     with exit_codes():
         run_id = resolve_child(run_id, tracking_uri, arm, seed)
         cfg = EvaluateConfig(run_id=run_id, tracking_uri=tracking_uri, out=out, episodes=episodes,
                              episode_index=episode_index, use_cache=not no_cache, cache_path=cache_path)
-        done = evaluate_run(cfg)
+        done = evaluate_run(cfg, get_task)
 
     run = done.run
     if run.arm.uses_vlm and run.simulated:  # first, and on the results' own stream: no capture can reorder them

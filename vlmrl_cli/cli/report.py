@@ -69,13 +69,14 @@ def report(
 ) -> None:
     """Write Table 2, Figures 2-4, the claims table and report.md from finished runs in MLflow."""
     from vlmrl_cli.report.writer import ReportConfig, write_report
+    from vlmrl_cli.tasks.registry import get_task
 
     with exit_codes():
         cfg = ReportConfig(experiment=experiment, tracking_uri=tracking_uri, out=out or DEFAULT_OUT,
                            thresholds=parse_thresholds(thresholds) if thresholds is not None else None,
                            window=window, margin=margin, adjust=adjust,
                            allow_mixed_paths=allow_mixed_paths)
-        result = write_report(cfg)
+        result = write_report(cfg, get_task)
         console = Console()
         for line in console_summary(result.table, experiment):
             console.print(line, markup=False, highlight=False, soft_wrap=True)

@@ -47,6 +47,7 @@ def verify(
 
     from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
     from vlmrl_cli.sweep.cost import retrain_estimate
+    from vlmrl_cli.tasks.registry import get_task
     from vlmrl_cli.tracking import schema
     from vlmrl_cli.training import verify as lib
 
@@ -65,7 +66,7 @@ def verify(
             where = str(source)
         chosen = lib.choose(runs, run_ids=run_id or (), seeds=seed or (), arms=arm or (), sample=sample,
                             sample_seed=sample_seed, source=where)
-        jobs = [lib.rebuild_job(run) for run in chosen]  # every config is rebuilt before anything trains
+        jobs = [lib.rebuild_job(run, get_task) for run in chosen]  # every config is rebuilt before anything trains
         cost = retrain_estimate([(job, run.wall_s) for job, run in zip(jobs, chosen, strict=True)], workers)
         console.print(f"verifying {len(chosen)} of {len(runs)} run(s) of {where}: about {cost.total_s / 60:,.1f} min "
                       f"on {cost.workers} worker(s) ({cost.how})")
@@ -84,7 +85,7 @@ def verify(
                       TextColumn("{task.completed:,.0f}/{task.total:,.0f} steps"), TimeElapsedColumn(),
                       TimeRemainingColumn(), console=console, transient=True) as bar:
             task = bar.add_task(f"retraining {len(chosen)} run(s)", total=sum(steps.values()))
-            for outcome in lib.verify_many(chosen, workers=workers):
+            for outcome in lib.verify_many(chosen, get_task, workers=workers):
                 bar.advance(task, steps[outcome.run.run_id])
                 run = outcome.run
                 differ += not outcome.identical

@@ -15,6 +15,15 @@ from typing import Any
 
 from vlmrl_cli.core.errors import did_you_mean
 
+#: The metadata of a field that carries a value resolved from the config's other fields (the
+#: ``Task`` a ``task`` name names): not read from a file, not written, not hashed.
+CARRIED: dict[str, Any] = {"carried": True}
+
+
+def is_carried(f: dataclasses.Field[Any]) -> bool:
+    """Whether ``f`` is ``CARRIED``: left out of the config's serialised form and its schema."""
+    return bool(f.metadata.get("carried"))
+
 
 def rules_of(f: dataclasses.Field[Any]) -> tuple[Any, ...]:
     """The validation rules a dataclass field declares (none: any value of its type)."""

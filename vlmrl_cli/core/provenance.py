@@ -18,9 +18,11 @@ _PACKAGES = ("vlmrl", "torch", "gymnasium", "stable-baselines3", "transformers",
 
 
 def to_jsonable(obj: Any) -> Any:
-    """Dataclasses, enums and paths as plain JSON values (for hashing and logging)."""
+    """Dataclasses, enums and paths as plain JSON values (for hashing and logging); a dataclass
+    field that only carries a value resolved from the others (``core.fields.CARRIED``) is left out."""
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return {f.name: to_jsonable(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+        return {f.name: to_jsonable(getattr(obj, f.name)) for f in dataclasses.fields(obj)
+                if not f.metadata.get("carried")}
     if isinstance(obj, enum.Enum):
         return obj.value
     if isinstance(obj, Path):

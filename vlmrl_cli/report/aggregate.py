@@ -40,7 +40,8 @@ from vlmrl_cli.core.tables import markdown_rows
 from vlmrl_cli.report.figures import plot_normalised_profile
 from vlmrl_cli.report.table2 import BASELINE, order_arms
 from vlmrl_cli.report.writer import check_paths
-from vlmrl_cli.tasks.registry import get_task, recorded_task
+from vlmrl_cli.tasks.base import TaskLookup
+from vlmrl_cli.tasks.registry import recorded_task
 from vlmrl_cli.tasks.zoo import SOURCE as ZOO_SOURCE
 from vlmrl_cli.tasks.zoo import ZOO_PPO
 from vlmrl_cli.tracking import schema
@@ -220,8 +221,9 @@ def compared_arms(runs: pd.DataFrame) -> tuple[list[str], dict[str, list[str]]]:
     return order_arms(sorted(every)), left_out
 
 
-def normalisation_pairs(runs: pd.DataFrame, arms: Sequence[str], method: str) -> pd.DataFrame:
-    """Per task, the pair ``lo``/``hi`` of ``method`` and where each comes from.
+def normalisation_pairs(runs: pd.DataFrame, arms: Sequence[str], method: str, tasks: TaskLookup) -> pd.DataFrame:
+    """Per task, the pair ``lo``/``hi`` of ``method`` and where each comes from (``tasks``: the
+    command's registry, which gives each recorded task's env).
 
     ``BadInput`` when a task's pair is empty or reversed (``hi <= lo``).
     """
@@ -230,7 +232,7 @@ def normalisation_pairs(runs: pd.DataFrame, arms: Sequence[str], method: str) ->
         means = cell.groupby("arm")["score"].mean()
         lo = float(means[BASELINE])
         if method == "zoo":
-            env_id = get_task(str(task)).env_id
+            env_id = tasks(str(task)).env_id
             if env_id not in ZOO_PPO:
                 raise BadInput(f"task {task} ({env_id}) has no published rl-baselines3-zoo PPO score in the package; "
                                "use --normalise baseline-best.")
@@ -250,9 +252,9 @@ def _cell(e: Estimate, digits: int = 3) -> str:
     return f"{e.value:.{digits}f} [{e.low:.{digits}f}, {e.high:.{digits}f}]"
 
 
-def compare(cfg: CompareConfig) -> CompareResult:
-    """Read the export files, aggregate across tasks and write ``aggregate.md``, ``aggregate.csv``,
-    ``per_task.csv`` and ``performance_profile.png`` to ``cfg.out``."""
+def compare(cfg: CompareConfig, lookup: TaskLookup) -> CompareResult:
+    """Read the export files, aggregate across tasks (``lookup``: the command's task registry) and write
+    ``aggregate.md``, ``aggregate.csv``, ``per_task.csv`` and ``performance_profile.png`` to ``cfg.out``."""
     _validate(cfg)
     runs, dropped = count_once(read_runs(cfg.files))
     runs = select_configs(runs, cfg.config_hashes)
@@ -264,7 +266,7 @@ def compare(cfg: CompareConfig) -> CompareResult:
     if short.min() < 2:
         task, arm = short.idxmin()
         raise BadInput(f"{arm} on {task} has {short.min()} run; the stratified bootstrap needs at least 2 per task.")
-    pairs = normalisation_pairs(runs, arms, cfg.normalise).set_index("task")
+    pairs = normalisation_pairs(runs, arms, cfg.normalise, lookup).set_index("task")
     runs["lo"], runs["hi"] = runs["task"].map(pairs["lo"]), runs["task"].map(pairs["hi"])
     runs["normalised"] = (runs["score"] - runs["lo"]) / (runs["hi"] - runs["lo"])
     simulated = bool(runs["simulated"].any())

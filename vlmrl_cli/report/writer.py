@@ -39,8 +39,7 @@ from vlmrl_cli.report.table2 import (
 )
 from vlmrl_cli.shaping.arms import ARMS, DENSE, METHOD, ArmSpec
 from vlmrl_cli.shaping.hacking import HOVER_FLAG
-from vlmrl_cli.tasks.base import Task
-from vlmrl_cli.tasks.registry import get_task
+from vlmrl_cli.tasks.base import Task, TaskLookup
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
 
@@ -314,7 +313,7 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
                hack: pd.DataFrame, task: Task) -> str:
     assert cfg.window is not None  # resolved to the task's by write_report
     simulated = bool(data.runs["simulated"].any())
-    paper_task = task.reported_in_paper
+    paper_task = task.paper is not None
     title = "Reproduction report" if paper_task else f"Report (task {data.task})"
     parts = [f"# {title}: experiment `{data.experiment_name}`", ""]
     if simulated:
@@ -418,9 +417,10 @@ def _write_frame(frame: pd.DataFrame, stem: Path, vlm: str, markdown: str) -> li
     return [md, csv]
 
 
-def write_report(cfg: ReportConfig, registry: Mapping[str, ArmSpec] = ARMS) -> ReportResult:
-    """Read the experiment's finished runs and write every report file under ``cfg.out``; ``registry``:
-    the arms whose order and comparisons Table 2 and the attribution table follow.
+def write_report(cfg: ReportConfig, tasks: TaskLookup, registry: Mapping[str, ArmSpec] = ARMS) -> ReportResult:
+    """Read the experiment's finished runs and write every report file under ``cfg.out``; ``tasks``:
+    the command's registry, which resolves the task the runs recorded; ``registry``: the arms whose
+    order and comparisons Table 2 and the attribution table follow.
 
     Raises:
         BadInput: bad settings, unwritable ``out``, unreachable store, missing or empty experiment.
@@ -431,8 +431,8 @@ def write_report(cfg: ReportConfig, registry: Mapping[str, ArmSpec] = ARMS) -> R
     client = store.connect_existing(cfg.tracking_uri)
     data = load_experiment(client, cfg.experiment)
     check_paths(data.runs, cfg.allow_mixed_paths)  # before anything is computed or written
-    task = get_task(data.task)
-    if not task.reported_in_paper:
+    task = tasks(data.task)
+    if task.paper is None:
         reported = {}  # the paper's numbers and claims are MountainCar-v0's: none beside another task
     cfg = for_task(cfg, task)
     thresholds = cfg.thresholds

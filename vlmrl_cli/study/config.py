@@ -4,13 +4,17 @@ A *regime* is a name and a set of overrides (dotted keys, as ``--set`` takes the
 preset (``{"preset": "paper"}``); each is an ordinary `vlmrl run` configuration of every arm,
 built by ``calibration.regimes.resolve_regime``. A *variant* is the hybrid arm alone in the VLM
 regime with other simulated-VLM knobs: a named profile (``vlm.sim.profile``) or a flicker rate.
-Regimes come from ``--regime`` flags, else ``[study.regimes]`` in TOML, else ``DEFAULT_REGIMES``
-(a default regime whose preset does not exist yet is skipped with a note)::
+
+What the user chooses is ``StudySettings`` (``study/settings.py``): a ``[study]`` table in TOML,
+``--set study.KEY=VALUE`` and the study's flags, each layer over the one below
+(``StudyConfig.from_sources``). Regimes come from ``--regime`` flags, else ``[study.regimes]``,
+else the task's study preset (``task_regimes``)::
 
     [study]
     profiles = ["ideal", "default", "llava-table1"]
     flickers = [0.0, 0.1, 0.3, 0.5]
     vlm_regime = "paper-calibrated"
+    margin = 1.2
 
     [study.regimes]
     paper = "paper"                                     # a preset name
@@ -19,9 +23,10 @@ Regimes come from ``--regime`` flags, else ``[study.regimes]`` in TOML, else ``D
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -30,29 +35,29 @@ from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST, METHODS
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
 from vlmrl_cli.calibration.regimes import Regime, resolve_regime
 from vlmrl_cli.core.errors import BadInput, did_you_mean
-from vlmrl_cli.probe.scoring import DEFAULT_STATES
-from vlmrl_cli.shaping.arms import BASELINE, DENSE, METHOD, NO_LOCK, PLACEBO_OF, POTENTIAL_ONLY
-from vlmrl_cli.tasks.registry import get_task
-from vlmrl_cli.training.config import RunConfig, resolve
+from vlmrl_cli.shaping.arms import BASELINE, DENSE, METHOD, NO_LOCK, POTENTIAL_ONLY
+from vlmrl_cli.study.settings import (
+    DEFAULT_ALPHAS,
+    DEFAULT_ARMS,
+    DEFAULT_EXPERIMENT,
+    DEFAULT_FLICKERS,
+    DEFAULT_KIN_SCALES,
+    DEFAULT_MARGIN,
+    DEFAULT_OUT,
+    DEFAULT_PROFILES,
+    DEFAULT_QUERY_FLICKERS,
+    DEFAULT_SEEDS,
+    DEFAULT_STATES,
+    PLACEBO_ARM,
+    StudySettings,
+)
+from vlmrl_cli.tasks.base import Task, TaskLookup
+from vlmrl_cli.training.config import RunConfig, once, resolve, source_layers
 from vlmrl_cli.training.overrides import dotted, parse_assignment, parse_value
-from vlmrl_cli.vlm.config import SIM_PROFILES
+from vlmrl_cli.vlm.config import profile_problem
 
-DEFAULT_EXPERIMENT = "vlmrl-study"
-DEFAULT_SEEDS = 20
-PLACEBO_ARM = PLACEBO_OF[METHOD]
-# hybrid and its placebo first: a study stopped part-way has the comparison it exists for
-DEFAULT_ARMS = (BASELINE, METHOD, PLACEBO_ARM, DENSE, POTENTIAL_ONLY)
 VARIANT_ARM = METHOD
 CALIBRATED = "paper-unreliable"
-#: The dose-response grid (issue 18): PBRS scales x kinematic scales, in the VLM regime. alpha 0 is
-#: the dense term alone (the kinematic arm; with kin_scale 0 the baseline), kin_scale 0 the VLM's
-#: potential alone (the semantic arm: the paper's "deadlock" case where only the VLM can help). At
-#: alpha 100 the potential pays about as much per episode as R_kin at its default scale (~45).
-DEFAULT_ALPHAS: tuple[float, ...] = (5.0, 25.0, 100.0)
-DEFAULT_KIN_SCALES: tuple[float, ...] = (0.0, 0.5, 2.0)
-#: Per-query (temporal) flicker rates at which the hybrid and hybrid-no-lock are compared: what
-#: the hysteresis lock is for.
-DEFAULT_QUERY_FLICKERS: tuple[float, ...] = (0.3,)
 LOCK_ARMS: tuple[str, ...] = (METHOD, NO_LOCK)
 #: The default grid: the calibrated regime whose baseline fails on some seeds (reliability is
 #: testable there), where every arm, the placebo and the controls run. The study of 2026-11-29
@@ -61,12 +66,11 @@ LOCK_ARMS: tuple[str, ...] = (METHOD, NO_LOCK)
 DEFAULT_REGIMES: dict[str, Mapping[str, Any]] = {
     CALIBRATED: {"preset": CALIBRATED},
 }
-#: The VLM-quality variants are off by default since the dose-response and placebo controls came:
-#: the study of 2026-11-29 (results/study/2026-11-29/) ran them at 10 seeds and found no dependence
-#: it could detect; ``--profiles ideal,default,llava-table1 --flickers 0,0.1,0.3,0.5`` runs them again.
-DEFAULT_PROFILES: tuple[str, ...] = ()
-DEFAULT_FLICKERS: tuple[float, ...] = ()
-_STUDY_KEYS = ("regimes", "profiles", "flickers", "vlm_regime", "alphas", "kin_scales", "query_flickers")
+#: The keys of a ``[study]`` table: the fields of ``StudySettings``.
+STUDY_KEYS = tuple(f.name for f in dataclasses.fields(StudySettings))
+#: The ``[study]`` keys that hold a list, and the type of each entry.
+_LISTS: dict[str, type | tuple[type, ...]] = {"profiles": str, "flickers": (int, float), "alphas": (int, float),
+                                              "kin_scales": (int, float), "query_flickers": (int, float)}
 
 
 @dataclass(frozen=True)
@@ -138,18 +142,43 @@ class StudyConfig:
     cells: tuple[Cell, ...] = ()  # dose-response and temporal-flicker controls, in ``vlm_regime``
     vlm_regime: str = ""  # id of the regime whose baseline the variants are compared with
     notes: tuple[str, ...] = ()  # what was left out of the grid, and why
-    out: Path = Path("results/study")
+    out: Path = DEFAULT_OUT
     thresholds: tuple[float, ...] = (-190.0, -160.0, -130.0)
     states: int = DEFAULT_STATES  # taxonomy sweep positions per variant
     window: int = 100
     ci: float = 0.95
     alpha: float = 0.05  # significance level of the verdicts
-    margin: float = 1.15  # equivalence margin of a speedup (TOST: within [1/margin, margin])
+    margin: float = DEFAULT_MARGIN  # equivalence margin of a speedup (TOST: within [1/margin, margin])
     # multiplicity adjustment of the speedups' p-values, the study's comparisons one family: holm | bh | none
     adjust: str = DEFAULT_ADJUST
     n_boot: int = DEFAULT_N_BOOT
     seed: int = 0  # seed of the statistics' random streams
     extra: dict[str, Any] = field(default_factory=dict)  # free-form provenance (the command)
+
+    @classmethod
+    def from_sources(cls, file: Path | None, flags: Mapping[str, Any] | None = None, overrides: Iterable[str] = (),
+                     tasks: TaskLookup | None = None) -> StudyConfig:
+        """The validated study of a TOML ``file`` (or None), ``overrides`` (``--set`` strings) and
+        ``flags`` typed on the command line (dotted keys: the run's, as ``RunConfig.from_sources``
+        takes them, and the study's under ``study.``, ``{"study.alphas": [25.0]}``), in the order
+        preset < file < overrides < flags, for the runs' keys and the ``[study]`` table alike; the
+        task they name is looked up once, by ``tasks`` (the command's registry; None: the built-in
+        tasks alone), and every regime carries it.
+
+        Example:
+            >>> cfg = StudyConfig.from_sources(None, {"study.regimes": {"a": {"preset": "smoke"}},
+            ...                                       "study.alphas": []}, ["study.alphas=[25]", "seeds=[0]"])
+            >>> [r.id for r in cfg.regimes], cfg.base.seeds, {c.alpha for c in cfg.cells if c.kind == "dose"}
+            (['a'], (0,), {0.0})
+        """
+        layers = source_layers(file, flags or {}, overrides)
+        settings = settings_of([layer.pop("study", {}) for layer in layers])
+        tasks = once(tasks)
+        regimes, notes = choose_regimes([], settings.regimes, task_in(layers, tasks))
+        return build_study(layers, regimes, tasks=tasks, profiles=settings.profiles, flickers=settings.flickers,
+                           vlm_regime=settings.vlm_regime, alphas=settings.alphas, kin_scales=settings.kin_scales,
+                           query_flickers=settings.query_flickers, notes=notes, out=settings.out,
+                           margin=settings.margin, adjust=settings.adjust, states=settings.states)
 
     @property
     def base(self) -> RunConfig:
@@ -192,14 +221,28 @@ def parse_regime(text: str) -> tuple[str, dict[str, Any]]:
     return name, point
 
 
+def regimes_of(flags: Sequence[str]) -> dict[str, dict[str, Any]]:
+    """The regimes of ``--regime`` flags (``parse_regime``), name -> overrides, each name once.
+
+    Example:
+        >>> regimes_of(["a=smoke", "b"])
+        {'a': {'preset': 'smoke'}, 'b': {'preset': 'b'}}
+    """
+    chosen = dict(parse_regime(f) for f in flags)
+    if len(chosen) < len(flags):
+        raise BadInput("two --regime flags share a name; give each regime its own name.")
+    return chosen
+
+
 def study_section(raw: Any) -> dict[str, Any]:
-    """A config file's ``[study]`` table, checked: regimes as ``{name: point}``, the rest as given."""
+    """A config file's ``[study]`` table (or one layer's), checked: regimes as ``{name: point}``, the
+    rest as given."""
     if not isinstance(raw, Mapping):
         raise BadInput("[study] must be a table (regimes, profiles, flickers, vlm_regime).")
-    unknown = [k for k in raw if k not in _STUDY_KEYS]
+    unknown = [k for k in raw if k not in STUDY_KEYS]
     if unknown:
-        raise BadInput(f"unknown key 'study.{unknown[0]}'{did_you_mean(unknown[0], _STUDY_KEYS)}; "
-                       f"[study] holds {', '.join(_STUDY_KEYS)}.")
+        raise BadInput(f"unknown key 'study.{unknown[0]}'{did_you_mean(unknown[0], STUDY_KEYS)}; "
+                       f"[study] holds {', '.join(STUDY_KEYS)}.")
     out = dict(raw)
     regimes = raw.get("regimes")
     if regimes is not None:
@@ -210,41 +253,72 @@ def study_section(raw: Any) -> dict[str, Any]:
             else _bad_regime(str(name))
             for name, spec in regimes.items()
         }
-    for key, kind in (("profiles", str), ("flickers", (int, float)), ("alphas", (int, float)),
-                      ("kin_scales", (int, float)), ("query_flickers", (int, float))):
+    for key, kind in _LISTS.items():
         values = raw.get(key)
         if values is not None and (not isinstance(values, list) or not all(isinstance(v, kind) for v in values)):
             raise BadInput(f"study.{key} must be a list of {'names' if kind is str else 'numbers'}.")
+    _check_scalars(raw)
     return out
+
+
+def _check_scalars(raw: Mapping[str, Any]) -> None:
+    """The types of the ``[study]`` keys that hold one value (their ranges are ``build_study``'s)."""
+    states = raw.get("states")
+    if states is not None and (isinstance(states, bool) or not isinstance(states, int) or states < 2):
+        raise BadInput(f"study.states must be an integer >= 2, got {states!r}.")
+    margin = raw.get("margin")
+    if margin is not None and (isinstance(margin, bool) or not isinstance(margin, int | float)):
+        raise BadInput(f"study.margin must be a number above 1 (e.g. 1.15), got {margin!r}.")
+    for key, what in (("adjust", f"one of {', '.join(METHODS)}"), ("out", "a folder path")):
+        value = raw.get(key)
+        if value is not None and not isinstance(value, str | Path):
+            raise BadInput(f"study.{key} must be {what}, got {value!r}.")
+
+
+def settings_of(tables: Sequence[Any]) -> StudySettings:
+    """The ``StudySettings`` of the layers' ``[study]`` tables, lowest first (file, ``--set``,
+    flags): each table checked (``study_section``), each key replacing the one below whole.
+
+    Example:
+        >>> s = settings_of([{"alphas": [5], "regimes": {"a": "smoke", "b": "paper"}}, {}, {"regimes": {"c": "zoo"}}])
+        >>> s.alphas, s.regimes, s.kin_scales == StudySettings().kin_scales
+        ((5,), {'c': {'preset': 'zoo'}}, True)
+    """
+    merged: dict[str, Any] = {}
+    for table in tables:
+        merged |= study_section(table)
+    for key in _LISTS:
+        if key in merged:
+            merged[key] = tuple(merged[key])
+    if "out" in merged:
+        merged["out"] = Path(merged["out"])
+    return StudySettings(**merged)
 
 
 def _bad_regime(name: str) -> dict[str, Any]:
     raise BadInput(f"study.regimes.{name} must be a preset name or a table of overrides.")
 
 
-def task_name_of(layers: Sequence[Mapping[str, Any]]) -> str:
-    """The task the layers (file, ``--set``, flags) name: the ``task`` key, or MountainCar."""
-    return resolve([*layers]).task
+def task_in(layers: Sequence[Mapping[str, Any]], tasks: TaskLookup | None = None) -> Task:
+    """The Task the layers (file, ``--set``, flags) name (the ``task`` key, or the default task),
+    looked up by ``tasks``."""
+    return resolve([*layers], tasks).task_plugin
 
 
-def task_regimes(task: str) -> dict[str, dict[str, Any]]:
-    """Another task's default regime: its study preset (calibrated: the baseline slow or unreliable),
+def task_regimes(task: Task) -> dict[str, dict[str, Any]]:
+    """A task's default regime: its study preset (calibrated: the baseline slow or unreliable),
     else its default preset, under the preset's name."""
-    t = get_task(task)
-    preset = t.study_preset or t.default_preset
+    preset = task.study_preset or task.default_preset
     return {preset: {"preset": preset}}
 
 
 def choose_regimes(flags: Sequence[str], file_regimes: Mapping[str, Mapping[str, Any]] | None,
-                   task: str) -> tuple[dict[str, dict[str, Any]], list[str]]:
+                   task: Task) -> tuple[dict[str, dict[str, Any]], list[str]]:
     """The regimes to run (name -> overrides) and notes on the defaults left out: ``--regime``
     flags, else the file's, else ``DEFAULT_REGIMES`` without those whose preset does not exist yet
     (another task: ``task_regimes``)."""
     if flags:
-        chosen = dict(parse_regime(f) for f in flags)
-        if len(chosen) < len(flags):
-            raise BadInput("two --regime flags share a name; give each regime its own name.")
-        return chosen, []
+        return regimes_of(flags), []
     if file_regimes:
         return {k: dict(v) for k, v in file_regimes.items()}, []
     return task_regimes(task), []
@@ -264,28 +338,31 @@ def build_study(
     kin_scales: Sequence[float] = DEFAULT_KIN_SCALES,
     query_flickers: Sequence[float] = DEFAULT_QUERY_FLICKERS,
     notes: Sequence[str] = (),
+    tasks: TaskLookup | None = None,
     **settings: Any,
 ) -> StudyConfig:
     """One validated ``StudyConfig``: every regime's run of every arm (``layers`` above the study's
     defaults, the regime's overrides above them), the hybrid's VLM variants and the control cells
-    (``control_points``) in ``vlm_regime`` (default: the calibrated regime, else the first).
-    Anything invalid is ``BadInput`` now."""
+    (``control_points``) in ``vlm_regime`` (default: the calibrated regime, else the first); the
+    task is looked up once, by ``tasks`` (``training.config.resolve``). Anything invalid is
+    ``BadInput`` now."""
     if not regimes:
         raise BadInput("the study has no regime; pass --regime NAME[=...] or drop the [study.regimes] table.")
-    unknown = [p for p in profiles if p not in SIM_PROFILES]
-    if unknown:
-        raise BadInput(f"unknown simulated-VLM profile '{unknown[0]}'{did_you_mean(unknown[0], SIM_PROFILES)}; "
-                       f"choose from {', '.join(SIM_PROFILES)}.")
     base = {"experiment": DEFAULT_EXPERIMENT, "seeds": list(range(DEFAULT_SEEDS)), "arms": list(DEFAULT_ARMS)}
-    built = tuple(resolve_regime(name, point, [base, *layers], {"regime": name}) for name, point in regimes.items())
-    tasks = sorted({r.run.task for r in built})
-    if len(tasks) > 1:
-        raise BadInput(f"the regimes span tasks {', '.join(tasks)}; a study covers one task (--task).")
+    tasks = once(tasks)
+    built = tuple(resolve_regime(name, point, [base, *layers], {"regime": name}, tasks)
+                  for name, point in regimes.items())
+    names = sorted({r.run.task for r in built})
+    if len(names) > 1:
+        raise BadInput(f"the regimes span tasks {', '.join(names)}; a study covers one task (--task).")
     task = built[0].run.task_plugin
     if (profiles or flickers) and not task.probes_floats:
-        raise BadInput(f"task {tasks[0]}: the VLM-quality variants (--profiles, --flickers) take their accuracy "
+        raise BadInput(f"task {names[0]}: the VLM-quality variants (--profiles, --flickers) take their accuracy "
                        "from the float and box taxonomy probe, which this task has not; pass --profiles none "
                        "--flickers none.")
+    problem = next(filter(None, (profile_problem(p, task) for p in profiles)), None)  # the task's profiles
+    if problem:
+        raise BadInput(problem + ".")
     settings.setdefault("thresholds", task.thresholds)
     settings.setdefault("window", task.window)
     notes = list(notes)
@@ -295,7 +372,7 @@ def build_study(
         raise BadInput(f"--vlm-regime '{target}' is not a regime of this study{did_you_mean(target, regimes)}.")
     variants: list[Regime] = []
     reference = next(r for r in built if r.id == target)
-    margin = settings.get("margin", 1.15)
+    margin = settings.get("margin", DEFAULT_MARGIN)
     if not (math.isfinite(margin) and margin > 1):
         raise BadInput(f"--margin is a ratio above 1 (e.g. 1.15), got {margin}.")
     adjust = settings.get("adjust", DEFAULT_ADJUST)
@@ -312,7 +389,7 @@ def build_study(
     cells = tuple(
         Cell(kind="dose" if "query_flicker" not in knobs else "query-flicker", arm=arm,
              regime=resolve_regime(name, {**regimes[target], **over}, [base, *layers],
-                                   {"regime": f"{target} {name}", "arms": [arm]}), **knobs)
+                                   {"regime": f"{target} {name}", "arms": [arm]}, tasks), **knobs)
         for name, arm, over, knobs in control_points(alphas, kin_scales, query_flickers)
     )
     if reference.run.vlm.backend != "sim":
@@ -324,7 +401,7 @@ def build_study(
         seen: dict[str, int] = {}
         for name, extra in points:
             variant = resolve_regime(name, {**regimes[target], **extra}, [base, *layers],
-                                     {"regime": f"{target} {_label(extra)}", "arms": [VARIANT_ARM]})
+                                     {"regime": f"{target} {_label(extra)}", "arms": [VARIANT_ARM]}, tasks)
             key = variant.run.jobs()[0].config_hash
             if key in seen:  # the same knobs reached twice (profile default = flicker 0.1): one point
                 first = variants[seen[key]]

@@ -108,11 +108,22 @@ def train_job(job: TrainJob, ctx: JobContext) -> JobResult:
     return run_claimed(job, ctx, train_body)
 
 
+def with_task(job: TrainJob) -> TrainJob:
+    """``job`` with its Task: a job crosses to a worker process as its task's name (its ``plugin``
+    is not pickled), and the worker resolves it here, once, at the job's entry."""
+    if job.plugin is not None:
+        return job
+    from vlmrl_cli.tasks.registry import get_task
+
+    return dataclasses.replace(job, plugin=get_task(job.task))
+
+
 def run_claimed(job: TrainJob, ctx: JobContext, body: Body) -> JobResult:
     """Create the job's run, claim the job (``leases.claim``), then run ``body`` under a heartbeat.
     Never raises: failures end as a FAILED run. A job that starts after a stop request returns
     CANCELLED without creating a run; a job another live run owns returns SKIPPED."""
     start = time.perf_counter()
+    job = with_task(job)
     channels = _channels
     if channels.stop is not None and channels.stop.is_set():
         return JobResult(job.name, "", "CANCELLED", 0.0)

@@ -20,7 +20,7 @@ file (every key optional; ``vlmrl run --dry-run`` prints a complete one)::
     backend = "sim"
 
     [vlm.sim]
-    profile = "llava-table1"   # a named set of knobs (vlm/config.py SIM_PROFILES) ...
+    profile = "llava-table1"   # a named set of knobs (vlm/config.py, and the task's own) ...
     flicker = 0.1              # ... under the knobs set explicitly, which win
 
     [shaping]
@@ -34,30 +34,29 @@ file (every key optional; ``vlmrl run --dry-run`` prints a complete one)::
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import tomli_w
 from annotated_types import Ge, Gt
 from pydantic import AfterValidator
 
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.core.fields import one_of
+from vlmrl_cli.core.fields import CARRIED, one_of
 from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec, PotentialSource, parse_arms
 from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.tasks.base import Task, TaskLookup
 from vlmrl_cli.training.events import EXECUTORS
-from vlmrl_cli.training.overrides import nest, parse_assignment, parse_value, resolve_raw
+from vlmrl_cli.training.overrides import nest, parse_assignment, parse_value, resolve_raw, task_ref
 from vlmrl_cli.training.presets import PPOConfig, ppo_identity, preset_names, preset_of
-from vlmrl_cli.vlm.config import VLMConfig, sim_identity
-
-if TYPE_CHECKING:
-    from vlmrl_cli.tasks.base import Task
+from vlmrl_cli.vlm.config import VLMConfig, profile_problem, sim_identity
 
 DEFAULT_EXPERIMENT = "vlmrl"
 #: The task of a config that names none (``vlmrl run`` without ``--task``), and its preset (the
@@ -111,35 +110,19 @@ def _known_preset(value: str) -> str:
 def _builtin_presets() -> list[str]:
     from vlmrl_cli.tasks.registry import BUILTIN
 
-    return list(dict.fromkeys(name for task in BUILTIN for name in preset_names(task)))
+    return list(dict.fromkeys(name for load in BUILTIN.values() for name in preset_names(load())))
 
 
-def _known_task(value: str) -> str:
-    from vlmrl_cli.tasks.registry import get_task
+def _default_plugin() -> Task:
+    """The Task of a config that names none (``DEFAULT_TASK``)."""
+    from vlmrl_cli.tasks.registry import builtin_task
 
-    try:
-        get_task(value)
-    except BadInput as exc:
-        raise ValueError(str(exc).removesuffix(".")) from None
-    return value
+    return builtin_task(DEFAULT_TASK)
 
 
-def task_of(name: str) -> Task:
-    """The Task a config names: the one place a run's or a job's ``task`` field becomes the object
-    (``RunConfig.task_plugin``, ``TrainJob.task_plugin``). The field stays a name because it is
-    hashed, logged and sent to workers; the code that needs the task takes it from there."""
-    from vlmrl_cli.tasks.registry import get_task
-
-    return get_task(name)
-
-
-def with_task_labels(shaping: ShapingConfig, task: str) -> ShapingConfig:
-    """``shaping`` with ``task``'s own label map when it names none (the field's default)."""
-    return task_of(task).shaping_for(shaping)
-
-
-def _task_in_identity(task: str) -> bool:
-    return task_of(task).name_in_identity
+def _unresolved(job: str) -> RuntimeError:
+    return RuntimeError(f"{job}'s task was not resolved here: a config is built by resolve(), and a sweep "
+                        "worker resolves a job's task at its entry (sweep.worker.with_task)")
 
 
 @dataclass(frozen=True)
@@ -152,7 +135,7 @@ class RunConfig:
                                                                       "help": "training seeds, each a run per arm"})
     preset: str = field(default=DEFAULT_PRESET, metadata={"rules": (AfterValidator(_known_preset),),
                                                           "help": "named PPO preset: the bottom layer of [ppo]"})
-    task: str = field(default=DEFAULT_TASK, metadata={"rules": (AfterValidator(_known_task),),
+    task: str = field(default=DEFAULT_TASK, metadata={
         "help": "the environment: a built-in task (tasks/registry.py) or package.module:NAME"})
     workers: int = field(default_factory=lambda: os.cpu_count() or 1, metadata={"rules": (Ge(1),),
         "help": "worker processes (one torch thread each); default: the cores"})
@@ -175,14 +158,22 @@ class RunConfig:
                                                        "help": "how often a training run refreshes its heartbeat"})
     stale_after_s: float = field(default=300.0, metadata={"rules": (Gt(0),),
         "help": "a RUNNING run whose heartbeat is older is taken as dead and its job redone"})
+    # the Task that ``task`` names, resolved once where the config is built (``resolve``): carried
+    # whole from there, never looked up again; ``task`` stays the name that is hashed and logged
+    plugin: Task = field(default_factory=_default_plugin, compare=False, repr=False, metadata=CARRIED)
+
+    def __post_init__(self) -> None:
+        _check_plugin(self.task, self.plugin)
 
     @classmethod
     def from_sources(
-        cls, file: Path | None, flags: Mapping[str, Any] | None = None, overrides: Iterable[str] = ()
+        cls, file: Path | None, flags: Mapping[str, Any] | None = None, overrides: Iterable[str] = (),
+        tasks: TaskLookup | None = None,
     ) -> RunConfig:
         """The validated config of a TOML ``file`` (or None), ``overrides`` (``--set`` strings,
         ``"ppo.n_envs=4"``) and ``flags`` typed on the command line (dotted keys, ``{"arms":
-        ["baseline"], "ppo.timesteps": 512}``), in the order preset < file < overrides < flags.
+        ["baseline"], "ppo.timesteps": 512}``), in the order preset < file < overrides < flags; the
+        task they name is looked up by ``tasks`` (the command's registry; None: the built-in tasks).
 
         Raises ``BadInput`` for an unreadable file, a malformed assignment or an invalid value.
 
@@ -191,13 +182,13 @@ class RunConfig:
             >>> cfg.preset, cfg.seeds, cfg.budget
             ('smoke', (0,), 1024)
         """
-        return resolve(source_layers(file, flags or {}, overrides))
+        return resolve(source_layers(file, flags or {}, overrides), tasks)
 
     def validate(self) -> None:
         """Raise ``BadInput`` for anything that would fail later; nothing is trained before."""
         from vlmrl_cli.training.validation import validate_as
 
-        validate_as(RunConfig, to_jsonable(self))
+        validate_as(RunConfig, to_jsonable(self), plugin=self.plugin)
         self._check_task()
         if self.stale_after_s < 2 * self.heartbeat_s:
             raise BadInput(f"stale_after_s ({self.stale_after_s:g}) must be at least twice heartbeat_s "
@@ -207,10 +198,13 @@ class RunConfig:
         """What only the task can say: its presets, its labels, the arms it supports."""
         task = self.task_plugin
         if self.ppo is None:
-            preset_of(self.task, self.preset)  # a BadInput naming the task's presets
+            preset_of(task, self.preset)  # a BadInput naming the task's presets
         problem = task.labels_problem(self.task_shaping.label_potentials)
         if problem:
             raise BadInput(f"shaping.label_potentials: {problem} (task {self.task}).")
+        profile = profile_problem(self.vlm.sim.profile, task)
+        if profile:
+            raise BadInput(f"vlm.sim.profile: {profile}.")
         floats = [a for a in self.arms if ARMS[a].potential is PotentialSource.FLOAT]
         if floats and not task.probes_floats:
             raise BadInput(f"arm '{floats[0]}' asks the VLM for a number, which task {self.task} does not "
@@ -218,18 +212,18 @@ class RunConfig:
 
     @property
     def task_plugin(self) -> Task:
-        """The Task object this run trains on (``task_of``)."""
-        return task_of(self.task)
+        """The Task object this run trains on (``plugin``, resolved when the config was built)."""
+        return self.plugin
 
     @property
     def task_shaping(self) -> ShapingConfig:
         """``shaping`` with the task's label map when it names none (the field's default)."""
-        return with_task_labels(self.shaping, self.task)
+        return self.plugin.shaping_for(self.shaping)
 
     @property
     def ppo_config(self) -> PPOConfig:
         """The PPO knobs of every job: ``ppo``, or the preset's when that is None."""
-        return self.ppo if self.ppo is not None else preset_of(self.task, self.preset)
+        return self.ppo if self.ppo is not None else preset_of(self.plugin, self.preset)
 
     @property
     def budget(self) -> int:
@@ -240,7 +234,7 @@ class RunConfig:
         ppo, shaping = self.ppo_config, self.task_shaping
         return [
             TrainJob(arm=ARMS[arm], seed=seed, preset=self.preset, ppo=ppo, vlm=self.vlm, shaping=shaping,
-                     regime=self.regime, task=self.task)
+                     regime=self.regime, task=self.task, plugin=self.plugin)
             for arm in self.arms
             for seed in self.seeds
         ]
@@ -257,7 +251,17 @@ class TrainJob:
     vlm: VLMConfig
     shaping: ShapingConfig
     regime: str | None = None
-    task: str = field(kw_only=True)  # the run's task (tasks/registry.py)
+    task: str = field(kw_only=True)  # the run's task (tasks/registry.py), as it is hashed and logged
+    # the Task ``task`` names, carried from the RunConfig; None after pickling (a job crosses to a
+    # worker as its name, and the worker resolves it once at its entry: ``sweep.worker.with_task``)
+    plugin: Task | None = field(default=None, kw_only=True, compare=False, repr=False, metadata=CARRIED)
+
+    def __post_init__(self) -> None:
+        if self.plugin is not None:
+            _check_plugin(self.task, self.plugin)
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "plugin": None}
 
     @property
     def name(self) -> str:
@@ -265,8 +269,10 @@ class TrainJob:
 
     @property
     def task_plugin(self) -> Task:
-        """The Task object this job trains on (``task_of``)."""
-        return task_of(self.task)
+        """The Task object this job trains on (``plugin``)."""
+        if self.plugin is None:
+            raise _unresolved(f"job {self.name}")
+        return self.plugin
 
     @property
     def timesteps(self) -> int:
@@ -286,7 +292,7 @@ class TrainJob:
             "ppo": ppo_identity(self.ppo),
             "eval_seed": EVAL_SEED,
         }
-        if _task_in_identity(self.task):  # False for MountainCar-v0: its runs predate tasks
+        if self.task_plugin.name_in_identity:  # False for MountainCar-v0: its runs predate tasks
             ident["task"] = self.task
         if self.arm.kinematic or self.arm.uses_vlm:
             ident["shaping"] = to_jsonable(self.shaping)
@@ -312,7 +318,7 @@ class TrainJob:
     def overrides(self) -> dict[str, str]:
         """The knobs of this job that differ from its preset and the shaping/VLM defaults, as
         dotted keys (``{"ppo.n_envs": "1"}``); only knobs the job's identity depends on count."""
-        reference = dataclasses.replace(self, ppo=preset_of(self.task, self.preset), vlm=VLMConfig(),
+        reference = dataclasses.replace(self, ppo=preset_of(self.task_plugin, self.preset), vlm=VLMConfig(),
                                         shaping=self.task_plugin.default_shaping())
         ref = flatten(reference.identity())
         return {k: v for k, v in flatten(self.identity()).items() if ref.get(k) != v}
@@ -321,13 +327,63 @@ class TrainJob:
 # --- building from layers and back to TOML -----------------------------------------------
 
 
-def resolve(layers: Iterable[Mapping[str, Any]]) -> RunConfig:
-    """The validated ``RunConfig`` of ``layers`` (lowest first: config file, ``--set``, flags)."""
+def resolve(layers: Iterable[Mapping[str, Any]], tasks: TaskLookup | None = None) -> RunConfig:
+    """The validated ``RunConfig`` of ``layers`` (lowest first: config file, ``--set``, flags): the
+    one place a config's task name becomes its Task, looked up with ``tasks`` (the command's
+    registry, ``tasks.registry.get_task``; None: the built-in tasks alone), and carried from here."""
     from vlmrl_cli.training.validation import validate_as
 
-    cfg: RunConfig = validate_as(RunConfig, resolve_raw(layers, default_task=RunConfig.task))
+    layers = list(layers)
+    ref = task_ref(layers, DEFAULT_TASK)
+    task = lookup_task(ref, tasks) if isinstance(ref, str) else None  # else the schema says what is wrong
+    raw = resolve_raw(layers, task)
+    cfg: RunConfig = validate_as(RunConfig, raw, **({} if task is None else {"plugin": task}))
     cfg._check_task()
     return cfg
+
+
+def lookup_task(ref: str, tasks: TaskLookup | None = None) -> Task:
+    """The Task ``ref`` names, by ``tasks`` (None: the built-in tasks alone); ``BadInput`` in the
+    words of an invalid config value."""
+    from vlmrl_cli.tasks.registry import builtin_task
+
+    try:
+        return (tasks or builtin_task)(ref)
+    except BadInput as exc:
+        msg = str(exc).removesuffix(".")
+        raise BadInput(f"invalid task = {json.dumps(ref)}: {msg[:1].lower() + msg[1:]}.") from None
+
+
+def once(tasks: TaskLookup | None) -> TaskLookup:
+    """``tasks`` (None: the built-in tasks alone) looking each name up once: the lookup of a command
+    that builds many configs of one task (a calibration's or a study's regimes).
+
+    Example:
+        >>> lookup = once(None)
+        >>> lookup("acrobot") is lookup("acrobot")
+        True
+    """
+    from vlmrl_cli.tasks.registry import builtin_task
+
+    found: dict[str, Task] = {}
+    get = tasks or builtin_task
+
+    def lookup(ref: str) -> Task:
+        if ref not in found:
+            found[ref] = get(ref)
+        return found[ref]
+
+    return lookup
+
+
+def _check_plugin(task: str, plugin: Task) -> None:
+    """A config's ``plugin`` is the Task its ``task`` names (a built-in name is checked; a user's
+    ``module:NAME`` or entry point may name a Task of another name)."""
+    from vlmrl_cli.tasks.registry import BUILTIN
+
+    if task in BUILTIN and plugin.name != task:
+        raise ValueError(f"the config names task '{task}' but carries task '{plugin.name}'; build it with "
+                         "resolve() (or pass plugin=)")
 
 
 def source_layers(file: Path | None, flags: Mapping[str, Any], sets: Iterable[str]) -> list[dict[str, Any]]:

@@ -26,7 +26,7 @@ from vlmrl_cli.shaping.arms import PotentialSource
 from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.scene import SceneCamera
-from vlmrl_cli.tasks.base import Task
+from vlmrl_cli.tasks.base import Task, TaskLookup
 from vlmrl_cli.tracking import store
 from vlmrl_cli.training.config import EVAL_SEED
 from vlmrl_cli.training.evaluation import EvalResult, Policy, evaluate_detached
@@ -198,9 +198,9 @@ def label_frames(run: TrainedRun, views: list[FrameView], cfg: EvaluateConfig) -
 
 def describe_step(task: Task, obs: tuple[float, ...], action: Any) -> tuple[dict[str, Any], str]:
     """A played step's observation as the evaluation's JSON fields and its caption line: the
-    task's own (``Task.describe_step``), else the raw observation and action."""
-    if task.describe_step is not None:
-        return task.describe_step(obs, action)
+    task's own (``Task.caption``), else the raw observation and action."""
+    if task.caption is not None:
+        return task.caption(obs, action)
     shown = "-" if action is None else (f"{action:+.2f}" if isinstance(action, float) else str(action))
     return {"obs": list(obs)}, f"obs [{' '.join(f'{v:+.2f}' for v in obs[:6])}]  action {shown}"
 
@@ -226,8 +226,9 @@ class EvaluateResult:
     episode: list[PlayedStep] = field(repr=False)
 
 
-def evaluate_run(cfg: EvaluateConfig) -> EvaluateResult:
-    """Evaluate run ``cfg.run_id`` and write ``episode-<i>.gif`` and ``evaluation.json`` to
+def evaluate_run(cfg: EvaluateConfig, tasks: TaskLookup) -> EvaluateResult:
+    """Evaluate run ``cfg.run_id`` (its task resolved by ``tasks``, the command's registry) and write
+    ``episode-<i>.gif`` and ``evaluation.json`` to
     ``cfg.out_dir``, logged as artifacts of that run under ``evaluate/``.
 
     Raises ``BadInput`` (before any folder is made) for a missing tracking database, an
@@ -236,11 +237,11 @@ def evaluate_run(cfg: EvaluateConfig) -> EvaluateResult:
     cfg.validate()
     client = store.connect_existing(cfg.tracking_uri)
     with tempfile.TemporaryDirectory(prefix="vlmrl-evaluate-") as tmp:
-        run = load_trained_run(client, cfg.run_id, Path(tmp))
+        run = load_trained_run(client, cfg.run_id, Path(tmp), tasks)
     task = run.task
     result = evaluate_detached(run.policy, cfg.episodes, EVAL_SEED, task)
     seed = EVAL_SEED + cfg.episode_index
-    camera = task.make_camera(run.shaping) if run.arm.uses_vlm else None
+    camera = task.camera.make(run.shaping) if run.arm.uses_vlm else None
     try:
         steps = play_episode(run.policy, seed, run.shaping, task, cfg.frame_every, camera)
         shown = [s for s in steps if s.pixels is not None]

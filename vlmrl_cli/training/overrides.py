@@ -15,15 +15,17 @@ elsewhere: a bad value fails before any store, folder or run exists.
 
 from __future__ import annotations
 
-import contextlib
 import tomllib
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.provenance import to_jsonable
 from vlmrl_cli.training.presets import preset_of
 from vlmrl_cli.vlm.config import resolve_sim_profile
+
+if TYPE_CHECKING:
+    from vlmrl_cli.tasks.base import Task
 
 #: Top-level keys of older config files that now live in ``[ppo]``.
 MOVED_TO_PPO = ("timesteps", "eval_episodes")
@@ -140,26 +142,33 @@ def _lift_moved(layer: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def resolve_raw(layers: Iterable[Mapping[str, Any]], default_task: str) -> dict[str, Any]:
-    """The merged raw configuration of ``layers`` (lowest first) over the named preset's ``[ppo]``
-    (the task's default preset when none is named; ``default_task`` when no layer names a task)."""
-    from vlmrl_cli.tasks.registry import get_task
+def task_ref(layers: Iterable[Mapping[str, Any]], default: str) -> Any:
+    """The task the highest layer that names one names (``default`` when none does): a name for
+    the command's registry to resolve, or whatever a file wrote there (the schema refuses it).
 
+    Example:
+        >>> task_ref([{"task": "acrobot"}, {"seeds": [0]}], "mountain-car"), task_ref([{}], "mountain-car")
+        ('acrobot', 'mountain-car')
+    """
+    ref: Any = default
+    for layer in layers:
+        ref = layer.get("task", ref)
+    return ref
+
+
+def resolve_raw(layers: Iterable[Mapping[str, Any]], task: Task | None) -> dict[str, Any]:
+    """The merged raw configuration of ``layers`` (lowest first) over the named preset's ``[ppo]``
+    (the task's default preset when none is named), ``task`` the Task the layers name (None when
+    they name none that resolves: the schema then says what is wrong)."""
     lifted = [_lift_moved(layer) for layer in layers]
-    task_name: Any = default_task
     preset: Any = None
     for layer in lifted:
-        task_name = layer.get("task", task_name)
         preset = layer.get("preset", preset)
-    task = None
-    if isinstance(task_name, str):
-        with contextlib.suppress(BadInput):  # the task field's own check says what is wrong with the name
-            task = get_task(task_name)
     if preset is None and task is not None:  # else the config's own default preset
         preset = task.default_preset
     raw: dict[str, Any] = {} if preset is None else {"preset": preset}
     if isinstance(preset, str) and task is not None:  # else the schema says what is wrong
-        raw["ppo"] = to_jsonable(preset_of(task_name, preset))
+        raw["ppo"] = to_jsonable(preset_of(task, preset))
     if task is not None and task.scales is not None:  # the task's scales: the bottom layer of [shaping]
         raw["shaping"] = {"alpha": task.scales.alpha, "kin_scale": task.scales.kin_scale}
     for layer in lifted:
@@ -171,5 +180,5 @@ def resolve_raw(layers: Iterable[Mapping[str, Any]], default_task: str) -> dict[
         raw["shaping"] = {**shaping, "label_potentials": [[label, p] for label, p in table.items()]}
     vlm = raw.get("vlm")
     if isinstance(vlm, Mapping) and isinstance(vlm.get("sim"), Mapping):
-        raw["vlm"] = {**vlm, "sim": resolve_sim_profile(vlm["sim"])}
+        raw["vlm"] = {**vlm, "sim": resolve_sim_profile(vlm["sim"], task)}  # the generic profiles and the task's
     return raw

@@ -9,12 +9,15 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from annotated_types import Ge, Gt, Interval
 from pydantic import AfterValidator
 
 from vlmrl_cli.core.errors import BadInput, did_you_mean
+
+if TYPE_CHECKING:
+    from vlmrl_cli.tasks.base import Task
 
 LrSchedule = Literal["constant", "linear"]
 
@@ -96,21 +99,17 @@ def ppo_identity(ppo: PPOConfig) -> dict[str, object]:
     return ident
 
 
-def preset_names(task: str) -> list[str]:
-    """The presets of ``task`` (its plug-in's ``Task.presets``)."""
-    from vlmrl_cli.tasks.registry import get_task
-
-    return list(get_task(task).presets)
+def preset_names(task: Task) -> list[str]:
+    """The presets of ``task`` (``Task.presets``)."""
+    return list(task.presets)
 
 
-def preset_of(task: str, name: str) -> PPOConfig:
-    """The PPO preset ``name`` of ``task``, from its plug-in (``Task.presets``), checked like a
-    config file; an unknown one is a ``BadInput`` naming the task's presets."""
-    from vlmrl_cli.tasks.registry import get_task
-
-    table = get_task(task).presets
+def preset_of(task: Task, name: str) -> PPOConfig:
+    """The PPO preset ``name`` of ``task`` (``Task.presets``), checked like a config file; an
+    unknown one is a ``BadInput`` naming the task's presets."""
+    table = task.presets
     if name not in table:
-        raise BadInput(f"unknown preset '{name}' for task {task}{did_you_mean(name, table)}; "
+        raise BadInput(f"unknown preset '{name}' for task {task.name}{did_you_mean(name, table)}; "
                        f"choose from {', '.join(table)}.")
     items = tuple(sorted(table[name].items()))
     try:

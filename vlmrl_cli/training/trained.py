@@ -12,8 +12,8 @@ import numpy as np
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec
 from vlmrl_cli.shaping.config import ShapingConfig
-from vlmrl_cli.tasks.base import Task
-from vlmrl_cli.tasks.registry import get_task, recorded_task
+from vlmrl_cli.tasks.base import Task, TaskLookup
+from vlmrl_cli.tasks.registry import recorded_task
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training.evaluation import Policy
 from vlmrl_cli.training.validation import validate_as
@@ -62,8 +62,9 @@ class TrainedRun:
     task_ref: str = field(default="", kw_only=True)  # how its config.json names it (a user task: module:NAME)
 
 
-def load_trained_run(client: Any, run_id: str, workdir: Path) -> TrainedRun:
-    """Download run ``run_id``'s model, normaliser and config into ``workdir`` and load them.
+def load_trained_run(client: Any, run_id: str, workdir: Path, tasks: TaskLookup) -> TrainedRun:
+    """Download run ``run_id``'s model, normaliser and config into ``workdir`` and load them; the
+    task its config names is resolved once, by the command's ``tasks``.
 
     ``BadInput`` when the store has no such run or the run saved no model (it failed, was
     stopped, or is not a training run).
@@ -83,7 +84,7 @@ def load_trained_run(client: Any, run_id: str, workdir: Path) -> TrainedRun:
     config = json.loads((workdir / CONFIG).read_text(encoding="utf-8"))
     tags = run.data.tags
     task_ref = recorded_task(config.get("task"))
-    task = get_task(task_ref)
+    task = tasks(task_ref)
     return TrainedRun(
         run_id=run_id,
         name=tags.get(schema.MLFLOW_RUN_NAME, run_id),

@@ -26,7 +26,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError, create_model
 from pydantic import model_validator as _model_validator
 
 from vlmrl_cli.core.errors import BadInput, did_you_mean
-from vlmrl_cli.core.fields import rules_of
+from vlmrl_cli.core.fields import is_carried, rules_of
 
 
 def batch_sizes_near(rollout: int, batch_size: int) -> list[int]:
@@ -75,6 +75,8 @@ def _model(cls: type, prefix: str = "") -> type[BaseModel]:
     hints = typing.get_type_hints(cls)
     fields: dict[str, Any] = {}
     for f in dataclasses.fields(cls):
+        if is_carried(f):  # resolved from the other fields, never read from a file
+            continue
         key = f"{prefix}{f.name}"
         tp = hints[f.name]
         nested = _dataclass_in(tp)
@@ -120,10 +122,12 @@ def _jsonable(obj: Any) -> Any:
     return to_jsonable(obj)
 
 
-def _to_dataclass(cls: type, model: BaseModel) -> Any:
+def _to_dataclass(cls: type, model: BaseModel, carried: dict[str, Any] | None = None) -> Any:
     hints = typing.get_type_hints(cls)
-    kwargs: dict[str, Any] = {}
+    kwargs: dict[str, Any] = dict(carried or {})
     for f in dataclasses.fields(cls):
+        if is_carried(f):
+            continue
         value = getattr(model, f.name)
         nested = _dataclass_in(hints[f.name])
         if nested is not None and isinstance(value, BaseModel):
@@ -166,9 +170,10 @@ def _section_fields(cls: type, section: list[str]) -> list[str]:
     return list(model.model_fields)
 
 
-def validate_as(cls: type, raw: dict[str, Any]) -> Any:
+def validate_as(cls: type, raw: dict[str, Any], **carried: Any) -> Any:
     """``raw`` (nested plain values, as TOML gives them) checked against the schema of dataclass
-    ``cls`` and built into it; ``BadInput`` naming the first wrong key otherwise."""
+    ``cls`` and built into it, with the values of its ``CARRIED`` fields given as ``carried``;
+    ``BadInput`` naming the first wrong key otherwise."""
     try:
         blob = json.dumps(_jsonable(raw))
     except (TypeError, ValueError) as exc:
@@ -177,4 +182,4 @@ def validate_as(cls: type, raw: dict[str, Any]) -> Any:
         model = _model(cls).model_validate_json(blob)
     except ValidationError as exc:
         raise BadInput(_sentence(exc.errors()[0], cls)) from None
-    return _to_dataclass(cls, model)
+    return _to_dataclass(cls, model, carried)

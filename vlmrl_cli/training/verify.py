@@ -15,13 +15,16 @@ import random
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.numeric_pin import pin_record
 from vlmrl_cli.core.provenance import cpu_paths
 from vlmrl_cli.tracking import schema
 from vlmrl_cli.training.config import TrainJob
+
+if TYPE_CHECKING:
+    from vlmrl_cli.tasks.base import TaskLookup
 
 #: The tags that say which numeric path a run computed on (printed beside each verdict).
 PATH_TAGS = (schema.TAG_PIN, schema.TAG_PIN_ENV, f"{schema.TAG_CPU_PREFIX}numpy_simd",
@@ -187,13 +190,13 @@ def choose(runs: Sequence[RecordedRun], *, run_ids: Iterable[str] = (), seeds: I
     return picked
 
 
-def rebuild_job(run: RecordedRun) -> TrainJob:
-    """The ``TrainJob`` that trained ``run``, from its ``config.json``; ``BadInput`` when this code
-    cannot rebuild it with the recorded config hash (another version changed what it means)."""
+def rebuild_job(run: RecordedRun, tasks: TaskLookup) -> TrainJob:
+    """The ``TrainJob`` that trained ``run``, from its ``config.json`` (its task resolved by
+    ``tasks``, the command's registry); ``BadInput`` when this code cannot rebuild it with the
+    recorded config hash (another version changed what it means)."""
     from vlmrl_cli.shaping.arms import ARMS
     from vlmrl_cli.shaping.config import ShapingConfig
     from vlmrl_cli.tasks.registry import recorded_task
-    from vlmrl_cli.training.config import with_task_labels
     from vlmrl_cli.training.presets import PPOConfig
     from vlmrl_cli.training.validation import validate_as
     from vlmrl_cli.vlm.config import VLMConfig
@@ -202,12 +205,13 @@ def rebuild_job(run: RecordedRun) -> TrainJob:
     try:
         arm = ARMS[cfg["arm"]["name"]]
         task = recorded_task(cfg.get("task"))
+        plugin = tasks(task)
         ppo = validate_as(PPOConfig, dict(cfg["ppo"]))
         shaping = (validate_as(ShapingConfig, dict(cfg["shaping"])) if "shaping" in cfg
-                   else with_task_labels(ShapingConfig(), task))
+                   else plugin.shaping_for(ShapingConfig()))
         vlm = validate_as(VLMConfig, {**cfg["vlm"], "use_cache": False}) if "vlm" in cfg else VLMConfig(use_cache=False)
         job = TrainJob(arm=arm, seed=int(cfg["seed"]), preset=str(cfg["preset"]), ppo=ppo, vlm=vlm,
-                       shaping=shaping, regime=run.tags.get(schema.TAG_REGIME), task=task)
+                       shaping=shaping, regime=run.tags.get(schema.TAG_REGIME), task=task, plugin=plugin)
     except (KeyError, TypeError, ValueError, BadInput) as exc:
         raise BadInput(f"run {run.run_id} ({run.name}): its config.json cannot be rebuilt here ({exc}).") from None
     recorded = cfg.get("config_hash") or run.tags.get(schema.TAG_CONFIG_HASH)
@@ -217,13 +221,13 @@ def rebuild_job(run: RecordedRun) -> TrainJob:
     return job
 
 
-def verify_run(run: RecordedRun) -> Outcome:
+def verify_run(run: RecordedRun, tasks: TaskLookup) -> Outcome:
     """Retrain ``run`` in this process and compare its native returns with the recorded ones."""
     import time
 
     from vlmrl_cli.training.trace import native_returns
 
-    job = rebuild_job(run)
+    job = rebuild_job(run, tasks)
     start = time.perf_counter()
     returns = native_returns(job)
     return Outcome(run=run, returns=returns, wall_s=time.perf_counter() - start)
@@ -245,15 +249,15 @@ def describe_paths(tags: dict[str, str]) -> str:
     return "; ".join(f"{short[t]} {tags.get(t, 'unrecorded')}" for t in PATH_TAGS)
 
 
-def verify_many(runs: Sequence[RecordedRun], workers: int = 1) -> Iterator[Outcome]:
+def verify_many(runs: Sequence[RecordedRun], tasks: TaskLookup, workers: int = 1) -> Iterator[Outcome]:
     """Verify ``runs`` in ``workers`` spawned processes (each inherits this process's numeric pin;
     ``verify_run`` trains on one torch thread), yielding each outcome as it finishes."""
     if workers <= 1:
-        yield from map(verify_run, runs)
+        yield from (verify_run(run, tasks) for run in runs)
         return
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
-        for fut in as_completed([pool.submit(verify_run, run) for run in runs]):
+        for fut in as_completed([pool.submit(verify_run, run, tasks) for run in runs]):
             yield fut.result()
