@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -104,3 +105,33 @@ def test_an_area_on_a_zero_to_one_return_scale_keeps_its_digits() -> None:
     assert format_difference(small, "k", "auc").startswith("-0.012 [-0.020, -0.004]")
     large = {**small, "k.auc_diff": 7.44, "k.auc_low": 2.1, "k.auc_high": 12.5}
     assert format_difference(large, "k", "auc").startswith("+7.4 [+2.1, +12.5]")
+
+
+def _hacking_seeds(baseline: list[float], hybrid: list[float], pbrs: list[float]) -> pd.DataFrame:
+    arms = ["baseline"] * len(baseline) + ["hybrid"] * len(hybrid) + ["hybrid-dense-pbrs"] * len(pbrs)
+    return pd.DataFrame({"arm": arms, "eval_success_rate": [*baseline, *hybrid, *pbrs]})
+
+
+def test_the_potential_form_removes_the_hacking_only_where_the_hybrid_hacks() -> None:
+    rng = np.random.default_rng(0)
+    good, bad = [1.0] * 8, [0.2, 0.3, 0.1, 0.2, 0.25, 0.15, 0.3, 0.2]
+    removed = verdicts.hacking_answer(_hacking_seeds(good, bad, good), rng, n_boot=300)
+    assert removed is not None and removed.startswith("**removed**")
+    kept = verdicts.hacking_answer(_hacking_seeds(good, bad, bad), rng, n_boot=300)
+    assert kept is not None and kept.startswith("**not removed**")
+    nothing = verdicts.hacking_answer(_hacking_seeds(good, good, bad), rng, n_boot=300)
+    assert nothing is not None and nothing.startswith("**no hacking to remove**")
+    assert "fails more often than the hybrid" in nothing
+    assert "no seed failed in either arm: no test" in nothing  # baseline and hybrid tie: no p of 1 printed
+
+
+def test_no_hacking_answer_without_every_arm() -> None:
+    seeds = _hacking_seeds([1.0, 1.0], [1.0, 1.0], [])
+    assert verdicts.hacking_answer(seeds, np.random.default_rng(0)) is None
+
+
+def test_a_partial_family_says_the_finished_one_is_larger() -> None:
+    row = {"regime": "zoo", "seeds": 10}
+    lines = verdicts.summary([row], pd.DataFrame(), -130.0, 0.05, "zoo", planned=15)
+    assert "the finished study's family holds 15" in lines[0]
+    assert "finished study's family" not in verdicts.summary([row], pd.DataFrame(), -130.0, 0.05, "zoo")[0]

@@ -128,7 +128,7 @@ def run_study(
     data = load_experiment(client, cfg.base.experiment)
     check_paths(data.runs, allow_mixed=False)  # one numeric path, as a report needs (core.numeric_pin)
     streams = stats.Streams(cfg.seed)
-    rows, hack, seeds = [], [], []
+    rows, hack, seeds, hacking_answers = [], [], [], {}
     for regime in cfg.regimes:
         sub = verdicts.subset(data, regime.run)
         row, per_seed = verdicts.regime_row(regime.id, sub, cfg.thresholds, streams, cfg.n_boot, cfg.ci, cfg.alpha,
@@ -139,6 +139,9 @@ def run_study(
         hack.append(hacking.hacking_frame(per_seed, sub.eval_episodes, cfg.ci, regime.run.task_plugin.max_steps)
                     .assign(regime=regime.id))
         seeds.append(per_seed.assign(regime=regime.id, variant=""))
+        answer = verdicts.hacking_answer(per_seed, streams(f"study/hacking/{regime.id}"), cfg.alpha, cfg.n_boot, cfg.ci)
+        if answer:
+            hacking_answers[regime.id] = answer
     seeds += _other_sweep_frames(cfg, data)
     result.per_seed = study_per_seed(seeds, cfg.thresholds)
     result.missing = missing_runs(cfg, result.per_seed)
@@ -160,7 +163,8 @@ def run_study(
     result.vlm_points = pd.DataFrame(points, columns=["variant", "mcq_accuracy", "speedup", "low", "high", "p",
                                                       "hybrid_seeds", "baseline_seeds"])
     result.summary = verdicts.summary(rows, result.vlm_points, cfg.top, cfg.alpha, cfg.vlm_regime, control_rows,
-                                      cfg.margin, cfg.adjust, cfg.ci)
+                                      cfg.margin, cfg.adjust, cfg.ci, hacking=hacking_answers,
+                                      planned=planned_family(cfg))
     hack_frame = pd.concat(hack, ignore_index=True) if hack else pd.DataFrame()
     simulated = any(r.run.vlm.backend == "sim" for r in cfg.all_regimes())
     stage("analysis", start)
@@ -244,6 +248,16 @@ def study_per_seed(frames: Sequence[pd.DataFrame], thresholds: Sequence[float]) 
 DEFAULT_SD_LOG = 0.2
 
 
+def _planned_pairs(cfg: StudyConfig) -> list[tuple[str, str]]:
+    return [(a, b) for a, b, _ in verdicts.MAP_PAIRS if a in cfg.base.arms and b in cfg.base.arms]
+
+
+def planned_family(cfg: StudyConfig) -> int:
+    """The family the finished study holds: its arm pairs (per regime) and its controls, the family
+    the power line sizes the study for; a partial study's verdicts are adjusted within those measured."""
+    return max(1, len(_planned_pairs(cfg)) * len(cfg.regimes) + len(verdicts.controls(cfg.cells)))
+
+
 def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None) -> list[str]:
     """What the study can detect at 80% power, per comparison, simulated on censored data as the
     verdict sees it (``analysis.power``): each comparison's own reference arm's steps to the top
@@ -256,12 +270,14 @@ def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None) -> list[
     from vlmrl_cli.analysis import censored, power
 
     n = len(cfg.base.seeds)
-    comparisons = [(a, b) for a, b, _ in verdicts.MAP_PAIRS if a in cfg.base.arms and b in cfg.base.arms]
+    comparisons = _planned_pairs(cfg)
     controls = [c.name for c in verdicts.controls(cfg.cells)]
-    family = max(1, len(comparisons) + len(controls)) if cfg.adjust != "none" else 1
+    family = planned_family(cfg) if cfg.adjust != "none" else 1
     budget = float(cfg.base.budget)
+    pairs = (f"{len(comparisons)} arm pairs in each of {len(cfg.regimes)} regimes" if len(cfg.regimes) > 1
+             else f"{len(comparisons)} arm pairs")
     level = (f"alpha {cfg.alpha:g} / {family} (Holm's first step over the family of {family} comparisons: "
-             f"{len(comparisons)} arm pairs and {len(controls)} controls)" if family > 1 else f"alpha {cfg.alpha:g}")
+             f"{pairs} and {len(controls)} controls)" if family > 1 else f"alpha {cfg.alpha:g}")
     lines = [f"Power (80%) per comparison, simulated on censored steps to {cfg.top:g} "
              f"({power.DEFAULT_N_SIMS:,} simulated studies each): the comparison's reference arm's steps fitted as "
              f"a log-normal with its DNFs right-censored at the budget ({budget:,.0f} steps); the rank test at {level} "
@@ -347,6 +363,13 @@ def _vlm_table(points: pd.DataFrame, top: float) -> str:
 def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simulated: bool,
                 cost: CostEstimate | None, history: Sequence[Mapping[str, Any]] = ()) -> str:
     """``report.md``: the generated summary first, then the regime map, VLM quality, reward hacking, method."""
+    return "\n".join([*_head_lines(cfg, result, simulated), *_map_lines(cfg, result), *_controls_lines(cfg, result),
+                      *_vlm_lines(cfg, result), *_hacking_lines(cfg, hack_frame), *_method_lines(cfg, result),
+                      *_cost_lines(result, cost), *_history_lines(history)])
+
+
+def _head_lines(cfg: StudyConfig, result: StudyResult, simulated: bool) -> list[str]:
+    """The title, which VLM answered, and what is missing from a study still training."""
     vlm_line = ("**VLM: the SIMULATED VLM (a pixel-reading stand-in), not a real model: nothing here is evidence "
                 "about a real VLM.**" if simulated else "VLM: a real backend (see the runs' vlmrl.vlm tags).")
     lines = ["# Study: where does the hybrid's advantage hold?", "", vlm_line, ""]
@@ -358,81 +381,110 @@ def to_markdown(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame,
                   "with a side that has fewer than 2 runs are left out; the others use the seeds finished so far. "
                   "Missing, per sweep (a run shared by two sweeps counts in both): "
                   + "; ".join(f"`{k}` {v}" for k, v in result.missing.items()) + ".", ""]
-    lines += ["## Summary", "", *result.summary, ""]
+    return lines
+
+
+def _map_lines(cfg: StudyConfig, result: StudyResult) -> list[str]:
+    """The summary, the regime map, the regimes' overrides and the notes on the grid."""
+    lines = ["## Summary", "", *result.summary, ""]
     lines += ["## Regime map", "", verdicts.map_markdown(result.regime_map.to_dict("records"), cfg.top, cfg.ci,
                                                        cfg.margin, cfg.adjust)]
     lines += ["Regimes (overrides over the study's defaults): "
               + "; ".join(f"`{r.id}` = {r.label}" for r in cfg.regimes) + ".", ""]
-    lines += [f"- {n}" for n in cfg.notes] + ([""] if cfg.notes else [])
-    if len(result.controls):
-        lines += ["## Controls: placebo, dose-response, the lock", "",
-                  f"In regime `{cfg.vlm_regime}`. Dose-response: the reward pays alpha x PBRS + kin_scale x R_kin "
-                  "(alpha 0: the dense term alone, the kinematic arm, or the baseline at kin_scale 0; kin_scale 0: "
-                  "the VLM's potential alone, the semantic arm); each cell with a potential is compared with the "
-                  "dense term alone at its kin_scale, and at the largest alpha with its placebo (the same labels "
-                  "through a label map shuffled per seed). The lock: the hybrid against hybrid-no-lock when the "
-                  "VLM's labels are drawn afresh at every query.", "",
-                  verdicts.controls_markdown(result.controls.to_dict("records"), cfg.top, cfg.margin, cfg.ci,
-                                             cfg.adjust)]
-    lines += ["## VLM quality", "",
-              f"The hybrid alone, in regime `{cfg.vlm_regime}`, with other simulated-VLM knobs; each variant's MCQ "
-              f"accuracy is measured by `vlmrl taxonomy` on the same knobs ({cfg.states} sweep positions; "
-              "`taxonomy/<variant>/`). The baseline is the regime's own.", "",
-              _vlm_table(result.vlm_points, cfg.top) if len(result.vlm_points) else "No VLM variant was run.\n",
-              "![VLM quality](vlm_quality.png)", ""]
+    return lines + [f"- {n}" for n in cfg.notes] + ([""] if cfg.notes else [])
+
+
+def _controls_lines(cfg: StudyConfig, result: StudyResult) -> list[str]:
+    """The placebo, dose-response and lock controls, when the study has any."""
+    if not len(result.controls):
+        return []
+    return ["## Controls: placebo, dose-response, the lock", "",
+            f"In regime `{cfg.vlm_regime}`. Dose-response: the reward pays alpha x PBRS + kin_scale x R_kin "
+            "(alpha 0: the dense term alone, the kinematic arm, or the baseline at kin_scale 0; kin_scale 0: "
+            "the VLM's potential alone, the semantic arm); each cell with a potential is compared with the "
+            "dense term alone at its kin_scale, and at the largest alpha with its placebo (the same labels "
+            "through a label map shuffled per seed). The lock: the hybrid against hybrid-no-lock when the "
+            "VLM's labels are drawn afresh at every query.", "",
+            verdicts.controls_markdown(result.controls.to_dict("records"), cfg.top, cfg.margin, cfg.ci, cfg.adjust)]
+
+
+def _vlm_lines(cfg: StudyConfig, result: StudyResult) -> list[str]:
+    """The hybrid's speedup against each VLM variant's measured accuracy, and its figure."""
+    return ["## VLM quality", "",
+            f"The hybrid alone, in regime `{cfg.vlm_regime}`, with other simulated-VLM knobs; each variant's MCQ "
+            f"accuracy is measured by `vlmrl taxonomy` on the same knobs ({cfg.states} sweep positions; "
+            "`taxonomy/<variant>/`). The baseline is the regime's own.", "",
+            _vlm_table(result.vlm_points, cfg.top) if len(result.vlm_points) else "No VLM variant was run.\n",
+            "![VLM quality](vlm_quality.png)", ""]
+
+
+def _hacking_lines(cfg: StudyConfig, hack_frame: pd.DataFrame) -> list[str]:
+    """Reward hacking per regime, with the hovering diagnostic where the task has one."""
     tasks = {regime.id: regime.run.task_plugin for regime in cfg.regimes}
-    hover = {rid: task.hover_diagnostic for rid, task in tasks.items()}
     hover_from = next((task.hover_from for task in tasks.values() if task.hover_diagnostic), None)
-    lines += ["## Reward hacking", "", hacking.definition(hover_from), ""]
+    lines = ["## Reward hacking", "", hacking.definition(hover_from), ""]
     for regime in cfg.regimes:
         part = hack_frame[hack_frame["regime"] == regime.id] if len(hack_frame) else hack_frame
         lines += [f"### `{regime.id}`", "",
-                  hacking.hacking_markdown(part, cfg.ci, hover[regime.id]) if len(part) else "no runs\n"]
-    maps, controls = result.regime_map.to_dict("records"), result.controls.to_dict("records")
-    lines += ["## Method", "",
-              f"The DNF rule, everywhere: {RULE}. Reliability: the share of seeds that reached {cfg.top:g}, Wilson "
-              f"interval; differences of reliability with a Newcombe interval and a Fisher exact p. Steps to "
-              f"{cfg.top:g}: restricted mean over all seeds, bootstrap CI. Speedup: the ratio of restricted means, "
-              "bootstrap CI; p: two-sided Mann-Whitney U on steps with DNF seeds tied above every finish (exact "
-              "when every split of the seeds can be enumerated, else the tie-corrected normal approximation; with "
-              "one budget this is Gehan's censored rank test). Beside it, the log-rank test on the same steps, each "
-              "DNF censored at its own budget (chi-square, 1 df); where, after adjustment, one of the two rejects "
-              "and the other does not, the table says the tests disagree. The rank test drives the verdict: it is "
-              "the test this study declared before its runs, it is exact at these seed counts where the log-rank "
-              "is a large-sample chi-square, and it weighs the early finishes that a speedup is about, where the "
-              "log-rank weighs every finishing step alike. Multiplicity: "
-              f"{multiplicity.family_line(cfg.adjust, verdicts.family_size(maps, controls), verdicts.FAMILY_WHAT)}"
-              "; each table shows the raw p and the adjusted p side by side, and the verdict uses the adjusted "
-              "one. The VLM-quality points carry no verdict and are not in the family; the learning-curve area "
-              "and reliability differences are secondary measures, judged on their own raw p and not adjusted. "
-              f"Verdict: faster/slower when the adjusted p < {cfg.alpha:g} and the {100 * cfg.ci:g}% interval of the "
-              f"speedup excludes 1 on the same side; {equivalent(cfg.margin)} when the "
-              f"{100 * (1 - 2 * cfg.alpha):g}% bootstrap interval of the speedup lies inside [1/{cfg.margin:g}, "
-              f"{cfg.margin:g}] (two one-sided tests) and each arm finished on at least half its seeds; otherwise "
-              "inconclusive, with 'leans faster' (or slower) when the interval excludes 1 or the adjusted test "
-              "rejects, and both point one way. A speedup of restricted means is a lower bound on the speedup of "
-              "true means when the slower arm DNFs. Learning-curve area: per seed, the mean native return over the "
-              "budget (each step weighs its episode's return); a difference of means with a bootstrap CI, a "
-              f"Mann-Whitney p (not adjusted), and equivalence within +-{auc_margin(cfg):.3g} return points "
-                "(the task's "
-              "margin); higher or lower only when p < 0.05 and the interval excludes 0 on the same side. "
-              "The unit is the seed. "
-              "`per_seed.csv` holds every run's figures, so every number here can be recomputed.", "",
-              *result.power, ""]
+                  hacking.hacking_markdown(part, cfg.ci, tasks[regime.id].hover_diagnostic) if len(part)
+                  else "no runs\n"]
+    return lines
+
+
+def _method_lines(cfg: StudyConfig, result: StudyResult) -> list[str]:
+    """How every number was computed: the DNF rule, the tests, the family, the verdict rule; then the power."""
+    family = verdicts.family_size(result.regime_map.to_dict("records"), result.controls.to_dict("records"))
+    return ["## Method", "",
+            f"The DNF rule, everywhere: {RULE}. Reliability: the share of seeds that reached {cfg.top:g}, Wilson "
+            f"interval; differences of reliability with a Newcombe interval and a Fisher exact p. Steps to "
+            f"{cfg.top:g}: restricted mean over all seeds, bootstrap CI. Speedup: the ratio of restricted means, "
+            "bootstrap CI; p: two-sided Mann-Whitney U on steps with DNF seeds tied above every finish (exact "
+            "when every split of the seeds can be enumerated, else the tie-corrected normal approximation; with "
+            "one budget this is Gehan's censored rank test). Beside it, the log-rank test on the same steps, each "
+            "DNF censored at its own budget (chi-square, 1 df); where, after adjustment, one of the two rejects "
+            "and the other does not, the table says the tests disagree. The rank test drives the verdict: it is "
+            "the test this study declared before its runs, it is exact at these seed counts where the log-rank "
+            "is a large-sample chi-square, and it weighs the early finishes that a speedup is about, where the "
+            "log-rank weighs every finishing step alike. Multiplicity: "
+            f"{multiplicity.family_line(cfg.adjust, family, verdicts.FAMILY_WHAT)}"
+            "; each table shows the raw p and the adjusted p side by side, and the verdict uses the adjusted "
+            "one. The VLM-quality points carry no verdict and are not in the family; the learning-curve area "
+            "and reliability differences are secondary measures, judged on their own raw p and not adjusted. "
+            f"Verdict: faster/slower when the adjusted p < {cfg.alpha:g} and the {100 * cfg.ci:g}% interval of the "
+            f"speedup excludes 1 on the same side; {equivalent(cfg.margin)} when the "
+            f"{100 * (1 - 2 * cfg.alpha):g}% bootstrap interval of the speedup lies inside [1/{cfg.margin:g}, "
+            f"{cfg.margin:g}] (two one-sided tests) and each arm finished on at least half its seeds; otherwise "
+            "inconclusive, with 'leans faster' (or slower) when the interval excludes 1 or the adjusted test "
+            "rejects, and both point one way. A speedup of restricted means is a lower bound on the speedup of "
+            "true means when the slower arm DNFs. Learning-curve area: per seed, the mean native return over the "
+            "budget (each step weighs its episode's return); a difference of means with a bootstrap CI, a "
+            f"Mann-Whitney p (not adjusted), and equivalence within +-{auc_margin(cfg):.3g} return points "
+            "(the task's margin); higher or lower only when p < 0.05 and the interval excludes 0 on the same "
+            "side. The unit is the seed. "
+            "`per_seed.csv` holds every run's figures, so every number here can be recomputed.", "",
+            *result.power, ""]
+
+
+def _cost_lines(result: StudyResult, cost: CostEstimate | None) -> list[str]:
+    """This invocation's wall time, the worker time of every run the report reads, and the estimate."""
     train = sum(r.get("train_wall_s", 0.0) for r in result.regime_map.to_dict("records"))
     cost_line = (f" Estimated up front: {cost.pending} run(s) to train, {cost.total_s / 60:.0f} min ({cost.how})."
                  if cost else "")
-    lines += [f"Cost: {result.wall_s:,.0f} s of wall time in this invocation ({result.trained} run(s) trained now); "
-              f"the {result.runs} run(s) this report reads took {result.runs_wall_s:,.0f} s of worker time "
-              f"({result.runs_wall_s / 3600:.1f} h; the regimes' own runs {train:,.0f} s).{cost_line}", ""]
-    if history:
-        earlier = "; ".join(
-            f"commit {str(h.get('git_commit', '?'))[:7]} on {str(h.get('written_at', '?'))[:10]}: "
-            f"{h.get('runs_trained_now', '?')} run(s) trained, {float(h.get('wall_s', math.nan)):,.0f} s"
-            for h in history)
-        lines += [f"Earlier invocations of this study on the same store (`manifest.json`, `earlier_invocations`): "
-                  f"{earlier}.", ""]
-    return "\n".join(lines)
+    return [f"Cost: {result.wall_s:,.0f} s of wall time in this invocation ({result.trained} run(s) trained now); "
+            f"the {result.runs} run(s) this report reads took {result.runs_wall_s:,.0f} s of worker time "
+            f"({result.runs_wall_s / 3600:.1f} h; the regimes' own runs {train:,.0f} s).{cost_line}", ""]
+
+
+def _history_lines(history: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The earlier invocations of a resumed study, oldest first (none: no line)."""
+    if not history:
+        return []
+    earlier = "; ".join(
+        f"commit {str(h.get('git_commit', '?'))[:7]} on {str(h.get('written_at', '?'))[:10]}: "
+        f"{h.get('runs_trained_now', '?')} run(s) trained, {float(h.get('wall_s', math.nan)):,.0f} s"
+        for h in history)
+    return [f"Earlier invocations of this study on the same store (`manifest.json`, `earlier_invocations`): "
+            f"{earlier}.", ""]
 
 
 #: The fields of a manifest that say what one invocation did; earlier invocations keep only these.

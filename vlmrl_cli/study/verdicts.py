@@ -387,13 +387,19 @@ def _answer(row: dict[str, Any], key: str) -> str:
 
 def summary(rows: Sequence[dict[str, Any]], points: pd.DataFrame, top: float, alpha: float, vlm_regime: str,
             control_rows: Sequence[dict[str, Any]] = (), margin: float = censored.DEFAULT_MARGIN,
-            adjust: str = DEFAULT_ADJUST, ci: float = 0.95, registry: Mapping[str, ArmSpec] = ARMS) -> list[str]:
+            adjust: str = DEFAULT_ADJUST, ci: float = 0.95, registry: Mapping[str, ArmSpec] = ARMS,
+            hacking: Mapping[str, str] | None = None, planned: int = 0) -> list[str]:
     """The report's opening: the answers to the study's questions, in sentences made from the numbers.
     Every verdict follows ``censored.judge_speedup`` on the rank test's p adjusted within the study's
     family (``adjust_family``): faster / slower, equivalent within ``margin``, or inconclusive
-    (saying which way it leans)."""
+    (saying which way it leans). ``hacking``: each regime's ``hacking_answer``; ``planned``: the
+    family the finished study will hold (the power line's), said when fewer were measured."""
     size = family_size(rows, control_rows, registry)
-    lines = [f"- Verdicts on steps to {top:g}: {multiplicity.family_line(adjust, size, FAMILY_WHAT)}. Faster/slower "
+    partial = (f" (the finished study's family holds {planned}: with {planned - size} not measured yet, these "
+               "adjustments are less strict than the finished study's will be)" if adjust != "none" and planned > size
+               else "")
+    lines = [f"- Verdicts on steps to {top:g}: {multiplicity.family_line(adjust, size, FAMILY_WHAT)}{partial}. "
+             "Faster/slower "
              f"when the adjusted censored rank test rejects at {alpha:g} and the {100 * ci:g}% interval of the "
              f"speedup excludes 1 on the same side; {censored.equivalent(margin)} when the "
              f"{100 * (1 - 2 * alpha):g}% interval of the speedup lies inside [1/{margin:g}, {margin:g}] (TOST); "
@@ -411,6 +417,8 @@ def summary(rows: Sequence[dict[str, Any]], points: pd.DataFrame, top: float, al
             if f"{key}.verdict" in r and r[f"{key}.verdict"] != NOT_MEASURED:
                 lines.append(f"  - {question} {_answer(r, key)}; learning-curve area "
                              f"{format_difference(r, key, 'auc')}.")
+        if hacking and hacking.get(r["regime"]):
+            lines.append(f"  - {HACKING_QUESTION} {hacking[r['regime']]}")
         if f"{METHOD}_vs_{BASELINE}.reliability_diff" in r:
             lines.append(f"  - Is the hybrid more reliable than plain PPO? hybrid minus baseline "
                          f"{format_difference(r, f'{METHOD}_vs_{BASELINE}', 'reliability')} (Newcombe interval, Fisher "
@@ -432,3 +440,72 @@ def summary(rows: Sequence[dict[str, Any]], points: pd.DataFrame, top: float, al
         lines.append(f"- **VLM quality** (regime `{vlm_regime}`): {len(finite)} variant(s) with a measurable speedup; "
                      "too few for a trend.")
     return lines
+
+
+#: The question the potential-form arm answers (issue 41): a verdict line of every study that has it.
+HACKING_QUESTION = "Does the dense term in potential form remove the hacking?"
+
+
+def _share_comparison(a: np.ndarray, b: np.ndarray, rng: np.random.Generator, n_boot: int, ci: float
+                      ) -> tuple[stats.Estimate, float]:
+    """Mean per-seed failure share of ``a`` minus ``b``, with its bootstrap interval (seeds resampled),
+    and the two-sided Mann-Whitney p on the seeds' shares (NaN when every seed of both arms ties)."""
+    from vlmrl_cli.analysis.ranks import censored_rank_test
+
+    diff = stats.difference_of_means(a, b, rng, n_boot, ci)
+    tied = np.unique(np.concatenate([a, b])).size <= 1
+    return diff, float("nan") if tied else censored_rank_test(a, b, rng).p_value
+
+
+def hacking_answer(per_seed: pd.DataFrame, rng: np.random.Generator, alpha: float = 0.05,
+                   n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95) -> str | None:
+    """One regime's answer to ``HACKING_QUESTION``, the seed the unit: each seed's share of detached
+    evaluation episodes that failed (1 - ``eval_success_rate``; a policy farming the dense term runs
+    out the clock). The hybrid hacks when its share is above the baseline's (rank test at ``alpha``
+    and the interval of the difference above 0); the potential form removes it when its share is then
+    below the hybrid's and not above the baseline's on the same rule. None when an arm is missing.
+
+    Example:
+        >>> seeds = pd.DataFrame({"arm": ["baseline"] * 4 + ["hybrid"] * 4 + ["hybrid-dense-pbrs"] * 4,
+        ...                       "eval_success_rate": [1, 1, 1, 1, .2, .3, .1, .2, 1, 1, .9, 1]})
+        >>> hacking_answer(seeds, np.random.default_rng(0), n_boot=200).split(":")[0]
+        '**removed**'
+    """
+    from vlmrl_cli.shaping.arms import DENSE_POTENTIAL
+
+    share = {arm: 1.0 - per_seed.loc[per_seed["arm"] == arm, "eval_success_rate"].to_numpy(dtype=float)
+             for arm in (BASELINE, METHOD, DENSE_POTENTIAL)}
+    if any(v.size < 2 for v in share.values()):
+        return None
+    vs = {pair: _share_comparison(share[pair[0]], share[pair[1]], rng, n_boot, ci)
+          for pair in ((METHOD, BASELINE), (DENSE_POTENTIAL, METHOD), (DENSE_POTENTIAL, BASELINE))}
+
+    def above(pair: tuple[str, str]) -> bool:
+        diff, p = vs[pair]
+        return math.isfinite(p) and p < alpha and diff.value > 0 and diff.low > 0
+
+    def below(pair: tuple[str, str]) -> bool:
+        diff, p = vs[pair]
+        return math.isfinite(p) and p < alpha and diff.value < 0 and diff.high < 0
+
+    hybrid_hacks = above((METHOD, BASELINE))
+    if not hybrid_hacks:
+        word = "no hacking to remove"
+    elif below((DENSE_POTENTIAL, METHOD)) and not above((DENSE_POTENTIAL, BASELINE)):
+        word = "removed"
+    elif above((DENSE_POTENTIAL, BASELINE)):
+        word = "not removed"
+    else:
+        word = "cannot tell"
+    worse = " The potential form fails more often than the hybrid." if above((DENSE_POTENTIAL, METHOD)) else ""
+
+    def text(pair: tuple[str, str]) -> str:
+        diff, p = vs[pair]
+        shown = "no seed failed in either arm: no test" if not math.isfinite(p) else f"Mann-Whitney p {p:.2g}"
+        return (f"{100 * diff.value:+.1f} points [{100 * diff.low:+.1f}, {100 * diff.high:+.1f}], {shown}"
+                if diff.has_ci else f"{100 * diff.value:+.1f} points ({diff.note})")
+
+    means = ", ".join(f"{arm} {100 * share[arm].mean():.1f}%" for arm in (BASELINE, METHOD, DENSE_POTENTIAL))
+    return (f"**{word}**: mean share of failed detached episodes per seed {means}; hybrid minus baseline "
+            f"{text((METHOD, BASELINE))}; potential form minus hybrid {text((DENSE_POTENTIAL, METHOD))} "
+            f"({100 * ci:g}% bootstrap intervals over seeds, unadjusted: not in the speed family).{worse}")
