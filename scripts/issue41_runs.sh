@@ -37,7 +37,11 @@ stage() {  # $1 short, $2 task, $3 regime, $4 alphas, $5 kin-scales, $6 committe
   local exp=${EXP[$1]} u
   u=$(uri "$1")
   if [[ ! -f $STORE/$1.db ]]; then
-    [[ -f results/resume/$exp.jsonl.gz ]] && vlmrl import "results/resume/$exp.jsonl.gz" --experiment "$exp" --tracking-uri "$u"
+    # a finished stage's own export, else the partial one a session left under results/resume/
+    local done_file=results/tasks/$2/runs-study-scaled.jsonl.gz
+    if [[ -f $done_file ]]; then vlmrl import "$done_file" --experiment "$exp" --tracking-uri "$u"
+    elif [[ -f results/resume/$exp.jsonl.gz ]]; then vlmrl import "results/resume/$exp.jsonl.gz" --experiment "$exp" --tracking-uri "$u"
+    fi
     [[ -n $6 ]] && vlmrl import "$6" --experiment "$exp" --tracking-uri "$u"
   fi
   vlmrl study --task "$2" --regime "$3" --seeds 10 --arms $ARMS --alphas "$4" --kin-scales "$5" \
