@@ -11,6 +11,10 @@ import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+# Ray's driver replaces builtins.print when it relays a worker's tqdm output (ray.experimental.
+# tqdm_ray): a process-wide change that outlives the Ray tests in their xdist worker, after which
+# `print` is a Python function (test_task_factory_marks_functions_only saw it). Not here.
+os.environ.setdefault("RAY_TQDM_PATCH_PRINT", "0")
 
 
 def _file(item: pytest.Item) -> str:
