@@ -25,6 +25,7 @@ from vlmrl_cli.analysis.learning_profile import TargetProfile, paper_baseline, s
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.tasks.base import Task, TaskLookup
+from vlmrl_cli.tasks.capabilities import PaperTask
 from vlmrl_cli.tasks.registry import paper_task
 from vlmrl_cli.training.config import RunConfig, once, resolve
 from vlmrl_cli.training.overrides import dotted, nest, parse_assignment, parse_values
@@ -196,11 +197,15 @@ def calibrate_config(regimes: tuple[Regime, ...], **settings: Any) -> CalibrateC
     return CalibrateConfig(regimes, **settings)
 
 
-def papers_baseline() -> TargetProfile:
-    """The paper's baseline profile (its task's Table 2, ``PaperTask.reported``)."""
+def _papers() -> PaperTask:
     paper = paper_task().paper
     assert paper is not None  # paper_task() is the task that has one
-    return paper_baseline(paper.reported)
+    return paper
+
+
+def papers_baseline() -> TargetProfile:
+    """The paper's baseline profile (its task's Table 2, ``PaperTask.reported``)."""
+    return paper_baseline(_papers().reported)
 
 
 def calibration_target(run: RunConfig) -> TargetProfile:
@@ -210,9 +215,7 @@ def calibration_target(run: RunConfig) -> TargetProfile:
     task = run.task_plugin
     if task.paper is not None:
         return paper_baseline(task.paper.reported)
-    paper = paper_task().paper
-    assert paper is not None
-    return scaled_target(task.thresholds, run.budget, paper_baseline(paper.reported), paper.budget)
+    return scaled_target(task.thresholds, run.budget, papers_baseline(), _papers().budget)
 
 
 def _label(point: Mapping[str, Any]) -> str:
