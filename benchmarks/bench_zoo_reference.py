@@ -18,8 +18,8 @@ Runs trained elsewhere count when their export is imported first (``vlmrl import
 zoo-reference-TASK --tracking-uri sqlite:///STORE/zoo-reference.db``): only runs of the zoo preset's
 config hash are read.
 
-Usage: python benchmarks/bench_zoo_reference.py [--seeds 3] [--workers 1] [--store DIR] [--tasks a,b]
-       [--markdown FILE]   (also writes the table as markdown, with the date and the CPU)
+Usage: python benchmarks/bench_zoo_reference.py [--seeds 3] [--seeds-for TASK=N ...] [--workers 1] [--store DIR]
+       [--tasks a,b] [--markdown FILE]   (also writes the table as markdown, with the date and the CPU)
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats as sps
 
+from vlmrl_cli.analysis.stats import wilson_ci
 from vlmrl_cli.core.numeric_pin import cpu_model
 from vlmrl_cli.core.provenance import cpu_paths
 from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
@@ -82,8 +83,10 @@ class Row:
             if hi - lo <= WIDE * (z_hi - z_lo):
                 return "met"
             inside = sum(z_lo <= x <= z_hi for x in self.scores)
+            share = wilson_ci(inside, len(self.scores))
             return (f"cannot tell (our interval is {(hi - lo) / (z_hi - z_lo):.0f}x as wide as the zoo's; "
-                    f"{inside}/{len(self.scores)} seeds inside the zoo's interval)")
+                    f"{inside}/{len(self.scores)} seeds inside the zoo's interval, "
+                    f"{share.value:.0%} [{share.low:.0%}, {share.high:.0%}] Wilson)")
         gap = z_lo - hi if hi < z_lo else lo - z_hi
         return f"not met ({'below' if hi < z_lo else 'above'} the zoo's interval by {gap:.3g})"
 
@@ -139,9 +142,24 @@ def table(rows: list[Row]) -> list[str]:
     return lines
 
 
+def seed_counts(pairs: list[str], tasks: list[str]) -> dict[str, int]:
+    """``["task=N", ...]`` -> {task: N}, refusing a task not benchmarked or a count below 1."""
+    out: dict[str, int] = {}
+    for pair in pairs:
+        name, sep, count = pair.partition("=")
+        if not sep or not count.isdigit() or int(count) < 1:
+            raise SystemExit(f"--seeds-for {pair!r}: expected TASK=N with N >= 1")
+        if name not in tasks:
+            raise SystemExit(f"--seeds-for {pair!r}: {name!r} is not among --tasks ({', '.join(tasks)})")
+        out[name] = int(count)
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, default=3, help="seeds per task (0..N-1)")
+    parser.add_argument("--seeds-for", action="append", default=[], metavar="TASK=N",
+                        help="seeds for one task instead of --seeds (repeatable)")
     parser.add_argument("--workers", type=int, default=1, help="worker processes")
     parser.add_argument("--store", type=Path, default=None, help="folder of the resumable MLflow store "
                         "(default: a temporary one)")
@@ -150,9 +168,10 @@ def main() -> None:
     args = parser.parse_args()
     store = args.store or Path(tempfile.mkdtemp(prefix="vlmrl-zoo-"))
     store.mkdir(parents=True, exist_ok=True)
+    seeds_for = seed_counts(args.seeds_for, args.tasks.split(","))
     rows = []
     for name in args.tasks.split(","):
-        rows.append(bench(name, args.seeds, args.workers, store))
+        rows.append(bench(name, seeds_for.get(name, args.seeds), args.workers, store))
         print(f"{name}: {rows[-1].verdict}", flush=True)
     lines = [f"Zoo references, measured {dt.date.today().isoformat()} on {cpu_line()}.", "",
              f"Reference: {SOURCE}. Ours: the baseline arm under each task's `zoo` preset at its budget, detached "
