@@ -107,6 +107,18 @@ def test_power_matches_the_guides_figures() -> None:
     assert math.isnan(censored.detectable_speedup(0.2, 1, 10))
 
 
+@settings(max_examples=15, deadline=None)
+@given(st.integers(0, 9), st.integers(5, 12))
+def test_the_detectable_reliability_is_the_smallest_with_power(k: int, n: int) -> None:
+    p_b = k / 10
+    found = censored.detectable_reliability(p_b, n)
+    if found is None:
+        assert censored.fisher_power(1.0, p_b, n) < 0.8
+        return
+    assert p_b < found <= 1.0 and censored.fisher_power(found, p_b, n) >= 0.8
+    assert censored.fisher_power(round(found - 0.01, 2), p_b, n) < 0.8 or round(found - 0.01, 2) <= p_b
+
+
 def test_learning_curve_area_weighs_steps() -> None:
     assert censored.learning_curve_area([100, 300], [-200.0, -100.0], [100, 200], 1000) == pytest.approx(
         (-200 * 100 - 100 * 200) / 300)

@@ -133,5 +133,15 @@ def test_no_hacking_answer_without_every_arm() -> None:
 def test_a_partial_family_says_the_finished_one_is_larger() -> None:
     row = {"regime": "zoo", "seeds": 10}
     lines = verdicts.summary([row], pd.DataFrame(), -130.0, 0.05, "zoo", planned=15)
-    assert "the finished study's family holds 15" in lines[0]
+    assert "the finished study's family holds 15" in lines[0] and "15 not measured yet" in lines[0]
     assert "finished study's family" not in verdicts.summary([row], pd.DataFrame(), -130.0, 0.05, "zoo")[0]
+
+
+def test_a_comparison_without_a_test_is_not_called_unmeasured() -> None:
+    rows, controls = _rows()  # one map pair where neither arm reached: measured, but no test
+    lines = verdicts.summary(rows, pd.DataFrame(), -130.0, 0.05, "paper", controls, planned=6)
+    assert verdicts.untestable(rows, controls) == 1
+    assert "1 of them have no test" in lines[0]
+    assert "not measured yet" not in lines[0]
+    assert "not measured yet" in verdicts.summary(rows, pd.DataFrame(), -130.0, 0.05, "paper", controls,
+                                                   planned=8)[0]

@@ -420,6 +420,27 @@ def fisher_power(p_a: float, p_b: float, n: int, alpha: float = 0.05) -> float:
     return float(total)
 
 
+def detectable_reliability(p_b: float, n: int, alpha: float = 0.05, power: float = 0.8) -> float | None:
+    """The smallest reliability (on a 1% grid) that a two-sided Fisher exact test at ``alpha`` tells
+    from ``p_b`` with ``power``, at ``n`` seeds per arm; None when not even 100% is detected. Found by
+    bisection: above ``p_b`` the power grows with the other arm's reliability.
+
+    Example:
+        >>> detectable_reliability(0.0, 10), detectable_reliability(0.6, 10)
+        (0.59, None)
+    """
+    lo, hi = math.floor(100 * p_b) + 1, 100  # percent
+    if lo > hi or fisher_power(hi / 100, p_b, n, alpha) < power:
+        return None
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if fisher_power(mid / 100, p_b, n, alpha) >= power:
+            hi = mid
+        else:
+            lo = mid + 1
+    return hi / 100
+
+
 def seeds_for_reliability(p_a: float, p_b: float, alpha: float = 0.05, power: float = 0.8,
                           max_n: int = 200) -> int | None:
     """The fewest seeds per arm whose Fisher test reaches ``power`` for ``p_a`` vs ``p_b`` (None past ``max_n``).

@@ -261,6 +261,37 @@ def family_size(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[
     return sum(_made(tables_[t][i], k) for t, i, k in family_keys(map_rows, control_rows, registry))
 
 
+def untestable(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[str, Any]],
+               registry: Mapping[str, ArmSpec] = ARMS) -> int:
+    """How many of the family's comparisons were measured but have no test: every seed of both arms
+    is a DNF at the budget, so they cannot reject and are left out of the adjustment."""
+    tables_ = {"map": map_rows, "control": control_rows}
+    keys = family_keys(map_rows, control_rows, registry)
+    return sum(tables_[t][i].get(f"{k}.verdict") == NEITHER for t, i, k in keys)
+
+
+def _partial_family(planned: int, size: int, no_test: int) -> str:
+    """What the summary says when the family adjusted (``size`` comparisons) is smaller than the
+    ``planned`` one: ``no_test`` comparisons measured without a test, the rest not measured yet.
+
+    Example:
+        >>> _partial_family(15, 6, 9)[:67]
+        " (the finished study's family holds 15: 9 of them have no test, as "
+        >>> 'not measured yet' in _partial_family(15, 11, 1), _partial_family(15, 15, 0)
+        (True, '')
+    """
+    if planned <= size:
+        return ""
+    parts = []
+    if no_test:
+        parts.append(f"{no_test} of them have no test, as every seed of both arms is a DNF at the budget: they "
+                     "cannot reject and are not adjusted for")
+    if planned - size > no_test:
+        parts.append(f"{planned - size - no_test} not measured yet, so these adjustments are less strict than the "
+                     "finished study's will be")
+    return f" (the finished study's family holds {planned}: " + "; ".join(parts) + ")"
+
+
 def format_speedup(row: dict[str, Any], key: str) -> str:
     """``1.40x [1.10, 1.80], p = 0.01 (adj. 0.05); log-rank p = 0.02 (adj. 0.08) (faster)`` from a
     map row; a note where the rank test and the log-rank disagree after adjustment. Where neither arm
@@ -395,8 +426,7 @@ def summary(rows: Sequence[dict[str, Any]], points: pd.DataFrame, top: float, al
     (saying which way it leans). ``hacking``: each regime's ``hacking_answer``; ``planned``: the
     family the finished study will hold (the power line's), said when fewer were measured."""
     size = family_size(rows, control_rows, registry)
-    partial = (f" (the finished study's family holds {planned}: with {planned - size} not measured yet, these "
-               "adjustments are less strict than the finished study's will be)" if adjust != "none" and planned > size
+    partial = (_partial_family(planned, size, untestable(rows, control_rows, registry)) if adjust != "none"
                else "")
     lines = [f"- Verdicts on steps to {top:g}: {multiplicity.family_line(adjust, size, FAMILY_WHAT)}{partial}. "
              "Faster/slower "
