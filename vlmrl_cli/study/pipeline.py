@@ -332,7 +332,7 @@ def _reliability_power(rate: float, n: int, alpha: float) -> str:
     from vlmrl_cli.analysis import censored
 
     found = censored.detectable_reliability(rate, n, alpha)
-    what = f"{100 * found:.0f}% or more" if found is not None else "not even 100%"
+    what = f"{100 * found:.0f}% or more" if found is not None else "no reliability up to 100%"
     return (f"; in reliability, Fisher's exact test (alpha {alpha:g}, unadjusted) detects {what} against its "
             f"{100 * rate:.0f}% at {n} seeds per arm")
 
