@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -254,20 +254,24 @@ def adjust_family(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dic
     return rows["map"], rows["control"]
 
 
+def _count(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[str, Any]],
+           registry: Mapping[str, ArmSpec], keep: Callable[[dict[str, Any], str], bool]) -> int:
+    """How many of the family's comparisons (``family_keys``) ``keep`` accepts."""
+    tables_ = {"map": map_rows, "control": control_rows}
+    return sum(keep(tables_[t][i], k) for t, i, k in family_keys(map_rows, control_rows, registry))
+
+
 def family_size(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[str, Any]],
                 registry: Mapping[str, ArmSpec] = ARMS) -> int:
     """How many comparisons the study's family holds (those made)."""
-    tables_ = {"map": map_rows, "control": control_rows}
-    return sum(_made(tables_[t][i], k) for t, i, k in family_keys(map_rows, control_rows, registry))
+    return _count(map_rows, control_rows, registry, _made)
 
 
 def untestable(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[str, Any]],
                registry: Mapping[str, ArmSpec] = ARMS) -> int:
     """How many of the family's comparisons were measured but have no test: every seed of both arms
     is a DNF at the budget, so they cannot reject and are left out of the adjustment."""
-    tables_ = {"map": map_rows, "control": control_rows}
-    keys = family_keys(map_rows, control_rows, registry)
-    return sum(tables_[t][i].get(f"{k}.verdict") == NEITHER for t, i, k in keys)
+    return _count(map_rows, control_rows, registry, lambda row, key: row.get(f"{key}.verdict") == NEITHER)
 
 
 def _partial_family(planned: int, size: int, no_test: int) -> str:
