@@ -36,6 +36,20 @@ def trace(arm: str, env: dict[str, str], pinned: bool) -> dict:  # type: ignore[
     return json.loads(out.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
 
 
+def cpu_flags(cpuinfo: str = "/proc/cpuinfo") -> frozenset[str]:
+    """The first CPU's feature flags (empty where the file is missing or has no flags line)."""
+    try:
+        with open(cpuinfo, encoding="utf-8") as f:
+            for line in f:
+                if line.startswith("flags"):
+                    return frozenset(line.partition(":")[2].split())
+    except OSError:
+        pass
+    return frozenset()
+
+
+# what torch's avx512 kernels need (aten/src/ATen/native/DispatchStub.cpp: AVX512F, BW, VL, DQ)
+AVX512 = frozenset({"avx512f", "avx512bw", "avx512vl", "avx512dq"})
 ALL_NUMPY_TARGETS = "X86_V3 X86_V4 AVX512_ICL AVX512_SPR"
 OVERRIDES = {
     "mkl-avx2": {"MKL_ENABLE_INSTRUCTIONS": "AVX2"},
@@ -45,3 +59,5 @@ OVERRIDES = {
     "numpy-baseline": {"NPY_DISABLE_CPU_FEATURES": ALL_NUMPY_TARGETS},
     "openblas-prescott": {"OPENBLAS_CORETYPE": "Prescott"},
 }
+# an override that only a CPU with these flags can run (forcing it elsewhere dies with SIGILL)
+NEEDS = {"aten-avx512": AVX512}
