@@ -9,7 +9,7 @@ import subprocess
 import sys
 
 from tests.training.test_pinned_returns import STEPS
-from vlmrl_cli.core.numeric_pin import PIN_VARIABLES
+from vlmrl_cli.core.numeric_pin import PIN_VARIABLES, cpuinfo_fields, read_cpuinfo
 
 _PROBE = """
 import os, sys
@@ -38,14 +38,7 @@ def trace(arm: str, env: dict[str, str], pinned: bool) -> dict:  # type: ignore[
 
 def cpu_flags(cpuinfo: str = "/proc/cpuinfo") -> frozenset[str]:
     """The first CPU's feature flags (empty where the file is missing or has no flags line)."""
-    try:
-        with open(cpuinfo, encoding="utf-8") as f:
-            for line in f:
-                if line.startswith("flags"):
-                    return frozenset(line.partition(":")[2].split())
-    except OSError:
-        pass
-    return frozenset()
+    return frozenset(cpuinfo_fields(read_cpuinfo(cpuinfo)).get("flags", "").split())
 
 
 # what torch's avx512 kernels need (aten/src/ATen/native/DispatchStub.cpp: AVX512F, BW, VL, DQ)

@@ -177,11 +177,30 @@ def cpu_model() -> str:
     """The CPU's model name with its vendor, family, model and stepping (``/proc/cpuinfo``), or
     the platform's processor string: a hypervisor may show only ``AMD EPYC`` as the name, which
     the family tells apart (25 is Zen 3/4, 26 is Zen 5)."""
+    return describe_cpuinfo(read_cpuinfo()) or platform.processor() or platform.machine() or "unknown"
+
+
+def read_cpuinfo(path: str = "/proc/cpuinfo") -> str:
+    """The text of ``/proc/cpuinfo`` ("" where it cannot be read)."""
     try:
-        text = Path("/proc/cpuinfo").read_text(encoding="utf-8", errors="replace")
+        return Path(path).read_text(encoding="utf-8", errors="replace")
     except OSError:
-        text = ""
-    return describe_cpuinfo(text) or platform.processor() or platform.machine() or "unknown"
+        return ""
+
+
+def cpuinfo_fields(text: str) -> dict[str, str]:
+    r"""The first processor's ``key: value`` fields of a ``/proc/cpuinfo`` text (pure).
+
+    Example:
+        >>> cpuinfo_fields("model name\t: AMD EPYC\nflags\t\t: fpu avx2\n\nmodel name\t: other\n")
+        {'model name': 'AMD EPYC', 'flags': 'fpu avx2'}
+    """
+    fields: dict[str, str] = {}
+    for line in text.split("\n\n", 1)[0].splitlines():
+        key, sep, value = line.partition(":")
+        if sep:
+            fields.setdefault(key.strip(), value.strip())
+    return fields
 
 
 def describe_cpuinfo(text: str) -> str | None:
@@ -194,11 +213,7 @@ def describe_cpuinfo(text: str) -> str | None:
         >>> describe_cpuinfo("model name : Intel Xeon"), describe_cpuinfo("flags : avx2")
         ('Intel Xeon', None)
     """
-    fields: dict[str, str] = {}
-    for line in text.split("\n\n", 1)[0].splitlines():
-        key, sep, value = line.partition(":")
-        if sep:
-            fields.setdefault(key.strip(), value.strip())
+    fields = cpuinfo_fields(text)
     name = fields.get("model name")
     if not name:
         return None
