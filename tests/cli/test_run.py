@@ -36,11 +36,17 @@ def _children(runs: list) -> list:  # type: ignore[type-arg]
 
 
 @pytest.fixture(scope="module")
-def swept(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def swept_with_output(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """One sweep that the tests of this file read (none changes its experiment): its root, its output."""
     root = tmp_path_factory.mktemp("sweep")
     result = _run(root, "--arms", "baseline,hybrid", "--seeds", "2")
     assert result.exit_code == 0, result.output + result.stderr
-    return root
+    return root, result.output
+
+
+@pytest.fixture(scope="module")
+def swept(swept_with_output: tuple[Path, str]) -> Path:
+    return swept_with_output[0]
 
 
 def test_one_parent_and_four_finished_children_with_provenance(swept: Path) -> None:
@@ -95,14 +101,16 @@ def test_a_run_left_running_is_marked_failed_and_redone(tmp_path: Path) -> None:
     assert sorted(r.info.status for r in children.values()) == ["FAILED", "FINISHED"]
 
 
-def test_same_config_and_seed_give_identical_native_returns(tmp_path: Path) -> None:
-    for name in ("a", "b"):
-        result = _run(tmp_path, "--arms", "hybrid", "--seed-list", "7", "--workers", "1", "--experiment", name)
-        assert result.exit_code == 0, result.output + result.stderr
-    client = MlflowClient(tracking_uri=_uri(tmp_path))
+def test_same_config_and_seed_give_identical_native_returns(swept: Path) -> None:
+    """The sweep's hybrid seed 1 (trained beside three other jobs by a pool of two workers) and the
+    same job alone in a fresh one-worker pool give the same curve."""
+    result = _run(swept, "--arms", "hybrid", "--seed-list", "1", "--workers", "1", "--experiment", "alone")
+    assert result.exit_code == 0, result.output + result.stderr
+    client = MlflowClient(tracking_uri=_uri(swept))
     returns = []
-    for name in ("a", "b"):
-        (run,) = _children(_runs(tmp_path, name))
+    for runs in (_runs(swept), _runs(swept, "alone")):
+        (run,) = [r for r in _children(runs) if (r.data.tags["vlmrl.arm"], r.data.tags["vlmrl.seed"]) == (
+            "hybrid", "1")]
         history = client.get_metric_history(run.info.run_id, "episode/native_return")
         returns.append([(m.step, m.value) for m in sorted(history, key=lambda m: (m.step, m.timestamp))])
     assert returns[0] and returns[0] == returns[1]
@@ -157,14 +165,14 @@ def test_config_file_sets_knobs_and_flags_override_it(tmp_path: Path) -> None:
     assert run.data.tags["vlmrl.seed"] == "5" and run.data.params["timesteps"] == "256"
 
 
-def test_the_run_ends_with_its_child_runs_and_the_dry_run_lists_them_again(tmp_path: Path) -> None:
-    result = _run(tmp_path, "--arms", "baseline", "--seeds", "2", "--workers", "1")
-    assert result.exit_code == 0, result.output + result.stderr
-    ids = {r.data.tags["vlmrl.seed"]: r.info.run_id for r in _children(_runs(tmp_path))}
-    assert "training runs (vlmrl evaluate RUN_ID):" in result.output
-    for seed, run_id in ids.items():
-        assert any(line.split()[:3] == ["baseline", seed, run_id] for line in result.output.splitlines()), seed
-    dry = _run(tmp_path, "--arms", "baseline", "--seeds", "2", "--dry-run")
+def test_the_run_ends_with_its_child_runs_and_the_dry_run_lists_them_again(
+        swept_with_output: tuple[Path, str]) -> None:
+    root, output = swept_with_output
+    ids = {(r.data.tags["vlmrl.arm"], r.data.tags["vlmrl.seed"]): r.info.run_id for r in _children(_runs(root))}
+    assert len(ids) == 4 and "training runs (vlmrl evaluate RUN_ID):" in output
+    for (arm, seed), run_id in ids.items():
+        assert any(line.split()[:3] == [arm, seed, run_id] for line in output.splitlines()), (arm, seed)
+    dry = _run(root, "--arms", "baseline,hybrid", "--seeds", "2", "--dry-run")
     assert dry.exit_code == 0 and all(run_id in dry.output for run_id in ids.values()), dry.output
 
 

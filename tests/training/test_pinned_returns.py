@@ -6,8 +6,12 @@ conftest before torch loads) makes every x86-64-v3 CPU compute the same path, so
 whose digests differ fails here and prints its CPU, instead of skipping. The digests were
 printed on the pinned path by an AMD EPYC (numpy ``X86_V3,X86_V4,AVX512_ICL``, OpenBLAS
 SkylakeX, torch run at ``AVX2``) on 2026-12-03, with Adam's multi-tensor update
-(``training.model.OPTIMIZER_KWARGS``); ``test_cpu_paths.py`` shows that the other
-code paths this machine can be forced onto give them too, and that without the pin they move.
+(``training.model.OPTIMIZER_KWARGS``). The digests of the trained weights
+(``training.trace.weights_digest``), which part at the first update computed another way, were
+added on 2026-12-07 by an AMD EPYC without AVX-512 (Zen 3; numpy ``X86_V3``, OpenBLAS Haswell,
+torch at ``AVX2``), where the returns digests held as printed in 2026-12.
+``test_cpu_paths.py`` shows that the other code paths this machine can be forced onto give the
+same numbers, and that without the pin they move.
 """
 
 from __future__ import annotations
@@ -23,20 +27,22 @@ from vlmrl_cli.core.provenance import cpu_paths
 from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.presets import preset_of
-from vlmrl_cli.training.trace import native_returns
+from vlmrl_cli.training.trace import TrainTrace, train_trace
 from vlmrl_cli.vlm.config import VLMConfig
 
 pytestmark = pytest.mark.slow  # trains
 
-# Long enough for the unpinned path to part from the pinned one (plain PPO: at episode 185, about
-# 33,000 steps, on this machine), so that the table fails without the pin.
+# Long enough for the unpinned returns to part from the pinned ones (plain PPO: at episode 185, about
+# 33,000 steps, on this machine), so that the returns alone fail without the pin; the weights part at
+# once. Episodes reach the flag well before the end, so success paths (lock, cache) run too.
 STEPS = 50_000
-#: arm -> (episodes completed, sha256 of the JSON list of native returns, first 16 hex)
-PINNED: dict[str, tuple[int, str]] = {
-    "baseline": (317, "80bd6008a9a0c8b2"),
-    "hybrid": (360, "d7883a803a0580b9"),
-    "hybrid-no-lock": (356, "e1fb4a6578cb53ad"),
-    "semantic": (312, "fc2a4ce4596e9318"),
+#: arm -> (episodes completed, sha256 of the JSON list of native returns, sha256 of the trained
+#: weights; first 16 hex each)
+PINNED: dict[str, tuple[int, str, str]] = {
+    "baseline": (317, "80bd6008a9a0c8b2", "43a75d25c55468ee"),
+    "hybrid": (360, "d7883a803a0580b9", "764a55c9ba8f5fa5"),
+    "hybrid-no-lock": (356, "e1fb4a6578cb53ad", "2de9b6e08570265c"),
+    "semantic": (312, "fc2a4ce4596e9318", "5e2ee5b9d606ca74"),
 }
 
 
@@ -45,10 +51,11 @@ def digest(returns: list[float]) -> tuple[int, str]:
     return len(returns), hashlib.sha256(json.dumps(returns).encode()).hexdigest()[:16]
 
 
-def short_run(arm: str, steps: int = STEPS) -> list[float]:
+def short_trace(arm: str, steps: int = STEPS) -> TrainTrace:
+    """``arm`` trained for ``steps`` steps (paper preset, seed 0, no VLM cache), in this process."""
     ppo = dataclasses.replace(preset_of(get_task("mountain-car"), "paper"), timesteps=steps)
     cfg = RunConfig(arms=(arm,), seeds=(0,), preset="paper", ppo=ppo, workers=1, vlm=VLMConfig(use_cache=False))
-    return native_returns(cfg.jobs()[0])
+    return train_trace(cfg.jobs()[0])
 
 
 def test_this_process_computes_on_the_pinned_path() -> None:
@@ -59,7 +66,8 @@ def test_this_process_computes_on_the_pinned_path() -> None:
 
 @pytest.mark.parametrize("arm", list(PINNED))
 def test_a_short_run_gives_the_pinned_learning_curve(arm: str) -> None:
-    got = digest(short_run(arm))
+    trace = short_trace(arm)
+    got = (*digest(trace.native_returns), trace.weights_sha256[:16])
     assert got == PINNED[arm], (
         f"{arm}: {got} is not the pinned {PINNED[arm]} on this machine: CPU {pin_record()['cpu.model']}, "
         f"code paths {cpu_paths()}, pin {pin_record()['pin.env']} (user: {pin_record()['pin.user']})")

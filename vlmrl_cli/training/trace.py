@@ -4,18 +4,52 @@
 arguments, same seed, one torch thread: the thread count is part of the numeric path) and
 returns the native return of every completed episode, in order.
 It is the probe for determinism checks: two code paths that give the same list trained the
-same agent. Nothing is written to MLflow and no evaluation is run.
+same agent. ``train_trace(job)`` also gives a digest of the trained policy's parameters, bit for
+bit: two numeric paths that part in the last bit of one weight part there, long before their
+episodes do (chaotic divergence takes tens of thousands of steps to reach the returns).
+Nothing is written to MLflow and no evaluation is run.
 """
 
 from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from typing import Any
 
 from vlmrl_cli.tracking import schema
 from vlmrl_cli.training.callbacks import EpisodeTracker
 from vlmrl_cli.training.config import TrainJob
 
 
-def native_returns(job: TrainJob) -> list[float]:
-    """Native (unshaped) returns of the episodes completed while training ``job``."""
+@dataclass(frozen=True)
+class TrainTrace:
+    """What a training run leaves to compare: its learning curve and its weights."""
+
+    native_returns: list[float]
+    weights_sha256: str  # of every parameter tensor's bytes, in the state dict's order
+
+
+def weights_digest(state_dict: Any) -> str:
+    """sha256 (hex) over a torch state dict's names, dtypes, shapes and raw bytes, in order.
+
+    Example:
+        >>> import torch
+        >>> a = {"w": torch.tensor([1.0, 2.0])}
+        >>> weights_digest(a) == weights_digest({"w": torch.tensor([1.0, 2.0])})
+        True
+        >>> weights_digest(a) == weights_digest({"w": torch.tensor([1.0, 2.0000002])})
+        False
+    """
+    h = hashlib.sha256()
+    for name, tensor in state_dict.items():
+        t = tensor.detach().cpu().contiguous()
+        h.update(f"{name}:{t.dtype}:{tuple(t.shape)};".encode())
+        h.update(t.numpy().tobytes())
+    return h.hexdigest()
+
+
+def train_trace(job: TrainJob) -> TrainTrace:
+    """Train ``job`` as a worker does; its native returns in episode order and its weights' digest."""
     import torch
 
     from vlmrl_cli.training.envs import make_train_env
@@ -30,7 +64,13 @@ def native_returns(job: TrainJob) -> list[float]:
         model = make_model(job.ppo, env, job.seed)
         tracker = EpisodeTracker(job.name, job.timesteps, success=task.success)
         model.learn(total_timesteps=job.timesteps, callback=tracker)
-        return [e[schema.METRIC_NATIVE_RETURN] for e in tracker.episodes]
+        return TrainTrace([e[schema.METRIC_NATIVE_RETURN] for e in tracker.episodes],
+                          weights_digest(model.policy.state_dict()))
     finally:
         if client is not None:
             client.close()
+
+
+def native_returns(job: TrainJob) -> list[float]:
+    """Native (unshaped) returns of the episodes completed while training ``job``."""
+    return train_trace(job).native_returns
