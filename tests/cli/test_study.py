@@ -70,6 +70,8 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     runs = client.search_runs([exp.experiment_id], max_results=1000)
     train = [r for r in runs if r.data.tags["vlmrl.kind"] == "train"]
     assert len(train) == 14  # 2 regimes x 2 arms, 1 more profile, semantic and placebo at alpha 25 (x 2 seeds)
+    # its five sweeps share one pool: with --workers 1, one worker process trained every run
+    assert len({r.data.tags["vlmrl.owner"] for r in train}) == 1
     assert {r.data.tags.get("vlmrl.sim_profile") for r in train if r.data.tags["vlmrl.arm"] == "hybrid"} == {
         "default", "llava-table1"}
     (study,) = [r for r in runs if r.data.tags["vlmrl.kind"] == "study"]

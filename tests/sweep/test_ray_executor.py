@@ -1,5 +1,6 @@
-"""The Ray executor on a real local Ray instance (2 CPUs, loopback only): same numbers as the
-local pool, and a worker killed mid-run is retried without a second FINISHED run."""
+"""The Ray executor on a real local Ray instance (2 CPUs, loopback only): through a tracking
+server, the numbers a local worker gives, and a worker killed mid-run is retried without a second
+FINISHED run."""
 
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.events import ProgressEvent
 from vlmrl_cli.training.presets import preset_of
+from vlmrl_cli.training.trace import native_returns
 
 pytestmark = pytest.mark.slow  # trains, starts Ray or servers, or builds the wheel
 
@@ -60,22 +62,6 @@ def _histories(uri: str, experiment: str) -> dict[tuple[str, str], list[tuple[in
     return out
 
 
-def test_ray_gives_the_same_histories_as_the_local_pool(tmp_path: Path, local_ray: None) -> None:
-    uri = f"sqlite:///{tmp_path / 'm.db'}"
-    base = RunConfig(arms=("baseline", "hybrid"), seeds=(0, 1), preset="smoke", workers=2, tracking_uri=uri)
-    reporter = _Recording()
-    ray_summary = run_sweep(dataclasses.replace(base, executor="ray", experiment="ray"), reporter)
-    local_summary = run_sweep(dataclasses.replace(base, executor="local", experiment="local"), SilentReporter())
-    assert len(ray_summary.finished) == len(local_summary.finished) == 4
-    assert reporter.events  # progress came back from the Ray tasks
-    ray_h, local_h = _histories(uri, "ray"), _histories(uri, "local")
-    assert set(ray_h) == {("baseline", "0"), ("baseline", "1"), ("hybrid", "0"), ("hybrid", "1")}
-    assert all(ray_h[k] for k in ray_h)
-    assert ray_h == local_h
-    sweep = MlflowClient(tracking_uri=uri).get_run(str(ray_summary.parent_run_id))
-    assert sweep.data.tags["vlmrl.executor"] == "ray"
-
-
 def test_a_killed_ray_worker_is_retried_and_finishes_once(tmp_path: Path, local_ray: None) -> None:
     uri = f"sqlite:///{tmp_path / 'm.db'}"
     ppo = dataclasses.replace(preset_of(get_task("mountain-car"), "smoke"), timesteps=30_000)
@@ -110,8 +96,12 @@ def test_a_killed_ray_worker_is_retried_and_finishes_once(tmp_path: Path, local_
     assert "superseded" in client.get_run(killed.info.run_id).data.tags["vlmrl.error"]
 
 
-def test_a_ray_sweep_through_a_loopback_tracking_server(tmp_path: Path, local_ray: None) -> None:
-    """Workers write through ``mlflow server``; artifacts go up through it and come back."""
+def test_a_ray_sweep_through_a_loopback_tracking_server_trains_what_a_local_worker_does(
+        tmp_path: Path, local_ray: None) -> None:
+    """Workers write through ``mlflow server``; artifacts go up through it and come back; progress
+    comes back from the Ray tasks; and every run's curve is the one the worker's own training path
+    gives in this process (``training.trace``, which ``vlmrl verify`` holds the local pool's runs
+    to: tests/cli/test_verify.py), so Ray trains what the local pool trains."""
     from tests.sweep.tracking_server import TrackingServer
 
     server = TrackingServer(tmp_path)
@@ -119,14 +109,22 @@ def test_a_ray_sweep_through_a_loopback_tracking_server(tmp_path: Path, local_ra
     try:
         cfg = RunConfig(arms=("baseline", "hybrid"), seeds=(0, 1), preset="smoke", workers=2,
                         tracking_uri=server.uri, executor="ray")
-        summary = run_sweep(cfg, SilentReporter())
+        reporter = _Recording()
+        summary = run_sweep(cfg, reporter)
         assert len(summary.finished) == 4 and summary.failed == []
+        assert reporter.events  # progress came back from the Ray tasks
         client = MlflowClient(tracking_uri=server.uri)
+        assert client.get_run(str(summary.parent_run_id)).data.tags["vlmrl.executor"] == "ray"
         for result in summary.finished:
             names = {a.path for a in client.list_artifacts(result.run_id)}
             assert {"model.zip", "config.json"} <= names
         local = client.download_artifacts(summary.finished[0].run_id, "config.json", str(tmp_path))
         assert '"config_hash"' in Path(local).read_text()
         assert (tmp_path / "artifacts").exists()  # stored by the server, not by the workers
+        histories = _histories(server.uri, cfg.experiment)
+        assert set(histories) == {("baseline", "0"), ("baseline", "1"), ("hybrid", "0"), ("hybrid", "1")}
+        for job in cfg.jobs():
+            curve = [native for _, native, _ in histories[(job.arm.name, str(job.seed))]]
+            assert curve and curve == native_returns(job), job.name
     finally:
         server.stop()

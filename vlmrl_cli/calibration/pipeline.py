@@ -29,7 +29,7 @@ from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, flatten, git_commit, package_versions, to_jsonable
 from vlmrl_cli.report import figures
 from vlmrl_cli.report.table2 import threshold_key
-from vlmrl_cli.sweep.runner import JobResult, SweepReporter, run_sweep
+from vlmrl_cli.sweep.runner import JobResult, SharedPool, SweepReporter, run_sweep
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
 from vlmrl_cli.training.config import RunConfig
@@ -85,13 +85,15 @@ def train_regimes(
     regimes: Sequence[Regime], reporter_for: Callable[[Regime], AbstractContextManager[SweepReporter]]
 ) -> tuple[int, list[JobResult]]:
     """Train what is missing of each regime (one resumable sweep each, with a fresh
-    ``reporter_for(regime)``): the number of runs trained now and the failed ones."""
+    ``reporter_for(regime)``, all on one ``SharedPool`` of local workers): the number of runs
+    trained now and the failed ones."""
     trained, failed = 0, []
-    for regime in regimes:
-        with reporter_for(regime) as reporter:
-            summary = run_sweep(regime.run, reporter)
-        trained += len(summary.results)
-        failed += summary.failed
+    with SharedPool() as pool:
+        for regime in regimes:
+            with reporter_for(regime) as reporter:
+                summary = run_sweep(regime.run, reporter, pool=pool)
+            trained += len(summary.results)
+            failed += summary.failed
     return trained, failed
 
 

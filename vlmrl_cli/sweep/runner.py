@@ -23,10 +23,9 @@ from typing import Any, Protocol
 
 from vlmrl_cli.core.provenance import config_hash, flatten
 from vlmrl_cli.shaping.arms import ARMS
-from vlmrl_cli.sweep.executors import Executor, JobFn, LocalExecutor
+from vlmrl_cli.sweep.executors import Executor, JobFn, LocalExecutor, train_job
 from vlmrl_cli.sweep.leases import ACTIVE, Liveness, RunRecord, is_stale, mark_stale
 from vlmrl_cli.sweep.preflight import preflight
-from vlmrl_cli.sweep.worker import train_job
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import RunStatus, terminate
 from vlmrl_cli.training.config import RunConfig, TrainJob
@@ -141,11 +140,53 @@ def make_executor(cfg: RunConfig, n_jobs: int) -> Executor:
     return LocalExecutor(min(cfg.workers, n_jobs))
 
 
+class SharedPool:
+    """One local process pool lent to the successive sweeps of one command (a study's or a
+    calibration's regimes), so that its workers start and import torch and MLflow once, not once
+    per sweep; a worker already trains job after job within a sweep, each from a fresh seed and
+    env. A pool that lost a worker or was stopped is replaced; a sweep with another worker count
+    gets a new pool; a sweep on Ray gets an executor of its own, closed when that sweep ends.
+    Use it as a context manager: it closes the pool at the end, or when a Ctrl-C or an error
+    leaves the command."""
+
+    def __init__(self) -> None:
+        self._local: LocalExecutor | None = None
+        self._workers = 0
+
+    def executor(self, cfg: RunConfig, n_jobs: int) -> Executor:
+        if cfg.executor != "local":
+            return make_executor(cfg, n_jobs)
+        if self._local is None or self._workers != cfg.workers or not self._local.reusable:
+            self.close()
+            # sized for the command, not this sweep: spawned pools start a process per job up to
+            # that size, so a sweep of one job still starts one
+            self._local, self._workers = LocalExecutor(cfg.workers), cfg.workers
+        return self._local
+
+    def release(self, executor: Executor) -> None:
+        """The sweep is done with ``executor``: closed unless it is the shared pool."""
+        if executor is not self._local:
+            executor.close()
+
+    def close(self) -> None:
+        if self._local is not None:
+            self._local.close()
+            self._local = None
+
+    def __enter__(self) -> SharedPool:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
 def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job,
-              checked: bool = False) -> SweepSummary:
+              checked: bool = False, pool: SharedPool | None = None) -> SweepSummary:
     """Validate, plan, train the pending jobs through ``cfg.executor``, record the sweep.
     ``job_fn`` is what each job runs (a benchmark passes a fake trainer); ``checked``: the caller
-    has just run ``preflight(cfg)`` itself (the CLI does, before its header), so it is not run twice."""
+    has just run ``preflight(cfg)`` itself (the CLI does, before its header), so it is not run twice;
+    ``pool``: a ``SharedPool`` that lends the local executor (its owner closes it), else the sweep
+    starts and closes its own."""
     start = time.perf_counter()
     if not checked:
         preflight(cfg)
@@ -165,7 +206,9 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
     if not pending:
         summary.wall_s = time.perf_counter() - start
         return summary
-    executor = make_executor(cfg, len(pending))  # before the parent run: Ray may refuse the store
+    # before the parent run: Ray may refuse the store
+    executor = pool.executor(cfg, len(pending)) if pool is not None else make_executor(cfg, len(pending))
+    release = pool.release if pool is not None else (lambda ex: ex.close())
     status = "FINISHED"
     # The flag handler is installed before the parent run exists and stays installed through the
     # shutdown: a Ctrl-C while the parent is being created or its params logged, while the executor
@@ -183,7 +226,7 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
                 **({schema.TAG_REGIME: cfg.regime} if cfg.regime is not None else {}),
             })
         except BaseException:
-            executor.close()
+            release(executor)
             raise
         summary.parent_run_id = parent.info.run_id
         try:
@@ -208,7 +251,7 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
             status = "KILLED" if status == "KILLED" or interrupted.is_set() else "FAILED"
             raise
         finally:
-            executor.close()
+            release(executor)
             summary.wall_s = time.perf_counter() - start
             store.log_params(client, parent.info.run_id, {"sweep.pending": ",".join(j.name for j in pending)})
             client.log_metric(parent.info.run_id, schema.METRIC_SWEEP_WALL_S, summary.wall_s)
