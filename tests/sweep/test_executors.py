@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import pytest
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.sweep import executors
-from vlmrl_cli.training.config import RunConfig
+from vlmrl_cli.training.config import RunConfig, TrainJob
+from vlmrl_cli.training.events import JobContext, JobResult
 
 
 @pytest.mark.parametrize(("address", "remote"), [
@@ -59,3 +61,34 @@ def test_the_sweep_s_own_process_loads_no_torch() -> None:
             "print(sorted(m for m in ('torch', 'stable_baselines3') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
     assert out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+def _env_job(job: TrainJob, ctx: JobContext) -> JobResult:  # what a worker sees, reported as its run id
+    import signal
+
+    blocked = signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    ignored = signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+    seen = f"{os.environ.get('VLMRL_TEST_PROBE')}|{blocked}|{ignored}|{os.getpid()}"
+    return JobResult(job.name, seen, "FINISHED", 0.0)
+
+
+def _ran(executor: executors.LocalExecutor, job: TrainJob) -> list[str]:
+    executor.submit([job], _env_job, None)  # type: ignore[arg-type]
+    results: list[JobResult] = []
+    while executor.outstanding:
+        results += executor.poll(0.2).results
+    executor.close()
+    return results[0].run_id.split("|")
+
+
+def test_a_forked_worker_sees_the_sweep_s_environment_now_and_never_a_ctrl_c(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Workers fork from a fork server started once per process: each pool's workers still take
+    the environment of the moment the pool is made (not the fork server's), and SIGINT stays
+    blocked and ignored in them (the sweep alone handles a Ctrl-C)."""
+    job = RunConfig(arms=("baseline",), seeds=(0,)).jobs()[0]
+    monkeypatch.setenv("VLMRL_TEST_PROBE", "first")
+    first = _ran(executors.LocalExecutor(1), job)
+    monkeypatch.setenv("VLMRL_TEST_PROBE", "second")
+    second = _ran(executors.LocalExecutor(1), job)
+    assert first[:3] == ["first", "True", "True"] and second[:3] == ["second", "True", "True"]
+    assert first[3] != second[3] and str(os.getpid()) not in (first[3], second[3])

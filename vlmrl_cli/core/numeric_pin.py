@@ -22,8 +22,9 @@ dispatch stops numpy from importing at all.
 
 The pin only works in a process whose libraries have not loaded yet, so it is applied at the
 edges, never on import: the ``vlmrl`` command, ``python -m vlmrl_cli``, the test suite's
-conftest, the scripts and benchmarks call ``apply()`` first; sweep workers inherit it (spawned
-processes copy the environment; Ray workers get it through their ``runtime_env``). A variable
+conftest, the scripts and benchmarks call ``apply()`` first; sweep workers inherit it (local
+workers fork from a fork server that the pinned process starts, and take over its environment;
+``vlmrl verify``'s spawned processes copy it; Ray workers get it through their ``runtime_env``). A variable
 the user set wins, is warned about once (``VLMRL_PIN_USER`` tells child processes which ones
 were the user's), and every run records the values in force (``pin_record``).
 """

@@ -158,8 +158,8 @@ class SharedPool:
             return make_executor(cfg, n_jobs)
         if self._local is None or self._workers != cfg.workers or not self._local.reusable:
             self.close()
-            # sized for the command, not this sweep: spawned pools start a process per job up to
-            # that size, so a sweep of one job still starts one
+            # sized for the command, not this sweep: the pool starts a process per job up to that
+            # size, so a sweep of one job still starts one
             self._local, self._workers = LocalExecutor(cfg.workers), cfg.workers
         return self._local
 
