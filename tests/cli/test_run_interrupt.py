@@ -57,7 +57,7 @@ def _shutting_down(uri: str) -> bool:  # the last training run ended: the sweep 
 
 @pytest.mark.parametrize("executor", EXECUTORS)
 @pytest.mark.parametrize(("moment", "timesteps"), [
-    ("start-up", 200_000), ("training", 200_000), ("shutdown", 3_000),
+    ("start-up", 200_000), ("training", 200_000), ("shutdown", 1_024),
 ])
 def test_ctrl_c_to_the_whole_group_at_any_moment_stops_at_once(tmp_path: Path, executor: list[str], moment: str,
                                                                timesteps: int) -> None:

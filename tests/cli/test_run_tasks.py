@@ -22,8 +22,10 @@ ARMS = ["baseline", "kinematic", "semantic", "hybrid"]
 def test_four_arms_finish_tagged_with_their_task_and_evaluate_draws_the_tasks_captions(tmp_path: Path,
                                                                                       task: str) -> None:
     uri = f"sqlite:///{tmp_path / 'm.db'}"
+    # one evaluation episode per run: MountainCarContinuous's last up to 999 rendered steps
     result = runner.invoke(app, ["run", "--task", task, "--arms", ",".join(ARMS), "--seeds", "1", "--preset", "smoke",
-                                 "--workers", "1", "--tracking-uri", uri, "--cache-path", str(tmp_path / "c.sqlite")])
+                                 "--set", "ppo.eval_episodes=1", "--workers", "1", "--tracking-uri", uri,
+                                 "--cache-path", str(tmp_path / "c.sqlite")])
     assert result.exit_code == 0, result.output
     top = get_task(task).thresholds[-1]
     assert f"task {task}" in result.output and f"steps to {top:g}" in result.output

@@ -133,8 +133,11 @@ class LocalExecutor:
     name = "local"
 
     def __init__(self, workers: int) -> None:
-        ctx = mp.get_context("forkserver")
-        ctx.set_forkserver_preload(list(PRELOAD))  # read when the fork server starts; later calls do nothing
+        if "forkserver" in mp.get_all_start_methods():
+            ctx: Any = mp.get_context("forkserver")
+            ctx.set_forkserver_preload(list(PRELOAD))  # read when the fork server starts; later calls do nothing
+        else:  # Windows has no fork server: spawned workers, each importing for itself
+            ctx = mp.get_context("spawn")
         self._events: Any = ctx.Queue()
         self._stop: Any = ctx.Event()
         self._pool = ProcessPoolExecutor(max_workers=max(1, workers), mp_context=ctx, initializer=init_worker,
