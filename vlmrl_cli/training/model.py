@@ -38,10 +38,13 @@ OPTIMIZER_KWARGS = {"foreach": True}
 
 def make_model(ppo: PPOConfig, env: Any, seed: int) -> Any:
     """A ``PPO("MlpPolicy", env)`` with every knob of ``ppo``, on the CPU, seeded ``seed``, with
-    Adam's multi-tensor update (``OPTIMIZER_KWARGS``)."""
+    Adam's multi-tensor update (``OPTIMIZER_KWARGS``), and a logger that writes nowhere: without one
+    SB3's ``learn()`` makes an empty ``SB3-<date-time>`` folder in the temp folder on every call (a
+    worker replaces it with its MLflow logger; the logger draws no random numbers)."""
     from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import Logger
 
-    return PPO(
+    model = PPO(
         "MlpPolicy",
         env,
         n_steps=ppo.n_steps,
@@ -60,3 +63,5 @@ def make_model(ppo: PPOConfig, env: Any, seed: int) -> Any:
         device="cpu",
         verbose=0,
     )
+    model.set_logger(Logger(folder=None, output_formats=[]))
+    return model
