@@ -3,6 +3,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import socket
+import sqlite3
 import subprocess
 import sys
 from multiprocessing.synchronize import Barrier
@@ -62,21 +63,93 @@ def _connect_at_once(barrier: Barrier, uri: str) -> None:
     store.ensure_experiment(store.connect(uri), "vlmrl")
 
 
-def test_processes_creating_one_fresh_sqlite_store_at_once_all_succeed(tmp_path: Path) -> None:
+@pytest.mark.parametrize("template", [True, False], ids=["from-the-template", "by-mlflow"])
+def test_processes_creating_one_fresh_sqlite_store_at_once_all_succeed(tmp_path: Path, template: bool,
+                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
     # A sweep's workers, a second sweep or `vlmrl report` can open a new mlflow.db together.
     # MLflow migrates a fresh schema without a lock; without ``init_lock`` most of these
     # processes failed ("table experiments already exists", "duplicate column name: step").
+    # Both ways a new store comes about: a copy of the schema template (which the first process
+    # builds, under a lock of its own) and, where the user's cache folder cannot be made
+    # (platformdirs reads XDG_CACHE_HOME on Linux), MLflow's migrations in the first process.
+    (tmp_path / "not-a-folder").write_text("")
+    cache = tmp_path / ("cache" if template else "not-a-folder")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(cache))
     uri = f"sqlite:///{tmp_path}/mlflow.db"
     ctx = multiprocessing.get_context("spawn")
-    barrier = ctx.Barrier(4)
-    procs = [ctx.Process(target=_connect_at_once, args=(barrier, uri)) for _ in range(4)]
+    barrier = ctx.Barrier(3)
+    procs = [ctx.Process(target=_connect_at_once, args=(barrier, uri)) for _ in range(3)]
     for proc in procs:
         proc.start()
     for proc in procs:
         proc.join(timeout=240)
-    assert [proc.exitcode for proc in procs] == [0, 0, 0, 0]
+    assert [proc.exitcode for proc in procs] == [0, 0, 0]
     client = store.connect(uri)
     assert {e.name for e in client.search_experiments()} == {"vlmrl", "Default"}
+
+
+def _schema(db: Path) -> tuple[set[tuple[object, ...]], list[tuple[str, ...]], list[tuple[object, ...]]]:
+    """A store's tables and indexes, schema revision and experiments. A statement is compared as the
+    set of its lines: MLflow's own migrations order a table's constraints differently from one
+    process to the next."""
+    con = sqlite3.connect(db)
+    try:
+        return ({(kind, name, table, frozenset(line.strip().rstrip(",") for line in (sql or "").splitlines()))
+                 for kind, name, table, sql in con.execute("select type, name, tbl_name, sql from sqlite_master")},
+                con.execute("select * from alembic_version").fetchall(),
+                con.execute("select experiment_id, name, artifact_location, lifecycle_stage "
+                            "from experiments").fetchall())
+    finally:
+        con.close()
+
+
+@pytest.fixture
+def user_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """The user's cache folder that ``store.schema_template`` uses, moved under ``tmp_path``."""
+    import platformdirs
+
+    folder = tmp_path / "cache" / "vlmrl"
+    monkeypatch.setattr(platformdirs, "user_cache_path", lambda *args, **kwargs: folder)
+    return folder
+
+
+def test_a_new_store_is_the_schema_mlflow_makes_copied_from_the_template(
+        tmp_path: Path, user_cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from mlflow.tracking import MlflowClient
+
+    monkeypatch.chdir(tmp_path)  # the Default experiment's artifact root is the working folder's
+    MlflowClient(tracking_uri=f"sqlite:///{tmp_path}/own.db").search_experiments()
+    template = store.schema_template()
+    assert template is not None and template.parent == user_cache
+    store.connect(f"sqlite:///{tmp_path}/copy.db")
+    assert _schema(tmp_path / "copy.db") == _schema(tmp_path / "own.db")
+    assert _schema(tmp_path / "copy.db")[2] == [(0, "Default", str(tmp_path / "mlruns" / "0"), "active")]
+    # the template has no experiment (MLflow adds Default to each copy, with that process's folder);
+    # no partial file is left beside either
+    assert _schema(template)[2] == []
+    assert [p.name for p in [*tmp_path.iterdir(), *user_cache.iterdir()] if p.name.endswith(".part")] == []
+
+
+def test_without_a_usable_template_mlflow_makes_the_schema(tmp_path: Path, user_cache: Path,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    import platformdirs
+    from mlflow.tracking import MlflowClient
+
+    monkeypatch.chdir(tmp_path)
+    MlflowClient(tracking_uri=f"sqlite:///{tmp_path}/own.db").search_experiments()
+    # a template MLflow refuses: the copy is dropped and MLflow builds the store itself
+    user_cache.mkdir(parents=True)
+    template = store.schema_template()
+    assert template is not None
+    template.write_bytes(b"not a database")
+    store.ensure_experiment(store.connect(f"sqlite:///{tmp_path}/a.db"), "vlmrl")
+    assert _schema(tmp_path / "a.db")[:2] == _schema(tmp_path / "own.db")[:2]
+    # a cache folder that cannot be made: no template, and the store is made as MLflow makes it
+    (tmp_path / "file").write_text("")
+    monkeypatch.setattr(platformdirs, "user_cache_path", lambda *args, **kwargs: tmp_path / "file" / "vlmrl")
+    assert store.schema_template() is None
+    store.connect(f"sqlite:///{tmp_path}/b.db")
+    assert _schema(tmp_path / "b.db") == _schema(tmp_path / "own.db")
 
 
 def test_the_init_lock_is_per_database_file(tmp_path: Path) -> None:
