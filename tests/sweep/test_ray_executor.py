@@ -64,7 +64,8 @@ def _histories(uri: str, experiment: str) -> dict[tuple[str, str], list[tuple[in
 
 def test_a_killed_ray_worker_is_retried_and_finishes_once(tmp_path: Path, local_ray: None) -> None:
     uri = f"sqlite:///{tmp_path / 'm.db'}"
-    ppo = dataclasses.replace(preset_of(get_task("mountain-car"), "smoke"), timesteps=30_000)
+    # long enough that the first attempt cannot finish between two polls (the retry trains it whole)
+    ppo = dataclasses.replace(preset_of(get_task("mountain-car"), "smoke"), timesteps=12_000)
     cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="smoke", ppo=ppo, workers=2, tracking_uri=uri,
                     executor="ray", max_retries=2)
     box: dict[str, Any] = {}
@@ -77,11 +78,10 @@ def test_a_killed_ray_worker_is_retried_and_finishes_once(tmp_path: Path, local_
         exp = client.get_experiment_by_name("vlmrl") if (tmp_path / "m.db").exists() else None
         runs = [] if exp is None else client.search_runs(
             [exp.experiment_id], "tags.`vlmrl.kind` = 'train' and attributes.status = 'RUNNING'")
-        for run in runs:
-            if "episode/native_return" in run.data.metrics:  # training, not still starting
-                killed = run
-                os.kill(int(run.data.tags["vlmrl.owner"].rsplit(":", 1)[1]), signal.SIGKILL)
-        time.sleep(0.5)
+        for run in runs:  # the job's run is open: its worker is building the env or training
+            killed = run
+            os.kill(int(run.data.tags["vlmrl.owner"].rsplit(":", 1)[1]), signal.SIGKILL)
+        time.sleep(0.2)
     thread.join(timeout=600)
     assert killed is not None, "no training run to kill appeared"
     summary = box["summary"]
