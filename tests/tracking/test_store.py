@@ -130,20 +130,20 @@ def test_a_new_store_is_the_schema_mlflow_makes_copied_from_the_template(
     assert [p.name for p in [*tmp_path.iterdir(), *user_cache.iterdir()] if p.name.endswith(".part")] == []
 
 
-def test_without_a_usable_template_mlflow_makes_the_schema(tmp_path: Path, user_cache: Path,
-                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_broken_template_is_rebuilt_and_without_a_cache_folder_mlflow_makes_the_schema(
+        tmp_path: Path, user_cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     import platformdirs
     from mlflow.tracking import MlflowClient
 
     monkeypatch.chdir(tmp_path)
     MlflowClient(tracking_uri=f"sqlite:///{tmp_path}/own.db").search_experiments()
-    # a template MLflow refuses: the copy is dropped and MLflow builds the store itself
-    user_cache.mkdir(parents=True)
+    # a template that is not a database (a crash, another tool) is rebuilt before it is copied
     template = store.schema_template()
     assert template is not None
     template.write_bytes(b"not a database")
     store.ensure_experiment(store.connect(f"sqlite:///{tmp_path}/a.db"), "vlmrl")
     assert _schema(tmp_path / "a.db")[:2] == _schema(tmp_path / "own.db")[:2]
+    assert _schema(template)[:2] == _schema(tmp_path / "own.db")[:2]
     # a cache folder that cannot be made: no template, and the store is made as MLflow makes it
     (tmp_path / "file").write_text("")
     monkeypatch.setattr(platformdirs, "user_cache_path", lambda *args, **kwargs: tmp_path / "file" / "vlmrl")
