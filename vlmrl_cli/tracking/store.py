@@ -150,6 +150,7 @@ def connect(uri: str | None, wait_s: float = 0.0, write: bool = True, existing: 
     if problem:
         raise BadInput(problem + ".")
     lock: contextlib.AbstractContextManager[object] = contextlib.nullcontext()
+    db_path: Path | None = None
     if resolved.startswith("sqlite:///"):
         db_path = Path(resolved.removeprefix("sqlite:///"))
         parent = db_path.parent if str(db_path.parent) else Path(".")
@@ -166,8 +167,7 @@ def connect(uri: str | None, wait_s: float = 0.0, write: bool = True, existing: 
         _check_server(resolved, wait_s)
     try:
         with lock:
-            client = (_open_sqlite_store(db_path) if resolved.startswith("sqlite:///")
-                      else MlflowClient(tracking_uri=resolved))
+            client = MlflowClient(tracking_uri=resolved) if db_path is None else _open_sqlite_store(db_path)
             client.search_experiments(max_results=1)
     except filelock.Timeout as exc:
         raise BadInput(
