@@ -1,9 +1,7 @@
-"""`vlmrl compare` on small synthetic export files (the ``vlmrl-runs/1`` format of ``tracking.transfer``)."""
+"""`vlmrl compare` on small synthetic export files (the format of ``tracking.transfer``)."""
 
 from __future__ import annotations
 
-import gzip
-import json
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -16,7 +14,7 @@ from typer.testing import CliRunner
 from vlmrl_cli.cli.app import app
 from vlmrl_cli.cli.compare import NORMALISE_CHOICES
 from vlmrl_cli.report.aggregate import NORMALISATIONS
-from vlmrl_cli.tracking.transfer import FORMAT
+from vlmrl_cli.tracking.transfer import FORMAT, write_records
 
 runner = CliRunner()
 
@@ -41,8 +39,7 @@ def _record(task: str | None, arm: str, seed: int, score: float, config_hash: st
 
 
 def _write(path: Path, records: Sequence[dict[str, object]]) -> Path:
-    with gzip.open(path, "wt", encoding="utf-8") as out:
-        out.writelines(json.dumps(r) + "\n" for r in records)
+    write_records(path, records)
     return path
 
 

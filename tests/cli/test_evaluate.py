@@ -3,7 +3,9 @@ its output on a stand-in result."""
 
 from __future__ import annotations
 
+import gzip
 import json
+import pickle
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -117,6 +119,68 @@ def test_errors_exit_2_with_one_sentence_and_create_no_folder(
     assert result.stderr.startswith("error:") and words in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
     assert not out.exists() and not (tmp_path / "missing").exists()
+
+
+@slow
+def test_an_imported_run_evaluates_and_nothing_is_unpickled(trained: tuple[Path, str], tmp_path: Path,
+                                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    root, run_id = trained
+    export = tmp_path / "runs.jsonl.gz"
+    done = runner.invoke(app, ["export", "--out", str(export), "--models", "--tracking-uri", _uri(root),
+                               "--experiment", "e"])
+    assert done.exit_code == 0, done.output + done.stderr
+    with gzip.open(export, "rt", encoding="utf-8") as f:
+        record = json.loads(f.readline())
+    assert set(record["binary"]) == {"policy.pth", "vecnormalize.npz"}  # no model.zip, no pickle
+    imported = tmp_path / "imported"
+    imported.mkdir()
+    done = runner.invoke(app, ["import", str(export), "--tracking-uri", _uri(imported), "--experiment", "e"])
+    assert done.exit_code == 0, done.output + done.stderr
+    client = MlflowClient(tracking_uri=_uri(imported))
+    exp = client.get_experiment_by_name("e")
+    assert exp is not None
+    copy = client.search_runs([exp.experiment_id])[0].info.run_id
+
+    def refuse(*args: object, **kwargs: object) -> None:
+        raise AssertionError("something was unpickled")
+
+    for name in ("load", "loads", "Unpickler", "_Unpickler"):  # cloudpickle.loads is pickle.loads
+        monkeypatch.setattr(pickle, name, refuse)
+    evaluated = _evaluate(imported, copy, "--episodes", "3", "--out", str(tmp_path / "ev-copy"))
+    original = _evaluate(root, run_id, "--episodes", "3", "--out", str(tmp_path / "ev"))
+    assert evaluated.exit_code == 0 and original.exit_code == 0, evaluated.output + evaluated.stderr
+    figures = [json.loads((tmp_path / name / "evaluation.json").read_text()) for name in ("ev-copy", "ev")]
+    assert figures[0]["returns"] == figures[1]["returns"] and figures[0]["lengths"] == figures[1]["lengths"]
+
+
+@slow
+def test_a_pickled_normaliser_loads_only_when_trusted(trained: tuple[Path, str], tmp_path: Path) -> None:
+    root, run_id = trained
+    client = MlflowClient(tracking_uri=_uri(root))
+    exp = client.get_experiment_by_name("e")
+    assert exp is not None
+    old = client.create_run(exp.experiment_id, tags={"vlmrl.kind": "train"}).info.run_id
+    for name in ("model.zip", "config.json"):
+        client.download_artifacts(run_id, name, str(tmp_path))
+        client.log_artifact(old, str(tmp_path / name))
+    marker = tmp_path / "ran"
+    (tmp_path / "vecnormalize.pkl").write_bytes(pickle.dumps(_Payload(marker)))
+    client.log_artifact(old, str(tmp_path / "vecnormalize.pkl"))
+    client.set_terminated(old)
+    refused = _evaluate(root, old, "--episodes", "1", "--out", str(tmp_path / "ev"))
+    assert refused.exit_code == 2 and "vecnormalize.pkl, a pickle" in refused.stderr and "--trust-pickle" in \
+        refused.stderr
+    assert not marker.exists() and not (tmp_path / "ev").exists()
+    trusted = _evaluate(root, old, "--episodes", "1", "--out", str(tmp_path / "ev"), "--trust-pickle")
+    assert marker.exists() and trusted.exit_code == 2  # trusted, it ran (and is no VecNormalize: refused)
+
+
+class _Payload:
+    def __init__(self, marker: Path) -> None:
+        self.marker = marker
+
+    def __reduce__(self):  # type: ignore[no-untyped-def]
+        return (Path.touch, (self.marker,))
 
 
 @slow

@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from vlmrl_cli.cli.app import cli
-from vlmrl_cli.tracking.transfer import FORMAT, FORMAT_VERSION
+from vlmrl_cli.tracking.transfer import FORMAT_NAME, FORMAT_VERSION
 
 #: (command line, a phrase the error line must contain); {tmp} is the test's folder, which holds
 #: a plain file ``file``, so that ``{tmp}/file/x`` cannot be created.
@@ -57,11 +57,18 @@ CASES: list[tuple[str, str]] = [
     ("run --set ppo.n_envs=1 --set ppo.n_steps=1 --set ppo.batch_size=2", "exceeds ppo.n_envs x ppo.n_steps (1 x 1"),
     ("run --preset smoke --set ppo.n_steps=1 --set ppo.batch_size=3", "exceeds ppo.n_envs x ppo.n_steps (2 x 1"),
     ("run --task acrobot --set ppo.batch_size=48", "use a batch_size that divides"),
-    # a --task names a Task or a marked factory; nothing else is called (os.system ran, os.abort killed vlmrl)
-    ("run --task os:system", "is a builtin_function_or_method, not a vlmrl_cli.tasks.base.Task; give a Task, or a "
-                             "function marked @task_factory"),
-    ("run --task os.path:join", "is a function not marked @task_factory"),
-    ("run --task subprocess:Popen", "is a type, not a vlmrl_cli.tasks.base.Task"),
+    # a --task module is read before it is imported: only a vlmrl task module runs (os.system ran, os.abort
+    # killed vlmrl, `this` printed the Zen of Python, mlflow.__main__ ran MLflow's CLI)
+    ("run --task os:system", "os.py does not import vlmrl_cli; it is not a vlmrl task module, and nothing of it ran"),
+    ("run --task this:x", "this.py does not import vlmrl_cli"),
+    ("taxonomy --task this:x", "this.py does not import vlmrl_cli"),
+    ("run --task mlflow.__main__:cli", "__main__.py does not import vlmrl_cli"),
+    ("run --task os.path:join", "no Python source file os/path.py"),
+    ("run --task subprocess:Popen", "subprocess.py does not import vlmrl_cli"),
+    ("run --task vlmrl_cli.tasks.base:Task", "is a type, not a vlmrl_cli.tasks.base.Task"),
+    # a task named in a file resolves through the registry alone
+    ("run --set task=this:x", "names a Python module; vlmrl imports a module only when you name it with --task"),
+    ("report --user-task this:x", "this.py does not import vlmrl_cli"),
     ("run --set n_envs", "KEY=VALUE"),
     ("run --workers 0", "workers"),
     ("run --timesteps -5", "timesteps"),
@@ -181,13 +188,15 @@ def test_an_unusable_store_is_one_line_within_2_s_before_any_header(
 # --- export files: a sample larger than the file, a newer format ----------------------------
 
 
-def _record(seed: int, fmt: str = FORMAT) -> dict[str, object]:
+def _record(seed: int, fmt: str = f"{FORMAT_NAME}/1", task: str | None = None) -> dict[str, object]:
+    """A minimal record of format 1 (no digest line to write)."""
+    config = {"seed": seed, "arm": {"name": "baseline"}, **({"task": task} if task else {})}
     return {"format": fmt, "source_run_id": f"run{seed:04d}abcdef", "run_name": f"baseline-s{seed}",
             "start_time": 0, "end_time": 1, "tags": {"vlmrl.kind": "train", "vlmrl.arm": "baseline",
-                                                     "vlmrl.seed": str(seed)},
+                                                     "vlmrl.seed": str(seed), "vlmrl.config_hash": "0123456789ab"},
             "params": {}, "latest": {},
             "histories": {"episode/native_return": {"step": [1], "ts": [1], "value": [-200.0]}},
-            "artifacts": {"config.json": json.dumps({"seed": seed, "arm": {"name": "baseline"}})}, "binary": {}}
+            "artifacts": {"config.json": json.dumps(config)}, "binary": {}}
 
 
 def _export(path: Path, records: list[dict[str, object]]) -> Path:
@@ -205,6 +214,20 @@ def test_a_sample_larger_than_the_file_is_refused_with_its_run_count(
              f"--sample 999 is more than the 3 run(s) {tmp_path}/runs.jsonl.gz holds; pass --sample 3 or fewer")
     _refused(tmp_path, monkeypatch, capsys, "verify {tmp}/runs.jsonl.gz --seed 1 --sample 2",
              "more than the 3 run(s)")
+
+
+@pytest.mark.parametrize("command", ["verify {tmp}/runs.jsonl.gz", "verify {tmp}/runs.jsonl.gz --user-task this:x"])
+def test_a_task_module_named_in_an_export_is_never_imported(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], command: str
+) -> None:
+    records = [_record(seed, task="this:x") for seed in range(4)]
+    for record, arm in zip(records, ("baseline", "hybrid") * 2, strict=True):
+        record["tags"].update({"vlmrl.task": "this:x", "vlmrl.arm": arm})  # type: ignore[attr-defined]
+        record["latest"] = {"eval/mean_return": [0, 1, -200.0 + len(arm)]}
+    _export(tmp_path / "runs.jsonl.gz", records)
+    words = "this.py does not import vlmrl_cli" if "--user-task" in command else "names a Python module"
+    _refused(tmp_path, monkeypatch, capsys, command, words)
+    assert "Zen" not in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("command", ["verify {tmp}/runs.jsonl.gz", "import {tmp}/runs.jsonl.gz --tracking-uri "

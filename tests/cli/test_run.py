@@ -70,7 +70,7 @@ def test_one_parent_and_four_finished_children_with_provenance(swept: Path) -> N
         assert history and all(m.step <= 1024 for m in history)
         assert len(client.get_metric_history(run.info.run_id, "eval/episode_length")) == 5  # smoke: 5 episodes
         names = {a.path for a in client.list_artifacts(run.info.run_id)}
-        assert {"model.zip", "vecnormalize.pkl", "config.json"} <= names
+        assert {"model.zip", "vecnormalize.npz", "config.json"} <= names and "vecnormalize.pkl" not in names
         if tags["vlmrl.arm"] == "hybrid":
             assert "SIMULATED" in tags["vlmrl.vlm"] and tags["vlmrl.simulated"] == "true"
             assert metrics["vlm/queries"] > 0 and metrics["vlm/prototypes"] > 0

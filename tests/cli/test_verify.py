@@ -4,7 +4,6 @@ synthetic export."""
 
 from __future__ import annotations
 
-import gzip
 import json
 from pathlib import Path
 
@@ -13,7 +12,7 @@ from typer.testing import CliRunner
 
 from vlmrl_cli.cli.app import app
 from vlmrl_cli.sweep.cost import FALLBACK_S_PER_STEP
-from vlmrl_cli.tracking.transfer import FORMAT
+from vlmrl_cli.tracking.transfer import FORMAT, read_records, write_records
 from vlmrl_cli.training.config import RunConfig
 
 slow = pytest.mark.slow  # the tests that train
@@ -63,13 +62,11 @@ def test_a_dry_run_lists_the_runs_and_the_cost_and_trains_nothing(exported: tupl
 
 @slow
 def test_a_tampered_return_is_caught_at_its_episode(exported: tuple[str, Path], tmp_path: Path) -> None:
-    with gzip.open(exported[1], "rt", encoding="utf-8") as lines:
-        records = [json.loads(line) for line in lines]
+    records = list(read_records(exported[1]))
     target = next(r for r in records if r["run_name"] == "baseline-s0")
     target["histories"]["episode/native_return"]["value"][3] += 1.0
     tampered = tmp_path / "tampered.jsonl.gz"
-    with gzip.open(tampered, "wt", encoding="utf-8") as out:
-        out.write("".join(json.dumps(r) + "\n" for r in records))
+    write_records(tampered, records)  # with a digest of its own: whoever edits a file can write one
     result = runner.invoke(app, ["verify", str(tampered), "--run-id", target["source_run_id"][:10]])
     assert result.exit_code == 1
     assert "differs from episode 3" in result.output and "recorded:" in result.output
@@ -79,14 +76,12 @@ def test_a_tampered_return_is_caught_at_its_episode(exported: tuple[str, Path], 
 @slow
 def test_a_config_this_code_would_hash_differently_is_refused_before_training(exported: tuple[str, Path],
                                                                                tmp_path: Path) -> None:
-    with gzip.open(exported[1], "rt", encoding="utf-8") as lines:
-        records = [json.loads(line) for line in lines]
+    records = list(read_records(exported[1]))
     config = json.loads(records[0]["artifacts"]["config.json"])
     config["ppo"]["learning_rate"] = 0.5
     records[0]["artifacts"]["config.json"] = json.dumps(config)
     bad = tmp_path / "bad.jsonl.gz"
-    with gzip.open(bad, "wt", encoding="utf-8") as out:
-        out.write(json.dumps(records[0]) + "\n")
+    write_records(bad, records[:1])
     result = runner.invoke(app, ["verify", str(bad)])
     assert result.exit_code == 2 and "would train another experiment" in result.stderr
 
@@ -99,13 +94,14 @@ def _synthetic_export(path: Path, walls: list[float | None]) -> Path:
     records = []
     for job, wall in zip(jobs, walls, strict=True):
         records.append({"format": FORMAT, "source_run_id": f"{job.seed:08d}deadbeef", "run_name": job.name,
-                        "start_time": 0, "end_time": 1, "tags": {"vlmrl.kind": "train"}, "params": {},
+                        "start_time": 0, "end_time": 1, "params": {},
+                        "tags": {"vlmrl.kind": "train", "vlmrl.arm": job.arm.name, "vlmrl.seed": str(job.seed),
+                                 "vlmrl.config_hash": job.config_hash},
                         "latest": {} if wall is None else {"perf/wall_s": [0, 1, wall]},
                         "histories": {"episode/native_return": {"step": [200], "ts": [1], "value": [-200.0]}},
                         "artifacts": {"config.json": json.dumps({"config_hash": job.config_hash, **job.params()})},
                         "binary": {}})
-    with gzip.open(path, "wt", encoding="utf-8") as out:
-        out.writelines(json.dumps(r) + "\n" for r in records)
+    write_records(path, records)
     return path
 
 

@@ -22,7 +22,15 @@ from vlmrl_cli.shaping.camera import CellCamera
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
 from vlmrl_cli.tasks.base import Task
-from vlmrl_cli.tasks.registry import BUILTIN, ENTRY_POINT_GROUP, get_task, task_factory, task_names
+from vlmrl_cli.tasks.registry import (
+    BUILTIN,
+    ENTRY_POINT_GROUP,
+    command_tasks,
+    get_task,
+    import_task,
+    task_factory,
+    task_names,
+)
 from vlmrl_cli.tracking import store
 from vlmrl_cli.training.config import DEFAULT_TASK, RunConfig
 
@@ -70,18 +78,44 @@ def test_every_builtin_task_loads_and_mountain_car_is_the_default() -> None:
 
 @pytest.mark.parametrize(("name", "words"), [
     ("acrobat", "did you mean 'acrobot'"),
-    ("no_such_module_xyz:TASK", "cannot import no_such_module_xyz"),
-    ("math:pi", "is a float, not a vlmrl_cli.tasks.base.Task"),
-    ("os:system", "is a builtin_function_or_method, not a vlmrl_cli.tasks.base.Task; give a Task, or a function "
-                  "marked @task_factory (vlmrl_cli.tasks.registry) that returns one; vlmrl calls nothing else"),
-    ("os.path:join", "is a function not marked @task_factory"),
-    ("vlmrl_cli.tasks.base:Task", "is a type, not a vlmrl_cli.tasks.base.Task"),
-    ("math:nothing_here", "math has no nothing_here"),
-    (":TASK", "give package.module:NAME"),
+    ("this:x", "task 'this:x' names a Python module; vlmrl imports a module only when you name it with --task on "
+               "the command line, never from a file, an export or a store"),
+    ("mytasks.valley:TASK", "names a Python module"),
 ])
-def test_a_bad_task_name_says_why(name: str, words: str) -> None:
+def test_a_name_from_a_file_resolves_through_the_registry_alone(name: str, words: str) -> None:
     with pytest.raises(BadInput, match=re.escape(words)):
         get_task(name)
+
+
+@pytest.mark.parametrize(("name", "words"), [
+    ("no_such_module_xyz:TASK", "no Python source file no_such_module_xyz.py on the path"),
+    ("math:pi", "no Python source file math.py"),  # compiled into the interpreter: no source to read first
+    ("os:system", "os.py does not import vlmrl_cli; it is not a vlmrl task module, and nothing of it ran"),
+    ("os.path:join", "no Python source file os/path.py"),
+    ("this:x", "this.py does not import vlmrl_cli"),
+    ("mlflow.__main__:cli", "__main__.py does not import vlmrl_cli"),
+    ("vlmrl_cli.tasks.base:Task", "is a type, not a vlmrl_cli.tasks.base.Task"),
+    ("vlmrl_cli.tasks.base:nothing_here", "base.py binds no top-level nothing_here"),
+    (":TASK", "give package.module:NAME"),
+    ("my tasks:TASK", "give package.module:NAME"),
+])
+def test_a_bad_task_module_says_why(name: str, words: str) -> None:
+    with pytest.raises(BadInput, match=re.escape(words)):
+        import_task(name)
+
+
+def test_a_module_that_is_no_task_module_is_never_imported() -> None:
+    # `this` prints the Zen of Python when imported; `mlflow.__main__` runs MLflow's CLI: run where a
+    # regression cannot touch the suite's own process
+    code = ("import sys\nfrom vlmrl_cli.core.errors import BadInput\nfrom vlmrl_cli.tasks.registry import "
+            "command_tasks\nfor spec in ('this:x', 'mlflow.__main__:cli', 'os:abort'):\n    try:\n"
+            "        command_tasks([spec])\n    except BadInput as exc:\n        print(exc)\n"
+            "print(sorted(m for m in ('this', 'mlflow', 'mlflow.__main__') if m in sys.modules))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert len(lines) == 4 and all("does not import vlmrl_cli" in line for line in lines[:3]), done.stdout
+    assert lines[3] == "[]" and "Zen" not in done.stdout and not done.stderr
 
 
 USER_CODE = """
@@ -132,17 +166,17 @@ def factories(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
 
 def test_a_marked_factory_is_called_and_nothing_unmarked_ever_is(factories: str) -> None:
     calls = __import__(factories).CALLS
-    assert get_task(f"{factories}:marked").name == "acrobot" and calls == ["marked"]
+    assert import_task(f"{factories}:marked").name == "acrobot" and calls == ["marked"]
     for name, words in (("unmarked", "is a function not marked @task_factory"),
                         ("Maker", "is a type, not a vlmrl_cli.tasks.base.Task"),
                         ("instance", "is a Maker, not a vlmrl_cli.tasks.base.Task")):
         with pytest.raises(BadInput, match=re.escape(words)):
-            get_task(f"{factories}:{name}")
+            import_task(f"{factories}:{name}")
     assert calls == ["marked"]  # the type is checked first: none of them was called
     with pytest.raises(BadInput, match=re.escape("its factory returned a int, not a vlmrl_cli.tasks.base.Task")):
-        get_task(f"{factories}:not_a_task")
+        import_task(f"{factories}:not_a_task")
     with pytest.raises(BadInput, match="its factory failed: RuntimeError: no such env"):
-        get_task(f"{factories}:broken")
+        import_task(f"{factories}:broken")
 
 
 def test_task_factory_marks_functions_only() -> None:
@@ -163,20 +197,11 @@ def test_an_entry_point_follows_the_same_rule(factories: str, monkeypatch: pytes
     assert __import__(factories).CALLS == ["marked"]
 
 
-def test_os_abort_is_refused_not_called() -> None:
-    # os.abort, called, killed vlmrl with SIGABRT (exit 134): run it where a regression cannot kill the suite
-    code = ("from vlmrl_cli.core.errors import BadInput\nfrom vlmrl_cli.tasks.registry import get_task\n"
-            "try:\n    get_task('os:abort')\nexcept BadInput as exc:\n    print(exc)\n")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
-    assert "task 'os:abort' is a builtin_function_or_method, not a vlmrl_cli.tasks.base.Task" in done.stdout
-
-
 def test_the_docs_example_task_loads_from_a_user_module(user_module: str) -> None:
-    task = get_task(user_module)
+    task = import_task(user_module)
     assert task.name == "valley" and task.milestones.labels == ("VALLEY", "HILL")
     cfg = RunConfig.from_sources(None, {"task": user_module, "arms": ["hybrid"], "seeds": [0], "preset": "smoke"},
-                                 tasks=get_task)
+                                 tasks=command_tasks([user_module]))
     job = cfg.jobs()[0]
     assert dict(job.shaping.label_potentials) == {"VALLEY": 0.0, "HILL": 1.0}  # the task's map, not MountainCar's
     assert job.identity()["task"] == user_module and job.ppo.timesteps == 1_024
@@ -186,7 +211,8 @@ def test_the_docs_example_task_loads_from_a_user_module(user_module: str) -> Non
 def test_a_user_task_runs_a_smoke_sweep(tmp_path: Path, user_module: str) -> None:
     uri = f"sqlite:///{tmp_path / 'm.db'}"
     cfg = RunConfig.from_sources(None, {"task": user_module, "arms": ["baseline", "hybrid"], "seeds": [0],
-                                        "preset": "smoke", "workers": 1, "tracking_uri": uri}, tasks=get_task)
+                                        "preset": "smoke", "workers": 1, "tracking_uri": uri},
+                                 tasks=command_tasks([user_module]))
     summary = run_sweep(cfg, SilentReporter())
     assert len(summary.finished) == 2 and not summary.failed
     client = store.connect(uri)
@@ -200,7 +226,7 @@ def test_a_user_task_runs_a_smoke_sweep(tmp_path: Path, user_module: str) -> Non
 
 
 def test_the_grid_world_example_reads_every_frame_of_random_episodes_as_the_truth(room_module: str) -> None:
-    task = get_task(room_module)
+    task = import_task(room_module)
     camera = task.camera.make(ShapingConfig())
     assert isinstance(camera, CellCamera)
     env = task.make_env()
@@ -247,7 +273,10 @@ def test_the_grid_world_example_runs_study_and_evaluate_end_to_end(tmp_path: Pat
     kinematic = next(r for r in runs if r.data.tags["vlmrl.arm"] == "kinematic")
     assert "vlm/queries" not in kinematic.data.metrics  # the dense term alone asks the VLM nothing
 
-    evaluated = runner.invoke(app, ["evaluate", hybrid.info.run_id, "--episodes", "1", "--tracking-uri", uri,
-                                    "--out", str(tmp_path / "ev"), "--cache-path", str(tmp_path / "c.sqlite")])
+    args = ["evaluate", hybrid.info.run_id, "--episodes", "1", "--tracking-uri", uri, "--out", str(tmp_path / "ev"),
+            "--cache-path", str(tmp_path / "c.sqlite")]
+    refused = runner.invoke(app, args)  # the store names a module: imported only when the command line does
+    assert refused.exit_code == 2 and "names a Python module" in refused.stderr, refused.output + refused.stderr
+    evaluated = runner.invoke(app, [*args, "--user-task", room_module])
     assert evaluated.exit_code == 0, evaluated.output + evaluated.stderr
     assert (tmp_path / "ev" / "episode-0.gif").is_file() and evaluated.stdout.startswith("WARNING: SIMULATED VLM")

@@ -53,15 +53,15 @@ def calibrate(
     """Train the baseline arm under each PPO regime of a grid (resumable MLflow runs tagged vlmrl.regime)
     and rank the regimes by their distance to the paper's baseline learning profile."""
     from vlmrl_cli.calibration.regimes import Regime, build_regimes, calibrate_config, calibrate_section, grid_flags
-    from vlmrl_cli.tasks.registry import get_task
+    from vlmrl_cli.tasks.registry import command_tasks
     from vlmrl_cli.tracking.store import check_store
 
     console = Console()
     with exit_codes():
         file_layer, *upper = opt.config_layers(ctx, config, sets, vlm_cfg)
         file_grid = calibrate_section(file_layer.pop("calibrate", {}))
-        cfg = calibrate_config(build_regimes([file_layer, *upper], file_grid | grid_flags(grid or []), get_task),
-                               out=out)
+        regimes = build_regimes([file_layer, *upper], file_grid | grid_flags(grid or []), command_tasks([task]))
+        cfg = calibrate_config(regimes, out=out)
         base = cfg.base
         check_store(base.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
         # these load torch and MLflow (seconds): only once the store is known to be usable

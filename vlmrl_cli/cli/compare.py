@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from vlmrl_cli.cli.exit_codes import exit_codes
-from vlmrl_cli.cli.options import choices
+from vlmrl_cli.cli.options import UserTasks, choices
 
 DEFAULT_OUT = Path("results/compare")
 #: ``report.aggregate.NORMALISATIONS``' names (that module is imported only when the command runs)
@@ -36,6 +36,7 @@ def compare(
     config_hash: ConfigHashes = None,
     n_boot: Boot = 2000,
     seed: Seed = 0,
+    user_task: UserTasks = None,
     allow_mixed_paths: Annotated[bool, typer.Option(
         "--allow-mixed-paths", help="Compare runs computed on different numeric paths (vlmrl.pin tags) instead of "
         "refusing.")] = False,
@@ -44,13 +45,14 @@ def compare(
     performance_profile.png."""
     from vlmrl_cli.report.aggregate import CompareConfig
     from vlmrl_cli.report.aggregate import compare as run_compare
-    from vlmrl_cli.tasks.registry import get_task
+    from vlmrl_cli.tasks.registry import command_tasks
 
     with exit_codes():
+        lookup = command_tasks(user_task or ())
         cfg = CompareConfig(files=tuple(files), out=out, normalise=normalise,
                             config_hashes=tuple(config_hash or ()), n_boot=n_boot, seed=seed,
                             allow_mixed_paths=allow_mixed_paths)
-        result = run_compare(cfg, get_task)
+        result = run_compare(cfg, lookup)
         typer.echo(f"{len(result.arms)} arm(s) on {len(result.tasks)} task(s) ({', '.join(result.tasks)}); "
                    f"normalisation {normalise}" + ("; SIMULATED VLM" if result.simulated else ""))
         for r in result.table.itertuples(index=False):

@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 
 from vlmrl_cli.cli.exit_codes import exit_codes
-from vlmrl_cli.cli.options import CachePath, NoCache, OutDir, TrackingUri
+from vlmrl_cli.cli.options import CachePath, NoCache, OutDir, TrackingUri, TrustPickle, UserTasks
 from vlmrl_cli.vlm.config import DEFAULT_CACHE
 
 #: The first line of the output of a run that used the simulated VLM.
@@ -57,20 +57,24 @@ def evaluate(
                                                           "run to evaluate.")] = None,
     seed: Annotated[int | None, typer.Option("--seed", help="With a sweep's parent run id: the seed of the child "
                                                            "run to evaluate.")] = None,
+    user_task: UserTasks = None,
+    trust_pickle: TrustPickle = False,
 ) -> None:
     """Evaluate a trained policy on its task's native environment and write a captioned GIF of one episode.
 
     Outputs go to --out (default results/evaluate/RUN_ID/) and to the run's MLflow artifacts
     under evaluate/.
     """
-    from vlmrl_cli.tasks.registry import get_task
+    from vlmrl_cli.tasks.registry import command_tasks
     from vlmrl_cli.training.evaluate_trained import EvaluateConfig, evaluate_run
 
     with exit_codes():
+        tasks = command_tasks(user_task or ())
         run_id = resolve_child(run_id, tracking_uri, arm, seed)
         cfg = EvaluateConfig(run_id=run_id, tracking_uri=tracking_uri, out=out, episodes=episodes,
-                             episode_index=episode_index, use_cache=not no_cache, cache_path=cache_path)
-        done = evaluate_run(cfg, get_task)
+                             episode_index=episode_index, use_cache=not no_cache, cache_path=cache_path,
+                             trust_pickle=trust_pickle)
+        done = evaluate_run(cfg, tasks)
 
     run = done.run
     if run.arm.uses_vlm and run.simulated:  # first, and on the results' own stream: no capture can reorder them

@@ -207,6 +207,14 @@ TaskOpt = Annotated[str | None, typer.Option(
     "--task", metavar="mountain-car|mountain-car-continuous|acrobot|minigrid-doorkey|MODULE:NAME",
     help="The environment (default mountain-car): a built-in task, or a Task in your code as "
          "package.module:NAME (see the docs' 'Add a task').")]
+TrustPickle = Annotated[bool, typer.Option(
+    "--trust-pickle",
+    help="Accept a pickled artifact (the vecnormalize.pkl of a run saved before vlmrl kept it as arrays): loading "
+         "a pickle runs whatever code it holds, so pass this only for files whose source you trust.")]
+UserTasks = Annotated[list[str] | None, typer.Option(
+    "--user-task", metavar="MODULE:NAME",
+    help="A task of your own code that the runs recorded, imported for them (repeatable): vlmrl imports a module "
+         "only when the command line names it, never from a file, an export or a store.")]
 Workers = Annotated[int | None, typer.Option("--workers", help="Worker processes (default: cores).")]
 ExecutorOpt = Annotated[str | None, typer.Option(
     "--executor", metavar=choices(EXECUTORS),

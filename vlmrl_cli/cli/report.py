@@ -9,7 +9,7 @@ import typer
 from rich.console import Console
 
 from vlmrl_cli.cli.exit_codes import exit_codes
-from vlmrl_cli.cli.options import Adjust, Experiment, Margin, OutDir, TrackingUri
+from vlmrl_cli.cli.options import Adjust, Experiment, Margin, OutDir, TrackingUri, UserTasks
 from vlmrl_cli.core.errors import BadInput
 
 if TYPE_CHECKING:  # the CLI imports no analysis code before a command runs (help stays fast)
@@ -63,20 +63,22 @@ def report(
         show_default=False)] = None,
     margin: Margin = 1.15,
     adjust: Adjust = "holm",
+    user_task: UserTasks = None,
     allow_mixed_paths: Annotated[bool, typer.Option(
         "--allow-mixed-paths", help="Compare runs computed on different numeric paths (vlmrl.pin tags) instead of "
         "refusing.")] = False,
 ) -> None:
     """Write Table 2, Figures 2-4, the claims table and report.md from finished runs in MLflow."""
     from vlmrl_cli.report.writer import ReportConfig, write_report
-    from vlmrl_cli.tasks.registry import get_task
+    from vlmrl_cli.tasks.registry import command_tasks
 
     with exit_codes():
+        tasks = command_tasks(user_task or ())
         cfg = ReportConfig(experiment=experiment, tracking_uri=tracking_uri, out=out or DEFAULT_OUT,
                            thresholds=parse_thresholds(thresholds) if thresholds is not None else None,
                            window=window, margin=margin, adjust=adjust,
                            allow_mixed_paths=allow_mixed_paths)
-        result = write_report(cfg, get_task)
+        result = write_report(cfg, tasks)
         console = Console()
         for line in console_summary(result.table, experiment):
             console.print(line, markup=False, highlight=False, soft_wrap=True)

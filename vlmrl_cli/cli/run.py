@@ -27,7 +27,7 @@ from vlmrl_cli.cli.options import (
     with_vlm_options,
 )
 from vlmrl_cli.cli.progress import RichSweepReporter
-from vlmrl_cli.tasks.registry import get_task
+from vlmrl_cli.tasks.registry import command_tasks
 from vlmrl_cli.training.config import DEFAULT_EXPERIMENT, RunConfig, to_toml
 from vlmrl_cli.training.events import SweepSummary
 from vlmrl_cli.vlm.config import VLMConfig
@@ -65,7 +65,7 @@ def run(
 
     console = Console(stderr=False)
     with exit_codes():
-        cfg = RunConfig.from_sources(config, typed_flags(ctx, vlm_cfg), sets or [], tasks=get_task)
+        cfg = RunConfig.from_sources(config, typed_flags(ctx, vlm_cfg), sets or [], tasks=command_tasks([task]))
         check_store(cfg.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
         # the sweep's modules load torch and MLflow (seconds): only once the store is known to be usable
         from vlmrl_cli.sweep.preflight import preflight

@@ -28,7 +28,7 @@ from vlmrl_cli.cli.progress import RichSweepReporter
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.fields import help_of, rules_of
 from vlmrl_cli.study.settings import DEFAULT_ARMS, DEFAULT_EXPERIMENT, DEFAULT_SEEDS, Regimes, StudySettings
-from vlmrl_cli.tasks.registry import get_task
+from vlmrl_cli.tasks.registry import command_tasks
 from vlmrl_cli.vlm.config import VLMConfig
 
 if TYPE_CHECKING:
@@ -172,7 +172,7 @@ def study(
     console = Console()
     with exit_codes():
         cfg = StudyConfig.from_sources(config, opt.typed_flags(ctx, vlm_cfg) | setting_flags(ctx), sets or [],
-                                       tasks=get_task)
+                                       tasks=command_tasks([task]))
         check_store(cfg.base.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
         # the pipeline loads torch and MLflow (seconds): only once the store is known to be usable
         from vlmrl_cli.study.pipeline import estimate_cost, finished_per_seed, power_lines, run_study

@@ -37,10 +37,10 @@ def _probe_progress(console: Console) -> Iterator[Callable[[int, int], None]]:
 
 
 def _is_papers_task(name: str) -> bool:
-    from vlmrl_cli.tasks.registry import get_task
+    from vlmrl_cli.tasks.registry import command_tasks
 
     with exit_codes():
-        return get_task(name).paper is not None
+        return command_tasks([name])(name).paper is not None
     return False  # exit_codes() has exited
 
 
@@ -57,7 +57,7 @@ def taxonomy(
     from vlmrl_cli.probe.scoring import DEFAULT_STATES
     from vlmrl_cli.probe.table1 import with_ci
     from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
-    from vlmrl_cli.tasks.registry import get_task
+    from vlmrl_cli.tasks.registry import command_tasks
     from vlmrl_cli.tracking.store import check_store
 
     console = Console(stderr=True)
@@ -75,7 +75,7 @@ def taxonomy(
         )
         check_store(cfg.tracking_uri)  # before MLflow, the VLM or any file
         with _probe_progress(console) as progress:
-            result = run_taxonomy(cfg, progress=progress, task=None if task is None else get_task(task))
+            result = run_taxonomy(cfg, progress=progress, task=None if task is None else command_tasks([task])(task))
 
     if result.simulated:
         typer.secho("WARNING: SIMULATED VLM (not a real model): the answers come from a pixel reader with "
@@ -103,11 +103,11 @@ def _other_task(name: str, vlm_cfg: VLMConfig, states: int | None, out: Path | N
     """Table 1 and Figure 1 of another task: its milestone MCQ (``probe/milestones.py``)."""
     from vlmrl_cli.probe.milestones import run_milestone_taxonomy
     from vlmrl_cli.probe.scoring import DEFAULT_STATES
-    from vlmrl_cli.tasks.registry import get_task
+    from vlmrl_cli.tasks.registry import command_tasks
     from vlmrl_cli.tracking.store import check_store
 
     with exit_codes():
-        task = get_task(name)
+        task = command_tasks([name])(name)
         check_store(tracking_uri)  # before MLflow, the VLM or any file
         folder = out if out is not None else Path("results") / "taxonomy" / f"{task.name}-{vlm_cfg.backend}"
         with _probe_progress(console) as progress:

@@ -8,11 +8,12 @@ from typing import Annotated
 import typer
 
 from vlmrl_cli.cli.exit_codes import exit_codes
-from vlmrl_cli.cli.options import Experiment, TrackingUri
+from vlmrl_cli.cli.options import Experiment, TrackingUri, TrustPickle
 from vlmrl_cli.core.errors import BadInput
 
 ExportFile = Annotated[Path, typer.Option("--out", help="The export file to write (gzip JSON lines: runs.jsonl.gz).")]
-Models = Annotated[bool, typer.Option("--models", help="Include model.zip and vecnormalize.pkl (for vlmrl evaluate).")]
+Models = Annotated[bool, typer.Option(
+    "--models", help="Include the policy's weights and observation statistics (for vlmrl evaluate).")]
 
 
 Earlier = Annotated[list[Path] | None, typer.Option(
@@ -55,12 +56,14 @@ def import_(
     paths: Annotated[list[Path], typer.Argument(help="Export files written by `vlmrl export`.", show_default=False)],
     experiment: Experiment = "vlmrl",
     tracking_uri: TrackingUri = None,
+    trust_pickle: TrustPickle = False,
 ) -> None:
     """Create the runs of an export file in an experiment (created if missing) as FINISHED runs; runs
-    already there (same arm, seed and config hash) are skipped, so a resumed sweep never retrains them."""
+    already there (same arm, seed and config hash) are skipped, so a resumed sweep never retrains them.
+    Every file is checked whole before the store is touched; a file imports entirely or not at all."""
     from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
     from vlmrl_cli.tracking import store
-    from vlmrl_cli.tracking.transfer import import_runs, read_records
+    from vlmrl_cli.tracking.transfer import import_runs, read_export, refuse_pickles
 
     with exit_codes():
         problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
@@ -70,9 +73,12 @@ def import_(
         for path in paths:
             if not path.is_file():
                 raise BadInput(f"there is no export file {path}; write one with `vlmrl export --out FILE`.")
-            next(iter(read_records(path)), None)  # a file of another kind is refused before the store exists
+        exports = [read_export(path) for path in paths]  # every file whole, before the store exists
+        for export in exports:
+            refuse_pickles(export, trust_pickle)
         client = store.connect(tracking_uri)
-        for path in paths:
-            summary = import_runs(client, path, experiment)
-            typer.echo(f"{path}: imported {summary.written} run(s) into '{experiment}'; {summary.skipped} "
-                       "already present")
+        for export in exports:
+            summary = import_runs(client, export, experiment, trust_pickle=trust_pickle)
+            checked = "" if export.digest_checked else " (format 1: the file carries no digest to check)"
+            typer.echo(f"{export.path}: imported {summary.written} run(s) into '{experiment}'; {summary.skipped} "
+                       f"already present{checked}")

@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from vlmrl_cli.cli.exit_codes import exit_codes
-from vlmrl_cli.cli.options import Experiment, TrackingUri
+from vlmrl_cli.cli.options import Experiment, TrackingUri, UserTasks
 from vlmrl_cli.core.errors import BadInput
 
 #: Exit code when a retrained run differs from its record.
@@ -38,6 +38,7 @@ def verify(
     dry_run: DryRun = False,
     experiment: Experiment = "vlmrl",
     tracking_uri: TrackingUri = None,
+    user_task: UserTasks = None,
 ) -> None:
     """Retrain finished runs of an export file or a store from their recorded configs and compare
     their per-episode native returns bit for bit: prints `identical` or `differs from episode k` per
@@ -47,12 +48,13 @@ def verify(
 
     from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
     from vlmrl_cli.sweep.cost import retrain_estimate
-    from vlmrl_cli.tasks.registry import get_task
+    from vlmrl_cli.tasks.registry import command_tasks
     from vlmrl_cli.tracking import schema
     from vlmrl_cli.training import verify as lib
 
     console = Console(highlight=False, soft_wrap=True)
     with exit_codes():
+        tasks = command_tasks(user_task or ())
         if source is None:
             problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
             if problem:
@@ -66,7 +68,7 @@ def verify(
             where = str(source)
         chosen = lib.choose(runs, run_ids=run_id or (), seeds=seed or (), arms=arm or (), sample=sample,
                             sample_seed=sample_seed, source=where)
-        jobs = [lib.rebuild_job(run, get_task) for run in chosen]  # every config is rebuilt before anything trains
+        jobs = [lib.rebuild_job(run, tasks) for run in chosen]  # every config is rebuilt before anything trains
         cost = retrain_estimate([(job, run.wall_s) for job, run in zip(jobs, chosen, strict=True)], workers)
         console.print(f"verifying {len(chosen)} of {len(runs)} run(s) of {where}: about {cost.total_s / 60:,.1f} min "
                       f"on {cost.workers} worker(s) ({cost.how})")
@@ -85,7 +87,7 @@ def verify(
                       TextColumn("{task.completed:,.0f}/{task.total:,.0f} steps"), TimeElapsedColumn(),
                       TimeRemainingColumn(), console=console, transient=True) as bar:
             task = bar.add_task(f"retraining {len(chosen)} run(s)", total=sum(steps.values()))
-            for outcome in lib.verify_many(chosen, get_task, workers=workers):
+            for outcome in lib.verify_many(chosen, tasks, workers=workers):
                 bar.advance(task, steps[outcome.run.run_id])
                 run = outcome.run
                 differ += not outcome.identical

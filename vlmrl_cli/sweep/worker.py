@@ -113,9 +113,9 @@ def with_task(job: TrainJob) -> TrainJob:
     is not pickled), and the worker resolves it here, once, at the job's entry."""
     if job.plugin is not None:
         return job
-    from vlmrl_cli.tasks.registry import get_task
+    from vlmrl_cli.tasks.registry import job_task
 
-    return dataclasses.replace(job, plugin=get_task(job.task))
+    return dataclasses.replace(job, plugin=job_task(job.task))
 
 
 def run_claimed(job: TrainJob, ctx: JobContext, body: Body) -> JobResult:
@@ -268,8 +268,10 @@ EPISODE_TABLE_METRICS = (schema.METRIC_NATIVE_RETURN, schema.METRIC_LENGTH, sche
 def _save_artifacts(out: Path, job: TrainJob, model: Any, env: Any) -> None:
     from stable_baselines3.common.vec_env import VecNormalize
 
-    model.save(out / "model.zip")
-    if isinstance(env, VecNormalize):
-        env.save(str(out / "vecnormalize.pkl"))
+    from vlmrl_cli.training import trained
+
+    model.save(out / trained.MODEL)
+    if isinstance(env, VecNormalize):  # arrays, not SB3's pickle: evaluation unpickles nothing
+        trained.save_normalizer(env, out / trained.NORMALIZER)
     config = {"config_hash": job.config_hash, **job.params()}
-    (out / "config.json").write_text(json.dumps(config, indent=2, sort_keys=True))
+    (out / trained.CONFIG).write_text(json.dumps(config, indent=2, sort_keys=True))

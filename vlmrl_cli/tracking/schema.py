@@ -18,6 +18,14 @@ from typing import Any
 TAG_PREFIX = "vlmrl."
 #: The per-episode table a training run writes at its end (one row per episode, ``EPISODE_TABLE_COLUMNS``).
 EPISODES_TABLE = "episodes.csv"
+#: A training run's artifacts: its config, SB3's model (a zip whose ``policy.pth`` entry holds the
+#: policy's weights; the rest of it is cloudpickle), those weights alone as an export carries them,
+#: the observation statistics as arrays, and as older runs pickled them.
+ARTIFACT_CONFIG = "config.json"
+ARTIFACT_MODEL = "model.zip"
+ARTIFACT_POLICY = "policy.pth"
+ARTIFACT_NORMALIZER = "vecnormalize.npz"
+ARTIFACT_PICKLED_NORMALIZER = "vecnormalize.pkl"
 
 # ---- tags every vlmrl run carries (store.provenance_tags) ------------------------------------
 TAG_VLM = f"{TAG_PREFIX}vlm"

@@ -6,50 +6,151 @@ run of an experiment (``vlmrl.kind=train``) as one JSON line of a gzip file: its
 tags and params, the last value of every metric, the full histories that the analysis reads
 (the per-episode ``episode/*`` metrics and the detached evaluation's ``eval/episode_*``, with
 their steps and timestamps, so points logged at one step keep their order), ``config.json``,
-and the model files when asked. ``import_runs`` recreates them in another store as FINISHED
-runs with the same tags, so a sweep's resume rule (a FINISHED run with the same arm, seed and
-config hash) finds them and never trains them again, and ``vlmrl report`` reads them as it reads
-runs trained there. A run already present (same arm, seed and config hash FINISHED, or imported
-from the same source run) is skipped, so importing twice changes nothing.
+and the policy's weights and observation statistics when asked. ``import_runs`` recreates them in
+another store as FINISHED runs with the same tags, so a sweep's resume rule (a FINISHED run with
+the same arm, seed and config hash) finds them and never trains them again, and ``vlmrl report``
+reads them as it reads runs trained there. A run already present (same arm, seed and config hash
+FINISHED, or imported from the same source run) is skipped, so importing twice changes nothing.
 
-Format (``FORMAT``), one object per line::
+An export file is untrusted input. ``read_records`` checks every line against ``Record`` (types,
+lengths, the tags a training run has, MLflow's limits) and the file against its digest before a
+caller sees a record; an artifact is one of the names below, never a path; nothing in a file is
+ever unpickled: the policy travels as the ``state_dict`` that ``torch.load(weights_only=True)``
+reads, the normaliser as ``numpy`` arrays, and a pickle (SB3's ``model.zip`` carries cloudpickled
+objects; older runs' ``vecnormalize.pkl``) is refused unless the user passes ``trust_pickle``.
+``import_runs`` writes all of a file's runs or none.
 
-    {"format": "vlmrl-runs/1", "source_run_id": ..., "run_name": ..., "start_time": ms, "end_time": ms,
+Format (``FORMAT``), one object per line, then one digest line::
+
+    {"format": "vlmrl-runs/2", "source_run_id": ..., "run_name": ..., "start_time": ms, "end_time": ms,
      "tags": {...}, "params": {...}, "latest": {key: [0, end_time, last value]},
      "histories": {key: {"step": [...], "ts": [...], "value": [...]}},
-     "artifacts": {"config.json": "<text>"}, "binary": {"model.zip": "<base64>"}}
+     "artifacts": {"config.json": "<text>"}, "binary": {"policy.pth": "<base64>"}}
+    {"format": "vlmrl-runs/2", "records": N, "sha256": "<hex of the bytes of the N lines above>"}
+
+Files of format 1 (no digest line) are still read; their integrity cannot be checked, and
+``read_records`` says so through ``digest_checked``. The digest detects a truncated or edited
+file; it is no signature (whoever edits a file can write a new digest): safety rests on the
+checks above, which every record passes whatever its digest.
+
 """
 
 from __future__ import annotations
 
 import base64
+import binascii
+import contextlib
 import gzip
+import hashlib
+import io
 import json
 import tempfile
-from collections.abc import Callable, Iterator, Sequence
+import zipfile
+import zlib
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
+
+from pydantic import BaseModel, ConfigDict, Field, StrictFloat, StrictInt, ValidationError, model_validator
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
 
 FORMAT_NAME = "vlmrl-runs"
-#: The version of the format this package writes and reads; a file of a newer one is refused with
-#: "upgrade vlmrl".
-FORMAT_VERSION = 1
+#: The version of the format this package writes; it reads this one and every older one
+#: (``READABLE``), and refuses a file of a newer one with "upgrade vlmrl".
+FORMAT_VERSION = 2
 FORMAT = f"{FORMAT_NAME}/{FORMAT_VERSION}"
+READABLE = tuple(f"{FORMAT_NAME}/{v}" for v in range(1, FORMAT_VERSION + 1))
 HISTORY_KEYS: tuple[str, ...] = (
     schema.METRIC_NATIVE_RETURN, schema.METRIC_LENGTH, schema.METRIC_SUCCESS, schema.METRIC_SHAPED_RETURN,
     schema.METRIC_EVAL_EPISODE_RETURN, schema.METRIC_EVAL_EPISODE_LENGTH, schema.METRIC_EVAL_EPISODE_SUCCESS,
 )
-TEXT_ARTIFACTS: tuple[str, ...] = ("config.json",)
-MODEL_ARTIFACTS: tuple[str, ...] = ("model.zip", "vecnormalize.pkl")
+TEXT_ARTIFACTS: tuple[str, ...] = (schema.ARTIFACT_CONFIG,)
+#: What ``--models`` carries: the policy's weights and the observation statistics, neither a pickle.
+MODEL_ARTIFACTS: tuple[str, ...] = (schema.ARTIFACT_POLICY, schema.ARTIFACT_NORMALIZER)
+#: Pickles: an import refuses them unless the user trusts the file (``trust_pickle``).
+PICKLED_ARTIFACTS: tuple[str, ...] = (schema.ARTIFACT_MODEL, schema.ARTIFACT_PICKLED_NORMALIZER)
 #: Tags that name the source store's runs or processes; an imported run gets ``TAG_IMPORTED_FROM``.
 # the per-episode table is not exported (its histories are): an imported run reads those
 _DROPPED_TAGS = (schema.MLFLOW_PARENT_RUN_ID, schema.TAG_OWNER, schema.TAG_HEARTBEAT, schema.TAG_EPISODES_TABLE)
 TAG_IMPORTED_FROM = f"{schema.TAG_PREFIX}imported_from"
+#: The tags without which a record is no training run of vlmrl's (the resume key and the kind).
+REQUIRED_TAGS = (schema.TAG_KIND, schema.TAG_ARM, schema.TAG_SEED, schema.TAG_CONFIG_HASH)
+#: MLflow's limits (``mlflow.utils.validation``: MAX_ENTITY_KEY_LENGTH, MAX_TAG_VAL_LENGTH,
+#: MAX_PARAM_VAL_LENGTH), checked before anything is written so that an import cannot fail halfway;
+#: written here because importing that module costs seconds (a test keeps them equal).
+MAX_KEY = 250
+MAX_TAG_VALUE = 8000
+MAX_PARAM_VALUE = 6000
+
+_Key = Annotated[str, Field(min_length=1, max_length=MAX_KEY, pattern=r"^[A-Za-z0-9_.\-/ :]+$")]
+_Millis = Annotated[StrictInt, Field(ge=0)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class History(_Strict):
+    """One metric's points: as many steps, timestamps (ms) and values."""
+
+    step: list[StrictInt]
+    ts: list[StrictInt]
+    value: list[StrictFloat]
+
+    @model_validator(mode="after")
+    def _same_lengths(self) -> History:
+        if not len(self.step) == len(self.ts) == len(self.value):
+            raise ValueError(f"step, ts and value have {len(self.step)}, {len(self.ts)} and {len(self.value)} "
+                             "points; each point needs all three")
+        return self
+
+
+class Record(_Strict):
+    """One exported run, as ``read_records`` requires it before anyone reads it."""
+
+    format: str
+    source_run_id: Annotated[str, Field(pattern=r"^[0-9A-Za-z_-]{1,64}$")]
+    run_name: Annotated[str, Field(max_length=MAX_KEY)] | None = None
+    start_time: _Millis | None = None
+    end_time: _Millis | None = None
+    tags: dict[_Key, Annotated[str, Field(max_length=MAX_TAG_VALUE)]]
+    params: dict[_Key, Annotated[str, Field(max_length=MAX_PARAM_VALUE)]]
+    latest: dict[_Key, tuple[StrictInt, _Millis, StrictFloat]]
+    histories: dict[str, History]
+    artifacts: dict[str, str]
+    binary: dict[str, str] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _a_training_run(self) -> Record:
+        missing = [t for t in REQUIRED_TAGS if not self.tags.get(t)]
+        if missing:
+            raise ValueError(f"tags: {', '.join(missing)} missing; a record is one training run of vlmrl's")
+        if self.tags[schema.TAG_KIND] != schema.KIND_TRAIN:
+            raise ValueError(f"tags: {schema.TAG_KIND} is {self.tags[schema.TAG_KIND]!r}, not a training run")
+        unknown = sorted(set(self.histories) - set(HISTORY_KEYS))
+        if unknown:
+            raise ValueError(f"histories: {unknown[0]!r} is none of {', '.join(HISTORY_KEYS)}")
+        twice = sorted(set(self.latest) & set(HISTORY_KEYS))
+        if twice:
+            raise ValueError(f"latest: {twice[0]!r} has a history; it is not a last value")
+        for field, names, allowed in (("artifacts", self.artifacts, TEXT_ARTIFACTS),
+                                      ("binary", self.binary, MODEL_ARTIFACTS + PICKLED_ARTIFACTS)):
+            bad = sorted(set(names) - set(allowed))
+            if bad:
+                raise ValueError(f"{field}: the artifact name {bad[0]!r} is none of {', '.join(allowed)} (an "
+                                 "artifact is named, never a path)")
+        config = self.artifacts.get(schema.ARTIFACT_CONFIG, "{}")
+        try:
+            parsed = json.loads(config)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"artifacts: {schema.ARTIFACT_CONFIG} is not JSON ({exc.msg})") from None
+        if not isinstance(parsed, dict):
+            raise ValueError(f"artifacts: {schema.ARTIFACT_CONFIG} is not a JSON object")
+        return self
 
 
 @dataclass(frozen=True)
@@ -60,10 +161,35 @@ class TransferSummary:
     skipped: int = 0
 
 
+@dataclass(frozen=True)
+class ExportFile:
+    """The checked records of an export file, and whether its digest was there to check (format 1
+    files have none)."""
+
+    path: Path
+    records: list[dict[str, Any]]
+    digest_checked: bool
+
+
 def _history(client: Any, run_id: str, key: str) -> dict[str, list[Any]]:
     points = sorted(client.get_metric_history(run_id, key), key=lambda p: (p.step, p.timestamp))
     return {"step": [int(p.step) for p in points], "ts": [int(p.timestamp) for p in points],
             "value": [float(p.value) for p in points]}
+
+
+def _binary(present: set[str], workdir: Path) -> dict[str, bytes]:
+    """The model files of a run whose artifacts ``present`` were downloaded to ``workdir``: the
+    policy's weights (SB3's ``model.zip`` holds them as ``policy.pth``, the one entry of it exported;
+    the rest of the zip is cloudpickle), the normaliser's arrays, or an older run's pickled normaliser."""
+    files: dict[str, bytes] = {}
+    if schema.ARTIFACT_MODEL in present:
+        with zipfile.ZipFile(workdir / schema.ARTIFACT_MODEL) as archive:
+            files[schema.ARTIFACT_POLICY] = archive.read(schema.ARTIFACT_POLICY)
+    for name in (schema.ARTIFACT_NORMALIZER, schema.ARTIFACT_PICKLED_NORMALIZER):
+        if name in present:
+            files[name] = (workdir / name).read_bytes()
+            break
+    return files
 
 
 def _record(client: Any, run: Any, models: bool, workdir: Path) -> dict[str, Any]:
@@ -73,7 +199,8 @@ def _record(client: Any, run: Any, models: bool, workdir: Path) -> dict[str, Any
     when = int(run.info.end_time or run.info.start_time or 0)
     latest = {k: [0, when, float(v)] for k, v in run.data.metrics.items() if k not in HISTORY_KEYS}
     present = {a.path for a in client.list_artifacts(run_id)}
-    wanted = [n for n in (*TEXT_ARTIFACTS, *(MODEL_ARTIFACTS if models else ())) if n in present]
+    model_files = (schema.ARTIFACT_MODEL, schema.ARTIFACT_NORMALIZER, schema.ARTIFACT_PICKLED_NORMALIZER)
+    wanted = [n for n in (*TEXT_ARTIFACTS, *(model_files if models else ())) if n in present]
     store.download_artifacts(client, run_id, wanted, workdir)
     return {
         "format": FORMAT,
@@ -86,8 +213,8 @@ def _record(client: Any, run: Any, models: bool, workdir: Path) -> dict[str, Any
         "latest": latest,
         "histories": {key: _history(client, run_id, key) for key in HISTORY_KEYS if key in run.data.metrics},
         "artifacts": {n: (workdir / n).read_text(encoding="utf-8") for n in wanted if n in TEXT_ARTIFACTS},
-        "binary": {n: base64.b64encode((workdir / n).read_bytes()).decode("ascii")
-                   for n in wanted if n in MODEL_ARTIFACTS},
+        "binary": {n: base64.b64encode(blob).decode("ascii")
+                   for n, blob in (_binary(set(wanted), workdir) if models else {}).items()},
     }
 
 
@@ -100,8 +227,8 @@ def export_runs(client: Any, experiment: str, path: Path, models: bool = False,
                 progress: Callable[[int, int], None] | None = None, skip: set[str] | None = None) -> TransferSummary:
     """Write the FINISHED training runs of ``experiment`` to the gzip JSON-lines file ``path``
     (written to a temporary name first, so a failed export leaves no partial file), but those whose
-    run id is in ``skip`` (exported before: ``skipped`` counts them). ``progress(done, total)`` is
-    called after each run. ``BadInput`` when there is nothing to export."""
+    run id is in ``skip`` (exported before: ``skipped`` counts them), and the digest line.
+    ``progress(done, total)`` is called after each run. ``BadInput`` when there is nothing to export."""
     exp = client.get_experiment_by_name(experiment)
     if exp is None or exp.lifecycle_stage == "deleted":
         raise BadInput(f"MLflow experiment '{experiment}' does not exist in this store; pass --experiment NAME.")
@@ -113,27 +240,57 @@ def export_runs(client: Any, experiment: str, path: Path, models: bool = False,
         raise BadInput(f"MLflow experiment '{experiment}' has no FINISHED training run to export"
                        + (f" that is not in the earlier exports ({before} are)." if before else "."))
     runs.sort(key=lambda r: (r.info.start_time or 0, r.info.run_id))
-    partial = path.with_name(path.name + ".partial")
-    with gzip.open(partial, "wt", encoding="utf-8", compresslevel=9) as out:
+
+    def records() -> Iterator[dict[str, Any]]:
         for i, run in enumerate(runs, start=1):
             with tempfile.TemporaryDirectory(prefix="vlmrl-export-") as tmp:
-                out.write(json.dumps(_record(client, run, models, Path(tmp)), separators=(",", ":")) + "\n")
+                yield _record(client, run, models, Path(tmp))
             if progress is not None:
                 progress(i, len(runs))
-    partial.replace(path)
+
+    write_records(path, records())
     return TransferSummary(len(runs), before - len(runs))
+
+
+def write_records(path: Path, records: Iterable[dict[str, Any]]) -> int:
+    """Write ``records`` (this format's) to the gzip JSON-lines file ``path`` with their digest line,
+    through a temporary name, so that a failed write leaves no partial file; how many were written."""
+    partial = path.with_name(path.name + ".partial")
+    digest, count = hashlib.sha256(), 0
+    try:
+        with gzip.open(partial, "wt", encoding="utf-8", compresslevel=9) as out:
+            for record in records:
+                line = json.dumps(record, separators=(",", ":")) + "\n"
+                out.write(line)
+                digest.update(line.encode("utf-8"))
+                count += 1
+            out.write(json.dumps(digest_line(count, digest.hexdigest()), separators=(",", ":")) + "\n")
+        partial.replace(path)
+    except OSError as exc:
+        raise BadInput(f"cannot write the export file {path} ({exc.strerror or exc}).") from None
+    finally:
+        partial.unlink(missing_ok=True)
+    return count
+
+
+def digest_line(records: int, sha256: str) -> dict[str, Any]:
+    """The last line of an export file of this format: how many records precede it and the sha256
+    of their bytes (each line as written, newline included)."""
+    return {"format": FORMAT, "records": records, "sha256": sha256}
 
 
 def format_problem(tag: object) -> str | None:
     """Why a record whose ``format`` field is ``tag`` cannot be read here, or None.
 
     Example:
-        >>> format_problem(FORMAT) is None, format_problem("vlmrl-runs/7")
-        (True, 'written by a newer vlmrl (format 7; this one reads up to 1): upgrade vlmrl')
+        >>> format_problem(FORMAT) is None, format_problem("vlmrl-runs/1") is None
+        (True, True)
+        >>> format_problem("vlmrl-runs/7")
+        'written by a newer vlmrl (format 7; this one reads up to 2): upgrade vlmrl'
         >>> format_problem("mlflow-export")
-        'not a vlmrl run export (vlmrl-runs/1)'
+        'not a vlmrl run export (vlmrl-runs/2)'
     """
-    if tag == FORMAT:
+    if tag in READABLE:
         return None
     name, _, version = str(tag).partition("/")
     if name == FORMAT_NAME and version.isdigit() and int(version) > FORMAT_VERSION:
@@ -141,18 +298,139 @@ def format_problem(tag: object) -> str | None:
     return f"not a vlmrl run export ({FORMAT})"
 
 
-def read_records(path: Path) -> Iterator[dict[str, Any]]:
-    """The records of an export file, each checked for its format; ``BadInput`` for anything else."""
+def record_problem(record: object) -> str | None:
+    """Why the parsed line ``record`` is no run record this package reads, in one line, or None.
+
+    Example:
+        >>> record_problem({"format": FORMAT, "source_run_id": "abc"})
+        'tags: Field required (and 4 more: params, latest, histories, artifacts)'
+        >>> record_problem({"format": "vlmrl-runs/7"})
+        'written by a newer vlmrl (format 7; this one reads up to 2): upgrade vlmrl'
+    """
+    problem = format_problem(record.get("format") if isinstance(record, dict) else None)
+    if problem:
+        return problem
+    try:
+        Record.model_validate(record)
+    except ValidationError as exc:
+        return _one_line(exc)
+    return None
+
+
+def _one_line(exc: ValidationError) -> str:
+    """A pydantic error as one line: the first problem (where, what), and how many more."""
+    errors = exc.errors(include_url=False, include_input=False)
+    first = errors[0]
+    where = ".".join(str(p) for p in first["loc"])
+    what = str(first["msg"]).removeprefix("Value error, ")
+    line = f"{where}: {what}" if where else what
+    if len(errors) > 1:
+        more = [".".join(str(p) for p in e["loc"][:1]) for e in errors[1:]]
+        shown = list(dict.fromkeys(more))
+        line += (f" (and {len(errors) - 1} more: {', '.join(shown[:4])}{', ...' if len(shown) > 4 else ''})")
+    return line[:400]
+
+
+def read_export(path: Path) -> ExportFile:
+    """Every record of the export file ``path``, each checked (``record_problem``, ``check_binary``),
+    and the file against its digest line; ``BadInput`` naming the line for anything else. Nothing is
+    returned before the whole file has passed."""
+    records: list[dict[str, Any]] = []
+    digest = hashlib.sha256()
+    trailer: dict[str, Any] | None = None
     try:
         with gzip.open(path, "rt", encoding="utf-8") as lines:
             for n, line in enumerate(lines, start=1):
-                record = json.loads(line)
-                problem = format_problem(record.get("format") if isinstance(record, dict) else None)
+                if trailer is not None:
+                    raise BadInput(f"{path}, line {n}: a line after the digest line; the file was edited.")
+                try:
+                    parsed = json.loads(line)
+                except json.JSONDecodeError as exc:
+                    raise BadInput(f"{path}, line {n}: not JSON ({exc.msg}); the file is damaged.") from None
+                if isinstance(parsed, dict) and "sha256" in parsed and "source_run_id" not in parsed:
+                    trailer = parsed
+                    continue
+                problem = record_problem(parsed)
                 if problem:
                     raise BadInput(f"{path}, line {n}: {problem}.")
-                yield record
-    except (OSError, EOFError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+                check_binary(parsed)
+                digest.update(line.encode("utf-8"))
+                records.append(parsed)
+    except (OSError, EOFError, zlib.error, UnicodeDecodeError) as exc:
         raise BadInput(f"cannot read the run export {path}: {exc}.") from None
+    if not records:
+        raise BadInput(f"{path} holds no run; write one with `vlmrl export`.")
+    return ExportFile(path, records, _check_digest(path, records, trailer, digest.hexdigest()))
+
+
+def _check_digest(path: Path, records: list[dict[str, Any]], trailer: dict[str, Any] | None, sha256: str) -> bool:
+    """Whether the file's digest was checked (format 1 has none); ``BadInput`` when it does not hold."""
+    versions = {r["format"] for r in records}
+    if versions == {f"{FORMAT_NAME}/1"} and trailer is None:
+        return False
+    if len(versions) > 1:
+        raise BadInput(f"{path} mixes formats {', '.join(sorted(versions))}; the file was edited.")
+    if trailer is None:
+        raise BadInput(f"{path} has no digest line: the file is truncated or was edited; export it again.")
+    if trailer != digest_line(len(records), sha256):
+        raise BadInput(f"{path}: its records do not match its digest line: the file was edited or damaged; "
+                       "export it again.")
+    return True
+
+
+def read_records(path: Path) -> Iterator[dict[str, Any]]:
+    """The checked records of an export file (``read_export``)."""
+    yield from read_export(path).records
+
+
+def check_binary(record: dict[str, Any]) -> None:
+    """``BadInput`` unless every model file of ``record`` is what its name says: base64;
+    ``policy.pth`` a tensor dictionary that ``torch.load(weights_only=True)`` reads;
+    ``vecnormalize.npz`` arrays that ``numpy.load(allow_pickle=False)`` reads. Reading them this
+    way runs nothing; a pickle is not opened here (``refuse_pickles``)."""
+    for name, text in record.get("binary", {}).items():
+        where = f"run {record['source_run_id']}: {name}"
+        try:
+            blob = base64.b64decode(text, validate=True)
+        except (binascii.Error, ValueError):
+            raise BadInput(f"{where} is not base64; the file is damaged.") from None
+        try:
+            if name == schema.ARTIFACT_POLICY:
+                _check_weights(blob)
+            elif name == schema.ARTIFACT_NORMALIZER:
+                _check_arrays(blob)
+        except Exception as exc:  # whatever a crafted file makes the readers raise: refused, not run
+            raise BadInput(f"{where} is not a plain {'tensor' if name == schema.ARTIFACT_POLICY else 'array'} "
+                           f"file ({type(exc).__name__}); nothing of it was loaded.") from None
+
+
+def refuse_pickles(export: ExportFile, trust_pickle: bool = False) -> None:
+    """``BadInput`` for a pickled model file (``PICKLED_ARTIFACTS``) in ``export`` unless the user
+    trusts the file: a store that keeps one hands it to whoever evaluates the run."""
+    if trust_pickle:
+        return
+    for record in export.records:
+        for name in set(record.get("binary", {})) & set(PICKLED_ARTIFACTS):
+            raise BadInput(f"{export.path}: run {record['source_run_id']}: {name} is a pickle, and loading a pickle "
+                           "runs whatever code it holds; import it with --trust-pickle only if you trust where "
+                           "the file came from.")
+
+
+def _check_weights(blob: bytes) -> None:
+    import torch
+
+    state = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=True)
+    if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
+        raise TypeError("not a dictionary of tensors")
+
+
+def _check_arrays(blob: bytes) -> None:
+    import numpy as np
+
+    with np.load(io.BytesIO(blob), allow_pickle=False) as saved:
+        for key in saved.files:
+            if saved[key].dtype.kind not in "biuf":
+                raise TypeError(f"{key} holds {saved[key].dtype} values")
 
 
 def _present(client: Any, experiment_id: str) -> tuple[set[tuple[str, str, str]], set[str]]:
@@ -164,7 +442,7 @@ def _present(client: Any, experiment_id: str) -> tuple[set[tuple[str, str, str]]
     return keys, sources
 
 
-def _create(client: Any, experiment_id: str, record: dict[str, Any]) -> None:
+def _create(client: Any, experiment_id: str, record: dict[str, Any], created: list[str]) -> None:
     from mlflow.entities import Metric
 
     tags = {k: v for k, v in record["tags"].items() if k not in _DROPPED_TAGS}
@@ -172,6 +450,7 @@ def _create(client: Any, experiment_id: str, record: dict[str, Any]) -> None:
     run = client.create_run(experiment_id, start_time=record["start_time"], tags=tags,
                             run_name=record.get("run_name"))
     run_id = run.info.run_id
+    created.append(run_id)
     # never left RUNNING, and a failed import is FAILED: never taken for a finished run
     with tracked_run(client, run_id) as handle:
         handle.end_time = record["end_time"]
@@ -184,7 +463,8 @@ def _create(client: Any, experiment_id: str, record: dict[str, Any]) -> None:
             client.log_batch(run_id, metrics=metrics[i : i + 1000])
         with tempfile.TemporaryDirectory(prefix="vlmrl-import-") as tmp:
             files = []
-            for name, text in record.get("artifacts", {}).items():
+            # the names are TEXT_ARTIFACTS', MODEL_ARTIFACTS' or PICKLED_ARTIFACTS' (Record): plain file names
+            for name, text in record["artifacts"].items():
                 (Path(tmp) / name).write_text(text, encoding="utf-8")
                 files.append(Path(tmp) / name)
             for name, blob in record.get("binary", {}).items():
@@ -193,23 +473,47 @@ def _create(client: Any, experiment_id: str, record: dict[str, Any]) -> None:
             store.log_artifacts(client, run_id, files)
 
 
-def import_runs(client: Any, path: Path, experiment: str,
-                progress: Callable[[int, int], None] | None = None) -> TransferSummary:
-    """Create the runs of the export ``path`` in ``experiment`` (created if missing); runs already
-    there are skipped. ``progress(done, total)`` after each record."""
-    records = list(read_records(path))
+def import_runs(client: Any, path: Path | ExportFile, experiment: str,
+                progress: Callable[[int, int], None] | None = None, trust_pickle: bool = False) -> TransferSummary:
+    """Create the runs of the export ``path`` (or a file ``read_export`` has read) in ``experiment``
+    (created if missing); runs already there are skipped. All or nothing: the whole file is checked
+    first (``read_export``, ``refuse_pickles``), and a failure while writing deletes the runs this
+    call made. ``progress(done, total)`` after each record."""
+    export = path if isinstance(path, ExportFile) else read_export(path)
+    refuse_pickles(export, trust_pickle)
+    existed = client.get_experiment_by_name(experiment) is not None
     experiment_id = store.ensure_experiment(client, experiment)
     keys, sources = _present(client, experiment_id)
     written = skipped = 0
-    for i, record in enumerate(records, start=1):
-        tags = record["tags"]
-        key = (tags.get(schema.TAG_ARM, ""), tags.get(schema.TAG_SEED, ""), tags.get(schema.TAG_CONFIG_HASH, ""))
-        if key in keys or record["source_run_id"] in sources:
-            skipped += 1
-        else:
-            _create(client, experiment_id, record)
-            keys.add(key)
-            written += 1
-        if progress is not None:
-            progress(i, len(records))
+    created: list[str] = []
+    try:
+        for i, record in enumerate(export.records, start=1):
+            tags = record["tags"]
+            key = (tags[schema.TAG_ARM], tags[schema.TAG_SEED], tags[schema.TAG_CONFIG_HASH])
+            if key in keys or record["source_run_id"] in sources:
+                skipped += 1
+            else:
+                _create(client, experiment_id, record, created)
+                keys.add(key)
+                written += 1
+            if progress is not None:
+                progress(i, len(export.records))
+    except BaseException:
+        _undo(client, created, None if existed else experiment_id)
+        raise
     return TransferSummary(written, skipped)
+
+
+def _undo(client: Any, run_ids: Iterable[str], experiment_id: str | None) -> None:
+    """Mark the runs an import made FAILED and delete them (and the experiment it created), so that a
+    failed import leaves the store as it found it: MLflow keeps deleted runs out of every search, and
+    restoring the experiment (which restores its runs) brings back no run taken for a finished one."""
+    # a store that fails here too leaves the runs FAILED at worst (tracked_run), never FINISHED
+    for run_id in run_ids:
+        with contextlib.suppress(Exception):
+            client.set_terminated(run_id, "FAILED")
+        with contextlib.suppress(Exception):
+            client.delete_run(run_id)
+    if experiment_id is not None:
+        with contextlib.suppress(Exception):
+            client.delete_experiment(experiment_id)

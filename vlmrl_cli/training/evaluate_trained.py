@@ -51,6 +51,7 @@ class EvaluateConfig:
     width: int = field(default=300, metadata={"help": "GIF width, pixels"})
     use_cache: bool = True
     cache_path: Path | None = DEFAULT_CACHE
+    trust_pickle: bool = field(default=False, metadata={"help": "load an old run's pickled normaliser"})
 
     @property
     def out_dir(self) -> Path:
@@ -237,7 +238,7 @@ def evaluate_run(cfg: EvaluateConfig, tasks: TaskLookup) -> EvaluateResult:
     cfg.validate()
     client = store.connect_existing(cfg.tracking_uri)
     with tempfile.TemporaryDirectory(prefix="vlmrl-evaluate-") as tmp:
-        run = load_trained_run(client, cfg.run_id, Path(tmp), tasks)
+        run = load_trained_run(client, cfg.run_id, Path(tmp), tasks, cfg.trust_pickle)
     task = run.task
     result = evaluate_detached(run.policy, cfg.episodes, EVAL_SEED, task)
     seed = EVAL_SEED + cfg.episode_index

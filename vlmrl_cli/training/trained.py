@@ -1,4 +1,13 @@
-"""A trained run read back from MLflow: its policy (model.zip + vecnormalize.pkl) and configs."""
+"""A trained run read back from MLflow: its policy and configs, read without unpickling anything.
+
+A run keeps its policy in SB3's ``model.zip`` and its observation statistics in
+``vecnormalize.npz``. Both may come from an export file, so neither is loaded the way SB3 loads
+them (``PPO.load`` cloudpickles the zip's ``data``; ``VecNormalize.load`` unpickles a whole
+object): the policy is rebuilt from the run's own PPO config and given the zip's ``policy.pth``
+weights through ``torch.load(weights_only=True)``, and the statistics are plain arrays
+(``numpy.load(allow_pickle=False)``). Runs saved before the arrays existed keep a
+``vecnormalize.pkl``, which is read only with the user's explicit ``trust_pickle``.
+"""
 
 from __future__ import annotations
 
@@ -16,12 +25,19 @@ from vlmrl_cli.tasks.base import Task, TaskLookup
 from vlmrl_cli.tasks.registry import recorded_task
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training.evaluation import Policy
+from vlmrl_cli.training.presets import PPOConfig
 from vlmrl_cli.training.validation import validate_as
 from vlmrl_cli.vlm.config import VLMConfig
 
-MODEL = "model.zip"
-NORMALIZER = "vecnormalize.pkl"
-CONFIG = "config.json"
+MODEL = schema.ARTIFACT_MODEL
+#: The policy's ``state_dict`` (``torch.save``): an entry of ``model.zip``, and an imported run's artifact.
+POLICY_WEIGHTS = schema.ARTIFACT_POLICY
+NORMALIZER = schema.ARTIFACT_NORMALIZER
+#: What runs saved before ``NORMALIZER`` kept instead: a pickle, loaded only with ``trust_pickle``.
+PICKLED_NORMALIZER = schema.ARTIFACT_PICKLED_NORMALIZER
+CONFIG = schema.ARTIFACT_CONFIG
+PICKLE_WARNING = ("a pickle, and loading a pickle runs whatever code it holds; pass --trust-pickle only if you "
+                  "trust where the run came from")
 
 
 def deterministic_policy(model: Any, env: Any) -> Policy:
@@ -62,12 +78,14 @@ class TrainedRun:
     task_ref: str = field(default="", kw_only=True)  # how its config.json names it (a user task: module:NAME)
 
 
-def load_trained_run(client: Any, run_id: str, workdir: Path, tasks: TaskLookup) -> TrainedRun:
-    """Download run ``run_id``'s model, normaliser and config into ``workdir`` and load them; the
-    task its config names is resolved once, by the command's ``tasks``.
+def load_trained_run(client: Any, run_id: str, workdir: Path, tasks: TaskLookup,
+                     trust_pickle: bool = False) -> TrainedRun:
+    """Download run ``run_id``'s model, normaliser and config into ``workdir`` and load them, without
+    unpickling (see the module's docstring; ``trust_pickle`` lets an old run's pickled normaliser
+    load); the task its config names is resolved once, by the command's ``tasks``.
 
-    ``BadInput`` when the store has no such run or the run saved no model (it failed, was
-    stopped, or is not a training run).
+    ``BadInput`` when the store has no such run, the run saved no model (it failed, was stopped,
+    or is not a training run), or its files do not fit its config.
     """
     from mlflow.exceptions import MlflowException
 
@@ -77,11 +95,18 @@ def load_trained_run(client: Any, run_id: str, workdir: Path, tasks: TaskLookup)
         raise BadInput(f"there is no run '{run_id}' in this tracking store; copy a run id from "
                        "`vlmrl run`'s output or the MLflow UI.") from None
     artifacts = {a.path for a in client.list_artifacts(run_id)}
-    if MODEL not in artifacts or CONFIG not in artifacts:
+    if not {MODEL, POLICY_WEIGHTS} & artifacts or CONFIG not in artifacts:
         raise BadInput(f"run '{run_id}' ({run.info.status}) has no {MODEL} artifact; evaluate a FINISHED "
-                       "training run.")
-    store.download_artifacts(client, run_id, [n for n in (MODEL, CONFIG, NORMALIZER) if n in artifacts], workdir)
-    config = json.loads((workdir / CONFIG).read_text(encoding="utf-8"))
+                       "training run (an imported one: export it with --models).")
+    if NORMALIZER not in artifacts and PICKLED_NORMALIZER in artifacts and not trust_pickle:
+        raise BadInput(f"run '{run_id}' keeps its observation statistics as {PICKLED_NORMALIZER}, {PICKLE_WARNING}.")
+    wanted = [n for n in (MODEL, POLICY_WEIGHTS, CONFIG, NORMALIZER, PICKLED_NORMALIZER) if n in artifacts]
+    store.download_artifacts(client, run_id, wanted, workdir)
+    try:
+        config = json.loads((workdir / CONFIG).read_text(encoding="utf-8"))
+        ppo = validate_as(PPOConfig, dict(config["ppo"]))
+    except (ValueError, KeyError, TypeError, BadInput) as exc:
+        raise BadInput(f"run '{run_id}': its {CONFIG} cannot be read here ({exc}).") from None
     tags = run.data.tags
     task_ref = recorded_task(config.get("task"))
     task = tasks(task_ref)
@@ -94,7 +119,7 @@ def load_trained_run(client: Any, run_id: str, workdir: Path, tasks: TaskLookup)
         vlm=validate_as(VLMConfig, dict(config["vlm"])) if "vlm" in config else VLMConfig(),
         vlm_label=tags.get(schema.TAG_VLM, "unknown"),
         simulated=tags.get(schema.TAG_SIMULATED) == "true",
-        policy=_load_policy(workdir, task),
+        policy=_load_policy(workdir, task, ppo, run_id),
         seed=int(config.get("seed", 0)),
         task=task,
         task_ref=task_ref,
@@ -110,14 +135,75 @@ def _shaping_config(data: dict[str, Any] | None) -> ShapingConfig:
     return result
 
 
-def _load_policy(workdir: Path, task: Task) -> Policy:
-    from stable_baselines3 import PPO
+def _load_policy(workdir: Path, task: Task, ppo: PPOConfig, run_id: str) -> Policy:
+    """The run's deterministic policy: an ``ActorCriticPolicy`` built from its PPO config (as
+    ``PPO("MlpPolicy")`` builds it) holding the weights of ``policy.pth`` (the artifact, else the
+    entry of ``model.zip``), read with ``torch.load(weights_only=True)``, on the observation
+    statistics of ``load_normalizer``."""
+    import io
+    import pickle
+    import zipfile
+
+    import torch
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    env = task.make_env()
+    try:
+        if (workdir / POLICY_WEIGHTS).exists():
+            blob = (workdir / POLICY_WEIGHTS).read_bytes()
+        else:
+            with zipfile.ZipFile(workdir / MODEL) as archive:
+                blob = archive.read(POLICY_WEIGHTS)
+        state = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=True)
+        kwargs: dict[str, Any] = dict(ppo.policy_kwargs)
+        policy = ActorCriticPolicy(env.observation_space, env.action_space, lambda _: 0.0, use_sde=ppo.use_sde,
+                                   **kwargs)
+        policy.load_state_dict(state)
+        normalizer = load_normalizer(workdir, task)
+    except (zipfile.BadZipFile, KeyError, RuntimeError, pickle.UnpicklingError, ValueError, TypeError, OSError,
+            EOFError) as exc:
+        raise BadInput(f"run '{run_id}': its model files do not hold a policy for task {task.name} and its PPO "
+                       f"config ({type(exc).__name__}: {str(exc).splitlines()[0][:160] if str(exc) else ''}).") \
+            from None
+    finally:
+        env.close()
+    policy.set_training_mode(False)
+    return deterministic_policy(policy, normalizer)
+
+
+def save_normalizer(env: Any, path: Path) -> None:
+    """Write the observation statistics of the ``VecNormalize`` ``env`` to ``path`` as plain arrays
+    (``numpy.savez``): what evaluation needs, with nothing to unpickle."""
+    rms = env.obs_rms
+    np.savez(path, obs_mean=np.asarray(rms.mean, dtype=np.float64), obs_var=np.asarray(rms.var, dtype=np.float64),
+             obs_count=np.float64(rms.count), clip_obs=np.float64(env.clip_obs), epsilon=np.float64(env.epsilon),
+             norm_obs=np.bool_(env.norm_obs))
+
+
+def load_normalizer(workdir: Path, task: Task) -> Any:
+    """The run's observation normaliser (a ``VecNormalize`` that no longer updates), or None for a run
+    without one: from ``vecnormalize.npz`` (``numpy.load(allow_pickle=False)``), else from the
+    pickle of an older run, which ``load_trained_run`` downloads only when trusted."""
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    model = PPO.load(workdir / MODEL, device="cpu")
-    normalizer: Any = None
-    if (workdir / NORMALIZER).exists():
-        normalizer = VecNormalize.load(str(workdir / NORMALIZER), DummyVecEnv([task.make_env]))
-        normalizer.training = False
-        normalizer.norm_reward = False
-    return deterministic_policy(model, normalizer)
+    arrays, pickled = workdir / NORMALIZER, workdir / PICKLED_NORMALIZER
+    if not arrays.exists():
+        if not pickled.exists():
+            return None
+        try:  # the user trusted this pickle (load_trained_run's trust_pickle): whatever it is, it ran
+            normalizer = VecNormalize.load(str(pickled), DummyVecEnv([task.make_env]))
+        except Exception as exc:
+            raise ValueError(f"{PICKLED_NORMALIZER} holds no VecNormalize ({type(exc).__name__})") from None
+    else:
+        with np.load(arrays, allow_pickle=False) as saved:
+            stats = {key: saved[key] for key in saved.files}
+        normalizer = VecNormalize(DummyVecEnv([task.make_env]), training=False, norm_obs=bool(stats["norm_obs"]),
+                                  norm_reward=False, clip_obs=float(stats["clip_obs"]), epsilon=float(stats["epsilon"]))
+        rms: Any = normalizer.obs_rms
+        if stats["obs_mean"].shape != rms.mean.shape or stats["obs_var"].shape != rms.mean.shape:
+            raise ValueError(f"{NORMALIZER} holds statistics of shape {stats['obs_mean'].shape}, the task's "
+                             f"observations are {rms.mean.shape}")
+        rms.mean, rms.var, rms.count = stats["obs_mean"], stats["obs_var"], float(stats["obs_count"])
+    normalizer.training = False
+    normalizer.norm_reward = False
+    return normalizer
