@@ -75,3 +75,16 @@ def test_the_preset_help_states_the_tasks_own_default(tmp_path) -> None:  # type
     dry = CliRunner().invoke(app, ["run", "--task", "acrobot", "--dry-run", "--tracking-uri", uri])
     assert dry.exit_code == 0 and 'preset = "zoo"' in dry.stdout, dry.output
     assert not list(tmp_path.iterdir())
+
+
+def test_the_app_help_shows_each_commands_whole_summary_on_one_line() -> None:
+    from vlmrl_cli.cli.app import SUMMARIES, SUMMARY_WIDTH
+
+    result = CliRunner().invoke(app, ["--help"], terminal_width=80)
+    assert result.exit_code == 0
+    lines = result.stdout.splitlines()
+    for name, summary in SUMMARIES.items():
+        assert len(summary) <= SUMMARY_WIDTH, name
+        assert any(line.split() == [name, *summary.split()] for line in lines), (name, result.stdout)
+    commands = lines[lines.index("Commands:") + 1:]
+    assert len(commands) == len(SUMMARIES) and not any("..." in line for line in commands)

@@ -159,3 +159,16 @@ def test_every_task_weighs_the_same_in_the_iqm(tmp_path: Path) -> None:
     for col in ("iqm", "mean"):
         assert two.loc["baseline", col] == pytest.approx(one.loc["baseline", col], abs=1e-9)
     assert "every task weighs the same" in (b / "cmp" / "aggregate.md").read_text(encoding="utf-8")
+
+
+def test_without_out_each_compare_writes_a_new_git_ignored_folder(tmp_path: Path,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    files = _files(tmp_path)
+    monkeypatch.chdir(tmp_path)  # as if run from a checkout, whose results/compare/ is committed
+    for _ in range(2):
+        assert _compare(*files).exit_code == 0
+    made = sorted((tmp_path / "results" / "_scratch" / "compare").iterdir())
+    assert len(made) == 2 and all((m / "aggregate.md").is_file() for m in made)  # the second did not overwrite
+    assert not (tmp_path / "results" / "compare").exists()
+    root = Path(__file__).resolve().parents[2]
+    assert "results/_scratch/" in (root / ".gitignore").read_text(encoding="utf-8").splitlines()

@@ -223,3 +223,23 @@ def test_the_simulated_vlm_notice_is_the_first_line_before_any_result(
     else:
         assert lines[0].startswith("run:") and "SIMULATED" not in result.output
     assert result.stderr == ""
+
+
+def test_the_default_output_folder_is_under_the_git_ignored_scratch_folder() -> None:
+    from vlmrl_cli.training.evaluate_trained import EvaluateConfig
+
+    assert EvaluateConfig(run_id="abc123").out_dir == Path("results/_scratch/evaluate/abc123")
+    root = Path(__file__).resolve().parents[2]
+    assert "results/_scratch/" in (root / ".gitignore").read_text(encoding="utf-8").splitlines()
+    assert EvaluateConfig(run_id="abc123", out=Path("x")).out_dir == Path("x")
+
+
+@slow
+def test_without_out_the_gif_lands_in_the_scratch_folder(trained: tuple[Path, str], tmp_path: Path,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    root, run_id = trained
+    monkeypatch.chdir(tmp_path)  # as if run from a checkout, whose results/ is committed
+    result = _evaluate(root, run_id, "--episodes", "1")
+    assert result.exit_code == 0, result.output + result.stderr
+    assert (tmp_path / "results" / "_scratch" / "evaluate" / run_id / "episode-0.gif").is_file()
+    assert [p.name for p in (tmp_path / "results").iterdir()] == ["_scratch"]

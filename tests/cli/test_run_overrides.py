@@ -163,3 +163,31 @@ def test_sim_profile_flag_and_set_resolve_the_same_knobs(tmp_path: Path) -> None
     assert via_set.exit_code == 0 and via_set.output == flag.output
     bad = _run(tmp_path, "--sim-profile", "lava", "--dry-run")
     assert bad.exit_code == 2 and "llava-table1" in bad.output + bad.stderr
+
+
+@pytest.mark.parametrize(("args", "line"), [
+    (["--task", "acrobot", "--arms", "baseline,hybrid"],
+     "scales: the task's own scales alpha 107, kin_scale 0.152 replace the paper's defaults alpha 5, kin_scale 2"),
+    (["--task", "acrobot", "--arms", "kinematic", "--set", "shaping.alpha=5"],
+     "scales: the task's own scale kin_scale 0.152 replaces the paper's default kin_scale 2"),
+    (["--task", "acrobot", "--arms", "baseline"], None),  # no arm is shaped
+    (["--arms", "baseline,hybrid"], None),  # MountainCar's scales are the paper's
+])
+def test_the_banner_says_when_the_tasks_own_scales_replace_the_defaults(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, args: list[str], line: str | None) -> None:
+    from types import SimpleNamespace
+
+    from vlmrl_cli.sweep import preflight
+    from vlmrl_cli.sweep import runner as sweep_runner
+
+    monkeypatch.setattr(preflight, "preflight", lambda cfg: None)  # the banner, then a sweep with nothing to do
+    monkeypatch.setattr(sweep_runner, "run_sweep",
+                        lambda cfg, reporter, checked: SimpleNamespace(elsewhere=[], parent_run_id=None))
+    result = runner.invoke(app, ["run", "--preset", "smoke", "--seeds", "1", "--tracking-uri", _uri(tmp_path), *args])
+    assert result.exit_code == 0, result.output
+    text = " ".join(result.output.split())
+    assert "vlmrl run: task" in text
+    if line is None:
+        assert "scales:" not in text
+    else:
+        assert line in text

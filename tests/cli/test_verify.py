@@ -11,7 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from vlmrl_cli.cli.app import app
-from vlmrl_cli.sweep.cost import FALLBACK_S_PER_STEP
+from vlmrl_cli.sweep.cost import FALLBACK_S_PER_STEP, SLOWER_MACHINE
 from vlmrl_cli.tracking.transfer import FORMAT, read_records, write_records
 from vlmrl_cli.training.config import RunConfig
 
@@ -111,8 +111,20 @@ def test_the_cost_estimate_rests_on_the_runs_steps_and_per_step_costs(tmp_path: 
     assert result.exit_code == 0, result.output
     text = " ".join(result.output.split())
     minutes = (60.0 + 1_024 * FALLBACK_S_PER_STEP) / 60  # the recorded run, then 1,024 steps at the task's figure
-    assert f"verifying 2 of 2 run(s) of {path}: about {minutes:,.1f} min on 1 worker(s)" in text
+    slower = minutes * SLOWER_MACHINE  # the same runs on a machine 3x slower than the one that recorded them
+    assert (f"verifying 2 of 2 run(s) of {path}: about {minutes:,.1f}-{slower:,.1f} min ({minutes:,.1f} at the "
+            f"recorded speed, {slower:,.1f} on a machine {SLOWER_MACHINE:g}x slower) on 1 worker(s)") in text
     assert "2,048 steps in all: 1 run(s) at the wall time per step they recorded" in text
     assert f"1 run(s), which recorded no wall time, at their task's mountain-car {FALLBACK_S_PER_STEP * 1e3:.2f} ms" \
         in text
     assert result.output.count("1 episodes, 1,024 steps") == 2 and "identical" not in result.output
+
+
+@slow
+def test_in_a_log_progress_is_a_plain_line_per_finished_run_on_stderr(tmp_path: Path) -> None:
+    path = _synthetic_export(tmp_path / "runs.jsonl.gz", [60.0])  # its one recorded return is made up: differs
+    result = runner.invoke(app, ["verify", str(path)])  # CliRunner's stderr is no terminal
+    assert result.exit_code == 1, result.output
+    assert "progress: retraining 1 run(s), 1,024 steps" in result.stderr
+    assert "progress: 1/1 run(s), 1,024/1,024 steps" in result.stderr and "min left" in result.stderr
+    assert "progress:" not in result.stdout  # the verdicts stay on stdout, alone

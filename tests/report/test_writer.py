@@ -35,3 +35,16 @@ def test_a_window_taken_from_the_task_caps_min_episodes_and_a_given_one_does_not
     acrobot = get_task("acrobot")
     assert for_task(ReportConfig(min_episodes=50), acrobot).min_episodes == acrobot.window
     assert for_task(ReportConfig(window=100, min_episodes=50), acrobot).min_episodes == 50
+
+
+def test_a_disagreement_states_the_papers_figure_without_our_seed_count() -> None:
+    from vlmrl_cli.report.writer import paper_disagreement
+
+    cell = {"metric": "reliability", "arm": "hybrid", "value": 0.0, "ci_low": 0.0, "ci_high": 0.66, "n": 2,
+            "n_reached": 0, "paper": 1.0, "note": ""}
+    line = paper_disagreement("Final reliability (seeds reaching -130)", "hybrid", cell)
+    assert line == ("- Final reliability (seeds reaching -130), hybrid: paper 100%, ours 0% [0%, 66%] (0/2) "
+                    "(outside our CI).")
+    assert "(2/2)" not in line  # the paper's 100% is its own figure, not 2 of our 2 seeds
+    inside = {**cell, "value": 0.9, "ci_low": 0.6, "ci_high": 1.0, "n_reached": 2}
+    assert paper_disagreement("Final reliability", "hybrid", inside) is None

@@ -11,13 +11,14 @@ import typer
 from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import UserTasks, choices
 
-DEFAULT_OUT = Path("results/compare")
 #: ``report.aggregate.NORMALISATIONS``' names (that module is imported only when the command runs)
 NORMALISE_CHOICES = ("baseline-best", "zoo")
 
 Files = Annotated[list[Path], typer.Argument(help="Export files written by `vlmrl export` (any tasks).",
                                              show_default=False)]
-Out = Annotated[Path, typer.Option("--out", help="Output folder.")]
+Out = Annotated[Path | None, typer.Option(
+    "--out", help="Output folder (default: a new folder results/_scratch/compare/YYYYMMDD-HHMMSS, git-ignored, so "
+                  "that no committed result is overwritten unless named here).", show_default=False)]
 Normalise = Annotated[str, typer.Option(
     "--normalise", metavar=choices(NORMALISE_CHOICES),
     help="Per-task min-max normalisation of the scores: baseline-best (0 = the baseline arm's mean, 1 = the best "
@@ -31,7 +32,7 @@ Seed = Annotated[int, typer.Option("--seed", help="Seed of the bootstrap.")]
 
 def compare(
     files: Files,
-    out: Out = DEFAULT_OUT,
+    out: Out = None,
     normalise: Normalise = "baseline-best",
     config_hash: ConfigHashes = None,
     n_boot: Boot = 2000,
@@ -42,14 +43,18 @@ def compare(
         "refusing.")] = False,
 ) -> None:
     """Aggregate the arms' detached evaluation scores across tasks: aggregate.md/.csv, per_task.csv and
-    performance_profile.png."""
+    performance_profile.png.
+
+    They go to --out, by default to a new folder under results/_scratch/ (git-ignored).
+    """
+    from vlmrl_cli.core.paths import fresh_scratch_folder
     from vlmrl_cli.report.aggregate import CompareConfig
     from vlmrl_cli.report.aggregate import compare as run_compare
     from vlmrl_cli.tasks.registry import command_tasks
 
     with exit_codes():
         lookup = command_tasks(user_task or ())
-        cfg = CompareConfig(files=tuple(files), out=out, normalise=normalise,
+        cfg = CompareConfig(files=tuple(files), out=out or fresh_scratch_folder("compare"), normalise=normalise,
                             config_hashes=tuple(config_hash or ()), n_boot=n_boot, seed=seed,
                             allow_mixed_paths=allow_mixed_paths)
         result = run_compare(cfg, lookup)

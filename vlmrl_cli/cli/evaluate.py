@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from vlmrl_cli.cli.exit_codes import exit_codes
-from vlmrl_cli.cli.options import CachePath, NoCache, OutDir, TrackingUri, TrustPickle, UserTasks
+from vlmrl_cli.cli.options import CachePath, NoCache, TrackingUri, TrustPickle, UserTasks
 from vlmrl_cli.vlm.config import DEFAULT_CACHE
+
+EvalOut = Annotated[Path | None, typer.Option(
+    "--out", help="Output folder (default: results/_scratch/evaluate/RUN_ID, git-ignored, so that no committed "
+                  "result is overwritten unless named here).", show_default=False)]
 
 #: The first line of the output of a run that used the simulated VLM.
 SIMULATED_NOTICE = ("WARNING: SIMULATED VLM (not a real model): the GIF's VLM labels come from a pixel reader "
@@ -49,7 +54,7 @@ def evaluate(
     episode_index: Annotated[
         int, typer.Option("--episode-index", min=0, help="Which evaluated episode the GIF shows.")
     ] = 0,
-    out: OutDir = None,
+    out: EvalOut = None,
     tracking_uri: TrackingUri = None,
     no_cache: NoCache = False,
     cache_path: CachePath = DEFAULT_CACHE,
@@ -62,8 +67,8 @@ def evaluate(
 ) -> None:
     """Evaluate a trained policy on its task's native environment and write a captioned GIF of one episode.
 
-    Outputs go to --out (default results/evaluate/RUN_ID/) and to the run's MLflow artifacts
-    under evaluate/.
+    Outputs go to --out (default results/_scratch/evaluate/RUN_ID/, git-ignored) and to the run's
+    MLflow artifacts under evaluate/.
     """
     from vlmrl_cli.tasks.registry import command_tasks
     from vlmrl_cli.training.evaluate_trained import EvaluateConfig, evaluate_run

@@ -1,9 +1,12 @@
-"""Rich progress for a sweep: one row per (arm, seed) run and an overall row with the ETA."""
+"""Progress: rich rows for a sweep (one per (arm, seed) run and an overall row with the ETA), and
+plain lines for a log or a pipe."""
 
 from __future__ import annotations
 
 import math
+import time
 from types import TracebackType
+from typing import TextIO
 
 from rich.console import Console
 from rich.progress import (
@@ -88,3 +91,37 @@ class RichSweepReporter:
         self._finished += 1
         if not self.console.is_terminal:
             self.console.print(f"{self._finished}/{len(self._tasks)} {result.job}: {status} ({result.wall_s:.0f} s)")
+
+
+def progress_line(runs_done: int, runs: int, steps_done: int, steps: int, elapsed_s: float) -> str:
+    """One plain line of progress for a log: runs and steps done, the time spent, and the time left
+    at the pace so far (steps, so that a long run weighs as long).
+
+    Example:
+        >>> progress_line(1, 4, 25_000, 100_000, 90.0)
+        'progress: 1/4 run(s), 25,000/100,000 steps, 1.5 min elapsed, about 4.5 min left'
+    """
+    left = elapsed_s * (steps - steps_done) / steps_done if steps_done else math.nan
+    tail = "" if math.isnan(left) else f", about {left / 60:,.1f} min left"
+    return (f"progress: {runs_done}/{runs} run(s), {steps_done:,}/{steps:,} steps, {elapsed_s / 60:,.1f} min "
+            f"elapsed{tail}")
+
+
+class PlainProgress:
+    """Plain progress lines on ``out`` (a log's stream), one per finished run; silent when ``out``
+    is None (a terminal, where a rich bar shows progress instead)."""
+
+    def __init__(self, runs: int, steps: int, out: TextIO | None) -> None:
+        self.runs, self.steps, self.out = runs, steps, out
+        self.runs_done = self.steps_done = 0
+        self.started = time.monotonic()
+        if out is not None:
+            print(f"progress: retraining {runs} run(s), {steps:,} steps; a line as each run finishes", file=out,
+                  flush=True)
+
+    def advance(self, steps: int) -> None:
+        self.runs_done += 1
+        self.steps_done += steps
+        if self.out is not None:
+            print(progress_line(self.runs_done, self.runs, self.steps_done, self.steps,
+                                time.monotonic() - self.started), file=self.out, flush=True)

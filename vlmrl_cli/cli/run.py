@@ -81,6 +81,10 @@ def run(
         overrides = cfg.jobs()[0].overrides()
         if overrides:
             console.print("overrides: " + " ".join(f"{k}={v}" for k, v in overrides.items()), markup=False)
+        scales = cfg.task_plugin.scales_note(cfg.task_shaping)
+        if scales and any(job.arm.kinematic or job.arm.uses_vlm for job in cfg.jobs()):
+            console.print(f"scales: {scales} (set them with --set shaping.alpha=A --set shaping.kin_scale=K)",
+                          markup=False)
         if cfg.vlm.backend == "sim":
             console.print("[yellow]VLM: the SIMULATED VLM (a pixel-reading stand-in), not a real model.[/]")
         with RichSweepReporter(console) as reporter:

@@ -10,6 +10,7 @@ import typer
 
 from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import Experiment, TrackingUri, UserTasks
+from vlmrl_cli.cli.progress import PlainProgress
 from vlmrl_cli.core.errors import BadInput
 
 #: Exit code when a retrained run differs from its record.
@@ -70,8 +71,8 @@ def verify(
                             sample_seed=sample_seed, source=where)
         jobs = [lib.rebuild_job(run, tasks) for run in chosen]  # every config is rebuilt before anything trains
         cost = retrain_estimate([(job, run.wall_s) for job, run in zip(jobs, chosen, strict=True)], workers)
-        console.print(f"verifying {len(chosen)} of {len(runs)} run(s) of {where}: about {cost.total_s / 60:,.1f} min "
-                      f"on {cost.workers} worker(s) ({cost.how})")
+        console.print(f"verifying {len(chosen)} of {len(runs)} run(s) of {where}: {cost.minutes_range()} on "
+                      f"{cost.workers} worker(s) ({cost.how})")
         here_tags = lib.here_paths()  # once: this process's path does not change while it runs
         here = lib.describe_paths(here_tags)
         console.print(f"here: {here}")
@@ -82,13 +83,17 @@ def verify(
             return
         differ = 0
         steps = {run.run_id: job.timesteps for run, job in zip(chosen, jobs, strict=True)}
+        # progress on stderr: a bar on a terminal; in a log or a pipe, one plain line per finished run
+        err = Console(stderr=True, highlight=False, soft_wrap=True)
+        lines = PlainProgress(len(chosen), sum(steps.values()), None if err.is_terminal else sys.stderr)
         # the bar counts steps, not runs, so that its time remaining weighs a long run as long
         with Progress(TextColumn("{task.description}"), BarColumn(),
                       TextColumn("{task.completed:,.0f}/{task.total:,.0f} steps"), TimeElapsedColumn(),
-                      TimeRemainingColumn(), console=console, transient=True) as bar:
+                      TimeRemainingColumn(), console=err, transient=True, disable=not err.is_terminal) as bar:
             task = bar.add_task(f"retraining {len(chosen)} run(s)", total=sum(steps.values()))
             for outcome in lib.verify_many(chosen, tasks, workers=workers):
                 bar.advance(task, steps[outcome.run.run_id])
+                lines.advance(steps[outcome.run.run_id])
                 run = outcome.run
                 differ += not outcome.identical
                 console.print(f"{run.run_id[:12]}  {run.name}: {outcome.verdict()} in {outcome.wall_s:.0f} s")

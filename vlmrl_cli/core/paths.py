@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+from datetime import UTC, datetime
 from pathlib import Path
 
 from vlmrl_cli.core.errors import BadInput
@@ -76,3 +77,25 @@ def check_out_folder(out: Path, flag: str = "--out") -> None:
     problem = out_folder_problem(out)
     if problem:
         raise BadInput(f"cannot write to the output folder {out} ({problem}); pass {flag} to a writable folder.")
+
+
+#: Where commands write by default when a default could land on committed results: the current
+#: folder's ``results/_scratch/``, which the repository's .gitignore ignores.
+SCRATCH = Path("results") / "_scratch"
+
+
+def fresh_scratch_folder(command: str, now: datetime | None = None) -> Path:
+    """A folder under ``SCRATCH`` that does not exist yet: ``results/_scratch/COMMAND/YYYYMMDD-HHMMSS``
+    (UTC), with ``-2``, ``-3``, ... when one of that second exists; nothing is created.
+
+    Example:
+        >>> from datetime import datetime, UTC
+        >>> fresh_scratch_folder("compare", datetime(2026, 12, 7, 15, 30, 5, tzinfo=UTC)).as_posix()
+        'results/_scratch/compare/20261207-153005'
+    """
+    stamp = (now or datetime.now(UTC)).strftime("%Y%m%d-%H%M%S")
+    folder, n = SCRATCH / command / stamp, 1
+    while folder.exists():
+        n += 1
+        folder = SCRATCH / command / f"{stamp}-{n}"
+    return folder

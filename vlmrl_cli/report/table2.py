@@ -433,7 +433,13 @@ def format_speedup(s: dict[str, Any] | None) -> str:
     return text
 
 
-def _paper_cell(metric: str, value: Any) -> str:
+def format_paper_cell(metric: str, value: Any) -> str:
+    """The paper's figure as the paper states it: no interval, and no count of our seeds.
+
+    Example:
+        >>> format_paper_cell("reliability", 1.0), format_paper_cell("eval_length", 120.0)
+        ('100%', '~120.0')
+    """
     if _isnan(value):
         return "—"
     text = _fmt(metric, value)
@@ -450,7 +456,7 @@ def display_frame(table: Table2) -> pd.DataFrame:
         for arm in table.arms:
             rec[f"{arm} (ours [{ci_pct}])"] = format_cell(table.cell(metric, arm))
         for arm in (METHOD, BASELINE):  # the paper's two arms
-            rec[f"{arm} (paper)"] = _paper_cell(metric, table.paper.get(metric, {}).get(arm))
+            rec[f"{arm} (paper)"] = format_paper_cell(metric, table.paper.get(metric, {}).get(arm))
         partial = metric.startswith("steps_")  # speedups are shown beside the paper's (partial) window
         for arm in speed_arms:
             col = f"speedup {arm} (ours)"

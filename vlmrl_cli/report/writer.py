@@ -33,6 +33,7 @@ from vlmrl_cli.report.table2 import (
     build_table2,
     floor_thresholds,
     format_cell,
+    format_paper_cell,
     per_seed_table,
     to_markdown,
     write_table2,
@@ -176,6 +177,27 @@ def _warnings(data: ExperimentData, table: Table2, allow_mixed_paths: bool) -> l
     return out
 
 
+def paper_disagreement(label: str, arm: str, c: dict[str, Any] | None) -> str | None:
+    """The line of "where we disagree" for one cell of Table 2 whose paper figure lies outside our
+    interval (None when it lies inside, or either side is missing): the paper's figure as the
+    paper states it, our estimate with its own counts.
+
+    Example:
+        >>> cell = {"metric": "reliability", "arm": "hybrid", "value": 0.0, "ci_low": 0.0, "ci_high": 0.66,
+        ...         "n": 2, "n_reached": 0, "paper": 1.0, "note": ""}
+        >>> paper_disagreement("Final reliability", "hybrid", cell)
+        '- Final reliability, hybrid: paper 100%, ours 0% [0%, 66%] (0/2) (outside our CI).'
+    """
+    if c is None or not np.isfinite(c["paper"]) or not np.isfinite(c["value"]):
+        return None
+    lo, hi = c["ci_low"], c["ci_high"]
+    if np.isfinite(lo) and np.isfinite(hi) and lo <= c["paper"] <= hi:
+        return None
+    where = "outside our CI" if np.isfinite(lo) else "no CI"
+    return (f"- {label}, {arm}: paper {format_paper_cell(c['metric'], c['paper'])}, ours {format_cell(c)} "
+            f"({where}).")
+
+
 def _disagreements(table: Table2, results: Sequence[claims_mod.ClaimResult]) -> list[str]:
     lines = []
     for r in results:
@@ -183,15 +205,9 @@ def _disagreements(table: Table2, results: Sequence[claims_mod.ClaimResult]) -> 
             lines.append(f"- **{r.claim}** ({r.section}): {r.reason}.")
     for metric, label in table.labels.items():
         for arm in table.arms:
-            c = table.cell(metric, arm)
-            if c is None or not np.isfinite(c["paper"]) or not np.isfinite(c["value"]):
-                continue
-            lo, hi = c["ci_low"], c["ci_high"]
-            if np.isfinite(lo) and np.isfinite(hi) and lo <= c["paper"] <= hi:
-                continue
-            where = "outside our CI" if np.isfinite(lo) else "no CI"
-            paper = format_cell({**c, "value": c["paper"], "ci_low": np.nan, "ci_high": np.nan, "n_reached": c["n"]})
-            lines.append(f"- {label}, {arm}: paper {paper}, ours {format_cell(c)} ({where}).")
+            line = paper_disagreement(label, arm, table.cell(metric, arm))
+            if line is not None:
+                lines.append(line)
     for t in table.thresholds:
         s = table.speedup(t, METHOD)
         if s is not None and np.isfinite(s["paper"]) and np.isfinite(s["value"]):

@@ -25,6 +25,12 @@ from vlmrl_cli.training.config import RunConfig, TrainJob
 FALLBACK_S_PER_STEP = 665.0 * 2 / (20 * 300_000)
 
 
+#: How much slower than the machine that recorded a run the machine retraining it may be: `vlmrl
+#: verify` gives its estimate as a range, from the recorded speed to this many times slower. `nox -s
+#: repro` took 906 s on a 2-core machine beside other work and 430 s on a Zen 5 EPYC (2.1x).
+SLOWER_MACHINE = 3.0
+
+
 @dataclass(frozen=True)
 class Timings:
     """Per-arm seconds per step with the worker count they were measured at, and the sweeps'
@@ -46,6 +52,17 @@ class CostEstimate:
     total_s: float
     workers: int
     how: str
+
+    def minutes_range(self, slower: float = SLOWER_MACHINE) -> str:
+        """The total as a range of minutes: at the recorded speed, and on a machine ``slower`` times slower.
+
+        Example:
+            >>> CostEstimate(2, 0, 60.0, 120.0, 1, "").minutes_range()
+            'about 2.0-6.0 min (2.0 at the recorded speed, 6.0 on a machine 3x slower)'
+        """
+        low, high = self.total_s / 60, self.total_s * slower / 60
+        return f"about {low:,.1f}-{high:,.1f} min ({low:,.1f} at the recorded speed, {high:,.1f} on a machine " \
+               f"{slower:g}x slower)"
 
     def line(self) -> str:
         """One line for a terminal: the figure and its basis."""

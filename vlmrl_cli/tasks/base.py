@@ -235,6 +235,33 @@ class Task:
             return shaping
         return dataclasses.replace(shaping, alpha=self.scales.alpha, kin_scale=self.scales.kin_scale)
 
+    def scales_note(self, shaping: ShapingConfig) -> str | None:
+        """One line saying which of ``shaping``'s scales are this task's own (``scales``) in place of
+        the paper's defaults (``ShapingConfig``'s alpha 5, kin_scale 2); None when none is.
+
+        Example:
+            >>> from vlmrl_cli.tasks.registry import get_task
+            >>> acrobot = get_task("acrobot")
+            >>> acrobot.scales_note(acrobot.default_shaping())
+            "the task's own scales alpha 107, kin_scale 0.152 replace the paper's defaults alpha 5, kin_scale 2"
+            >>> acrobot.scales_note(dataclasses.replace(acrobot.default_shaping(), alpha=5.0))
+            "the task's own scale kin_scale 0.152 replaces the paper's default kin_scale 2"
+            >>> get_task("mountain-car").scales_note(ShapingConfig()) is None
+            True
+        """
+        if self.scales is None:
+            return None
+        paper = ShapingConfig()
+        own = [(name, getattr(self.scales, name), getattr(paper, name)) for name in ("alpha", "kin_scale")
+               if getattr(shaping, name) == getattr(self.scales, name) != getattr(paper, name)]
+        if not own:
+            return None
+        ours = ", ".join(f"{name} {value:g}" for name, value, _ in own)
+        theirs = ", ".join(f"{name} {value:g}" for name, _, value in own)
+        many = len(own) > 1
+        return (f"the task's own scale{'s' if many else ''} {ours} replace{'' if many else 's'} the paper's "
+                f"default{'s' if many else ''} {theirs}")
+
     def labels_problem(self, label_potentials: LabelMap) -> str | None:
         """Why a label map does not fit this task (None when it does)."""
         return label_problem(label_potentials, self.milestones.labels)

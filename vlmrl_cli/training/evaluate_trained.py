@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.core.paths import check_out_folder
+from vlmrl_cli.core.paths import SCRATCH, check_out_folder
 from vlmrl_cli.frames.gif import captioned, write_gif
 from vlmrl_cli.shaping.arms import PotentialSource
 from vlmrl_cli.shaping.camera import FrameView
@@ -33,7 +33,9 @@ from vlmrl_cli.training.evaluation import EvalResult, Policy, evaluate_detached
 from vlmrl_cli.training.trained import TrainedRun, load_trained_run
 from vlmrl_cli.vlm.config import DEFAULT_CACHE
 
-DEFAULT_ROOT = Path("results") / "evaluate"
+#: Under the git-ignored scratch folder: run from the repository, a default never overwrites the
+#: committed results (results/tasks/*/evaluate/ were written with --out).
+DEFAULT_ROOT = SCRATCH / "evaluate"
 ARTIFACT_PATH = "evaluate"
 SIMULATED_ALERT = "SIMULATED VLM (not a real model)"
 
@@ -44,7 +46,7 @@ class EvaluateConfig:
 
     run_id: str
     tracking_uri: str | None = None
-    out: Path | None = field(default=None, metadata={"help": "None = results/evaluate/<run_id>"})
+    out: Path | None = field(default=None, metadata={"help": "None = results/_scratch/evaluate/<run_id>"})
     episodes: int = field(default=10, metadata={"help": "detached episodes; episode i resets with EVAL_SEED + i"})
     episode_index: int = field(default=0, metadata={"help": "which of them the GIF shows"})
     frame_every: int = field(default=2, metadata={"help": "keep every k-th frame in the GIF"})
