@@ -69,6 +69,12 @@ CASES: list[tuple[str, str]] = [
     # a task named in a file resolves through the registry alone
     ("run --set task=this:x", "names a Python module; vlmrl imports a module only when you name it with --task"),
     ("report --user-task this:x", "this.py does not import vlmrl_cli"),
+    # stores that keep nothing, ignore part of their URI or lack their driver
+    ("run --tracking-uri sqlite:///:memory:", "an in-memory sqlite store keeps nothing"),
+    ("run --tracking-uri sqlite://", "an in-memory sqlite store keeps nothing"),
+    ("run --tracking-uri sqlite:///{tmp}/m.db?mode=ro", "takes a file path and no query"),
+    ("report --tracking-uri sqlite:///{tmp}/m.db?mode=ro", "takes a file path and no query"),
+    ("run --tracking-uri postgresql+nosuchdriver://u@127.0.0.1:9/db", "no Python module nosuchdriver"),
     ("run --set n_envs", "KEY=VALUE"),
     ("run --workers 0", "workers"),
     ("run --timesteps -5", "timesteps"),
@@ -239,3 +245,35 @@ def test_an_export_of_a_newer_format_says_to_upgrade(
     _export(tmp_path / "runs.jsonl.gz", [_record(0, f"vlmrl-runs/{newer}")])
     _refused(tmp_path, monkeypatch, capsys, command,
              f"written by a newer vlmrl (format {newer}; this one reads up to {FORMAT_VERSION}): upgrade vlmrl")
+
+
+# --- another program's database, a text file posing as one: refused, and never written ---------
+
+
+def _foreign(tmp_path: Path) -> Path:
+    import sqlite3
+
+    path = tmp_path / "other.db"
+    con = sqlite3.connect(path)
+    con.execute("create table notes (id integer primary key, text text)")
+    con.execute("insert into notes (text) values ('mine')")
+    con.commit()
+    con.close()
+    return path
+
+
+@pytest.mark.parametrize("command", ["run --dry-run", "run", "report", "export --out {tmp}/x.jsonl.gz",
+                                     "verify", "taxonomy --states 2"])
+@pytest.mark.parametrize(("make", "words"), [(_foreign, "is a sqlite database of another program"),
+                                             (lambda t: (t / "text.db", (t / "text.db").write_text("hello\n"))[0],
+                                              "is not a sqlite database")])
+def test_a_database_that_is_no_mlflow_store_is_refused_and_left_as_it_was(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], command: str, make,  # type: ignore[no-untyped-def]
+    words: str
+) -> None:
+    import hashlib
+
+    db = make(tmp_path)
+    before = hashlib.sha256(db.read_bytes()).hexdigest()
+    _refused(tmp_path, monkeypatch, capsys, f"{command} --tracking-uri sqlite:///{db}", words)
+    assert hashlib.sha256(db.read_bytes()).hexdigest() == before

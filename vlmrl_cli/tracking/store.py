@@ -64,10 +64,18 @@ def _unreachable(uri: str, why: str) -> str:
 def _sqlite_problem(uri: str, write: bool, existing: bool) -> str | None:
     """Why this process cannot use the sqlite database of ``uri`` (read, or read and write), or
     None; ``existing``: a missing database is refused rather than created. Read from the file
-    system alone: a folder is probed with an anonymous temporary file, which leaves nothing."""
-    db_path = Path(uri.removeprefix("sqlite:///").split("?", 1)[0])
-    if str(db_path) in ("", ".", ":memory:"):
-        return None
+    system alone (a folder is probed with an anonymous temporary file, which leaves nothing; a
+    database is opened read-only): a store in memory or named with a query, and a file that is no
+    MLflow store, are refused before MLflow could add its tables to them."""
+    if not uri.startswith("sqlite:///") or uri.removeprefix("sqlite:///") in ("", ":memory:"):
+        return _unreachable(uri, "an in-memory sqlite store keeps nothing and each worker would open its own; "
+                                 "pass --tracking-uri sqlite:///PATH/mlflow.db")
+    if "?" in uri:
+        return _unreachable(uri, "a sqlite tracking URI takes a file path and no query (?...), which MLflow would "
+                                 "ignore; pass --tracking-uri sqlite:///PATH/mlflow.db")
+    db_path = Path(uri.removeprefix("sqlite:///"))
+    if str(db_path) == ".":
+        return _unreachable(uri, "no database file is named; pass --tracking-uri sqlite:///PATH/mlflow.db")
     if existing and not db_path.is_file():
         return f"there is no tracking database at {db_path}; pass the --tracking-uri the runs were made with"
     if db_path.exists():
@@ -78,6 +86,10 @@ def _sqlite_problem(uri: str, write: bool, existing: bool) -> str | None:
                 pass
         except OSError as exc:
             return _unreachable(uri, f"{db_path} cannot be {'written' if write else 'read'} here ({exc.strerror})")
+        foreign = _foreign_database(db_path)
+        if foreign:
+            return _unreachable(uri, f"{db_path} {foreign}; MLflow would add its tables to it. Pass --tracking-uri "
+                                     "sqlite:///PATH/mlflow.db of an MLflow store, or a new file")
     if not write:
         return None
     folder = db_path.absolute().parent
@@ -91,6 +103,54 @@ def _sqlite_problem(uri: str, write: bool, existing: bool) -> str | None:
     except OSError as exc:
         return _unreachable(uri, f"no file can be written in {folder} ({exc.strerror}); pass --tracking-uri "
                                  "sqlite:///PATH/mlflow.db in a folder you can write")
+    return None
+
+
+def _foreign_database(db_path: Path) -> str | None:
+    """Why the existing file ``db_path`` is no MLflow sqlite store, or None (an MLflow store, or an
+    empty file, which MLflow makes one): read through a read-only connection, which writes nothing."""
+    import sqlite3
+
+    if db_path.stat().st_size == 0:
+        return None
+    try:
+        con = sqlite3.connect(f"{db_path.absolute().as_uri()}?mode=ro", uri=True)
+        try:
+            tables = {row[0] for row in con.execute("select name from sqlite_master where type = 'table'")}
+        finally:
+            con.close()
+    except sqlite3.Error as exc:
+        return f"is not a sqlite database ({exc})"
+    if tables and not {"alembic_version", "experiments", "runs"} <= tables:
+        return f"is a sqlite database of another program ({len(tables)} table(s), none of MLflow's)"
+    return None
+
+
+#: The database drivers SQLAlchemy loads by default for MLflow's database stores (a ``+driver`` in
+#: the scheme names another), with what to install.
+DB_DRIVERS = {"postgresql": ("psycopg2", "psycopg2-binary"), "mysql": ("MySQLdb", "mysqlclient"),
+              "mssql": ("pyodbc", "pyodbc")}
+
+
+def _driver_problem(uri: str) -> str | None:
+    """Why the database store of ``uri`` cannot be opened for want of its driver, or None: MLflow
+    would print its header and then fail on the import after seconds.
+
+    Example:
+        >>> _driver_problem("postgresql+nosuchdriver://h/db").split(": ", 1)[1]
+        'no Python module nosuchdriver for its database driver; install it (pip install nosuchdriver)'
+    """
+    import importlib.util
+    import urllib.parse
+
+    scheme = urllib.parse.urlparse(uri).scheme.lower()
+    base, _, driver = scheme.partition("+")
+    if base not in DB_DRIVERS:
+        return None
+    module, package = (driver, driver) if driver else DB_DRIVERS[base]
+    if importlib.util.find_spec(module) is None:
+        return _unreachable(uri, f"no Python module {module} for its database driver; install it (pip install "
+                                 f"{package})")
     return None
 
 
@@ -115,9 +175,9 @@ def store_problem(uri: str | None, write: bool = True, existing: bool = False) -
     if scheme not in MLFLOW_SCHEMES and scheme not in plugins:
         return _unreachable(resolved, f"MLflow has no store for the scheme '{scheme}' (a typo?); pass "
                                       "sqlite:///PATH/mlflow.db or http://HOST:PORT")
-    if resolved.startswith("sqlite:///"):
+    if scheme == "sqlite":
         return _sqlite_problem(resolved, write, existing)
-    return None
+    return _driver_problem(resolved)
 
 
 def check_store(uri: str | None, write: bool = True, existing: bool = False) -> None:
