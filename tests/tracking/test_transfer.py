@@ -23,6 +23,7 @@ from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.tracking import store
 from vlmrl_cli.tracking.transfer import (
     FORMAT,
+    FORMAT_NAME,
     MAX_KEY,
     MAX_PARAM_VALUE,
     MAX_TAG_VALUE,
@@ -270,8 +271,10 @@ def test_an_edited_export_is_refused_by_its_digest(tmp_path: Path) -> None:
 
 
 def test_a_format_1_file_is_read_and_says_it_has_no_digest(tmp_path: Path) -> None:
-    assert not read_export(COMMITTED).digest_checked
-    result = _import(tmp_path, COMMITTED)
+    assert read_export(COMMITTED).digest_checked  # the committed files got their digest line appended
+    old = _write(tmp_path / "old.jsonl.gz", [{**r, "format": f"{FORMAT_NAME}/1"} for r in _records()], digest=False)
+    assert not read_export(old).digest_checked
+    result = _import(tmp_path, old)
     assert result.exit_code == 0 and "(format 1: the file carries no digest to check)" in result.output, result.output
 
 
