@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -38,6 +39,37 @@ class Backend(Protocol):
     def answer(self, prompt: Prompt, frame: Frame) -> str: ...
 
     def close(self) -> None: ...
+
+
+@runtime_checkable
+class BatchBackend(Backend, Protocol):
+    """A backend that answers several frames in one call (a batched forward pass, concurrent
+    requests): ``answer_many(prompt, frames)[i]`` is what ``answer(prompt, frames[i])`` would say,
+    whatever the split. A backend without it is asked one frame at a time (``answer_all``)."""
+
+    def answer_many(self, prompt: Prompt, frames: Sequence[Frame]) -> list[str]: ...
+
+
+def answer_all(backend: Backend, prompt: Prompt, frames: Sequence[Frame]) -> list[str]:
+    """``backend``'s answers about ``frames``, in order: one ``answer_many`` call where the backend
+    has it, else one ``answer`` per frame, in order (a stochastic backend's draws follow that order).
+
+    Example:
+        >>> class Echo:
+        ...     name, model, simulated = "echo", "e", True
+        ...     def answer(self, prompt, frame): return frame
+        ...     def close(self): pass
+        >>> answer_all(Echo(), None, ["a", "b"])
+        ['a', 'b']
+    """
+    if not frames:
+        return []
+    if isinstance(backend, BatchBackend):
+        answers = backend.answer_many(prompt, frames)
+        if len(answers) != len(frames):
+            raise ValueError(f"{backend.name} answered {len(answers)} of {len(frames)} frames")
+        return list(answers)
+    return [backend.answer(prompt, frame) for frame in frames]
 
 
 def describe(backend: Backend) -> str:
