@@ -33,7 +33,8 @@ def scripted(*answers: str) -> tuple[VLMClient, ScriptedBackend]:
 def test_stats_have_exactly_the_documented_keys() -> None:
     oracle = mc_oracle(sim_client(), ShapingConfig(), MCQ)
     assert tuple(oracle.stats()) == STAT_KEYS == (
-        "vlm/queries", "vlm/cache_hits", "vlm/prototypes", "vlm/label_reuses", "vlm/parse_failures")
+        "vlm/queries", "vlm/cache_hits", "vlm/prototypes", "vlm/label_reuses", "vlm/parse_failures",
+        "vlm/backend_calls", "vlm/backend_frames", "vlm/largest_batch", "vlm/backend_s", "vlm/budget_labels")
     assert all(v == 0.0 for v in oracle.stats().values())
 
 

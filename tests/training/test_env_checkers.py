@@ -16,7 +16,7 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec, PotentialSource
-from vlmrl_cli.shaping.wrapper import HybridReward
+from vlmrl_cli.shaping.wrapper import EpisodeStatistics
 from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.tasks.registry import get_task, task_names
 from vlmrl_cli.training.envs import make_train_env
@@ -65,7 +65,7 @@ def test_both_checkers_pass_on_the_training_env_of_every_task_and_arm(task_name:
     render and close checks (both ``env.spec.make()``) are run on the bare env below instead."""
     task = get_task(task_name)
     env, venv = training_env(task, ARMS[arm_name])
-    assert isinstance(env, HybridReward) and env.success == task.success
+    assert isinstance(env, EpisodeStatistics) and env.success == task.success
     try:
         with no_findings():
             gymnasium_check_env(env, skip_render_check=True, skip_close_check=True)

@@ -11,7 +11,7 @@ from tests.shaping import sim_client
 from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.semantic import SemanticOracle
-from vlmrl_cli.shaping.wrapper import HybridReward
+from vlmrl_cli.shaping.wrapper import EpisodeStatistics, LabelRoundVecEnv, SemanticPotential
 from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
 from vlmrl_cli.tasks.registry import get_task
@@ -21,11 +21,13 @@ from vlmrl_cli.training.presets import preset_of
 SMOKE = preset_of(get_task("mountain-car"), "smoke")  # 2 envs, VecNormalize on
 
 
-def wrappers(venv: VecEnv) -> list[HybridReward]:
+def wrappers(venv: VecEnv) -> list[SemanticPotential]:
+    """The semantic wrapper of each env of a hybrid run's stack (below its EpisodeStatistics)."""
     base = venv.venv if isinstance(venv, VecNormalize) else venv
-    assert isinstance(base, DummyVecEnv)
-    envs = [env for env in base.envs if isinstance(env, HybridReward)]
-    assert len(envs) == base.num_envs, "every env of the stack is a HybridReward"
+    assert isinstance(base, LabelRoundVecEnv)
+    assert all(isinstance(env, EpisodeStatistics) for env in base.envs), "every stack ends in EpisodeStatistics"
+    envs = [e.env for e in base.envs if isinstance(e, EpisodeStatistics) and isinstance(e.env, SemanticPotential)]
+    assert len(envs) == base.num_envs, "every env of a hybrid stack holds a SemanticPotential"
     return envs
 
 
@@ -67,12 +69,12 @@ def test_camera_and_oracle_are_shared_and_gamma_defaults_to_the_learner() -> Non
     venv, oracle = make_train_env(ARMS["hybrid"], SMOKE, ShapingConfig(), sim_client(), seed=0, task=MOUNTAIN_CAR)
     envs = wrappers(venv)
     assert envs[0].camera is envs[1].camera is not None
-    assert all(env._episode is not None and env._episode.oracle is oracle for env in envs)
+    assert all(env.episode.oracle is oracle for env in envs)
     assert isinstance(oracle, SemanticOracle)
-    assert all(env.gamma == SMOKE.gamma for env in envs)
+    assert all(env._gamma == SMOKE.gamma for env in envs)
     venv.close()
     venv, _ = make_train_env(ARMS["hybrid"], SMOKE, ShapingConfig(gamma=0.9), sim_client(), seed=0, task=MOUNTAIN_CAR)
-    assert all(env.gamma == 0.9 for env in wrappers(venv))
+    assert all(env._gamma == 0.9 for env in wrappers(venv))
 
 
 def test_same_seed_same_shaped_rewards() -> None:

@@ -1,7 +1,7 @@
 """What the hybrid reward needs to know of a task: its observation, its dense term, its camera.
 
-A task plug-in (``vlmrl_cli.tasks``) fills a ``Scene``; ``HybridReward`` reads nothing else about
-the environment. MountainCar's (``tasks/mountain_car``) is the paper's: observation ``[x, v]``,
+A task plug-in (``vlmrl_cli.tasks``) fills a ``Scene``; the reward wrappers (``shaping.wrapper``)
+read nothing else about the environment. MountainCar's (``tasks/mountain_car``) is the paper's: observation ``[x, v]``,
 Eq. 1's kinematic term on ``x`` and a camera that images the position.
 """
 

@@ -7,6 +7,17 @@ prototype within that feature distance) and asks the VLM otherwise. ``phi_rbf`` 
 prototypes' raw potentials with an ``RBFField`` (``rbf_potential`` kept up to date per frame
 key as prototypes arrive), so the per-step cost is a dict lookup.
 
+One labelling round per vector step (issue 53): the envs of a run register the views they will
+label in this step (``request``, in the order the labels are then taken), ``fetch`` asks the VLM
+about those a label may need in ONE call (``VLMClient.ask_many``), and the labels are then taken
+env by env exactly as one env at a time would take them (``label``), the asked answers read from
+the round instead of the VLM. So the round changes when the VLM is asked, never a label, a
+prototype or a potential: a deterministic VLM may be asked about a frame that an earlier env's
+new prototype then covers (its answer goes unused), a stochastic one is asked every labelling
+view in the same order. ``max_queries`` caps the labels asked of the VLM in a run; past it a
+label is the nearest prototype's (RL-VLM-F's budget is the model: at most 20,000 labels in 1M
+steps).
+
 ``EpisodePotential`` is the per-env part: when to label (every ``query_every`` steps, step 0
 of an episode included), the hysteresis lock, and the potential of the arm:
 
@@ -25,6 +36,7 @@ Nothing here sees the environment state: the only input is a ``FrameView``.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 
 import numpy as np
@@ -36,6 +48,7 @@ from vlmrl_cli.shaping.features import FEATURE_UNIT
 from vlmrl_cli.shaping.hysteresis import LockState, lock_step
 from vlmrl_cli.shaping.rbf import RBFField, squared_distances
 from vlmrl_cli.tracking import schema
+from vlmrl_cli.vlm.base import Answer
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.parsers import parse_float, parse_mcq
 from vlmrl_cli.vlm.prompts import Milestones, NumberQuestions
@@ -46,6 +59,11 @@ STAT_KEYS: tuple[str, ...] = (
     schema.METRIC_VLM_PROTOTYPES,
     schema.METRIC_VLM_LABEL_REUSES,
     schema.METRIC_VLM_PARSE_FAILURES,
+    schema.METRIC_VLM_BACKEND_CALLS,
+    schema.METRIC_VLM_BACKEND_FRAMES,
+    schema.METRIC_VLM_LARGEST_BATCH,
+    schema.METRIC_VLM_BACKEND_S,
+    schema.METRIC_VLM_BUDGET_LABELS,
 )
 
 
@@ -61,7 +79,8 @@ class SemanticOracle:
     """
 
     def __init__(self, client: VLMClient, cfg: ShapingConfig, source: PotentialSource, milestones: Milestones,
-                 feature_dim: int, rbf: bool = True, numbers: NumberQuestions | None = None) -> None:
+                 feature_dim: int, rbf: bool = True, numbers: NumberQuestions | None = None,
+                 max_queries: int | None = None) -> None:
         if source is PotentialSource.NONE:
             raise ValueError("a SemanticOracle needs a potential source (MCQ or FLOAT); arms without one need none.")
         if not (math.isfinite(cfg.bandwidth) and cfg.bandwidth > 0):
@@ -72,10 +91,13 @@ class SemanticOracle:
             raise ValueError(
                 f"ShapingConfig.query_every and confirm must be >= 1, got {cfg.query_every} and {cfg.confirm}."
             )
+        if max_queries is not None and max_queries < 0:
+            raise ValueError(f"max_queries must be >= 0 labels (None: no budget), got {max_queries}.")
         self.client = client
         self.cfg = cfg
         self.source = source
         self.rbf = rbf
+        self.max_queries = max_queries
         if source is PotentialSource.MCQ:
             unknown = sorted(set(milestones.labels) ^ {label for label, _ in cfg.label_potentials})
             if unknown:
@@ -100,6 +122,11 @@ class SemanticOracle:
         self._cache_hits = 0
         self._reuses = 0
         self._parse_failures = 0
+        self._budget_labels = 0
+        self._requests: list[FrameView] = []
+        # the round's answers: by frame key (a deterministic VLM), or in the order asked (a stochastic one)
+        self._fetched: dict[str, Answer] = {}
+        self._fetched_in_order: deque[tuple[str, Answer]] = deque()
 
     def __deepcopy__(self, memo: dict[int, object]) -> SemanticOracle:
         # One oracle (its VLM client, response cache and prototypes) is shared by the envs of a
@@ -115,6 +142,39 @@ class SemanticOracle:
         """The raw potentials of the cached prototypes, shape (N,), in insertion order."""
         return self._potentials[: self._n].copy()
 
+    def request(self, view: FrameView) -> None:
+        """Say that ``view`` is labelled in this vector step; requests come in the order their
+        labels are then taken (env by env; an env's step before its reset)."""
+        self._requests.append(view)
+
+    def fetch(self) -> None:
+        """Ask the VLM, in one call, about every requested view whose label may need it: all of
+        them for a stochastic VLM; else those neither labelled nor within ``reuse_radius`` of a
+        prototype now, each frame once, no more than the budget has left. Labels taken after
+        this read the answers from here (``label``)."""
+        views, self._requests = self._requests, []
+        self._fetched.clear()  # what an earlier round fetched and no label took
+        self._fetched_in_order.clear()
+        if self._stochastic:
+            need = views
+        else:
+            known: set[str] = set()
+            need = []
+            for view in views:
+                if view.key in self._label_of or view.key in known or self._nearby(view) is not None:
+                    continue
+                known.add(view.key)
+                need.append(view)
+        if self.max_queries is not None:
+            need = need[: max(self.max_queries - self._queries, 0)]
+        if not need:
+            return
+        answers = self.client.ask_many(self._prompt, [view.frame() for view in need])
+        if self._stochastic:
+            self._fetched_in_order.extend((view.key, answer) for view, answer in zip(need, answers, strict=True))
+        else:
+            self._fetched.update((view.key, answer) for view, answer in zip(need, answers, strict=True))
+
     def label(self, view: FrameView) -> float | None:
         """The raw potential of the view's label (reused or asked), or None if unparsed.
 
@@ -123,18 +183,21 @@ class SemanticOracle:
         With ``reuse_radius > 0`` the nearest prototype's label is also reused for frames within
         that feature distance, which saves queries but can change labels near zone edges. A
         stochastic VLM's client (``client.stochastic``) is asked at every labelling step, and its
-        newest answer about a frame replaces that prototype's potential.
+        newest answer about a frame replaces that prototype's potential. Once ``max_queries``
+        labels were asked, the label is the nearest prototype's, at any distance (None before
+        the first prototype).
         """
         known = self._label_of.get(view.key)
         if known is not None and not self._stochastic:
             self._reuses += 1
             return known
-        if self._n and self.cfg.reuse_radius > 0 and not self._stochastic:
-            sq = squared_distances(self._features[: self._n], view.features, unit=FEATURE_UNIT)
-            nearest = int(np.argmin(sq))
-            if math.sqrt(float(sq[nearest])) < self.cfg.reuse_radius:
+        if not self._stochastic:
+            nearest = self._nearby(view)
+            if nearest is not None:
                 self._reuses += 1
                 return float(self._potentials[nearest])
+        if self.max_queries is not None and self._queries >= self.max_queries:
+            return self._past_budget(view)
         potential = self._ask(view)
         if potential is None:
             self._parse_failures += 1
@@ -144,8 +207,34 @@ class SemanticOracle:
         self._add(view, potential)
         return potential
 
+    def _nearby(self, view: FrameView) -> int | None:
+        """The row of the nearest prototype within ``reuse_radius`` of ``view`` (None: reuse is off,
+        or none is that near)."""
+        if not self._n or self.cfg.reuse_radius <= 0:
+            return None
+        sq = squared_distances(self._features[: self._n], view.features, unit=FEATURE_UNIT)
+        nearest = int(np.argmin(sq))
+        return nearest if math.sqrt(float(sq[nearest])) < self.cfg.reuse_radius else None
+
+    def _past_budget(self, view: FrameView) -> float | None:
+        """The label past the query budget: the nearest prototype's potential, or None (no prototype)."""
+        if not self._n:
+            return None
+        self._budget_labels += 1
+        sq = squared_distances(self._features[: self._n], view.features, unit=FEATURE_UNIT)
+        return float(self._potentials[int(np.argmin(sq))])
+
+    def _answer(self, view: FrameView) -> Answer:
+        """The VLM's answer about ``view``: the round's (``fetch``), else asked now."""
+        if self._stochastic:
+            if self._fetched_in_order and self._fetched_in_order[0][0] == view.key:
+                return self._fetched_in_order.popleft()[1]
+        elif view.key in self._fetched:
+            return self._fetched.pop(view.key)
+        return self.client.ask(self._prompt, view.frame())
+
     def _ask(self, view: FrameView) -> float | None:
-        answer = self.client.ask(self._prompt, view.frame())
+        answer = self._answer(view)
         self._queries += 1
         self._cache_hits += int(answer.cached)
         if self.source is PotentialSource.MCQ:
@@ -198,6 +287,11 @@ class SemanticOracle:
             schema.METRIC_VLM_PROTOTYPES: float(self._n),
             schema.METRIC_VLM_LABEL_REUSES: float(self._reuses),
             schema.METRIC_VLM_PARSE_FAILURES: float(self._parse_failures),
+            schema.METRIC_VLM_BACKEND_CALLS: float(self.client.stats.backend_calls),
+            schema.METRIC_VLM_BACKEND_FRAMES: float(self.client.stats.backend_frames),
+            schema.METRIC_VLM_LARGEST_BATCH: float(self.client.stats.largest_batch),
+            schema.METRIC_VLM_BACKEND_S: float(self.client.stats.backend_seconds),
+            schema.METRIC_VLM_BUDGET_LABELS: float(self._budget_labels),
         }
 
 
@@ -218,6 +312,15 @@ class EpisodePotential:
         self.steps_since_label = 0
         # the oracle's RBF field's value(key, features), looked up once (None without the RBF)
         self._rbf_value = oracle.field_value if oracle.rbf else None
+
+    def request_reset(self, view: FrameView) -> None:
+        """Register the reset's label with the oracle's round (``reset`` then takes it)."""
+        self.oracle.request(view)
+
+    def request_step(self, view: FrameView) -> None:
+        """Register the next step's label with the oracle's round, when that step labels."""
+        if self.steps_since_label + 1 >= self.query_every:
+            self.oracle.request(view)
 
     def reset(self, view: FrameView) -> float:
         self.lock_state = LockState.reset()

@@ -1,166 +1,388 @@
-"""The hybrid reward of paper Eq. 2 as a gymnasium wrapper."""
+"""An arm as an ordered stack of reward wrappers (paper Eq. 2), each validating its own arguments.
+
+``R_total = R_env [+ R_kin(x) | + (gamma Phi_kin(s') - Phi_kin(s))] [+ alpha (gamma Phi(s') - Phi(s))]``:
+
+==========================  ============================================================
+wrapper                     what it adds
+==========================  ============================================================
+``KinematicReward``         Eq. 1's dense term ``R_kin`` of the observation (proprioception)
+``KinematicPotential``      the same term paid as a potential, ``Phi_kin = horizon x R_kin``
+``SemanticPotential``       the VLM milestones' potential through the camera (exteroception)
+``EpisodeStatistics``       nothing: ``shaped_return`` and ``is_success`` at an episode's end
+==========================  ============================================================
+
+``arm_wrappers`` says which an arm stacks, innermost first; ``wrap_arm`` stacks them. Each reward
+wrapper keeps the reward it was given as ``info["native_reward"]`` when no wrapper below it has,
+so the env's own reward stays visible, as gymnasium's reward wrappers do.
+
+A ``RewardStage`` can also step in two halves, ``begin_step`` and ``finish_step`` (and
+``begin_reset``/``finish_reset``): ``LabelRoundVecEnv`` begins every env's step, lets the
+``SemanticOracle`` ask the VLM about all their frames in one call, then finishes them env by env
+(issue 53). The halves give the same rewards, bit for bit, as ``step``.
+"""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
+from copy import deepcopy
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
+from stable_baselines3.common.vec_env import DummyVecEnv
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 
 from vlmrl_cli.shaping.arms import ArmSpec
 from vlmrl_cli.shaping.camera import FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.pbrs import pbrs_term
-from vlmrl_cli.shaping.scene import Scene, SceneCamera, SuccessRule, ended_by_env
+from vlmrl_cli.shaping.scene import DenseTerm, Scene, SceneCamera, SuccessRule, ended_by_env
 from vlmrl_cli.shaping.semantic import EpisodePotential, SemanticOracle
 
+StepResult = tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]
+ResetResult = tuple[Any, dict[str, Any]]
+Wrap = Callable[[gym.Env], gym.Env]
 
-class HybridReward(gym.Wrapper[np.ndarray, Any, np.ndarray, Any], gym.utils.RecordConstructorArgs):
-    """``R_total = R_env [+ R_kin(x)] [+ alpha (gamma Phi(s') - Phi(s))]``, terms chosen by ``arm``.
 
-    Observations pass through unchanged: the policy sees the task's native observation.
-    ``R_kin`` is the ``scene``'s dense term on the observation
-    (proprioception); the potential reads the simulator only through ``camera``
-    (exteroception), whose ``FrameView`` is all the
-    ``oracle`` ever gets. Every step puts the env's own reward in ``info["native_reward"]``;
-    the last step of an episode adds ``info["shaped_return"]`` (the sum of ``R_total``) and
-    ``info["is_success"]`` (``success(terminated, length)``, the episode's length counted here).
-    An arm without shaping (``baseline``) passes rewards through and still adds these keys.
+def _gamma(gamma: float) -> float:
+    if not (math.isfinite(gamma) and 0.0 < gamma <= 1.0):
+        raise ValueError(f"gamma must be in (0, 1], got {gamma}; pass the learner's discount.")
+    return float(gamma)
 
-    Args:
-        env: an env of ``scene``'s task.
-        arm: which terms to add.
-        shaping: alpha, the kinematic coefficients and the label schedule.
-        gamma: PBRS discount in (0, 1], normally the learner's.
-        scene: what the task's observation, dense term and simulator are (``Task.scene``).
-        camera, oracle: required when ``arm.uses_vlm``; shared by the envs of one run.
-        horizon: the task's time limit, required when ``arm.dense_potential``: the dense term is
-            then paid as ``gamma Phi_kin(s') - Phi_kin(s)`` with ``Phi_kin = horizon x R_kin``
-            (what Eq. 1 would pay for staying in ``s`` a whole episode, so both forms have the
-            same largest episode total; 0 at a terminal state, as ``pbrs_term`` does).
-        success: the task's success rule (``Task.success``); None: the env itself ended the
-            episode (``scene.ended_by_env``), at any length.
+
+def _native(info: dict[str, Any], reward: SupportsFloat) -> dict[str, Any]:
+    """``info`` (copied) with ``native_reward``: the reward of the env below the first reward wrapper."""
+    info = dict(info)
+    info.setdefault("native_reward", float(reward))
+    return info
+
+
+class RewardStage(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorArgs):
+    """A wrapper that changes what a step returns (``_after_step``) and what a reset returns
+    (``_after_reset``), whether the step runs at once (``step``) or in the two halves of a labelling
+    round (``begin_step``, ``finish_step``), which a stage passes down to the stage that splits
+    (``SemanticPotential``) and, below that, runs whole."""
+
+    def __init__(self, env: gym.Env, **recorded: Any) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, **recorded)
+        gym.Wrapper.__init__(self, env)
+        # a begun step and a begun reset (an episode that ended in the step) wait side by side
+        self._begun_step: StepResult | None = None
+        self._begun_reset: ResetResult | None = None
+
+    def _after_step(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
+                    info: dict[str, Any]) -> StepResult:
+        return obs, reward, terminated, truncated, info
+
+    def _after_reset(self, obs: Any, info: dict[str, Any]) -> ResetResult:
+        return obs, info
+
+    def step(self, action: Any) -> StepResult:
+        return self._after_step(*self.env.step(action))
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> ResetResult:
+        return self._after_reset(*self.env.reset(seed=seed, options=options))
+
+    def begin_step(self, action: Any) -> tuple[bool, bool]:
+        """The first half of ``step``: the env below moves; (terminated, truncated)."""
+        if isinstance(self.env, RewardStage):
+            return self.env.begin_step(action)
+        result = self.env.step(action)
+        self._begun_step = result
+        return bool(result[2]), bool(result[3])
+
+    def finish_step(self) -> StepResult:
+        """The second half of ``step``: what ``step`` would have returned."""
+        if isinstance(self.env, RewardStage):
+            return self._after_step(*self.env.finish_step())
+        result, self._begun_step = self._begun_step, None
+        assert result is not None, "finish_step without begin_step"
+        return self._after_step(*result)
+
+    def begin_reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
+        """The first half of ``reset``."""
+        if isinstance(self.env, RewardStage):
+            self.env.begin_reset(seed=seed, options=options)
+        else:
+            self._begun_reset = self.env.reset(seed=seed, options=options)
+
+    def finish_reset(self) -> ResetResult:
+        """The second half of ``reset``: what ``reset`` would have returned."""
+        if isinstance(self.env, RewardStage):
+            return self._after_reset(*self.env.finish_reset())
+        result, self._begun_reset = self._begun_reset, None
+        assert result is not None, "finish_reset without begin_reset"
+        return self._after_reset(*result)
+
+
+class KinematicReward(RewardStage):
+    """Adds Eq. 1's dense term ``R_kin = dense(obs, scale, offset)`` of the new observation.
 
     Example:
-        >>> import gymnasium as gym
         >>> from gymnasium.envs.classic_control.cartpole import CartPoleEnv
-        >>> from vlmrl_cli.shaping.arms import ARMS
-        >>> upright = Scene("cartpole", (4,), lambda obs, scale, offset: scale * (offset - abs(float(obs[2]))),
-        ...                 CartPoleEnv)
-        >>> env = HybridReward(gym.make("CartPole-v1"), ARMS["kinematic"], ShapingConfig(), 0.99, upright)
+        >>> upright = lambda obs, scale, offset: scale * (offset - abs(float(obs[2])))
+        >>> env = KinematicReward(gym.make("CartPole-v1"), upright, scale=2.0, offset=0.4)
         >>> obs, _ = env.reset(seed=0)
         >>> obs, reward, terminated, truncated, info = env.step(1)
         >>> info["native_reward"], reward == 1.0 + 2.0 * (0.4 - abs(float(obs[2])))
         (1.0, True)
-        >>> env.close()
     """
 
-    def __init__(
-        self,
-        env: gym.Env[np.ndarray, Any],
-        arm: ArmSpec,
-        shaping: ShapingConfig,
-        gamma: float,
-        scene: Scene,
-        camera: SceneCamera | None = None,
-        oracle: SemanticOracle | None = None,
-        horizon: int | None = None,
-        success: SuccessRule | None = None,
-    ) -> None:
-        gym.utils.RecordConstructorArgs.__init__(
-            self, arm=arm, shaping=shaping, gamma=gamma, camera=camera, oracle=oracle, scene=scene, horizon=horizon,
-            success=success,
-        )
-        gym.Wrapper.__init__(self, env)
-        shape = getattr(env.observation_space, "shape", None)
-        if shape != scene.obs_shape:
-            raise ValueError(f"HybridReward wraps {scene.name}, observation shape {scene.obs_shape}; "
-                             f"got shape {shape}.")
-        if not (math.isfinite(gamma) and 0.0 < gamma <= 1.0):
-            raise ValueError(f"gamma must be in (0, 1], got {gamma}; pass the learner's discount.")
-        if not (math.isfinite(shaping.alpha) and shaping.alpha >= 0):
-            raise ValueError(f"ShapingConfig.alpha must be a finite value >= 0, got {shaping.alpha}.")
-        if arm.dense_potential and not (isinstance(horizon, int) and horizon >= 1):
-            raise ValueError(f"arm '{arm.name}' pays the dense term as a potential; pass the task's time limit "
-                             f"as horizon (got {horizon}).")
-        if arm.uses_vlm:
-            if camera is None or oracle is None:
-                raise ValueError(f"arm '{arm.name}' shapes with the VLM; pass the run's camera and oracle.")
-            if oracle.source is not arm.potential or oracle.rbf != arm.rbf:
-                raise ValueError(
-                    f"the oracle ({oracle.source}, rbf={oracle.rbf}) does not match arm '{arm.name}' "
-                    f"({arm.potential}, rbf={arm.rbf}); build it with the arm's potential and rbf."
-                )
-            if not isinstance(env.unwrapped, scene.sim_type):
-                raise ValueError(f"the camera images {scene.name}'s simulator ({scene.sim_type.__name__}); "
-                                 f"wrap an env of that task.")
-        self.arm = arm
-        self.shaping = shaping
-        self.gamma = float(gamma)
-        self.camera = camera
-        self.scene = scene
-        self._dense = scene.dense
-        self._sim = env.unwrapped  # looked up once: this runs every step
-        self._episode = EpisodePotential(oracle, arm.lock) if arm.uses_vlm and oracle is not None else None
+    def __init__(self, env: gym.Env, dense: DenseTerm, scale: float, offset: float) -> None:
+        super().__init__(env, dense=dense, scale=scale, offset=offset)
+        if not (math.isfinite(scale) and math.isfinite(offset)):
+            raise ValueError(f"the dense term's scale and offset must be finite, got {scale} and {offset}.")
+        self._dense, self._scale, self._offset = dense, float(scale), float(offset)
+
+    def _after_step(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
+                    info: dict[str, Any]) -> StepResult:
+        info = _native(info, reward)
+        return obs, float(reward) + self._dense(obs, self._scale, self._offset), terminated, truncated, info
+
+
+class KinematicPotential(RewardStage):
+    """Pays the dense term as a potential: ``gamma Phi_kin(s') - Phi_kin(s)`` with
+    ``Phi_kin = horizon x R_kin`` (what Eq. 1 would pay for staying in ``s`` a whole episode, so
+    both forms have the same largest episode total; 0 at a terminal state, as ``pbrs_term`` does).
+
+    Example:
+        >>> from gymnasium.envs.classic_control.cartpole import CartPoleEnv
+        >>> upright = lambda obs, scale, offset: scale * (offset - abs(float(obs[2])))
+        >>> env = KinematicPotential(gym.make("CartPole-v1"), upright, 2.0, 0.4, horizon=500, gamma=1.0)
+        >>> obs0, _ = env.reset(seed=0)
+        >>> obs1, reward, *_ = env.step(1)
+        >>> round(reward - 1.0, 9) == round(500 * (upright(obs1, 2.0, 0.4) - upright(obs0, 2.0, 0.4)), 9)
+        True
+    """
+
+    def __init__(self, env: gym.Env, dense: DenseTerm, scale: float, offset: float, horizon: int,
+                 gamma: float) -> None:
+        super().__init__(env, dense=dense, scale=scale, offset=offset, horizon=horizon, gamma=gamma)
+        if not (isinstance(horizon, int) and horizon >= 1):
+            raise ValueError(f"the dense term paid as a potential needs the task's time limit as horizon (got "
+                             f"{horizon}).")
+        self._dense, self._scale, self._offset = dense, float(scale), float(offset)
+        self._horizon, self._gamma = float(horizon), _gamma(gamma)
         self._phi = 0.0
-        self._horizon = float(horizon or 0)
-        self._phi_kin = 0.0
-        self._return = 0.0
-        self.success = success if success is not None else ended_by_env
-        self._length = 0
+
+    def _potential(self, obs: Any) -> float:
+        return self._horizon * self._dense(obs, self._scale, self._offset)
+
+    def _after_reset(self, obs: Any, info: dict[str, Any]) -> ResetResult:
+        self._phi = self._potential(obs)
+        return obs, info
+
+    def _after_step(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
+                    info: dict[str, Any]) -> StepResult:
+        info = _native(info, reward)
+        phi = self._potential(obs)
+        reward = float(reward) + pbrs_term(self._phi, phi, self._gamma, 1.0, terminated)
+        self._phi = phi
+        return obs, reward, terminated, truncated, info
+
+
+class SemanticPotential(RewardStage):
+    """Adds ``alpha (gamma Phi(s') - Phi(s))``, ``Phi`` the VLM milestones' potential of what the
+    ``camera`` shows (the simulator imaged as ``env.render()`` would, never the observation), as
+    the arm's ``EpisodePotential`` (labelling schedule, lock, RBF) makes it from the run's shared
+    ``oracle``. In a labelling round (``begin_step``/``finish_step``) the frame is taken in the
+    first half and labelled in the second, once the oracle has fetched the round's answers."""
+
+    def __init__(self, env: gym.Env, arm: ArmSpec, alpha: float, gamma: float, camera: SceneCamera,
+                 oracle: SemanticOracle, sim_type: type) -> None:
+        super().__init__(env, arm=arm, alpha=alpha, gamma=gamma, camera=camera, oracle=oracle, sim_type=sim_type)
+        if not arm.uses_vlm:
+            raise ValueError(f"arm '{arm.name}' shapes with no VLM; it needs no SemanticPotential.")
+        if not (math.isfinite(alpha) and alpha >= 0):
+            raise ValueError(f"ShapingConfig.alpha must be a finite value >= 0, got {alpha}.")
+        if oracle.source is not arm.potential or oracle.rbf != arm.rbf:
+            raise ValueError(f"the oracle ({oracle.source}, rbf={oracle.rbf}) does not match arm '{arm.name}' "
+                             f"({arm.potential}, rbf={arm.rbf}); build it with the arm's potential and rbf.")
+        if not isinstance(env.unwrapped, sim_type):
+            raise ValueError(f"the camera images {sim_type.__name__}; wrap an env of that simulator.")
+        self.camera, self._alpha, self._gamma = camera, float(alpha), _gamma(gamma)
+        self.episode = EpisodePotential(oracle, arm.lock)
+        self._sim = env.unwrapped  # looked up once: this runs every step
+        self._phi = 0.0
+        # the frames a labelling round took in the halves' first part (None: take it now)
+        self._step_view: FrameView | None = None
+        self._reset_view: FrameView | None = None
 
     @property
     def potential(self) -> float:
-        """Phi of the current state (0.0 for arms without a potential)."""
+        """Phi of the current state."""
         return self._phi
 
     @property
     def lock_level(self) -> float:
         """The hysteresis lock's level in this episode (0.0 without a lock)."""
-        return self._episode.lock_state.level if self._episode is not None else 0.0
+        return self.episode.lock_state.level
 
-    def _view(self) -> FrameView:
-        assert self.camera is not None
-        # The camera images the simulator (as env.render() would), not the agent's observation.
-        return self.camera.look(self._sim)
-
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[np.ndarray, dict[str, Any]]:
-        obs, info = self.env.reset(seed=seed, options=options)
-        self._return = 0.0
-        self._length = 0
-        if self.arm.dense_potential:
-            self._phi_kin = self._horizon * self._dense(obs, self.shaping.kin_scale, self.shaping.kin_offset)
-        self._phi = self._episode.reset(self._view()) if self._episode is not None else 0.0
+    def _after_reset(self, obs: Any, info: dict[str, Any]) -> ResetResult:
+        view, self._reset_view = self._reset_view, None
+        self._phi = self.episode.reset(view if view is not None else self.camera.look(self._sim))
         return obs, info
 
-    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
-        obs, native, terminated, truncated, info = self.env.step(action)
-        reward = float(native)
-        if self.arm.dense_potential:
-            phi_kin = self._horizon * self._dense(obs, self.shaping.kin_scale, self.shaping.kin_offset)
-            reward += pbrs_term(self._phi_kin, phi_kin, self.gamma, 1.0, terminated)
-            self._phi_kin = phi_kin
-        elif self.arm.kinematic:
-            reward += self._dense(obs, self.shaping.kin_scale, self.shaping.kin_offset)
-        if self._episode is not None:
-            assert self.camera is not None  # with the episode: checked in __init__
-            # the camera images the simulator (as env.render() would), not the observation
-            phi_next = self._episode.step(self.camera.look(self._sim))
-            reward += pbrs_term(self._phi, phi_next, self.gamma, self.shaping.alpha, terminated)
-            self._phi = phi_next
-        self._return += reward
+    def _after_step(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
+                    info: dict[str, Any]) -> StepResult:
+        info = _native(info, reward)
+        view, self._step_view = self._step_view, None
+        phi_next = self.episode.step(view if view is not None else self.camera.look(self._sim))
+        reward = float(reward) + pbrs_term(self._phi, phi_next, self._gamma, self._alpha, terminated)
+        self._phi = phi_next
+        return obs, reward, terminated, truncated, info
+
+    def begin_step(self, action: Any) -> tuple[bool, bool]:
+        done = super().begin_step(action)
+        self._step_view = self.camera.look(self._sim)
+        self.episode.request_step(self._step_view)
+        return done
+
+    def begin_reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
+        super().begin_reset(seed=seed, options=options)
+        self._reset_view = self.camera.look(self._sim)
+        self.episode.request_reset(self._reset_view)
+
+    def close(self) -> None:
+        self.camera.close()  # idempotent; a camera shared by other envs reopens on demand
+        super().close()
+
+
+class EpisodeStatistics(RewardStage):
+    """Adds no reward: at an episode's end it puts ``shaped_return`` (the sum of the rewards it
+    saw) and ``is_success`` (the task's ``success(terminated, length)``, the length counted here)
+    in ``info``, and every step keeps the env's reward as ``native_reward`` (when no reward
+    wrapper below has). The outermost wrapper of every arm, baseline's only one.
+
+    Example:
+        >>> env = EpisodeStatistics(gym.make("CartPole-v1"), success=lambda terminated, length: length >= 500)
+        >>> _ = env.reset(seed=0)
+        >>> steps, done = 0, False
+        >>> while not done:
+        ...     _, _, terminated, truncated, info = env.step(0)
+        ...     steps, done = steps + 1, terminated or truncated
+        >>> info["shaped_return"] == steps, info["native_reward"], info["is_success"]
+        (True, 1.0, False)
+    """
+
+    def __init__(self, env: gym.Env, success: SuccessRule | None = None) -> None:
+        super().__init__(env, success=success)
+        self.success = success if success is not None else ended_by_env
+        self._return = 0.0
+        self._length = 0
+
+    def _after_reset(self, obs: Any, info: dict[str, Any]) -> ResetResult:
+        self._return, self._length = 0.0, 0
+        return obs, info
+
+    def _after_step(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
+                    info: dict[str, Any]) -> StepResult:
+        info = _native(info, reward)
+        self._return += float(reward)
         self._length += 1
-        info = dict(info)
-        info["native_reward"] = float(native)
         if terminated or truncated:
             info["shaped_return"] = self._return
             info["is_success"] = bool(self.success(bool(terminated), self._length))
         return obs, reward, terminated, truncated, info
 
-    def close(self) -> None:
-        if self.camera is not None:
-            self.camera.close()  # idempotent; a camera shared by other envs reopens on demand
-        super().close()
+
+def arm_wrappers(arm: ArmSpec, shaping: ShapingConfig, gamma: float, scene: Scene, camera: SceneCamera | None = None,
+                 oracle: SemanticOracle | None = None, horizon: int | None = None,
+                 success: SuccessRule | None = None) -> list[Wrap]:
+    """The wrappers of ``arm``, innermost first: its dense term (as a reward or as a potential), its
+    semantic potential (``camera`` and ``oracle``, shared by the envs of one run), then
+    ``EpisodeStatistics`` with the task's success rule. ``horizon``: the task's time limit, which
+    the dense term paid as a potential needs.
+
+    Example:
+        >>> from vlmrl_cli.shaping.arms import ARMS
+        >>> from vlmrl_cli.tasks.registry import get_task
+        >>> car = get_task("mountain-car")
+        >>> stack = arm_wrappers(ARMS["kinematic"], ShapingConfig(), 0.99, car.scene, horizon=200)
+        >>> [type(wrap(gym.make("MountainCar-v0"))).__name__ for wrap in stack]
+        ['KinematicReward', 'EpisodeStatistics']
+    """
+    gamma = _gamma(gamma)
+    stack: list[Wrap] = []
+    if arm.dense_potential:
+        if not (isinstance(horizon, int) and horizon >= 1):
+            raise ValueError(f"arm '{arm.name}' pays the dense term as a potential; pass the task's time limit "
+                             f"as horizon (got {horizon}).")
+        steps = horizon
+        stack.append(lambda env: KinematicPotential(env, scene.dense, shaping.kin_scale, shaping.kin_offset, steps,
+                                                    gamma))
+    elif arm.kinematic:
+        stack.append(lambda env: KinematicReward(env, scene.dense, shaping.kin_scale, shaping.kin_offset))
+    if arm.uses_vlm:
+        if camera is None or oracle is None:
+            raise ValueError(f"arm '{arm.name}' shapes with the VLM; pass the run's camera and oracle.")
+        lens, seer = camera, oracle
+        stack.append(lambda env: SemanticPotential(env, arm, shaping.alpha, gamma, lens, seer, scene.sim_type))
+    stack.append(lambda env: EpisodeStatistics(env, success))
+    return stack
+
+
+def wrap_arm(env: gym.Env, arm: ArmSpec, shaping: ShapingConfig, gamma: float, scene: Scene,
+             camera: SceneCamera | None = None, oracle: SemanticOracle | None = None, horizon: int | None = None,
+             success: SuccessRule | None = None) -> EpisodeStatistics:
+    """``env`` (an env of ``scene``'s task, its observation of ``scene.obs_shape``) under ``arm``'s
+    wrappers (``arm_wrappers``); the outermost, ``EpisodeStatistics``, is returned."""
+    shape = getattr(env.observation_space, "shape", None)
+    if shape != scene.obs_shape:
+        raise ValueError(f"the arm's wrappers read {scene.name}, observation shape {scene.obs_shape}; "
+                         f"got shape {shape}.")
+    for wrap in arm_wrappers(arm, shaping, gamma, scene, camera, oracle, horizon, success):
+        env = wrap(env)
+    assert isinstance(env, EpisodeStatistics)
+    return env
+
+
+class LabelRoundVecEnv(DummyVecEnv):
+    """SB3's ``DummyVecEnv`` with one labelling round per vector step: every env's step (and the
+    reset of an env whose episode ended) is begun, the run's ``oracle`` asks the VLM about the
+    frames in one call (``SemanticOracle.fetch``), and then each env's step is finished in env
+    order, exactly as ``DummyVecEnv`` would have stepped it (same labels, prototypes, rewards).
+    Every env must be a ``RewardStage`` stack holding a ``SemanticPotential`` on ``oracle``."""
+
+    def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], oracle: SemanticOracle) -> None:
+        super().__init__(list(env_fns))
+        if not all(isinstance(env, RewardStage) for env in self.envs):
+            raise ValueError("a labelling round steps RewardStage stacks (wrap_arm); got another env")
+        self.oracle = oracle
+
+    def reset(self) -> VecEnvObs:
+        for i in range(self.num_envs):
+            maybe_options = {"options": self._options[i]} if self._options[i] else {}
+            self._stage(i).begin_reset(seed=self._seeds[i], **maybe_options)
+        self.oracle.fetch()
+        for i in range(self.num_envs):
+            obs, self.reset_infos[i] = self._stage(i).finish_reset()
+            self._save_obs(i, obs)
+        self._reset_seeds()
+        self._reset_options()
+        return self._obs_from_buf()
+
+    def step_wait(self) -> VecEnvStepReturn:
+        done = [False] * self.num_envs
+        for i in range(self.num_envs):
+            terminated, truncated = self._stage(i).begin_step(self.actions[i])
+            done[i] = terminated or truncated
+            if done[i]:
+                self._stage(i).begin_reset()
+        self.oracle.fetch()
+        for i in range(self.num_envs):
+            stage = self._stage(i)
+            obs, self.buf_rews[i], terminated, truncated, self.buf_infos[i] = stage.finish_step()  # type: ignore[assignment]
+            self.buf_dones[i] = terminated or truncated
+            self.buf_infos[i]["TimeLimit.truncated"] = truncated and not terminated
+            if self.buf_dones[i]:
+                self.buf_infos[i]["terminal_observation"] = obs
+                obs, self.reset_infos[i] = stage.finish_reset()
+            self._save_obs(i, obs)
+        return self._obs_from_buf(), np.copy(self.buf_rews), np.copy(self.buf_dones), deepcopy(self.buf_infos)
+
+    def _stage(self, i: int) -> RewardStage:
+        env = self.envs[i]
+        assert isinstance(env, RewardStage)
+        return env

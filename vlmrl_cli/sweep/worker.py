@@ -204,7 +204,8 @@ def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> J
             if job.arm.uses_vlm:
                 vlm_client = build_client(job.vlm, transcript=out / "transcript.jsonl", stream=job.seed,
                                           reader=task.reader)
-            env, oracle = make_train_env(job.arm, job.ppo, job.shaping, vlm_client, job.seed, task)
+            env, oracle = make_train_env(job.arm, job.ppo, job.shaping, vlm_client, job.seed, task,
+                                         job.vlm.max_queries)
             model = make_model(job.ppo, env, job.seed)
             if stopped():
                 return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start)

@@ -94,6 +94,16 @@ METRIC_VLM_CACHE_HITS = "vlm/cache_hits"
 METRIC_VLM_PROTOTYPES = "vlm/prototypes"
 METRIC_VLM_LABEL_REUSES = "vlm/label_reuses"
 METRIC_VLM_PARSE_FAILURES = "vlm/parse_failures"
+#: What the VLM cost a run (issue 53): the backend calls (one per labelling round with a miss), the
+#: frames they carried and the largest round, the seconds spent waiting for them, their share of
+#: the run's wall time, and the labels that came from the nearest prototype once ``vlm.max_queries``
+#: was spent.
+METRIC_VLM_BACKEND_CALLS = "vlm/backend_calls"
+METRIC_VLM_BACKEND_FRAMES = "vlm/backend_frames"
+METRIC_VLM_LARGEST_BATCH = "vlm/largest_batch"
+METRIC_VLM_BACKEND_S = "vlm/backend_s"
+METRIC_VLM_WAIT_SHARE = "vlm/wait_share"
+METRIC_VLM_BUDGET_LABELS = "vlm/budget_labels"
 #: SB3's PPO update diagnostics (``train/approx_kl``, ...), forwarded under this prefix.
 TRAIN_METRIC_PREFIX = "train/"
 

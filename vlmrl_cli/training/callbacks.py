@@ -22,7 +22,7 @@ class EpisodeTracker(BaseCallback):
     (``rollout/return_100``), VLM and throughput figures; and sends progress.
 
     ``should_stop`` is polled every step; when it returns True training ends cleanly. ``success`` is
-    the task's rule (``Task.success(terminated, length)``, the one ``HybridReward`` writes as
+    the task's rule (``Task.success(terminated, length)``, the one ``EpisodeStatistics`` writes as
     ``is_success``), applied to every episode here, on Monitor's length and on SB3's
     ``TimeLimit.truncated`` (an episode the env ended itself is terminated), so that no other rule
     in the env stack decides; without it an episode succeeds when the env itself ended it.
@@ -97,7 +97,10 @@ class EpisodeTracker(BaseCallback):
         if self.recent:  # the rolling mean the reward thresholds are read from
             figures[schema.METRIC_RETURN_100] = float(np.mean(self.recent))
         if self.vlm_stats is not None:
-            figures.update(self.vlm_stats())
+            vlm = self.vlm_stats()
+            figures.update(vlm)
+            if schema.METRIC_VLM_BACKEND_S in vlm:  # the share of the run's wall time spent waiting for the VLM
+                figures[schema.METRIC_VLM_WAIT_SHARE] = vlm[schema.METRIC_VLM_BACKEND_S] / elapsed
         self.metrics.log(figures, step=self.num_timesteps)
 
     def _on_training_end(self) -> None:

@@ -300,6 +300,9 @@ class TrainJob:
             vlm = to_jsonable(self.vlm)
             for key in ("cache_path", "use_cache", "timeout_s", "retries", "api_key_env"):
                 vlm.pop(key, None)
+            for key in VLM_KEYS_ADDED_LATER:  # count only when set: older runs keep their hash
+                if vlm.get(key) is None:
+                    vlm.pop(key, None)
             if self.vlm.backend != "sim":
                 vlm.pop("sim", None)
             else:  # knobs added later count only off their neutral value: older runs keep their hash
@@ -325,6 +328,10 @@ class TrainJob:
 
 
 # --- building from layers and back to TOML -----------------------------------------------
+
+
+#: VLMConfig fields that enter a run's identity only when set (None leaves the hash as it was).
+VLM_KEYS_ADDED_LATER = ("max_queries",)
 
 
 def resolve(layers: Iterable[Mapping[str, Any]], tasks: TaskLookup | None = None) -> RunConfig:

@@ -13,7 +13,7 @@ from vlmrl_cli.shaping.arms import ArmSpec
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.placebo import oracle_shaping
 from vlmrl_cli.shaping.semantic import SemanticOracle
-from vlmrl_cli.shaping.wrapper import HybridReward
+from vlmrl_cli.shaping.wrapper import LabelRoundVecEnv, wrap_arm
 from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.training.presets import PPOConfig
 from vlmrl_cli.vlm.client import VLMClient
@@ -26,6 +26,7 @@ def make_train_env(
     client: VLMClient | None,
     seed: int,
     task: Task,
+    max_queries: int | None = None,
 ) -> tuple[VecEnv, SemanticOracle | None]:
     """The training VecEnv of one run of ``task`` and its oracle (None for arms without a VLM).
     A ``shaping`` that names no label map takes the task's (``Task.shaping_for``).
@@ -33,9 +34,11 @@ def make_train_env(
     Per env: ``task.make_env()`` -> ``as_float`` (a non-float Box observation cast to float32: SB3's
     rollout buffer keeps the space's dtype, so a ``uint8`` one under ``VecNormalize`` would be
     truncated to integers) -> ``Monitor`` (SB3's episode stats are the NATIVE
-    return and length) -> ``HybridReward`` (the arm's reward and ``is_success`` by the task's rule,
-    ``task.success``; a pass-through adding the info keys for ``baseline``). Then ``DummyVecEnv`` of
-    ``preset.n_envs`` (one process, so the camera and oracle are shared by all envs) ->
+    return and length) -> the arm's wrappers (``shaping.wrapper.arm_wrappers``: its dense term, its
+    semantic potential, then ``EpisodeStatistics`` with ``is_success`` by the task's rule,
+    ``task.success``; baseline's only one). Then ``DummyVecEnv`` of ``preset.n_envs`` (one
+    process, so the camera and oracle are shared by all envs; ``LabelRoundVecEnv`` for an arm with
+    a VLM: one labelling round per vector step, ``max_queries`` its labels' budget) ->
     ``VecNormalize`` (observations if ``ppo.normalize_obs``, rewards if ``ppo.normalize_reward``,
     with the learner's gamma; no wrapper when both are off). Env ``i`` is seeded ``seed + i``. A
     placebo arm's oracle maps labels through ``placebo.oracle_shaping`` (the label map shuffled by
@@ -49,17 +52,17 @@ def make_train_env(
     gamma = shaping.gamma if shaping.gamma is not None else ppo.gamma
     camera = task.camera.make(shaping) if arm.uses_vlm else None
     oracle = (SemanticOracle(client, oracle_shaping(arm, shaping, seed), arm.potential, task.milestones,
-                             task.camera.feature_dim, rbf=arm.rbf, numbers=task.numbers)
+                             task.camera.feature_dim, rbf=arm.rbf, numbers=task.numbers, max_queries=max_queries)
               if arm.uses_vlm and client else None)
 
     def make_one() -> gym.Env:
         env: gym.Env = as_float(task.make_env())
         env = Monitor(env)
-        return HybridReward(env, arm, shaping, gamma, task.scene, camera=camera, oracle=oracle,
-                            horizon=task.max_steps, success=task.success)
+        return wrap_arm(env, arm, shaping, gamma, task.scene, camera=camera, oracle=oracle, horizon=task.max_steps,
+                        success=task.success)
 
     fns: list[Callable[[], gym.Env]] = [make_one] * ppo.n_envs
-    venv: VecEnv = DummyVecEnv(fns)
+    venv: VecEnv = LabelRoundVecEnv(fns, oracle) if oracle is not None else DummyVecEnv(fns)
     venv.seed(seed)
     if ppo.vec_normalize:
         venv = VecNormalize(venv, norm_obs=ppo.normalize_obs, norm_reward=ppo.normalize_reward, gamma=ppo.gamma)

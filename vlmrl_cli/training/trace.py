@@ -60,7 +60,7 @@ def train_trace(job: TrainJob) -> TrainTrace:
     task = job.task_plugin
     client = build_client(job.vlm, stream=job.seed, reader=task.reader) if job.arm.uses_vlm else None
     try:
-        env, _ = make_train_env(job.arm, job.ppo, job.shaping, client, job.seed, task)
+        env, _ = make_train_env(job.arm, job.ppo, job.shaping, client, job.seed, task, job.vlm.max_queries)
         model = make_model(job.ppo, env, job.seed)
         tracker = EpisodeTracker(job.name, job.timesteps, success=task.success)
         model.learn(total_timesteps=job.timesteps, callback=tracker)

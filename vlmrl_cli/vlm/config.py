@@ -261,4 +261,6 @@ class VLMConfig:
         "help": "replay: JSONL transcript (None: the paper's Table 1 transcript)"})
     cache_path: Path | None = field(default=DEFAULT_CACHE, metadata={"help": "sqlite file of the response cache"})
     use_cache: bool = field(default=True, metadata={"help": "read and write the response cache"})
+    max_queries: int | None = field(default=None, metadata={
+        "rules": (Ge(0),), "help": "labels a run may ask of the VLM; past it the nearest prototype's (None: no cap)"})
     sim: SimKnobs = field(default_factory=SimKnobs)
