@@ -74,6 +74,10 @@ def test_one_parent_and_four_finished_children_with_provenance(swept: Path) -> N
         if tags["vlmrl.arm"] == "hybrid":
             assert "SIMULATED" in tags["vlmrl.vlm"] and tags["vlmrl.simulated"] == "true"
             assert metrics["vlm/queries"] > 0 and metrics["vlm/prototypes"] > 0
+            # the VLM's cost: one call per labelling round with a miss, the frames they carried
+            assert 0 < metrics["vlm/backend_calls"] <= metrics["vlm/backend_frames"] <= metrics["vlm/queries"]
+            assert 1 <= metrics["vlm/largest_batch"] <= 16 and 0.0 <= metrics["vlm/wait_share"] < 1.0
+            assert metrics["vlm/budget_labels"] == 0 and "vlm.max_queries" not in params  # no budget: no param
             assert "transcript.jsonl" in names
             assert "episode/shaped_return" in metrics
         else:
@@ -193,3 +197,12 @@ def test_ambiguous_or_non_finite_input_is_refused_before_anything_exists(tmp_pat
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and needle in lines[0], lines
     assert not any(tmp_path.iterdir())
+
+
+def test_a_query_budget_is_respected_and_recorded(tmp_path: Path) -> None:
+    result = _run(tmp_path, "--arms", "hybrid", "--seeds", "1", "--set", "vlm.max_queries=5")
+    assert result.exit_code == 0, result.output + result.stderr
+    (run,) = _children(_runs(tmp_path))
+    metrics, params = run.data.metrics, run.data.params
+    assert params["vlm.max_queries"] == "5" and "vlm.max_queries=5" in run.data.tags["vlmrl.overrides"]
+    assert metrics["vlm/queries"] == 5 and metrics["vlm/backend_frames"] <= 5 and metrics["vlm/budget_labels"] > 0
