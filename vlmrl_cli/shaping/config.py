@@ -12,9 +12,10 @@ from pydantic import BeforeValidator
 from vlmrl_cli.core.fields import AtMost
 
 #: The largest reward scale (alpha, kin_scale): a shaped term of scale 1e6 already dwarfs any task's
-#: own reward, and one near 1e308 overflows to inf in PPO's float32 arithmetic.
-_SCALE_LIMIT = AtMost(1e6, "a larger scale makes the shaped term dwarf the task's own reward (the paper's kin_scale "
-                           "is 2.0), and near 1e308 it overflows to inf in PPO's float32 arithmetic")
+#: own reward, and one near 1e308 overflows to inf in PPO's float32 rollout buffer.
+_SCALE_LIMIT = AtMost(1e6, "a larger scale makes the shaped term dwarf the task's own reward (the paper's dense term "
+                           "has scale 2.0, the committed studies' largest alpha is 214), and near 1e308 it overflows "
+                           "to inf in PPO's float32 rollout buffer")
 
 
 def _label_table(value: Any) -> Any:
