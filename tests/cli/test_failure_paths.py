@@ -148,6 +148,7 @@ CASES: list[tuple[str, str]] = [
     ("taxonomy --experiment 'a\nb'", "holds a tab, newline or other control character"),
     ("export --out /proc/x.jsonl.gz --tracking-uri sqlite:///{tmp}/missing.db", "cannot write the export file"),
     ("compare {tmp}/file --config-hash ''", "--config-hash is empty"),
+    ("compare {tmp}/file --n-boot 1000000000000", "--n-boot 1,000,000,000,000 is too many: at most 100,000"),
     ("verify {tmp}/file --tracking-uri sqlite:///{tmp}/m.db",
      "--tracking-uri chooses a store's runs, and {tmp}/file is an export file: verify reads one or the other"),
     ("verify {tmp}/file --experiment x", "drop --experiment to verify the file"),

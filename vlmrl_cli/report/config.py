@@ -14,6 +14,9 @@ from vlmrl_cli.core.errors import BadInput, first_repeated
 from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.tasks.zoo import SOURCE as ZOO_SOURCE
 
+#: The most bootstrap resamples of a comparison.
+MAX_N_BOOT = 100_000
+
 NORMALISATIONS: dict[str, str] = {
     "baseline-best": "min-max per task from the baseline arm's mean score (0) to the best compared arm's mean "
                      "score (1)",
@@ -126,6 +129,9 @@ def check_compare(cfg: CompareConfig) -> None:
                        "with the most runs.")
     if cfg.n_boot < 100:
         raise BadInput(f"the bootstrap needs at least 100 resamples, got {cfg.n_boot}.")
+    if cfg.n_boot > MAX_N_BOOT:
+        raise BadInput(f"--n-boot {cfg.n_boot:,} is too many: at most {MAX_N_BOOT:,} (each resample recomputes every "
+                       f"arm's aggregates and profile; the default is {DEFAULT_N_BOOT:,}).")
     if not 0 < cfg.ci < 1:
         raise BadInput(f"the interval's coverage must lie strictly between 0 and 1, got {cfg.ci}.")
     if cfg.out.exists() and not cfg.out.is_dir():
