@@ -134,6 +134,7 @@ CASES: list[tuple[str, str]] = [
     # a repeated value: a second copy of its comparisons in the multiplicity family, or a silent last-wins
     ("study --alphas 5,5 --dry-run", "study.alphas lists 5 twice; list each value once"),
     ("study --flickers 0.1,0.1 --dry-run", "study.flickers lists 0.1 twice"),
+    ("study --alphas 0,5 --dry-run", "study.alphas lists 0, which the dose-response always includes"),
     ("study --kin-scales 2,2.0 --dry-run", "study.kin_scales lists 2 twice"),
     ("study --profiles ideal,ideal --dry-run", "study.profiles lists ideal twice"),
     ("calibrate --grid ppo.n_envs=1,1 --dry-run", "the grid of ppo.n_envs lists 1 twice"),

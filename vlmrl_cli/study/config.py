@@ -391,6 +391,9 @@ def build_study(
         bad = [v for v in values if not (math.isfinite(v) and v >= 0)]
         if bad:
             raise BadInput(f"{name} must be finite and >= 0, got {bad[0]}.")
+    if 0 in alphas:  # a second copy of each alpha-0 cell, and of its comparisons in the verdicts' family
+        raise BadInput("study.alphas lists 0, which the dose-response always includes (the dense term alone; with "
+                       "kin_scale 0, the baseline); drop it.")
     if reference.run.vlm.backend != "sim" and query_flickers:
         notes.append(f"no query-flicker cells: the VLM backend is '{reference.run.vlm.backend}', and query_flicker "
                      "is a knob of the simulated VLM.")
