@@ -116,6 +116,18 @@ def test_tied_configurations_are_refused_until_one_is_named(tmp_path: Path) -> N
     assert res.exit_code == 2 and "matches no run" in res.output
 
 
+def test_a_configuration_left_out_is_said_in_one_line(tmp_path: Path) -> None:
+    # the configuration with fewer runs was dropped without a word (issue 50)
+    files = _files(tmp_path)
+    other = _write(tmp_path / "other.jsonl.gz", [_record("acrobot", "baseline", 9, -199.0, "fewerruns1")])
+    res = _compare(*files, str(other), "--out", str(tmp_path / "cmp"))
+    assert res.exit_code == 0, res.output
+    lines = [line for line in res.output.splitlines() if line.startswith("not compared:")]
+    assert lines == ["not compared: 1 other configuration(s), the arm's configuration with the most runs kept (name "
+                     "one with --config-hash): baseline on acrobot: fewerruns1 (1 run)"]
+    assert "not compared" not in _compare(*files, "--out", str(tmp_path / "all")).output
+
+
 def test_a_file_that_is_not_an_export_is_refused(tmp_path: Path) -> None:
     bad = tmp_path / "bad.jsonl.gz"
     _write(bad, [{"format": "something-else"}])

@@ -243,3 +243,25 @@ def test_without_out_the_gif_lands_in_the_scratch_folder(trained: tuple[Path, st
     assert result.exit_code == 0, result.output + result.stderr
     assert (tmp_path / "results" / "_scratch" / "evaluate" / run_id / "episode-0.gif").is_file()
     assert [p.name for p in (tmp_path / "results").iterdir()] == ["_scratch"]
+
+
+def test_a_sweep_without_the_given_arm_and_seed_says_so_instead_of_asking_for_them() -> None:
+    # it asked for --arm/--seed, which had been given (issue 50)
+    from vlmrl_cli.cli.evaluate import pick_child
+    from vlmrl_cli.core.errors import BadInput
+    from vlmrl_cli.report.children import ChildRow
+
+    kids = [ChildRow(arm, seed, f"{arm}-{seed}", "FINISHED", 0.0, 1.0) for arm in ("baseline", "hybrid")
+            for seed in (0, 1)]
+    assert pick_child("p", kids, "hybrid", 1) == "hybrid-1"
+    with pytest.raises(BadInput) as unknown:
+        pick_child("p", kids, "teleport", 0)
+    assert "no training run of arm teleport and seed 0" in str(unknown.value)
+    assert "--arm ARM" not in str(unknown.value) and "baseline seed 0 = baseline-0" in str(unknown.value)
+    with pytest.raises(BadInput) as no_seed:
+        pick_child("p", kids, "hybrid", None)
+    assert "pass --seed N, or one of its training runs: hybrid seed 0 = hybrid-0, hybrid seed 1" in str(no_seed.value)
+    with pytest.raises(BadInput, match="pass --arm ARM --seed N"):
+        pick_child("p", kids, None, None)
+    with pytest.raises(BadInput, match="2 training runs of arm hybrid and seed 0"):
+        pick_child("p", [*kids, ChildRow("hybrid", 0, "again", "FINISHED", 0.0, 1.0)], "hybrid", 0)

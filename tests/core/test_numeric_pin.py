@@ -113,3 +113,18 @@ def test_an_mkl_cbwr_value_mkl_does_not_know_is_said_in_the_one_warning_line(
     for known in ("AVX2", "AVX512_E1,STRICT"):
         message = pin.pin_state(pin.pinned_environ({"MKL_CBWR": known})).warning()
         assert message is not None and "not a value MKL knows" not in message
+
+
+@pytest.mark.parametrize(("variable", "library"), [("ATEN_CPU_CAPABILITY", "torch"), ("ONEDNN_MAX_CPU_ISA", "oneDNN")])
+def test_a_torch_or_onednn_value_they_do_not_know_is_said_in_the_one_warning_line(
+    capsys: pytest.CaptureFixture[str], variable: str, library: str
+) -> None:
+    # both were unchecked: a typo left the library to pick kernels by CPU, without a word (issue 50)
+    env: dict[str, str] = {variable: "garbage"}
+    pin.apply(env)
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("warning: ")
+    assert f"{variable}=garbage is not a value {library} knows (it takes one of " in lines[0]
+    for known in ("avx512", "default") if variable == "ATEN_CPU_CAPABILITY" else ("AVX512_CORE", "avx2", "ALL"):
+        message = pin.pin_state(pin.pinned_environ({variable: known})).warning()
+        assert message is not None and "not a value" not in message

@@ -34,10 +34,10 @@ import numpy as np
 import numpy.typing as npt
 from scipy import stats as sps
 
+from vlmrl_cli.analysis.defaults import DEFAULT_MARGIN
 from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST, adjust
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, bootstrap_ci
 
-DEFAULT_MARGIN = 1.15
 MIN_FINISHED_FOR_EQUIVALENCE = 0.5
 FASTER, SLOWER, INCONCLUSIVE = "faster", "slower", "inconclusive"
 HIGHER, LOWER = "higher", "lower"

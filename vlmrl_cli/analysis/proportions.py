@@ -16,12 +16,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy import stats as sps
 
+from vlmrl_cli.analysis.defaults import DETACHED_SUCCESS_CUT
 from vlmrl_cli.analysis.stats import Estimate, wilson_ci
-
-#: A seed counts as a detached success when at least this fraction of its detached evaluation
-#: episodes reached the flag. Trained MountainCar policies are bimodal (about 0% or 100% of
-#: episodes), so the claim "the baseline fails 40%" is read per seed and the cut rarely matters.
-DETACHED_SUCCESS_CUT = 0.9
 
 
 @dataclass(frozen=True)

@@ -17,10 +17,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy import stats as sps
 
+from vlmrl_cli.analysis.defaults import DEFAULT_N_PERM
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, bootstrap_ci
-
-#: Permutations of the rank test; small experiments (<= this many splits) are enumerated exactly.
-DEFAULT_N_PERM = 9999
 
 
 @dataclass(frozen=True)

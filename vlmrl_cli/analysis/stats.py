@@ -21,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import stats as sps
 
-DEFAULT_N_BOOT = 2000
+from vlmrl_cli.analysis.defaults import DEFAULT_N_BOOT
 
 
 @dataclass(frozen=True)

@@ -19,16 +19,18 @@ import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from vlmrl_cli.analysis.learning_profile import TargetProfile, paper_baseline, scaled_target
-from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
-from vlmrl_cli.core.errors import BadInput, did_you_mean
+from vlmrl_cli.analysis.defaults import DEFAULT_N_BOOT
+from vlmrl_cli.core.errors import BadInput, did_you_mean, first_repeated
 from vlmrl_cli.tasks.base import Task, TaskLookup
 from vlmrl_cli.tasks.capabilities import PaperTask
 from vlmrl_cli.tasks.registry import paper_task
 from vlmrl_cli.training.config import RunConfig, once, resolve
 from vlmrl_cli.training.overrides import dotted, nest, parse_assignment, parse_values
+
+if TYPE_CHECKING:  # the profiles load pandas and scipy: only once a calibration's regimes are checked
+    from vlmrl_cli.analysis.learning_profile import TargetProfile
 
 DEFAULT_EXPERIMENT = "vlmrl-calibrate"
 DEFAULT_SEEDS = 10
@@ -136,6 +138,11 @@ def build_regimes(layers: Sequence[Mapping[str, Any]], grid: Mapping[str, Sequen
     empty = [key for key, values in grid.items() if not values]
     if empty:
         raise BadInput(f"the grid of {empty[0]} lists no value; give at least one (e.g. --grid {empty[0]}=1,4).")
+    for key, values in grid.items():
+        twice = first_repeated([json.dumps(v) for v in values])
+        if twice is not None:  # two regimes of one configuration: the same runs, ranked twice
+            raise BadInput(f"the grid of {key} lists {twice} twice; list each value once (a repeated value makes two "
+                           "regimes of one configuration).")
     base = {"experiment": DEFAULT_EXPERIMENT, "seeds": list(range(DEFAULT_SEEDS))}
     tasks = once(tasks)
     points = grid_product(grid) if grid else default_grid(resolve([base, *layers], tasks).task_plugin)
@@ -205,6 +212,8 @@ def _papers() -> PaperTask:
 
 def papers_baseline() -> TargetProfile:
     """The paper's baseline profile (its task's Table 2, ``PaperTask.reported``)."""
+    from vlmrl_cli.analysis.learning_profile import paper_baseline
+
     return paper_baseline(_papers().reported)
 
 
@@ -212,6 +221,8 @@ def calibration_target(run: RunConfig) -> TargetProfile:
     """What a regime's baseline is scored against: the paper's baseline for the task it reports,
     else its shape on the task's thresholds and the run's budget (``scaled_target``), the paper's
     budget (``PaperTask.budget``) read as the paper's baseline's."""
+    from vlmrl_cli.analysis.learning_profile import paper_baseline, scaled_target
+
     task = run.task_plugin
     if task.paper is not None:
         return paper_baseline(task.paper.reported)

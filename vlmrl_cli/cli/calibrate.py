@@ -53,6 +53,7 @@ def calibrate(
     """Train the baseline arm under each PPO regime of a grid (resumable MLflow runs tagged vlmrl.regime)
     and rank the regimes by their distance to the paper's baseline learning profile."""
     from vlmrl_cli.calibration.regimes import Regime, build_regimes, calibrate_config, calibrate_section, grid_flags
+    from vlmrl_cli.core.paths import check_out_folder
     from vlmrl_cli.tasks.registry import command_tasks
     from vlmrl_cli.tracking.store import check_store
 
@@ -61,9 +62,12 @@ def calibrate(
         file_layer, *upper = opt.config_layers(ctx, config, sets, vlm_cfg)
         file_grid = calibrate_section(file_layer.pop("calibrate", {}))
         regimes = build_regimes([file_layer, *upper], file_grid | grid_flags(grid or []), command_tasks([task]))
-        cfg = calibrate_config(regimes, out=out)
+        opt.check_sim_flags(ctx, regimes[0].run.arms, regimes[0].run.vlm.backend,
+                            remedy="drop it: calibrate trains the baseline arm alone")
+        check_out_folder(out)
+        check_store(regimes[0].run.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
+        cfg = calibrate_config(regimes, out=out)  # its target profile loads pandas and scipy (seconds)
         base = cfg.base
-        check_store(base.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
         # these load torch and MLflow (seconds): only once the store is known to be usable
         from vlmrl_cli.calibration.pipeline import calibrate as run_calibration
         from vlmrl_cli.sweep.cost import estimate_sweeps

@@ -10,9 +10,9 @@ import typer
 
 from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import UserTasks, choices
+from vlmrl_cli.report.config import NORMALISATIONS
 
-#: ``report.aggregate.NORMALISATIONS``' names (that module is imported only when the command runs)
-NORMALISE_CHOICES = ("baseline-best", "zoo")
+NORMALISE_CHOICES = tuple(NORMALISATIONS)
 
 Files = Annotated[list[Path], typer.Argument(help="Export files written by `vlmrl export` (any tasks).",
                                              show_default=False)]
@@ -48,8 +48,7 @@ def compare(
     They go to --out, by default to a new folder under results/_scratch/ (git-ignored).
     """
     from vlmrl_cli.core.paths import fresh_scratch_folder
-    from vlmrl_cli.report.aggregate import CompareConfig
-    from vlmrl_cli.report.aggregate import compare as run_compare
+    from vlmrl_cli.report.config import CompareConfig, check_compare
     from vlmrl_cli.tasks.registry import command_tasks
 
     with exit_codes():
@@ -57,6 +56,9 @@ def compare(
         cfg = CompareConfig(files=tuple(files), out=out or fresh_scratch_folder("compare"), normalise=normalise,
                             config_hashes=tuple(config_hash or ()), n_boot=n_boot, seed=seed,
                             allow_mixed_paths=allow_mixed_paths)
+        check_compare(cfg)  # before the analysis stack loads (seconds)
+        from vlmrl_cli.report.aggregate import compare as run_compare
+
         result = run_compare(cfg, lookup)
         typer.echo(f"{len(result.arms)} arm(s) on {len(result.tasks)} task(s) ({', '.join(result.tasks)}); "
                    f"normalisation {normalise}" + ("; SIMULATED VLM" if result.simulated else ""))
@@ -69,4 +71,7 @@ def compare(
                        "seed and config hash)")
         for arm, tasks in result.left_out.items():
             typer.echo(f"left out: {arm} (missing on {', '.join(tasks)})")
+        if result.other_configs:
+            typer.echo(f"not compared: {len(result.other_configs)} other configuration(s), the arm's configuration "
+                       f"with the most runs kept (name one with --config-hash): {'; '.join(result.other_configs)}")
         typer.echo(f"written to {result.out}/ (aggregate.md, aggregate.csv, per_task.csv, performance_profile.png)")

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -15,19 +16,57 @@ EvalOut = Annotated[Path | None, typer.Option(
     "--out", help="Output folder (default: results/_scratch/evaluate/RUN_ID, git-ignored, so that no committed "
                   "result is overwritten unless named here).", show_default=False)]
 
+if TYPE_CHECKING:
+    from vlmrl_cli.report.children import ChildRow
+
 #: The first line of the output of a run that used the simulated VLM.
 SIMULATED_NOTICE = ("WARNING: SIMULATED VLM (not a real model): the GIF's VLM labels come from a pixel reader "
                     "with noise.")
 
 
+def pick_child(run_id: str, children: Sequence[ChildRow], arm: str | None, seed: int | None) -> str:
+    """The run id of the training run of ``arm`` and ``seed`` among a sweep's ``children`` (``run_id``
+    is the sweep's parent run), or ``BadInput`` that says which of the two to give, or that no
+    child has them, and lists the children to pick from.
+
+    Example:
+        >>> from vlmrl_cli.report.children import ChildRow
+        >>> kids = [ChildRow(arm, 0, f"r-{arm}", "FINISHED", 0.0, 1.0) for arm in ("baseline", "hybrid")]
+        >>> pick_child("p", kids, "hybrid", 0)
+        'r-hybrid'
+    """
+    from vlmrl_cli.core.errors import BadInput
+
+    picked = [c for c in children if (arm is None or c.arm == arm) and (seed is None or c.seed == seed)]
+    if arm is not None and seed is not None and len(picked) == 1:
+        return picked[0].run_id
+
+    def listing(rows: Sequence[ChildRow]) -> str:
+        return ", ".join(f"{c.arm} seed {c.seed} = {c.run_id}" for c in rows) or "none it trained itself"
+
+    given = " and ".join(part for part in (f"arm {arm}" if arm is not None else "",
+                                           f"seed {seed}" if seed is not None else "") if part)
+    if given and not picked:
+        raise BadInput(f"run {run_id} is a sweep's parent run with no training run of {given}; pass the --arm and "
+                       f"--seed of one of its training runs: {listing(children)}.")
+    if arm is not None and seed is not None:  # the sweep trained that job more than once (a retried attempt)
+        raise BadInput(f"run {run_id} is a sweep's parent run with {len(picked)} training runs of {given}: "
+                       f"{listing(picked)}; pass the run id of the one to evaluate.")
+    missing = " ".join(flag for flag, value in (("--arm ARM", arm), ("--seed N", seed)) if value is None)
+    raise BadInput(f"run {run_id} is a sweep's parent run, not a training run; pass {missing}, or one of its "
+                   f"training runs: {listing(picked or children)} (`vlmrl run ... --dry-run` lists every job's run).")
+
+
 def resolve_child(run_id: str, tracking_uri: str | None, arm: str | None, seed: int | None) -> str:
-    """``run_id`` itself for a training run; for a sweep's parent run, its child of ``--arm``/``--seed``,
-    or ``BadInput`` naming the children to pick from."""
+    """``run_id`` itself for a training run; for a sweep's parent run, its child of ``--arm``/``--seed``
+    (``pick_child``)."""
+    from vlmrl_cli.core.errors import BadInput
+    from vlmrl_cli.tracking import schema, store
+
+    store.check_store(tracking_uri, write=False, existing=True)  # before MLflow loads (a second)
     from mlflow.exceptions import MlflowException
 
-    from vlmrl_cli.core.errors import BadInput
     from vlmrl_cli.report.children import children_of
-    from vlmrl_cli.tracking import schema, store
 
     client = store.connect_existing(tracking_uri)
     try:
@@ -39,13 +78,7 @@ def resolve_child(run_id: str, tracking_uri: str | None, arm: str | None, seed: 
             raise BadInput(f"--arm/--seed pick a child of a sweep's parent run; run {run_id} is a training run "
                            "already: drop them.")
         return run_id
-    children = children_of(client, run)
-    picked = [c for c in children if (arm is None or c.arm == arm) and (seed is None or c.seed == seed)]
-    if arm is not None and seed is not None and len(picked) == 1:
-        return picked[0].run_id
-    listed = ", ".join(f"{c.arm} seed {c.seed} = {c.run_id}" for c in picked or children) or "none it trained itself"
-    raise BadInput(f"run {run_id} is a sweep's parent run, not a training run; pass --arm ARM --seed N, or one of "
-                   f"its training runs: {listed} (`vlmrl run ... --dry-run` lists every job's run).")
+    return pick_child(run_id, children_of(client, run), arm, seed)
 
 
 def evaluate(

@@ -17,7 +17,7 @@ from vlmrl_cli.analysis.multiplicity import METHODS
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.tasks.registry import get_task
-from vlmrl_cli.training.config import DEFAULT_PRESET, DEFAULT_TASK, source_layers
+from vlmrl_cli.training.config import DEFAULT_PRESET, DEFAULT_TASK, seed_count_problem, source_layers
 from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.presets import preset_names
 from vlmrl_cli.vlm.config import BACKENDS, DEFAULT_SIM_PROFILE, SimKnobs, VLMConfig, sim_profiles
@@ -191,6 +191,23 @@ def vlm_flags(ctx: typer.Context, flags: VLMConfig) -> dict[str, Any]:
     return out
 
 
+def check_sim_flags(ctx: typer.Context, arms: Sequence[str], backend: str,
+                    remedy: str = "drop it, or add an arm that uses the VLM (e.g. --arms baseline,hybrid)") -> None:
+    """``BadInput`` for a simulated-VLM knob (``--sim-*``) typed for runs that never ask it: no arm
+    of ``arms`` queries a VLM (the message then ends with ``remedy``), or the VLM is not the
+    simulated one (``backend``). A knob from a config file is left alone: one file may serve
+    several commands."""
+    typed = [o.flag for o in VLM_OPTIONS if o.target.startswith("sim.") and given(ctx, o.param)]
+    if not typed:
+        return
+    if not any(ARMS[arm].uses_vlm for arm in arms):
+        raise BadInput(f"{typed[0]} sets the simulated VLM, which no arm of these runs asks (arms: {', '.join(arms)}); "
+                       f"{remedy}.")
+    if backend != "sim":
+        raise BadInput(f"{typed[0]} sets the simulated VLM, and these runs ask the '{backend}' backend; drop it, or "
+                       "pass --vlm sim.")
+
+
 # --- the options of commands that train (`run`, `calibrate`) and how they layer -----------
 
 Arms = Annotated[str, typer.Option("--arms", help=f"Comma-separated arms, any of: {', '.join(ARMS)}.")]
@@ -265,6 +282,9 @@ def seeds_of(n: int, seed_list: str | None) -> tuple[int, ...]:
         return seeds
     if n < 1:
         raise BadInput(f"--seeds must be at least 1, got {n}.")
+    problem = seed_count_problem(n)  # before a tuple of n seeds is built
+    if problem:
+        raise BadInput(f"--seeds {n}: {problem}.")
     return tuple(range(n))
 
 

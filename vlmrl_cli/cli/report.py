@@ -11,6 +11,7 @@ from rich.console import Console
 from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import Adjust, Experiment, Margin, OutDir, TrackingUri, UserTasks
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.report.config import check_thresholds
 
 if TYPE_CHECKING:  # the CLI imports no analysis code before a command runs (help stays fast)
     from vlmrl_cli.report.table2 import Table2
@@ -31,6 +32,7 @@ def parse_thresholds(text: str) -> tuple[float, ...]:
         raise BadInput(f"--thresholds must be comma-separated numbers like -190,-160,-130, got '{text}'.") from None
     if not values:
         raise BadInput("--thresholds is empty; pass numbers like -190,-160,-130.")
+    check_thresholds(values)
     return values
 
 
@@ -69,8 +71,10 @@ def report(
         "refusing.")] = False,
 ) -> None:
     """Write Table 2, Figures 2-4, the claims table and report.md from finished runs in MLflow."""
-    from vlmrl_cli.report.writer import ReportConfig, write_report
+    from vlmrl_cli.core.paths import check_out_folder
+    from vlmrl_cli.report.config import ReportConfig, check_report
     from vlmrl_cli.tasks.registry import command_tasks
+    from vlmrl_cli.tracking.store import check_store
 
     with exit_codes():
         tasks = command_tasks(user_task or ())
@@ -78,6 +82,12 @@ def report(
                            thresholds=parse_thresholds(thresholds) if thresholds is not None else None,
                            window=window, margin=margin, adjust=adjust,
                            allow_mixed_paths=allow_mixed_paths)
+        # every flag, the folder and the store are checked before the analysis stack loads (seconds)
+        check_report(cfg)
+        check_out_folder(cfg.out)
+        check_store(cfg.tracking_uri, write=False, existing=True)
+        from vlmrl_cli.report.writer import write_report
+
         result = write_report(cfg, tasks)
         console = Console()
         for line in console_summary(result.table, experiment):

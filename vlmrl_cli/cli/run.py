@@ -23,6 +23,7 @@ from vlmrl_cli.cli.options import (
     Timesteps,
     TrackingUri,
     Workers,
+    check_sim_flags,
     typed_flags,
     with_vlm_options,
 )
@@ -66,6 +67,7 @@ def run(
     console = Console(stderr=False)
     with exit_codes():
         cfg = RunConfig.from_sources(config, typed_flags(ctx, vlm_cfg), sets or [], tasks=command_tasks([task]))
+        check_sim_flags(ctx, cfg.arms, cfg.vlm.backend)
         check_store(cfg.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
         # the sweep's modules load torch and MLflow (seconds): only once the store is known to be usable
         from vlmrl_cli.sweep.preflight import preflight

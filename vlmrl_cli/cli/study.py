@@ -166,6 +166,7 @@ def study(
 ) -> None:
     """Run regimes x arms x seeds (and the hybrid under several simulated VLMs) through the resumable
     MLflow sweep; write the regime map, the VLM-quality figure and a report generated from the numbers."""
+    from vlmrl_cli.core.paths import check_out_folder
     from vlmrl_cli.study.config import StudyConfig
     from vlmrl_cli.tracking.store import check_store
 
@@ -173,6 +174,7 @@ def study(
     with exit_codes():
         cfg = StudyConfig.from_sources(config, opt.typed_flags(ctx, vlm_cfg) | setting_flags(ctx), sets or [],
                                        tasks=command_tasks([task]))
+        check_out_folder(cfg.out)  # the pipeline checks it again; here, before its modules load (seconds)
         check_store(cfg.base.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
         # the pipeline loads torch and MLflow (seconds): only once the store is known to be usable
         from vlmrl_cli.study.pipeline import estimate_cost, finished_per_seed, power_lines, run_study

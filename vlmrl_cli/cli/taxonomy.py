@@ -54,6 +54,9 @@ def taxonomy(
     experiment: Experiment = "vlmrl-taxonomy",
 ) -> None:
     """Probe a VLM with float, box and MCQ prompts (paper Section 2); write Table 1 and Figure 1."""
+    with exit_codes():
+        _check_flags(vlm_cfg, states, out, tracking_uri, experiment)
+    # the probe's modules load scipy and pandas (seconds): only once the flags are known to be usable
     from vlmrl_cli.probe.scoring import DEFAULT_STATES
     from vlmrl_cli.probe.table1 import with_ci
     from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
@@ -96,6 +99,28 @@ def taxonomy(
         typer.echo("sweep:     n/a (only the transcript's frames were probed)")
     typer.echo(f"outputs:   {result.out}/ ({', '.join(p.name for p in result.files)})")
     typer.echo(f"MLflow:    run {result.run_id}")
+
+
+def _check_flags(vlm_cfg: VLMConfig, states: int | None, out: Path | None, tracking_uri: str | None,
+                 experiment: str) -> None:
+    """The checks of the probe's configuration (``TaxonomyConfig``, ``run_taxonomy``) that need no
+    task, made before the probe's modules load, in the order the probe makes them: the sweep's
+    size and the names, the store, the output folder, the VLM."""
+    from vlmrl_cli.core.errors import BadInput
+    from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
+    from vlmrl_cli.core.paths import check_out_folder
+    from vlmrl_cli.probe.states import states_problem
+    from vlmrl_cli.tracking.store import check_store
+    from vlmrl_cli.vlm.preflight import check_vlm
+
+    problem = (states_problem(states) if states is not None else None) or experiment_problem(experiment) or \
+        tracking_uri_problem(tracking_uri)
+    if problem:
+        raise BadInput(problem + ".")
+    check_store(tracking_uri)
+    if out is not None:
+        check_out_folder(out)
+    check_vlm(vlm_cfg)
 
 
 def _other_task(name: str, vlm_cfg: VLMConfig, states: int | None, out: Path | None, tracking_uri: str | None,

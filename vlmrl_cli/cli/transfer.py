@@ -30,6 +30,7 @@ def export(
     """Write every FINISHED training run of an experiment (tags, params, per-episode and evaluation
     histories, config; models with --models) to one file that `vlmrl import` reads into another store."""
     from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
+    from vlmrl_cli.core.paths import file_problem
     from vlmrl_cli.tracking import store
     from vlmrl_cli.tracking.transfer import export_runs, exported_ids
 
@@ -41,6 +42,10 @@ def export(
             raise BadInput(f"--out {out} is a folder; name the export file, e.g. {out / 'runs.jsonl.gz'}.")
         if not out.parent.is_dir():
             raise BadInput(f"--out {out}: the folder {out.parent} does not exist; create it first.")
+        unwritable = file_problem(out)
+        if unwritable:
+            raise BadInput(f"--out {out}: cannot write the export file there ({unwritable}); pass --out to a file in "
+                           "a writable folder.")
         missing = [p for p in skip_exported or [] if not p.is_file()]
         if missing:
             raise BadInput(f"--skip-exported {missing[0]}: no such export file.")

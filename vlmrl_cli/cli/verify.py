@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from vlmrl_cli.cli.exit_codes import exit_codes
-from vlmrl_cli.cli.options import Experiment, TrackingUri, UserTasks
+from vlmrl_cli.cli.options import Experiment, TrackingUri, UserTasks, given
 from vlmrl_cli.cli.progress import PlainProgress
 from vlmrl_cli.core.errors import BadInput
 
@@ -29,6 +29,7 @@ DryRun = Annotated[bool, typer.Option("--dry-run", help="List the runs and the e
 
 
 def verify(
+    ctx: typer.Context,
     source: Source = None,
     sample: Sample = None,
     sample_seed: SampleSeed = 0,
@@ -55,6 +56,13 @@ def verify(
 
     console = Console(highlight=False, soft_wrap=True)
     with exit_codes():
+        store_flags = [flag for flag, name in (("--tracking-uri", "tracking_uri"), ("--experiment", "experiment"))
+                       if given(ctx, name)]
+        if source is not None and store_flags:  # the file's runs would be verified, the store's ignored
+            verb = "choose" if len(store_flags) > 1 else "chooses"
+            raise BadInput(f"{' and '.join(store_flags)} {verb} a store's runs, and {source} is an export file: verify "
+                           f"reads one or the other; drop {' and '.join(store_flags)} to verify the file, or the file "
+                           "to verify the store's runs.")
         tasks = command_tasks(user_task or ())
         if source is None:
             problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
@@ -62,6 +70,7 @@ def verify(
                 raise BadInput(problem + ".")
             from vlmrl_cli.tracking import store
 
+            store.check_store(tracking_uri, write=False, existing=True)  # before MLflow loads (a second)
             runs = lib.runs_of_store(store.connect_existing(tracking_uri), experiment)
             where = f"experiment '{experiment}'"
         else:

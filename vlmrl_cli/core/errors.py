@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import difflib
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
+from typing import TypeVar
+
+T = TypeVar("T")
 
 
 class BadInput(Exception):
@@ -33,3 +36,14 @@ def did_you_mean(word: str, choices: Iterable[str]) -> str:
     """
     close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
     return f" (did you mean '{close[0]}'?)" if close else ""
+
+
+def first_repeated(values: Sequence[T]) -> T | None:
+    """The first of ``values`` that an earlier one equals (the second 5 of ``5, 5``), or None: a
+    list of choices where a repeat would count one choice twice.
+
+    Example:
+        >>> first_repeated([5.0, 25.0, 5]), first_repeated(["a", "b"])
+        (5, None)
+    """
+    return next((v for i, v in enumerate(values) if v in values[:i]), None)

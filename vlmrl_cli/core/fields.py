@@ -1,7 +1,7 @@
 """How a configuration field declares itself once: its type (the annotation), its help text and
 its rules (``annotated_types`` ranges, pydantic validators) in the field's metadata::
 
-    n_envs: int = field(default=16, metadata={"rules": (Ge(1),), "help": "parallel envs"})
+    n_envs: int = field(default=16, metadata={"rules": (Ge(1), AtMost(256, "...")), "help": "parallel envs"})
 
 The input schema (``training/validation.py``) applies ``rules_of`` to every field; the docs'
 configuration reference prints both. A renamed field keeps its rules.
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Collection
+from dataclasses import dataclass
 from typing import Any
 
 from vlmrl_cli.core.errors import did_you_mean
@@ -33,6 +34,43 @@ def rules_of(f: dataclasses.Field[Any]) -> tuple[Any, ...]:
 def help_of(f: dataclasses.Field[Any]) -> str:
     """The help text a dataclass field declares ("" when it has none)."""
     return str(f.metadata.get("help", ""))
+
+
+def number(value: float) -> str:
+    """``value`` as a bound is written in a message: whole numbers with thousands separators.
+
+    Example:
+        >>> number(256), number(100_000_000), number(1e6), number(0.5)
+        ('256', '100,000,000', '1,000,000', '0.5')
+    """
+    return f"{int(value):,}" if float(value).is_integer() else f"{value:g}"
+
+
+@dataclass(frozen=True)
+class AtMost:
+    """A field's upper bound and the reason for it, declared with its other rules: a value above
+    ``le`` is refused with the reason (``le`` is ``annotated_types.Le``'s name, which the docs'
+    configuration reference reads).
+
+    Example:
+        >>> AtMost(256, "each env is stepped in turn").check(300)
+        Traceback (most recent call last):
+        ...
+        ValueError: at most 256; each env is stepped in turn
+    """
+
+    le: float
+    why: str
+
+    def check(self, value: Any) -> Any:
+        if value > self.le:
+            raise ValueError(f"at most {number(self.le)}; {self.why}")
+        return value
+
+    def __get_pydantic_core_schema__(self, source: Any, handler: Callable[[Any], Any]) -> Any:
+        from pydantic_core import core_schema
+
+        return core_schema.no_info_after_validator_function(self.check, handler(source))
 
 
 def one_of(choices: Collection[str] | Callable[[], Collection[str]], what: str) -> Callable[[str], str]:

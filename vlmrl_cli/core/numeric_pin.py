@@ -59,6 +59,16 @@ MKL_CBWR_BRANCHES: tuple[str, ...] = (
     "AUTO", "COMPATIBLE", "SSE2", "SSSE3", "SSE4_1", "SSE4_2", "AVX", "AVX2", "AVX512", "AVX512_MIC",
     "AVX512_E1", "AVX2_E1", "AVX512_MIC_E1", "AVX512_E2", "AVX512_E3", "AVX512_E4",
 )
+#: ATEN_CPU_CAPABILITY's values as torch reads them (``ATen/native/DispatchStub.cpp``: compared
+#: exactly, in lower case, per platform; anything else is ignored with a warning and the CPU decides).
+ATEN_CAPABILITIES: tuple[str, ...] = ("default", "avx2", "avx512", "vsx", "zvector", "sve256")
+#: ONEDNN_MAX_CPU_ISA's values as oneDNN documents them ("CPU Dispatcher Control"; v2 to v3.x, the
+#: AVX10 names from 3.5); anything else leaves oneDNN to pick by CPU.
+ONEDNN_ISAS: tuple[str, ...] = (
+    "ALL", "SSE41", "AVX", "AVX2", "AVX2_VNNI", "AVX2_VNNI_2", "AVX512_MIC", "AVX512_MIC_4OPS", "AVX512_CORE",
+    "AVX512_CORE_VNNI", "AVX512_CORE_BF16", "AVX512_CORE_FP16", "AVX512_CORE_AMX", "AVX512_CORE_AMX_FP16",
+    "AVX10_1_512", "AVX10_1_512_AMX", "AVX10_1_512_AMX_FP16", "AVX10_2_512", "AVX10_2_512_AMX_2",
+)
 #: Libraries whose presence in ``sys.modules`` means the pin may come too late for this process
 #: (numpy is not pinned, so an earlier numpy import does not matter).
 _NUMERIC_MODULES = ("torch",)
@@ -87,9 +97,10 @@ class PinState:
             given = ", ".join(f"{k}={v}" for k, v in sorted(off.items()))
             ours = ", ".join(f"{k}={PIN[k]}" for k in sorted(off))
             parts.append(f"your {given} replaces vlmrl's numeric pin ({ours})")
-        if "MKL_CBWR" in off and not mkl_knows(off["MKL_CBWR"]):  # a typo MKL would not take as a branch
-            parts.append(f"MKL_CBWR={off['MKL_CBWR']} is not a value MKL knows (it takes one of "
-                         f"{', '.join(MKL_CBWR_BRANCHES)}, optionally with ,STRICT)")
+        for key, value in sorted(off.items()):  # a typo the library would not take, so the CPU picks
+            unknown = unknown_value(key, value)
+            if unknown:
+                parts.append(unknown)
         if self.loaded_before:
             parts.append(f"{' and '.join(self.loaded_before)} loaded before vlmrl could pin its kernels")
         if not parts:
@@ -108,6 +119,27 @@ def mkl_knows(value: str) -> bool:
     """
     branch, comma, rest = value.partition(",")
     return branch.strip().upper() in MKL_CBWR_BRANCHES and (not comma or rest.strip().upper() == "STRICT")
+
+
+def unknown_value(key: str, value: str) -> str | None:
+    """Why ``value`` of pin variable ``key`` is not one its library knows (it would ignore it and
+    pick kernels by CPU), or None when it knows it.
+
+    Example:
+        >>> unknown_value("ATEN_CPU_CAPABILITY", "avx512") is None, unknown_value("ONEDNN_MAX_CPU_ISA", "avx2") is None
+        (True, True)
+        >>> unknown_value("ATEN_CPU_CAPABILITY", "garbage")[:56]
+        'ATEN_CPU_CAPABILITY=garbage is not a value torch knows ('
+    """
+    if key == "MKL_CBWR" and not mkl_knows(value):
+        return (f"MKL_CBWR={value} is not a value MKL knows (it takes one of {', '.join(MKL_CBWR_BRANCHES)}, "
+                "optionally with ,STRICT)")
+    if key == "ATEN_CPU_CAPABILITY" and value not in ATEN_CAPABILITIES:
+        return (f"ATEN_CPU_CAPABILITY={value} is not a value torch knows (it takes one of "
+                f"{', '.join(ATEN_CAPABILITIES)})")
+    if key == "ONEDNN_MAX_CPU_ISA" and value.strip().upper() not in ONEDNN_ISAS:
+        return f"ONEDNN_MAX_CPU_ISA={value} is not a value oneDNN knows (it takes one of {', '.join(ONEDNN_ISAS)})"
+    return None
 
 
 def pinned_environ(environ: Mapping[str, str]) -> dict[str, str]:

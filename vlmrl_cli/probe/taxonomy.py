@@ -41,6 +41,7 @@ from vlmrl_cli.probe.scoring import (
     sweep_statistics,
     table1_prompts,
 )
+from vlmrl_cli.probe.states import states_problem
 from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
@@ -67,9 +68,8 @@ class TaxonomyConfig:
     experiment: str = field(default="vlmrl-taxonomy", metadata={"help": "MLflow experiment name"})
 
     def __post_init__(self) -> None:
-        if self.states is not None and self.states < 2:
-            raise BadInput(f"--states {self.states} is too few: a sweep needs at least 2 positions.")
-        problem = experiment_problem(self.experiment) or tracking_uri_problem(self.tracking_uri)
+        problem = (states_problem(self.states) if self.states is not None else None) or \
+            experiment_problem(self.experiment) or tracking_uri_problem(self.tracking_uri)
         if problem:
             raise BadInput(problem + ".")
 

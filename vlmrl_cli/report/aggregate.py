@@ -34,24 +34,19 @@ from matplotlib.figure import Figure
 
 from vlmrl_cli.analysis import aggregate as agg
 from vlmrl_cli.analysis.load import numeric_path
-from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, Streams
+from vlmrl_cli.analysis.stats import Estimate, Streams
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.tables import markdown_rows
+from vlmrl_cli.report.config import NORMALISATIONS, CompareConfig, check_compare
 from vlmrl_cli.report.figures import plot_normalised_profile
 from vlmrl_cli.report.table2 import BASELINE, order_arms
 from vlmrl_cli.report.writer import check_paths
 from vlmrl_cli.tasks.base import TaskLookup
 from vlmrl_cli.tasks.registry import recorded_task
-from vlmrl_cli.tasks.zoo import SOURCE as ZOO_SOURCE
 from vlmrl_cli.tasks.zoo import ZOO_PPO
 from vlmrl_cli.tracking import schema
 from vlmrl_cli.tracking.transfer import read_records
 
-NORMALISATIONS: dict[str, str] = {
-    "baseline-best": "min-max per task from the baseline arm's mean score (0) to the best compared arm's mean "
-                     "score (1)",
-    "zoo": f"min-max per task from the baseline arm's mean score (0) to the published PPO score of {ZOO_SOURCE} (1)",
-}
 SIMULATED_NOTE = "SIMULATED VLM, not a real model."
 REAL_NOTE = "no run used the simulated VLM"
 RUN_COLUMNS = ["task", "arm", "seed", "config_hash", "run_id", "score", "simulated", "numeric_path", "file", "regime"]
@@ -60,22 +55,6 @@ RUN_RULE = ("a run counts once per (task, arm, seed, config hash): when several 
             "the first file named is kept")
 WEIGHT_RULE = ("every task weighs the same in every aggregate, whatever its number of runs (IQM: the middle half "
                "of the mixture of the tasks' run distributions, each task's runs sharing 1/n_tasks)")
-
-
-@dataclass(frozen=True)
-class CompareConfig:
-    """Everything `vlmrl compare` does, in one object."""
-
-    files: tuple[Path, ...]
-    out: Path
-    normalise: str = "baseline-best"
-    config_hashes: tuple[str, ...] = ()
-    n_boot: int = DEFAULT_N_BOOT
-    ci: float = 0.95
-    seed: int = 0
-    n_taus: int = 201
-    # compare runs computed on different numeric paths (core.numeric_pin) instead of refusing, as `report`
-    allow_mixed_paths: bool = False
 
 
 @dataclass(frozen=True)
@@ -90,22 +69,8 @@ class CompareResult:
     left_out: dict[str, list[str]] = field(default_factory=dict)
     simulated: bool = False
     counted_once: int = 0  # runs held by more than one file, counted once (``RUN_RULE``)
-
-
-def _validate(cfg: CompareConfig) -> None:
-    if not cfg.files:
-        raise BadInput("name at least one export file (written by `vlmrl export --out FILE`).")
-    missing = [p for p in cfg.files if not p.is_file()]
-    if missing:
-        raise BadInput(f"there is no export file {missing[0]}; write one with `vlmrl export --out FILE`.")
-    if cfg.normalise not in NORMALISATIONS:
-        raise BadInput(f"--normalise must be one of {', '.join(NORMALISATIONS)}, got '{cfg.normalise}'.")
-    if cfg.n_boot < 100:
-        raise BadInput(f"the bootstrap needs at least 100 resamples, got {cfg.n_boot}.")
-    if not 0 < cfg.ci < 1:
-        raise BadInput(f"the interval's coverage must lie strictly between 0 and 1, got {cfg.ci}.")
-    if cfg.out.exists() and not cfg.out.is_dir():
-        raise BadInput(f"--out {cfg.out} is a file; name a folder.")
+    # the configurations of a task's arm not compared (``select_configs`` keeps one), as "arm on task: hash (n runs)"
+    other_configs: tuple[str, ...] = ()
 
 
 def read_runs(files: Sequence[Path]) -> pd.DataFrame:
@@ -190,6 +155,22 @@ def select_configs(runs: pd.DataFrame, config_hashes: Sequence[str] = ()) -> pd.
     return pd.concat(keep, ignore_index=True)
 
 
+def configs_left_out(every: pd.DataFrame, kept: pd.DataFrame) -> tuple[str, ...]:
+    """The configurations of ``every`` run that ``select_configs`` did not keep in ``kept``, each as
+    ``arm on task: hash (n runs)``, so that a comparison says what it left out.
+
+    Example:
+        >>> runs = pd.DataFrame({"task": ["t"] * 3, "arm": ["a"] * 3, "config_hash": ["x1", "x1", "y2"]})
+        >>> configs_left_out(runs, select_configs(runs))
+        ('a on t: y2 (1 run)',)
+    """
+    keys = ["task", "arm", "config_hash"]
+    counts = every.groupby(keys, sort=True).size()
+    compared = set(kept[keys].itertuples(index=False, name=None))
+    return tuple(f"{arm} on {task}: {h} ({n} run{'s' if n != 1 else ''})"
+                 for (task, arm, h), n in counts.items() if (task, arm, h) not in compared)
+
+
 def _with_regimes(cell: pd.DataFrame, hashes: Sequence[str]) -> str:
     """Each hash with the regimes (``vlmrl.regime`` tags) its runs were trained in, e.g. ``ab12 (zoo)``."""
     def regimes(h: str) -> str:
@@ -255,9 +236,11 @@ def _cell(e: Estimate, digits: int = 3) -> str:
 def compare(cfg: CompareConfig, lookup: TaskLookup) -> CompareResult:
     """Read the export files, aggregate across tasks (``lookup``: the command's task registry) and write
     ``aggregate.md``, ``aggregate.csv``, ``per_task.csv`` and ``performance_profile.png`` to ``cfg.out``."""
-    _validate(cfg)
+    check_compare(cfg)
     runs, dropped = count_once(read_runs(cfg.files))
+    every_config = runs
     runs = select_configs(runs, cfg.config_hashes)
+    other_configs = configs_left_out(every_config, runs)
     check_paths(runs, cfg.allow_mixed_paths)  # one numeric path, as `vlmrl report` requires
     arms, left_out = compared_arms(runs)
     runs = runs[runs["arm"].isin(arms)].reset_index(drop=True)
@@ -302,7 +285,7 @@ def compare(cfg: CompareConfig, lookup: TaskLookup) -> CompareResult:
                         encoding="utf-8")
     fig = _profile_figure(scores, cfg, streams, note)
     fig.savefig(files[3], dpi=200)
-    return CompareResult(cfg.out, files, table, arms, tasks, left_out, simulated, len(dropped))
+    return CompareResult(cfg.out, files, table, arms, tasks, left_out, simulated, len(dropped), other_configs)
 
 
 def profile_taus(scores: Mapping[str, Sequence[np.ndarray]], n: int) -> np.ndarray:

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,15 +17,13 @@ import pandas as pd
 from vlmrl_cli import paper
 from vlmrl_cli.analysis import censored, multiplicity, stats
 from vlmrl_cli.analysis.load import ExperimentData, load_experiment
-from vlmrl_cli.analysis.proportions import DETACHED_SUCCESS_CUT
-from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM
 from vlmrl_cli.core import tables
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
 from vlmrl_cli.report import attribution, figures, hacking
 from vlmrl_cli.report import claims as claims_mod
+from vlmrl_cli.report.config import ReportConfig, check_report
 from vlmrl_cli.report.table2 import (
     BASELINE,
     Table2,
@@ -48,32 +45,6 @@ DEFAULT_REPORTED = paper.REPORTED
 
 
 @dataclass(frozen=True)
-class ReportConfig:
-    """Everything one report depends on (logged whole as the report run's params)."""
-
-    experiment: str = "vlmrl"  # MLflow experiment holding the training runs
-    tracking_uri: str | None = None  # MLflow store (None: $MLFLOW_TRACKING_URI or sqlite:///mlflow.db)
-    out: Path = Path("results/report")  # output folder
-    # reward targets (rolling mean native return); None: the runs' task's own (MountainCar's
-    # -190, -160, -130)
-    thresholds: tuple[float, ...] | None = None
-    window: int | None = None  # episodes in the rolling mean; None: the task's own (MountainCar's 100)
-    min_episodes: int = 1  # fewest completed episodes before a rolling mean counts
-    ci: float = 0.95  # confidence level of every interval
-    n_boot: int = stats.DEFAULT_N_BOOT  # bootstrap resamples
-    n_perm: int = DEFAULT_N_PERM  # rank-test permutations (fewer splits of the seeds are enumerated exactly)
-    seed: int = 0  # seed of the random streams (one per report section and metric)
-    margin: float = censored.DEFAULT_MARGIN  # equivalence margin of a speedup (TOST within [1/margin, margin])
-    # multiplicity adjustment of the speedups' p-values, one family per report: holm | bh | none
-    adjust: str = multiplicity.DEFAULT_ADJUST
-    detached_cut: float = DETACHED_SUCCESS_CUT  # a seed succeeds detached when this share of its episodes do
-    reported: Path | None = None  # the paper's numbers (default: the packaged vlmrl_cli/paper/reported.json)
-    log_to_mlflow: bool = True  # log the outputs as artifacts of a vlmrl.kind=report run
-    # compare runs computed on different numeric paths (core.numeric_pin) instead of refusing
-    allow_mixed_paths: bool = False
-
-
-@dataclass(frozen=True)
 class ReportResult:
     out: Path
     files: tuple[Path, ...]
@@ -81,31 +52,6 @@ class ReportResult:
     claims: tuple[claims_mod.ClaimResult, ...]
     report_run_id: str | None
     warnings: tuple[str, ...] = field(default_factory=tuple)
-
-
-def _validate(cfg: ReportConfig) -> None:
-    problem = experiment_problem(cfg.experiment) or tracking_uri_problem(cfg.tracking_uri)
-    if problem:
-        raise BadInput(problem + ".")
-    if cfg.adjust not in multiplicity.METHODS:
-        raise BadInput(f"--adjust is one of {', '.join(multiplicity.METHODS)}, got '{cfg.adjust}'.")
-    if not cfg.margin > 1 or not math.isfinite(cfg.margin):
-        raise BadInput(f"the equivalence margin is a ratio above 1 (e.g. 1.15), got {cfg.margin}.")
-    if cfg.thresholds is not None and not cfg.thresholds:
-        raise BadInput("no reward threshold given; pass --thresholds like -190,-160,-130.")
-    if cfg.window is not None and cfg.window < 1:
-        raise BadInput(f"--window must be at least 1, got {cfg.window}.")
-    if cfg.min_episodes < 1 or (cfg.window is not None and cfg.min_episodes > cfg.window):
-        window = cfg.window if cfg.window is not None else "the task's"
-        raise BadInput(f"min_episodes must be between 1 and the window ({window}), got {cfg.min_episodes}.")
-    if not 0.0 < cfg.ci < 1.0:
-        raise BadInput(f"the confidence level must be between 0 and 1, got {cfg.ci}.")
-    if cfg.n_boot < 10:
-        raise BadInput(f"use at least 10 bootstrap resamples, got {cfg.n_boot}.")
-    if cfg.n_perm < 10:
-        raise BadInput(f"use at least 10 rank-test permutations, got {cfg.n_perm}.")
-    if not 0.0 < cfg.detached_cut <= 1.0:
-        raise BadInput(f"the detached success cut must be in (0, 1], got {cfg.detached_cut}.")
 
 
 def load_reported(path: Path | None) -> dict[str, Any]:
@@ -441,7 +387,7 @@ def write_report(cfg: ReportConfig, tasks: TaskLookup, registry: Mapping[str, Ar
     Raises:
         BadInput: bad settings, unwritable ``out``, unreachable store, missing or empty experiment.
     """
-    _validate(cfg)
+    check_report(cfg)
     check_out_folder(cfg.out)  # before touching MLflow, so a bad --out fails fast
     reported = load_reported(cfg.reported)
     client = store.connect_existing(cfg.tracking_uri)

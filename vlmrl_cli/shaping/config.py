@@ -9,6 +9,14 @@ from typing import Any
 from annotated_types import Ge, Gt, Interval
 from pydantic import BeforeValidator
 
+from vlmrl_cli.core.fields import AtMost
+
+#: The largest reward scale (alpha, kin_scale): a shaped term of scale 1e6 already dwarfs any task's
+#: own reward, and one near 1e308 overflows to inf in PPO's float32 rollout buffer.
+_SCALE_LIMIT = AtMost(1e6, "a larger scale makes the shaped term dwarf the task's own reward (the paper's dense term "
+                           "has scale 2.0, the committed studies' largest alpha is 214), and near 1e308 it overflows "
+                           "to inf in PPO's float32 rollout buffer")
+
 
 def _label_table(value: Any) -> Any:
     """A label map as a tuple of ``(label, potential)`` pairs, from a TOML table (``{label =
@@ -61,11 +69,15 @@ class ShapingConfig:
         metadata={"rules": (BeforeValidator(_label_table),),
                   "help": "MCQ label -> raw potential (empty: the task's own map)"}
     )
-    alpha: float = field(default=5.0, metadata={"rules": (Ge(0),), "help": "PBRS scale (the paper gives none)"})
+    alpha: float = field(default=5.0, metadata={"rules": (Ge(0), _SCALE_LIMIT), "help": "PBRS scale (the paper gives "
+                                                                                       "none)"})
     gamma: float | None = field(default=None, metadata={"rules": (Interval(gt=0, le=1),),
                                                         "help": "PBRS discount; None = PPO's gamma"})
     query_every: int = field(default=10, metadata={"rules": (Ge(1),), "help": "ask the VLM at most every k env steps"})
-    confirm: int = field(default=2, metadata={"rules": (Ge(1),), "help": "agreeing labels that confirm a milestone"})
+    confirm: int = field(default=2, metadata={"rules": (Ge(1), AtMost(100, (
+        "a milestone is confirmed by that many agreeing labels in a row, and an episode holds few queries "
+        "(MountainCar's 200 steps, 20 at query_every 10): a larger value would never confirm one"))),
+        "help": "agreeing labels that confirm a milestone"})
     # On MountainCar, feature distance grows ~0.075 per pixel of car shift and saturates (~1.4)
     # beyond ~40 px (measured, see shaping/features.py): 0.3 keeps far prototypes from pulling Phi
     # to the mean.
@@ -80,7 +92,7 @@ class ShapingConfig:
     # the same rule as alpha: a scale weighs a term, and a negative one would pay for the opposite
     # Eq. 1's knobs (the paper's 2.0 and 0.4); each task's dense term reads them (Task.scene.dense)
     kin_scale: float = field(default=2.0, metadata={
-        "rules": (Ge(0),), "help": "the dense term's scale (Eq. 1: max(0, scale (x + offset)))"})
+        "rules": (Ge(0), _SCALE_LIMIT), "help": "the dense term's scale (Eq. 1: max(0, scale (x + offset)))"})
     kin_offset: float = field(default=0.4, metadata={"help": "the dense term's offset (see kin_scale)"})
     # A camera that renders a position snaps it to this grid (MountainCar: one pixel of car
     # motion, so at most 601 distinct frames per run); a camera of its own grid ignores it.

@@ -31,10 +31,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from vlmrl_cli.analysis.defaults import DEFAULT_N_BOOT
 from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST, METHODS
-from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT
 from vlmrl_cli.calibration.regimes import Regime, resolve_regime
-from vlmrl_cli.core.errors import BadInput, did_you_mean
+from vlmrl_cli.core.errors import BadInput, did_you_mean, first_repeated
+from vlmrl_cli.probe.states import states_problem
 from vlmrl_cli.shaping.arms import BASELINE, DENSE, METHOD, NO_LOCK, POTENTIAL_ONLY
 from vlmrl_cli.study.settings import (
     DEFAULT_ALPHAS,
@@ -50,6 +51,7 @@ from vlmrl_cli.study.settings import (
     DEFAULT_STATES,
     PLACEBO_ARM,
     StudySettings,
+    listed,
 )
 from vlmrl_cli.tasks.base import Task, TaskLookup
 from vlmrl_cli.training.config import RunConfig, once, resolve, source_layers
@@ -257,6 +259,10 @@ def study_section(raw: Any) -> dict[str, Any]:
         values = raw.get(key)
         if values is not None and (not isinstance(values, list) or not all(isinstance(v, kind) for v in values)):
             raise BadInput(f"study.{key} must be a list of {'names' if kind is str else 'numbers'}.")
+        twice = first_repeated(list(values or ()))
+        if twice is not None:  # a repeated point trains nothing new but counts twice in the verdicts' family
+            raise BadInput(f"study.{key} lists {listed((twice,))} twice; list each value once (a repeated value adds "
+                           "its comparisons to the multiplicity family again).")
     _check_scalars(raw)
     return out
 
@@ -266,6 +272,9 @@ def _check_scalars(raw: Mapping[str, Any]) -> None:
     states = raw.get("states")
     if states is not None and (isinstance(states, bool) or not isinstance(states, int) or states < 2):
         raise BadInput(f"study.states must be an integer >= 2, got {states!r}.")
+    problem = states_problem(states) if states is not None else None
+    if problem:
+        raise BadInput(f"study.states: {problem}.")
     margin = raw.get("margin")
     if margin is not None and (isinstance(margin, bool) or not isinstance(margin, int | float)):
         raise BadInput(f"study.margin must be a number above 1 (e.g. 1.15), got {margin!r}.")
@@ -382,6 +391,9 @@ def build_study(
         bad = [v for v in values if not (math.isfinite(v) and v >= 0)]
         if bad:
             raise BadInput(f"{name} must be finite and >= 0, got {bad[0]}.")
+    if 0 in alphas:  # a second copy of each alpha-0 cell, and of its comparisons in the verdicts' family
+        raise BadInput("study.alphas lists 0, which the dose-response always includes (the dense term alone; with "
+                       "kin_scale 0, the baseline); drop it.")
     if reference.run.vlm.backend != "sim" and query_flickers:
         notes.append(f"no query-flicker cells: the VLM backend is '{reference.run.vlm.backend}', and query_flicker "
                      "is a knob of the simulated VLM.")

@@ -46,7 +46,7 @@ import tomli_w
 from annotated_types import Ge, Gt
 from pydantic import AfterValidator
 
-from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.core.errors import BadInput, first_repeated
 from vlmrl_cli.core.fields import CARRIED, one_of
 from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
@@ -74,13 +74,38 @@ def _known_arms(arms: tuple[str, ...]) -> tuple[str, ...]:
     return arms
 
 
+#: The most seeds of one configuration: each trains a run per arm, and 1,000 are past any power a
+#: study here needs (the committed ones use at most 20).
+MAX_SEEDS = 1_000
+#: The largest seed: numpy takes 32-bit seeds, and env i of a run is seeded with seed + i.
+MAX_SEED = 2**31 - 1
+
+
+def seed_count_problem(n: int) -> str | None:
+    """Why ``n`` seeds are too many for one configuration (None when they are not).
+
+    Example:
+        >>> seed_count_problem(20) is None, seed_count_problem(10**8)
+        (True, 'at most 1,000 seeds, got 100,000,000: each trains a run per arm; the committed studies use 20')
+    """
+    if n > MAX_SEEDS:
+        return f"at most {MAX_SEEDS:,} seeds, got {n:,}: each trains a run per arm; the committed studies use 20"
+    return None
+
+
 def _distinct_seeds(seeds: tuple[int, ...]) -> tuple[int, ...]:
     if not seeds:
         raise ValueError("no seed given; pass --seeds N (N >= 1) or --seed-list 0,1,2")
+    problem = seed_count_problem(len(seeds))
+    if problem:
+        raise ValueError(problem)
     if len(set(seeds)) != len(seeds):
         raise ValueError("a seed is listed twice; list each seed once")
     if any(s < 0 for s in seeds):
         raise ValueError("seeds must be non-negative integers")
+    if any(s > MAX_SEED for s in seeds):
+        raise ValueError(f"seeds are at most {MAX_SEED:,} (numpy takes 32-bit seeds, and env i of a run is seeded "
+                         "with seed + i)")
     return seeds
 
 
@@ -398,7 +423,12 @@ def source_layers(file: Path | None, flags: Mapping[str, Any], sets: Iterable[st
     assignments ``sets``, then ``flags`` (dotted keys). Commands with sections of their own
     (``[calibrate]``, ``[study]``) take these before resolving."""
     file_layer = load_config_file(file) if file is not None else {}
-    set_layer = nest((key, parse_value(value)) for key, value in map(parse_assignment, sets))
+    assignments = [parse_assignment(text) for text in sets]
+    twice = first_repeated([key for key, _ in assignments])
+    if twice is not None:  # the last would win without a word
+        values = " and ".join(f"--set {key}={value}" for key, value in assignments if key == twice)
+        raise BadInput(f"{values} set one key twice; set each key once.")
+    set_layer = nest((key, parse_value(value)) for key, value in assignments)
     return [file_layer, set_layer, nest(flags.items())]
 
 

@@ -38,6 +38,7 @@ from vlmrl_cli.vlm.config import DEFAULT_CACHE
 DEFAULT_ROOT = SCRATCH / "evaluate"
 ARTIFACT_PATH = "evaluate"
 SIMULATED_ALERT = "SIMULATED VLM (not a real model)"
+MAX_EPISODES = 10_000
 
 
 @dataclass(frozen=True)
@@ -63,8 +64,9 @@ class EvaluateConfig:
         """Raise ``BadInput`` for anything that would fail later; nothing is read before."""
         if not self.run_id.strip():
             raise BadInput("the run id is empty; copy one from `vlmrl run`'s output or the MLflow UI.")
-        if self.episodes < 1:
-            raise BadInput(f"--episodes must be at least 1, got {self.episodes}.")
+        if not 1 <= self.episodes <= MAX_EPISODES:
+            raise BadInput(f"--episodes must be in 1..{MAX_EPISODES:,} (each is a whole episode; 100 give a success "
+                           f"rate to within about 0.1), got {self.episodes}.")
         if not 0 <= self.episode_index < self.episodes:
             raise BadInput(f"--episode-index must be in 0..{self.episodes - 1} (one of the evaluated episodes), "
                            f"got {self.episode_index}.")
