@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -108,10 +109,11 @@ def evaluate(
 
     with exit_codes():
         tasks = command_tasks(user_task or ())
-        run_id = resolve_child(run_id, tracking_uri, arm, seed)
         cfg = EvaluateConfig(run_id=run_id, tracking_uri=tracking_uri, out=out, episodes=episodes,
                              episode_index=episode_index, use_cache=not no_cache, cache_path=cache_path,
                              trust_pickle=trust_pickle)
+        cfg.validate()  # the flags, before the store is opened
+        cfg = dataclasses.replace(cfg, run_id=resolve_child(run_id, tracking_uri, arm, seed))
         done = evaluate_run(cfg, tasks)
 
     run = done.run
