@@ -19,14 +19,13 @@ from typing import Any
 import numpy as np
 
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.shaping.arms import ARMS, ArmSpec
+from vlmrl_cli.shaping.arms import ArmSpec
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.tasks.base import Task, TaskLookup
-from vlmrl_cli.tasks.registry import recorded_task
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.training.evaluation import Policy
 from vlmrl_cli.training.presets import PPOConfig
-from vlmrl_cli.training.validation import validate_as
+from vlmrl_cli.training.verify import job_of
 from vlmrl_cli.vlm.config import VLMConfig
 
 MODEL = schema.ARTIFACT_MODEL
@@ -104,35 +103,24 @@ def load_trained_run(client: Any, run_id: str, workdir: Path, tasks: TaskLookup,
     store.download_artifacts(client, run_id, wanted, workdir)
     try:
         config = json.loads((workdir / CONFIG).read_text(encoding="utf-8"))
-        ppo = validate_as(PPOConfig, dict(config["ppo"]))
-    except (ValueError, KeyError, TypeError, BadInput) as exc:
+    except (ValueError, OSError) as exc:
         raise BadInput(f"run '{run_id}': its {CONFIG} cannot be read here ({exc}).") from None
     tags = run.data.tags
-    task_ref = recorded_task(config.get("task"))
-    task = tasks(task_ref)
+    job = job_of(config if isinstance(config, dict) else {}, tags, tasks, f"run '{run_id}'")
     return TrainedRun(
         run_id=run_id,
         name=tags.get(schema.MLFLOW_RUN_NAME, run_id),
         status=run.info.status,
-        arm=ARMS[config["arm"]["name"]],
-        shaping=_shaping_config(config.get("shaping")),
-        vlm=validate_as(VLMConfig, dict(config["vlm"])) if "vlm" in config else VLMConfig(),
+        arm=job.arm,
+        shaping=job.shaping,
+        vlm=job.vlm,
         vlm_label=tags.get(schema.TAG_VLM, "unknown"),
         simulated=tags.get(schema.TAG_SIMULATED) == "true",
-        policy=_load_policy(workdir, task, ppo, run_id),
-        seed=int(config.get("seed", 0)),
-        task=task,
-        task_ref=task_ref,
+        policy=_load_policy(workdir, job.task_plugin, job.ppo, run_id),
+        seed=job.seed,
+        task=job.task_plugin,
+        task_ref=job.task,
     )
-
-
-def _shaping_config(data: dict[str, Any] | None) -> ShapingConfig:
-    """The run's shaping knobs (config.json keeps the label potentials as [label, value] pairs,
-    as the schema reads them)."""
-    if data is None:
-        return ShapingConfig()
-    result: ShapingConfig = validate_as(ShapingConfig, data)
-    return result
 
 
 def _load_policy(workdir: Path, task: Task, ppo: PPOConfig, run_id: str) -> Policy:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import random
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -190,10 +190,12 @@ def choose(runs: Sequence[RecordedRun], *, run_ids: Iterable[str] = (), seeds: I
     return picked
 
 
-def rebuild_job(run: RecordedRun, tasks: TaskLookup) -> TrainJob:
-    """The ``TrainJob`` that trained ``run``, from its ``config.json`` (its task resolved by
-    ``tasks``, the command's registry); ``BadInput`` when this code cannot rebuild it with the
-    recorded config hash (another version changed what it means)."""
+def job_of(config: Mapping[str, Any], tags: Mapping[str, str], tasks: TaskLookup, where: str) -> TrainJob:
+    """The ``TrainJob`` a run's ``config.json`` (``config``) describes, its task resolved by ``tasks``
+    (the command's registry): the one way a recorded run becomes a job again (``verify`` retrains it,
+    ``evaluate`` reads its arm, shaping and VLM). A config without ``shaping`` takes its task's
+    default scales, one without ``vlm`` the default VLM; the response cache is off (a job rebuilt to
+    check a result asks its VLM afresh). ``BadInput`` naming ``where`` when it cannot be rebuilt."""
     from vlmrl_cli.shaping.arms import ARMS
     from vlmrl_cli.shaping.config import ShapingConfig
     from vlmrl_cli.tasks.registry import recorded_task
@@ -201,20 +203,26 @@ def rebuild_job(run: RecordedRun, tasks: TaskLookup) -> TrainJob:
     from vlmrl_cli.training.validation import validate_as
     from vlmrl_cli.vlm.config import VLMConfig
 
-    cfg = run.config
     try:
-        arm = ARMS[cfg["arm"]["name"]]
-        task = recorded_task(cfg.get("task"))
+        arm = ARMS[config["arm"]["name"]]
+        task = recorded_task(config.get("task"))
         plugin = tasks(task)
-        ppo = validate_as(PPOConfig, dict(cfg["ppo"]))
-        shaping = (validate_as(ShapingConfig, dict(cfg["shaping"])) if "shaping" in cfg
+        ppo = validate_as(PPOConfig, dict(config["ppo"]))
+        shaping = (validate_as(ShapingConfig, dict(config["shaping"])) if "shaping" in config
                    else plugin.shaping_for(ShapingConfig()))
-        vlm = validate_as(VLMConfig, {**cfg["vlm"], "use_cache": False}) if "vlm" in cfg else VLMConfig(use_cache=False)
-        job = TrainJob(arm=arm, seed=int(cfg["seed"]), preset=str(cfg["preset"]), ppo=ppo, vlm=vlm,
-                       shaping=shaping, regime=run.tags.get(schema.TAG_REGIME), task=task, plugin=plugin)
+        vlm = (validate_as(VLMConfig, {**config["vlm"], "use_cache": False}) if "vlm" in config
+               else VLMConfig(use_cache=False))
+        return TrainJob(arm=arm, seed=int(config["seed"]), preset=str(config["preset"]), ppo=ppo, vlm=vlm,
+                        shaping=shaping, regime=tags.get(schema.TAG_REGIME), task=task, plugin=plugin)
     except (KeyError, TypeError, ValueError, BadInput) as exc:
-        raise BadInput(f"run {run.run_id} ({run.name}): its config.json cannot be rebuilt here ({exc}).") from None
-    recorded = cfg.get("config_hash") or run.tags.get(schema.TAG_CONFIG_HASH)
+        raise BadInput(f"{where}: its config.json cannot be rebuilt here ({exc}).") from None
+
+
+def rebuild_job(run: RecordedRun, tasks: TaskLookup) -> TrainJob:
+    """The ``TrainJob`` that trained ``run`` (``job_of`` its ``config.json``); ``BadInput`` when this
+    code cannot rebuild it with the recorded config hash (another version changed what it means)."""
+    job = job_of(run.config, run.tags, tasks, f"run {run.run_id} ({run.name})")
+    recorded = run.config.get("config_hash") or run.tags.get(schema.TAG_CONFIG_HASH)
     if job.config_hash != recorded:
         raise BadInput(f"run {run.run_id} ({run.name}): rebuilt here its config hashes {job.config_hash}, "
                        f"not {recorded}: this version of vlmrl would train another experiment.")
