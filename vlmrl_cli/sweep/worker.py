@@ -178,10 +178,8 @@ def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> J
     (``run_claimed`` sets it). Raises on failure."""
     from stable_baselines3.common.logger import Logger
 
-    from vlmrl_cli.training.envs import make_train_env
     from vlmrl_cli.training.logger import MetricsOutputFormat
-    from vlmrl_cli.training.model import make_model
-    from vlmrl_cli.vlm.registry import build_client
+    from vlmrl_cli.training.session import session
 
     start = time.perf_counter()
     progress, stop = channels.progress, channels.stop
@@ -195,18 +193,12 @@ def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> J
 
     with tempfile.TemporaryDirectory(prefix="vlmrl-") as tmp:
         out = Path(tmp)
-        vlm_client = None
-        try:
-            store.log_params(client, run_id, {schema.PARAM_TIMESTEPS: str(job.timesteps), **flatten(job.params())})
-            if stopped():
-                return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start)
-            task = job.task_plugin
-            if job.arm.uses_vlm:
-                vlm_client = build_client(job.vlm, transcript=out / "transcript.jsonl", stream=job.seed,
-                                          reader=task.reader)
-            env, oracle = make_train_env(job.arm, job.ppo, job.shaping, vlm_client, job.seed, task,
-                                         job.vlm.max_queries)
-            model = make_model(job.ppo, env, job.seed)
+        store.log_params(client, run_id, {schema.PARAM_TIMESTEPS: str(job.timesteps), **flatten(job.params())})
+        if stopped():
+            return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start)
+        task = job.task_plugin
+        with session(job, transcript=out / "transcript.jsonl") as built:
+            model, env, oracle = built.model, built.env, built.oracle
             if stopped():
                 return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start)
             metrics = store.BatchLogger(client, run_id)
@@ -233,9 +225,6 @@ def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> J
             store.set_tags(client, run_id, {schema.TAG_EPISODES_TABLE: schema.EPISODES_TABLE})
             return JobResult(job.name, run_id, "FINISHED", time.perf_counter() - start,
                              result.success_rate, result.mean_length)
-        finally:
-            if vlm_client is not None:
-                vlm_client.close()
 
 
 def _log_eval(metrics: store.BatchLogger, result: EvalResult) -> None:

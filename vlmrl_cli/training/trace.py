@@ -52,23 +52,14 @@ def train_trace(job: TrainJob) -> TrainTrace:
     """Train ``job`` as a worker does; its native returns in episode order and its weights' digest."""
     import torch
 
-    from vlmrl_cli.training.envs import make_train_env
-    from vlmrl_cli.training.model import make_model
-    from vlmrl_cli.vlm.registry import build_client
+    from vlmrl_cli.training.session import session
 
     torch.set_num_threads(1)  # as every worker (sweep.worker.init_worker)
-    task = job.task_plugin
-    client = build_client(job.vlm, stream=job.seed, reader=task.reader) if job.arm.uses_vlm else None
-    try:
-        env, _ = make_train_env(job.arm, job.ppo, job.shaping, client, job.seed, task, job.vlm.max_queries)
-        model = make_model(job.ppo, env, job.seed)
-        tracker = EpisodeTracker(job.name, job.timesteps, success=task.success)
-        model.learn(total_timesteps=job.timesteps, callback=tracker)
+    with session(job) as built:
+        tracker = EpisodeTracker(job.name, job.timesteps, success=job.task_plugin.success)
+        built.model.learn(total_timesteps=job.timesteps, callback=tracker)
         return TrainTrace([e[schema.METRIC_NATIVE_RETURN] for e in tracker.episodes],
-                          weights_digest(model.policy.state_dict()))
-    finally:
-        if client is not None:
-            client.close()
+                          weights_digest(built.model.policy.state_dict()))
 
 
 def native_returns(job: TrainJob) -> list[float]:

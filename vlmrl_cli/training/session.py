@@ -1,0 +1,45 @@
+"""What training one job needs, built the one way every run builds it: its VLM client (none for an
+arm without one), its env stack (``envs.make_train_env``) and its PPO learner (``model.make_model``).
+
+A sweep's worker (``sweep/worker.py``) trains inside it and records everything; the determinism
+probe (``trace.py``) trains inside it and keeps the learning curve. Neither builds a piece itself.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from vlmrl_cli.shaping.semantic import SemanticOracle
+from vlmrl_cli.training.config import TrainJob
+
+
+@dataclass(frozen=True)
+class Session:
+    """One job's learner, its (vector) env and the oracle of its VLM (None without one)."""
+
+    model: Any
+    env: Any
+    oracle: SemanticOracle | None
+
+
+@contextmanager
+def session(job: TrainJob, transcript: Path | None = None) -> Iterator[Session]:
+    """``job``'s learner, env stack and oracle; its VLM client (writing ``transcript`` when given,
+    its simulated draws seeded by the job's seed) is closed when the block ends."""
+    from vlmrl_cli.training.envs import make_train_env
+    from vlmrl_cli.training.model import make_model
+    from vlmrl_cli.vlm.registry import build_client
+
+    task = job.task_plugin
+    client = (build_client(job.vlm, transcript=transcript, stream=job.seed, reader=task.reader)
+              if job.arm.uses_vlm else None)
+    try:
+        env, oracle = make_train_env(job.arm, job.ppo, job.shaping, client, job.seed, task, job.vlm.max_queries)
+        yield Session(make_model(job.ppo, env, job.seed), env, oracle)
+    finally:
+        if client is not None:
+            client.close()
