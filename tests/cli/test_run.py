@@ -193,3 +193,15 @@ def test_ambiguous_or_non_finite_input_is_refused_before_anything_exists(tmp_pat
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and needle in lines[0], lines
     assert not any(tmp_path.iterdir())
+
+
+def test_the_dry_run_states_a_real_vlms_queries_and_time(tmp_path: Path) -> None:
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    args = ["run", "--arms", "baseline,hybrid", "--seeds", "2", "--preset", "smoke", "--dry-run", "--tracking-uri", uri]
+    slow = CliRunner().invoke(app, [*args, "--vlm-qps", "1"])
+    fast = CliRunner().invoke(app, [*args, "--vlm-qps", "10"])
+    assert slow.exit_code == 0 and fast.exit_code == 0, slow.output
+    line = next(x for x in slow.output.splitlines() if x.startswith("# VLM cost"))
+    assert "2 run(s) ask the VLM" in line and "at 1 queries/s" in line and "simulated VLM" in line
+    assert "at 10 queries/s" in fast.output
+    assert CliRunner().invoke(app, [*args, "--vlm-qps", "0"]).exit_code == 2
