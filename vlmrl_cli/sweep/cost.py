@@ -284,7 +284,7 @@ class VlmCost:
         """One line for a terminal.
 
         Example:
-            >>> VlmCost(10, 58_000.0, 3.0, "basis").line()[42:]
+            >>> VlmCost(10, 58_000.0, 3.0, "basis").line()[46:]
             'at 3 queries/s (--vlm-qps) ~5.4 h of VLM time (22% of a GPU-day); basis'
         """
         hours = self.seconds / 3600
