@@ -79,7 +79,7 @@ class VLMClient:
         """The answer about one frame (``ask_many`` of one)."""
         return self.ask_many(prompt, [frame])[0]
 
-    def ask_many(self, prompt: Prompt, frames: Sequence[Frame]) -> list[Answer]:
+    def ask_many(self, prompt: Prompt, frames: Sequence[Frame], *, generate: bool = False) -> list[Answer]:
         """The answers about ``frames``, in order: each looked up in the cache, the others sent to
         the backend in ONE call (``answer_all``: a batch, concurrent requests, or one by one for a
         backend that cannot batch; for an MCQ with options that the backend can score,
@@ -87,9 +87,10 @@ class VLMClient:
         the call sent once unless the backend is stochastic; every query written to the transcript
         in the order of ``frames``. The answers do not depend on how a caller splits its frames
         into calls. A scored answer is cached apart from a generated one (its model key ends in
-        ``SCORED_KEY``): the two modes may answer one frame differently."""
+        ``SCORED_KEY``): the two modes may answer one frame differently. ``generate`` decodes
+        whatever the mode (the probe's comparison of the two)."""
         b = self.backend
-        scored = self.scores(prompt)
+        scored = self.scores(prompt) and not generate
         keys = [self._key(prompt, frame, scored) for frame in frames]
         hits: dict[int, tuple[str, float]] = {}
         for i, key in enumerate(keys):
