@@ -151,7 +151,7 @@ def run_milestone_taxonomy(task: Task, vlm: Any, states: int, out: Path, trackin
                        "mcq.accuracy_low": summary.accuracy_low, "mcq.accuracy_high": summary.accuracy_high,
                        "mcq.format_failure_rate": summary.format_failure_rate,
                        "mcq.mean_abs_dphi": summary.mean_abs_dphi,
-                       "mcq.mode": "logprob" if client.scores(task.milestones.prompt) else "generate", **both}
+                       **client.mcq_mode_entry(task.milestones.prompt), **both}
             (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
             files.append(out / "metrics.json")
             batch = store.BatchLogger(tracker, run_id)

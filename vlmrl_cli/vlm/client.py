@@ -149,6 +149,13 @@ class VLMClient:
         return (prompt.options is not None and self.mcq_mode != "generate"
                 and isinstance(self.backend, ScoringBackend) and bool(self.backend.can_score))
 
+    def mcq_mode_entry(self, prompt: Prompt) -> dict[str, str]:
+        """``{"mcq.mode": "logprob" | "generate"}``, how ``prompt`` is answered, for a backend that
+        can score; empty for the others (the simulated VLM, replay), whose records stay as they were."""
+        if not isinstance(self.backend, ScoringBackend):
+            return {}
+        return {"mcq.mode": "logprob" if self.scores(prompt) else "generate"}
+
     def _key(self, prompt: Prompt, frame: Frame, scored: bool) -> str:
         b = self.backend
         return cache_key(b.name, b.model + (SCORED_KEY if scored else ""), prompt.text, frame.sha256)
