@@ -206,3 +206,15 @@ def test_a_query_budget_is_respected_and_recorded(tmp_path: Path) -> None:
     metrics, params = run.data.metrics, run.data.params
     assert params["vlm.max_queries"] == "5" and "vlm.max_queries=5" in run.data.tags["vlmrl.overrides"]
     assert metrics["vlm/queries"] == 5 and metrics["vlm/backend_frames"] <= 5 and metrics["vlm/budget_labels"] > 0
+
+
+def test_the_dry_run_states_a_real_vlms_queries_and_time(tmp_path: Path) -> None:
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    args = ["run", "--arms", "baseline,hybrid", "--seeds", "2", "--preset", "smoke", "--dry-run", "--tracking-uri", uri]
+    slow = CliRunner().invoke(app, [*args, "--vlm-qps", "1"])
+    fast = CliRunner().invoke(app, [*args, "--vlm-qps", "10"])
+    assert slow.exit_code == 0 and fast.exit_code == 0, slow.output
+    line = next(x for x in slow.output.splitlines() if x.startswith("# VLM cost"))
+    assert "2 run(s) ask the VLM" in line and "at 1 queries/s" in line and "simulated VLM" in line
+    assert "at 10 queries/s" in fast.output
+    assert CliRunner().invoke(app, [*args, "--vlm-qps", "0"]).exit_code == 2

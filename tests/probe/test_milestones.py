@@ -58,3 +58,26 @@ def test_a_bad_output_folder_is_refused_before_anything_exists(tmp_path: Path) -
                                  "--tracking-uri", f"sqlite:///{tmp_path / 'm.db'}"])
     assert result.exit_code == 2 and "cannot write to the output folder" in result.output
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
+
+
+@pytest.mark.slow  # builds the tiny LLaVA and probes a few frames through it
+def test_a_backend_that_scores_is_reported_in_both_modes_on_the_same_frames(tmp_path: Path) -> None:
+    from tests.vlm.tiny_llava import build_tiny_llava
+
+    model = build_tiny_llava(tmp_path / "llava", image_gain=30.0)
+    uri = f"sqlite:///{tmp_path / 'm.db'}"
+    out = tmp_path / "t"
+    result = runner.invoke(app, ["taxonomy", "--task", "acrobot", "--vlm", "hf", "--model", str(model), "--device",
+                                 "cpu", "--states", "4", "--out", str(out), "--tracking-uri", uri, "--no-cache"])
+    assert result.exit_code == 0, result.output
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["mcq.mode"] == "logprob" and metrics["simulated"] is False
+    assert metrics["mcq.format_failure_rate"] == 0.0  # a scored answer is always one of the labels
+    assert metrics["mcq.generate.format_failure_rate"] == 1.0  # the random model's decoded text is garbage
+    assert metrics["mcq.modes_agree"] == 0.0
+    client = MlflowClient(tracking_uri=uri)
+    exp = client.get_experiment_by_name("vlmrl-taxonomy")
+    assert exp is not None
+    (run,) = client.search_runs([exp.experiment_id])
+    assert "MCQ by option log-probability" in run.data.tags["vlmrl.vlm"]
+    assert run.data.metrics["taxonomy.mcq.generate.format_failure_rate"] == 1.0

@@ -134,3 +134,24 @@ def test_failure_mid_probe_marks_the_run_failed(
     client = MlflowClient(tracking_uri=uri)
     runs = client.search_runs([client.get_experiment_by_name("e4").experiment_id])  # type: ignore[union-attr]
     assert [r.info.status for r in runs] == ["FAILED"]
+
+
+@pytest.mark.slow  # builds the tiny LLaVA and probes six frames through it
+def test_a_backend_that_scores_reports_the_mcq_both_ways(tmp_path: Path, tracking_uri: str) -> None:
+    from mlflow.tracking import MlflowClient
+
+    from tests.vlm.tiny_llava import build_tiny_llava
+
+    model = build_tiny_llava(tmp_path / "llava", image_gain=30.0)
+    vlm = VLMConfig(backend="hf", model=str(model), device="cpu", cache_path=None, max_new_tokens=8)
+    out = tmp_path / "out"
+    run_taxonomy(TaxonomyConfig(vlm=vlm, states=4, out=out, tracking_uri=tracking_uri, experiment="both"))
+    summary = json.loads((out / "metrics.json").read_text())
+    assert summary["mcq.mode"] == "logprob" and "MCQ by option log-probability" in summary["label"]
+    assert summary["mcq.generate.format_failure_rate"] == 1.0  # the random model's decoded text is garbage
+    assert summary["metrics"]["mcq.format_failure_rate"] == 0.0  # a scored answer is always a label
+    records = [json.loads(line) for line in (out / "transcript.jsonl").read_text().splitlines()]
+    assert sum("confidence" in r for r in records) == 6  # the six scored MCQs, not the generated ones
+    client = MlflowClient(tracking_uri=tracking_uri)
+    (run,) = client.search_runs([client.get_experiment_by_name("both").experiment_id])  # type: ignore[union-attr]
+    assert run.data.metrics["taxonomy.mcq.modes_agree"] == 0.0

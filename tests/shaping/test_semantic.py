@@ -34,7 +34,8 @@ def test_stats_have_exactly_the_documented_keys() -> None:
     oracle = mc_oracle(sim_client(), ShapingConfig(), MCQ)
     assert tuple(oracle.stats()) == STAT_KEYS == (
         "vlm/queries", "vlm/cache_hits", "vlm/prototypes", "vlm/label_reuses", "vlm/parse_failures",
-        "vlm/backend_calls", "vlm/backend_frames", "vlm/largest_batch", "vlm/backend_s", "vlm/budget_labels")
+        "vlm/backend_calls", "vlm/backend_frames", "vlm/largest_batch", "vlm/backend_s", "vlm/budget_labels",
+        "vlm/scored", "vlm/generated")
     assert all(v == 0.0 for v in oracle.stats().values())
 
 
@@ -48,7 +49,8 @@ def test_near_frames_reuse_a_prototype_and_far_frames_ask(camera: Camera) -> Non
     assert stats | {"vlm/backend_s": 0.0} == {
         "vlm/queries": 2.0, "vlm/cache_hits": 0.0, "vlm/prototypes": 2.0, "vlm/label_reuses": 1.0,
         "vlm/parse_failures": 0.0, "vlm/backend_calls": 2.0, "vlm/backend_frames": 2.0, "vlm/largest_batch": 1.0,
-        "vlm/backend_s": 0.0, "vlm/budget_labels": 0.0}  # asked one by one: two calls of one frame
+        "vlm/backend_s": 0.0, "vlm/budget_labels": 0.0, "vlm/scored": 0.0,
+        "vlm/generated": 2.0}  # asked one by one: two calls of one frame, each generated
     assert stats["vlm/backend_s"] > 0
 
 

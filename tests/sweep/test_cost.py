@@ -54,3 +54,25 @@ def test_an_empty_store_estimates_each_task_from_its_own_measured_step_time(tmp_
     cost = estimate_sweeps([cfg])
     assert cost.per_run_s == pytest.approx(cfg.budget * step_s)
     assert f"minigrid-doorkey {step_s * 1e3:.2f} ms per step" in cost.how
+
+
+# --- a real VLM's queries ------------------------------------------------------------------------
+
+def test_the_hit_rate_table_is_what_the_committed_exports_measure() -> None:
+    from vlmrl_cli.sweep.cost import VLM_HIT_RATES, committed_exports, measure_hit_rates
+
+    assert measure_hit_rates(committed_exports()) == VLM_HIT_RATES
+
+
+def test_vlm_cost_counts_only_the_arms_that_ask_and_scales_with_qps() -> None:
+    from vlmrl_cli.sweep.cost import VLM_HIT_RATES, VlmHitRate, vlm_cost
+    from vlmrl_cli.training.config import RunConfig
+
+    jobs = RunConfig.from_sources(None, {"preset": "paper", "seeds": [0, 1], "arms": ["baseline", "hybrid"]}).jobs()
+    cost = vlm_cost(jobs, qps=3.0)
+    assert cost is not None and cost.runs == 2
+    assert cost.queries == pytest.approx(2 * 300_000 / 10 * VLM_HIT_RATES["mountain-car"].asked)
+    assert vlm_cost(jobs, qps=6.0).seconds == pytest.approx(cost.seconds / 2)  # type: ignore[union-attr]
+    assert vlm_cost([j for j in jobs if j.arm.name == "baseline"]) is None
+    unmeasured = vlm_cost(jobs, rates={"other": VlmHitRate(1.0, 0.5, 1)})
+    assert unmeasured is not None and unmeasured.queries == 2 * 30_000 and "h = 0 assumed" in unmeasured.how

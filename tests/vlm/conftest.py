@@ -19,6 +19,19 @@ def tiny_llava_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def sighted_llava_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The tiny LLaVA with its projector scaled up (``image_gain``): its answers differ by frame."""
+    return build_tiny_llava(tmp_path_factory.mktemp("sighted-llava"), image_gain=30.0)
+
+
+@pytest.fixture(scope="session")
+def frames() -> Iterator[list[Frame]]:
+    """Nine MountainCar frames along the track, left to right."""
+    with FrameRenderer() as renderer:
+        yield [renderer.render(x, frame_id=f"x={x:.2f}") for x in (-1.1, -0.9, -0.7, -0.5, -0.3, -0.1, 0.1, 0.3, 0.5)]
+
+
+@pytest.fixture(scope="session")
 def frame() -> Iterator[Frame]:
     """A real MountainCar frame, car in the valley."""
     with FrameRenderer() as renderer:

@@ -8,9 +8,11 @@ tests can script outages (503 then 200), malformed JSON, 4xx and so on.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import socket
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -68,6 +70,30 @@ def canned_answer(request: Recorded, index: int) -> tuple[int, Body]:
     text = request.prompt_text
     kind = next((k for k, p in PROMPTS.items() if p.text == text), PromptKind.MCQ)
     return 200, completion(CANNED[kind], model=request.json().get("model", "m"))
+
+
+def image_label(image_url: str, labels: tuple[str, ...]) -> str:
+    """A label per image, fixed by the image's bytes: different frames get different labels."""
+    return labels[int(hashlib.sha256(image_url.encode()).hexdigest(), 16) % len(labels)]
+
+
+def mcq_by_image(labels: tuple[str, ...], *, latency_s: float = 0.0, logprobs: bool = True) -> Responder:
+    """A server that answers after ``latency_s`` seconds with one label per image
+    (``frame_label``) and, when asked (``"logprobs": true``) and ``logprobs``, the log-probability
+    of each label as its one token (`` LABEL``, the answer's at -0.05, the others lower)."""
+
+    def respond(request: Recorded, index: int) -> tuple[int, Body]:
+        time.sleep(latency_s)
+        label = image_label(request.image_url, labels)
+        body = completion(label, model=request.json().get("model", "m"))
+        if logprobs and request.json().get("logprobs"):
+            top = [{"token": " " + option, "logprob": -0.05 if option == label else -3.0 - 0.5 * i}
+                   for i, option in enumerate(labels)][: int(request.json().get("top_logprobs", 0))]
+            step = {"token": " " + label, "logprob": -0.05, "top_logprobs": top}
+            body["choices"][0]["logprobs"] = {"content": [step]}
+        return 200, body
+
+    return respond
 
 
 def list_models(*names: str) -> Responder:

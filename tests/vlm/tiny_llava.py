@@ -32,10 +32,12 @@ _CORPUS = (
 )
 
 
-def build_tiny_llava(folder: Path, seed: int = 0) -> Path:
+def build_tiny_llava(folder: Path, seed: int = 0, image_gain: float = 1.0) -> Path:
     """Write a tiny LLaVA (CLIP vision tower + Llama text model, ~43k parameters) to ``folder``.
 
-    Needs no network: nothing is downloaded. Returns ``folder``.
+    ``image_gain`` scales the projector's weights: at 1 the random model says the same whatever
+    the image; at 30 its answers differ from frame to frame (what a batching test needs to see a
+    frame's answer land in another's place). Needs no network: nothing is downloaded. Returns ``folder``.
     """
     import torch
     from tokenizers import Tokenizer, decoders, models, pre_tokenizers, trainers
@@ -87,6 +89,11 @@ def build_tiny_llava(folder: Path, seed: int = 0) -> Path:
     )
     torch.manual_seed(seed)
     model = LlavaForConditionalGeneration(config).eval()
+    if image_gain != 1.0:
+        with torch.no_grad():
+            for name, param in model.named_parameters():
+                if "multi_modal_projector" in name and name.endswith("weight"):
+                    param.mul_(image_gain)
     image_processor = image_processor_cls(
         size={"shortest_edge": IMAGE_SIZE}, crop_size={"height": IMAGE_SIZE, "width": IMAGE_SIZE}
     )

@@ -36,6 +36,10 @@ from vlmrl_cli.vlm.config import VLMConfig
 DryRun = Annotated[
     bool, typer.Option("--dry-run", help="Print the resolved config (TOML) and the job list; train nothing.")
 ]
+VlmQps = Annotated[float, typer.Option(
+    "--vlm-qps", min=0.001,
+    help="Queries per second of your VLM, for the dry run's estimate of its time (default 3: a 7B VLM under HF "
+         "transformers at batch 1; a vLLM/SGLang server with many requests in flight answers 10-20).")]
 
 
 @with_vlm_options
@@ -55,6 +59,7 @@ def run(
     config: ConfigFile = None,
     sets: Sets = None,
     dry_run: DryRun = False,
+    vlm_qps: VlmQps = 3.0,
     experiment: Experiment = DEFAULT_EXPERIMENT,
     tracking_uri: TrackingUri = None,
 ) -> None:
@@ -74,7 +79,7 @@ def run(
         from vlmrl_cli.sweep.runner import run_sweep
 
         if dry_run:
-            typer.echo(dry_run_text(cfg), nl=False)
+            typer.echo(dry_run_text(cfg, vlm_qps), nl=False)
             return
         preflight(cfg)  # refuse before the header; run_sweep(checked=True) then does not check again
         console.print(f"[bold]vlmrl run[/]: task {cfg.task}, arms {', '.join(cfg.arms)} x seeds "
@@ -134,12 +139,13 @@ def print_children(console: Console, cfg: RunConfig, experiment_id: str) -> None
                       highlight=False, soft_wrap=True)
 
 
-def dry_run_text(cfg: RunConfig) -> str:
+def dry_run_text(cfg: RunConfig, vlm_qps: float = 3.0) -> str:
     """The resolved config as TOML, then the job list as TOML comments (with the run id, steps to
     the task's top threshold (MountainCar's -130) and detached success of each job already
-    FINISHED), so the whole text is a config file that ``--config`` reads back."""
+    FINISHED) and what the pending runs will cost (wall time; a real VLM's queries and time at
+    ``vlm_qps``), so the whole text is a config file that ``--config`` reads back."""
     from vlmrl_cli.report.children import child_rows, format_rows
-    from vlmrl_cli.sweep.cost import estimate_sweeps
+    from vlmrl_cli.sweep.cost import estimate_sweeps, vlm_cost
     from vlmrl_cli.sweep.runner import dry_plan
     from vlmrl_cli.tracking import store
 
@@ -163,4 +169,9 @@ def dry_run_text(cfg: RunConfig) -> str:
     lines.append(f"# {len(plan.done)} FINISHED, {len(plan.pending)} pending; nothing was trained.")
     if plan.pending:
         lines.append(f"# cost estimate: {estimate_sweeps([cfg]).line()}")
+        asked = vlm_cost(plan.pending, vlm_qps)
+        if asked is not None:
+            sim = cfg.vlm.backend == "sim"
+            simulated = " (the simulated VLM of this config answers at no such cost)" if sim else ""
+            lines.append(f"# VLM cost with a real VLM{simulated}: {asked.line()}")
     return "# vlmrl run --dry-run: the resolved configuration\n" + to_toml(cfg) + "\n" + "\n".join(lines) + "\n"

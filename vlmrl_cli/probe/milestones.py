@@ -27,11 +27,13 @@ from vlmrl_cli.core import tables
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, flatten
+from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.probe import metrics
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
+from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.config import profile_problem
 from vlmrl_cli.vlm.parsers import ParseStatus, parse_mcq
 from vlmrl_cli.vlm.preflight import check_vlm
@@ -138,6 +140,7 @@ def run_milestone_taxonomy(task: Task, vlm: Any, states: int, out: Path, trackin
                 if progress is not None:
                     progress(i, len(planned))
             summary = summarize(probes, potentials)
+            both = _generated_too(client, task, probes, shown, potentials)
             label = f"{client.backend.name}:{client.backend.model}"
             simulated = bool(client.backend.simulated)
             out.mkdir(parents=True, exist_ok=True)
@@ -147,7 +150,8 @@ def run_milestone_taxonomy(task: Task, vlm: Any, states: int, out: Path, trackin
                        "simulated": simulated, "frames": summary.frames, "mcq.accuracy": summary.accuracy,
                        "mcq.accuracy_low": summary.accuracy_low, "mcq.accuracy_high": summary.accuracy_high,
                        "mcq.format_failure_rate": summary.format_failure_rate,
-                       "mcq.mean_abs_dphi": summary.mean_abs_dphi}
+                       "mcq.mean_abs_dphi": summary.mean_abs_dphi,
+                       **client.mcq_mode_entry(task.milestones.prompt), **both}
             (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
             files.append(out / "metrics.json")
             batch = store.BatchLogger(tracker, run_id)
@@ -163,6 +167,26 @@ def run_milestone_taxonomy(task: Task, vlm: Any, states: int, out: Path, trackin
     finally:
         camera.close()
         client.close()
+
+
+def _generated_too(client: VLMClient, task: Task, probes: list[MilestoneProbe], frames: list[Frame],
+                   potentials: dict[str, float]) -> dict[str, float]:
+    """Where the MCQ was scored by option log-probability, the same frames answered by generation
+    as well (one round), summarised under ``mcq.generate.*``, with the share of frames on which
+    the two modes agree; nothing where the MCQ was generated anyway."""
+    prompt = task.milestones.prompt
+    if not client.scores(prompt) or not frames:
+        return {}
+    generated = []
+    for probe, answer in zip(probes, client.ask_many(prompt, frames, generate=True), strict=True):
+        parsed = parse_mcq(answer.text, task.milestones.labels)
+        generated.append(MilestoneProbe(probe.frame_id, probe.truth, answer.text,
+                                        str(parsed.label) if parsed.ok and parsed.label is not None else None,
+                                        parsed.status))
+    s = summarize(generated, potentials)
+    agree = sum(a.label == b.label for a, b in zip(probes, generated, strict=True)) / len(probes)
+    return {"mcq.generate.accuracy": s.accuracy, "mcq.generate.format_failure_rate": s.format_failure_rate,
+            "mcq.generate.mean_abs_dphi": s.mean_abs_dphi, "mcq.modes_agree": agree}
 
 
 def _frame_id(state: Any) -> str:

@@ -30,6 +30,7 @@ from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, flatten
+from vlmrl_cli.probe.metrics import format_failure_rate, mcq_accuracy
 from vlmrl_cli.probe.scoring import (
     DEFAULT_STATES,
     FrameProbe,
@@ -48,6 +49,7 @@ from vlmrl_cli.tracking.lifecycle import tracked_run
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.config import VLMConfig, profile_problem
+from vlmrl_cli.vlm.parsers import parse_mcq
 from vlmrl_cli.vlm.preflight import check_vlm
 from vlmrl_cli.vlm.registry import build_client
 
@@ -195,6 +197,7 @@ def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None, task: 
             store.log_params(tracker, run_id, _params(cfg, task, backend, len(planned), is_sweep))
             probes = _probe_all(client, task, planned, progress)
             sweep = sweep_statistics(probes) if is_sweep else empty_sweep_statistics()
+            both = _generated_too(client, task, planned, probes)
             label = client.label
             provenance = provenance_line(backend)
             plain = f"{backend.name}:{backend.model}"
@@ -208,6 +211,7 @@ def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None, task: 
                 "label": label, "provenance": provenance, "sweep": is_sweep,
                 "queries": stats.queries, "cache_hits": stats.cache_hits, "cache_misses": stats.cache_misses,
                 "metrics": _jsonable(sweep),
+                **client.mcq_mode_entry(task.milestones.prompt), **both,
             }
             (staging / "metrics.json").write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n",
                                                   encoding="utf-8")
@@ -216,6 +220,7 @@ def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None, task: 
             logged = {f"taxonomy.{k}": v for k, v in sweep.items() if math.isfinite(v)}
             logged.update({"taxonomy.cache_hits": stats.cache_hits, "taxonomy.cache_misses": stats.cache_misses,
                            "taxonomy.frames": len(probes)})
+            logged.update({f"taxonomy.{k}": v for k, v in both.items() if math.isfinite(v)})
             batch = store.BatchLogger(tracker, run_id)
             batch.log(logged, step=0)
             batch.flush()
@@ -241,6 +246,27 @@ def _probe_all(client: VLMClient, task: Task, planned: list[_Planned], progress:
             if progress is not None:
                 progress(i, len(planned))
     return probes
+
+
+def _generated_too(client: VLMClient, task: Task, planned: list[_Planned], probes: list[FrameProbe]
+                   ) -> dict[str, float]:
+    """Where the MCQ was scored by option log-probability, the same frames (drawn again) answered
+    by generation as well, in one round: its accuracy and format failure rate, and the share of
+    frames on which the two modes agree (``mcq.generate.*``, ``mcq.modes_agree``); nothing where the
+    MCQ was generated."""
+    prompt = task.milestones.prompt
+    if not client.scores(prompt) or not planned:
+        return {}
+    with closing(number_probe(task).renderer()) as renderer:
+        frames = [renderer.render(item.x, frame_id=item.frame_id) for item in planned]
+    answers = client.ask_many(prompt, frames, generate=True)
+    parsed = [parse_mcq(a.text, task.milestones.labels) for a in answers]
+    labels = [str(p.label) if p.ok and p.label is not None else None for p in parsed]
+    scored = [str(p.mcq_result.label) if p.mcq_result.ok and p.mcq_result.label is not None else None
+              for p in probes]
+    return {"mcq.generate.accuracy": mcq_accuracy(labels, [p.truth.label for p in probes]),
+            "mcq.generate.format_failure_rate": format_failure_rate(p.status for p in parsed),
+            "mcq.modes_agree": sum(a == b for a, b in zip(labels, scored, strict=True)) / len(probes)}
 
 
 def _params(cfg: TaxonomyConfig, task: Task, backend: Backend, frames: int, is_sweep: bool) -> dict[str, str]:

@@ -64,6 +64,8 @@ STAT_KEYS: tuple[str, ...] = (
     schema.METRIC_VLM_LARGEST_BATCH,
     schema.METRIC_VLM_BACKEND_S,
     schema.METRIC_VLM_BUDGET_LABELS,
+    schema.METRIC_VLM_SCORED,
+    schema.METRIC_VLM_GENERATED,
 )
 
 
@@ -292,6 +294,8 @@ class SemanticOracle:
             schema.METRIC_VLM_LARGEST_BATCH: float(self.client.stats.largest_batch),
             schema.METRIC_VLM_BACKEND_S: float(self.client.stats.backend_seconds),
             schema.METRIC_VLM_BUDGET_LABELS: float(self._budget_labels),
+            schema.METRIC_VLM_SCORED: float(self.client.stats.scored),
+            schema.METRIC_VLM_GENERATED: float(self.client.stats.generated),
         }
 
 

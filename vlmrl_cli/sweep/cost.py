@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import os
 import statistics
-from collections.abc import Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from vlmrl_cli.tracking import schema
@@ -188,3 +189,132 @@ def estimate_sweeps(cfgs: Sequence[RunConfig]) -> CostEstimate:
             timings = measure(store.connect(cfg.tracking_uri), plan.experiment_id)
     workers = cfgs[0].workers if cfgs else 1
     return estimate(list(pending.values()), len(done - set(pending)), workers, timings or Timings({}))
+
+
+# --- what a run will ask of a real VLM ---------------------------------------------------------
+
+#: Queries per second a user's VLM answers when ``--vlm-qps`` is not given: a 7B-class VLM under HF
+#: transformers at batch 1 (olmo-eval PR #347 measured 2.0 it/s for transformers against 11.9 for
+#: vLLM on Qwen3-VL-4B; LLaVA's own code batches no faster than one at a time, LLaVA issue #1009).
+DEFAULT_VLM_QPS = 3.0
+
+
+@dataclass(frozen=True)
+class VlmHitRate:
+    """How often a task's hybrid runs ask the VLM, measured on committed runs: ``events`` labelling
+    steps per ``T / k`` (a run of ``T`` steps labelling every ``k``: episode starts add some), and
+    ``miss``, the share of them that reach the VLM client (a frame new to the run: neither labelled
+    before nor within ``reuse_radius`` of a prototype), medians over ``runs`` runs. A run alone with
+    an empty response cache asks ``T / k x events x miss`` queries: ``Q = T / k x (1 - h)``."""
+
+    events: float
+    miss: float
+    runs: int
+
+    @property
+    def asked(self) -> float:
+        """``1 - h``: the queries per ``T / k``."""
+        return self.events * self.miss
+
+
+#: Measured from the committed exports' hybrid runs (``measure_hit_rates``) with
+#: ``python -c "from vlmrl_cli.sweep.cost import *; print(measure_hit_rates(committed_exports()))"``;
+#: tests/sweep/test_cost.py measures them again. MountainCar's camera has 601 distinct frames, so
+#: nearly every label is reused; Acrobot's two-link pictures repeat least.
+VLM_HIT_RATES: dict[str, VlmHitRate] = {
+    "mountain-car": VlmHitRate(events=1.0431, miss=0.018631, runs=153),
+    "mountain-car-continuous": VlmHitRate(events=1.01045, miss=0.053466, runs=60),
+    "acrobot": VlmHitRate(events=1.0599, miss=0.143449, runs=60),
+    "minigrid-doorkey": VlmHitRate(events=1.43905, miss=0.015269, runs=40),
+}
+
+
+def committed_exports(root: Path = Path("results")) -> list[Path]:
+    """The run exports committed under ``root`` (``results/**/*.jsonl.gz``)."""
+    return sorted(root.rglob("*.jsonl.gz"))
+
+
+def _rate_of_run(record: Mapping[str, Any]) -> tuple[str, float, float] | None:
+    """(task, events per T/k, miss) of one exported hybrid run, or None for any other run."""
+    tags, params, latest = record["tags"], record["params"], record["latest"]
+    needed = (schema.METRIC_VLM_QUERIES, schema.METRIC_VLM_LABEL_REUSES)
+    if tags.get(schema.TAG_ARM) != "hybrid" or not all(k in latest for k in needed):
+        return None
+    queries, reuses = (float(latest[k][2]) for k in needed)  # [step, timestamp, value]
+    steps, every = float(params["timesteps"]), float(params["shaping.query_every"])
+    events = queries + reuses
+    if events <= 0 or steps <= 0:
+        return None
+    return str(tags.get(schema.TAG_TASK) or params.get("task") or "mountain-car"), events * every / steps, \
+        queries / events
+
+
+def measure_hit_rates(paths: Iterable[Path]) -> dict[str, VlmHitRate]:
+    """``VlmHitRate`` per task from the hybrid runs in the export files ``paths`` (metrics
+    ``vlm/queries`` and ``vlm/label_reuses``; a run found in two files counts once)."""
+    from vlmrl_cli.tracking.transfer import read_records
+
+    seen: dict[str, tuple[str, float, float]] = {}
+    for path in paths:
+        for record in read_records(path):
+            rate = _rate_of_run(record)
+            if rate is not None:
+                seen[str(record["source_run_id"])] = rate
+    by_task: dict[str, list[tuple[float, float]]] = {}
+    for task, events, miss in seen.values():
+        by_task.setdefault(task, []).append((events, miss))
+    return {task: VlmHitRate(round(statistics.median(e for e, _ in v), 6), round(statistics.median(m for _, m in v), 6),
+                             len(v)) for task, v in sorted(by_task.items())}
+
+
+@dataclass(frozen=True)
+class VlmCost:
+    """What ``runs`` runs that ask the VLM will ask of it: ``queries`` in all, ``seconds`` at ``qps``."""
+
+    runs: int
+    queries: float
+    qps: float
+    how: str
+
+    @property
+    def seconds(self) -> float:
+        return self.queries / self.qps
+
+    def line(self) -> str:
+        """One line for a terminal.
+
+        Example:
+            >>> VlmCost(10, 58_000.0, 3.0, "basis").line()[46:]
+            'at 3 queries/s (--vlm-qps) ~5.4 h of VLM time (22% of a GPU-day); basis'
+        """
+        hours = self.seconds / 3600
+        return (f"{self.runs} run(s) ask the VLM ~{self.queries:,.0f} queries in all; at {self.qps:g} queries/s "
+                f"(--vlm-qps) ~{hours:,.1f} h of VLM time ({hours / 24:.0%} of a GPU-day); {self.how}")
+
+
+def vlm_cost(jobs: Sequence[TrainJob], qps: float = DEFAULT_VLM_QPS,
+             rates: Mapping[str, VlmHitRate] = VLM_HIT_RATES) -> VlmCost | None:
+    """The VLM queries of ``jobs`` (those whose arm asks the VLM; None when none does) and their
+    time at ``qps``: each run ``T / k x (1 - h)`` with its task's measured rate (``VLM_HIT_RATES``),
+    or ``h = 0`` (every labelling step asked) for a task with none.
+
+    Example:
+        >>> from vlmrl_cli.training.config import RunConfig
+        >>> jobs = RunConfig.from_sources(None, {"preset": "paper", "seeds": [0], "arms": ["hybrid"]}).jobs()
+        >>> round(vlm_cost(jobs).queries)  # 300,000 steps / 10 x 1.0431 x 0.018631
+        583
+    """
+    asking = [job for job in jobs if job.arm.uses_vlm]
+    if not asking:
+        return None
+    if qps <= 0:
+        raise ValueError("queries per second must be > 0")
+    queries, basis = 0.0, {}
+    for job in asking:
+        task = job.task_plugin.name
+        rate = rates.get(task)
+        queries += job.timesteps / job.shaping.query_every * (rate.asked if rate else 1.0)
+        basis[task] = (f"{task}: 1 - h = {rate.asked:.4f} of T/k, the median of {rate.runs} committed hybrid runs "
+                       "(vlm/queries, vlm/label_reuses), each with an empty response cache, an upper bound for "
+                       "runs sharing one" if rate else f"{task}: no committed runs measured, h = 0 assumed")
+    return VlmCost(len(asking), queries, qps, "; ".join(basis.values()) + "; Q = T/k x (1 - h)")

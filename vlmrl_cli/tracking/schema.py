@@ -104,6 +104,9 @@ METRIC_VLM_LARGEST_BATCH = "vlm/largest_batch"
 METRIC_VLM_BACKEND_S = "vlm/backend_s"
 METRIC_VLM_WAIT_SHARE = "vlm/wait_share"
 METRIC_VLM_BUDGET_LABELS = "vlm/budget_labels"
+#: How the backend answered: from the MCQ options' log-probabilities, or by generating text.
+METRIC_VLM_SCORED = "vlm/scored"
+METRIC_VLM_GENERATED = "vlm/generated"
 #: SB3's PPO update diagnostics (``train/approx_kl``, ...), forwarded under this prefix.
 TRAIN_METRIC_PREFIX = "train/"
 

@@ -56,7 +56,7 @@ from vlmrl_cli.tasks.base import Task, TaskLookup
 from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.overrides import nest, parse_assignment, parse_value, resolve_raw, task_ref
 from vlmrl_cli.training.presets import PPOConfig, ppo_identity, preset_names, preset_of
-from vlmrl_cli.vlm.config import VLMConfig, profile_problem, sim_identity
+from vlmrl_cli.vlm.config import VLMConfig, profile_problem, vlm_identity
 
 DEFAULT_EXPERIMENT = "vlmrl"
 #: The task of a config that names none (``vlmrl run`` without ``--task``), and its preset (the
@@ -321,18 +321,8 @@ class TrainJob:
             ident["task"] = self.task
         if self.arm.kinematic or self.arm.uses_vlm:
             ident["shaping"] = to_jsonable(self.shaping)
-        if self.arm.uses_vlm:
-            vlm = to_jsonable(self.vlm)
-            for key in ("cache_path", "use_cache", "timeout_s", "retries", "api_key_env"):
-                vlm.pop(key, None)
-            for key in VLM_KEYS_ADDED_LATER:  # count only when set: older runs keep their hash
-                if vlm.get(key) is None:
-                    vlm.pop(key, None)
-            if self.vlm.backend != "sim":
-                vlm.pop("sim", None)
-            else:  # knobs added later count only off their neutral value: older runs keep their hash
-                vlm["sim"] = to_jsonable(sim_identity(self.vlm.sim))
-            ident["vlm"] = vlm
+        if self.arm.uses_vlm:  # knobs added later count only off their neutral value: older runs keep their hash
+            ident["vlm"] = vlm_identity(self.vlm)
         return ident
 
     @property
@@ -353,10 +343,6 @@ class TrainJob:
 
 
 # --- building from layers and back to TOML -----------------------------------------------
-
-
-#: VLMConfig fields that enter a run's identity only when set (None leaves the hash as it was).
-VLM_KEYS_ADDED_LATER = ("max_queries",)
 
 
 def resolve(layers: Iterable[Mapping[str, Any]], tasks: TaskLookup | None = None) -> RunConfig:

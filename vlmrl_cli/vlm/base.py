@@ -20,6 +20,7 @@ class Answer:
     model: str
     simulated: bool
     cached: bool = False
+    confidence: float | None = None  # an MCQ scored by option log-probability: best minus second
 
 
 @runtime_checkable
@@ -48,6 +49,50 @@ class BatchBackend(Backend, Protocol):
     whatever the split. A backend without it is asked one frame at a time (``answer_all``)."""
 
     def answer_many(self, prompt: Prompt, frames: Sequence[Frame]) -> list[str]: ...
+
+
+@dataclass(frozen=True)
+class OptionScores:
+    """An MCQ answered by scoring: the log-probability of each of ``options`` (summed over the
+    option's tokens, given the prompt and the image), the argmax as the ``label`` and the margin
+    (best minus second) as the answer's confidence.
+
+    Example:
+        >>> s = OptionScores(("LOW", "MID", "HIGH"), (-2.0, -0.25, -1.5))
+        >>> s.label, s.margin
+        ('MID', 1.25)
+    """
+
+    options: tuple[str, ...]
+    logprobs: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        if len(self.options) != len(self.logprobs) or len(self.options) < 2:
+            raise ValueError(f"{len(self.logprobs)} log-probabilities for {len(self.options)} options")
+
+    @property
+    def label(self) -> str:
+        """The option with the highest log-probability (the first of equals)."""
+        return self.options[max(range(len(self.options)), key=lambda i: (self.logprobs[i], -i))]
+
+    @property
+    def margin(self) -> float:
+        """The best log-probability minus the second best (>= 0)."""
+        best, second = sorted(self.logprobs, reverse=True)[:2]
+        return best - second
+
+
+@runtime_checkable
+class ScoringBackend(Backend, Protocol):
+    """A backend that can answer an MCQ by its options' log-probabilities (one prefill, no
+    decoding): ``score_many(prompt, frames)[i]`` scores ``prompt.options`` about ``frames[i]``, or
+    is None where no log-probabilities came back (a server that returns none): that frame is
+    answered by generation instead, or refused in ``logprob`` mode. ``can_score`` is False where
+    the backend knows up front that it cannot (a server known to return none)."""
+
+    can_score: bool
+
+    def score_many(self, prompt: Prompt, frames: Sequence[Frame]) -> list[OptionScores | None]: ...
 
 
 def answer_all(backend: Backend, prompt: Prompt, frames: Sequence[Frame]) -> list[str]:

@@ -7,11 +7,16 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from vlmrl_cli.core.errors import BackendUnavailable, BadInput
 from vlmrl_cli.frames.render import Frame
-from vlmrl_cli.vlm.base import Answer, Backend, answer_all, describe
+from vlmrl_cli.vlm.base import Answer, Backend, OptionScores, ScoringBackend, answer_all, describe
 from vlmrl_cli.vlm.cache import ResponseCache, cache_key
+from vlmrl_cli.vlm.config import MCQ_MODES
 from vlmrl_cli.vlm.prompts import Prompt
 from vlmrl_cli.vlm.transcript import TranscriptRecord, TranscriptWriter
+
+#: Appended to the model's name in the cache key of an answer scored by option log-probability.
+SCORED_KEY = "#mcq-logprob"
 
 
 @dataclass
@@ -26,6 +31,8 @@ class ClientStats:
     backend_calls: int = 0
     backend_frames: int = 0
     largest_batch: int = 0
+    scored: int = 0  # backend answers from option log-probabilities
+    generated: int = 0  # backend answers decoded (every answer but a scored MCQ's)
 
 
 class VLMClient:
@@ -41,7 +48,14 @@ class VLMClient:
         backend: Backend,
         cache: ResponseCache | None = None,
         transcript: Path | None = None,
+        mcq_mode: str = "auto",
     ) -> None:
+        if mcq_mode not in MCQ_MODES:
+            raise BadInput(f"unknown vlm.mcq_mode '{mcq_mode}'; choose one of {', '.join(MCQ_MODES)}.")
+        if mcq_mode == "logprob" and not isinstance(backend, ScoringBackend):
+            raise BadInput(f"vlm.mcq_mode=logprob needs a backend that scores options (hf, openai), not "
+                           f"{backend.name}; set vlm.mcq_mode=auto or generate.")
+        self.mcq_mode = mcq_mode
         self.backend = backend
         self.cache = cache if backend.name != "replay" and not self.stochastic else None
         self.transcript = TranscriptWriter(transcript) if transcript is not None else None
@@ -54,20 +68,30 @@ class VLMClient:
 
     @property
     def label(self) -> str:
-        return describe(self.backend)
+        """``describe(backend)``, and for a backend that can score, how it answers an MCQ
+        (``MCQ by option log-probability`` or ``MCQ by generation``): the runs' provenance tag."""
+        if not isinstance(self.backend, ScoringBackend):
+            return describe(self.backend)
+        mode = "option log-probability" if self.mcq_mode != "generate" and self.backend.can_score else "generation"
+        return f"{describe(self.backend)} (MCQ by {mode})"
 
     def ask(self, prompt: Prompt, frame: Frame) -> Answer:
         """The answer about one frame (``ask_many`` of one)."""
         return self.ask_many(prompt, [frame])[0]
 
-    def ask_many(self, prompt: Prompt, frames: Sequence[Frame]) -> list[Answer]:
+    def ask_many(self, prompt: Prompt, frames: Sequence[Frame], *, generate: bool = False) -> list[Answer]:
         """The answers about ``frames``, in order: each looked up in the cache, the others sent to
         the backend in ONE call (``answer_all``: a batch, concurrent requests, or one by one for a
-        backend that cannot batch), a frame asked twice in the call sent once unless the backend
-        is stochastic; every query written to the transcript in the order of ``frames``. The
-        answers do not depend on how a caller splits its frames into calls."""
+        backend that cannot batch; for an MCQ with options that the backend can score,
+        ``score_many``, the frames it returns no scores for then generated), a frame asked twice in
+        the call sent once unless the backend is stochastic; every query written to the transcript
+        in the order of ``frames``. The answers do not depend on how a caller splits its frames
+        into calls. A scored answer is cached apart from a generated one (its model key ends in
+        ``SCORED_KEY``): the two modes may answer one frame differently. ``generate`` decodes
+        whatever the mode (the probe's comparison of the two)."""
         b = self.backend
-        keys = [cache_key(b.name, b.model, prompt.text, frame.sha256) for frame in frames]
+        scored = self.scores(prompt) and not generate
+        keys = [self._key(prompt, frame, scored) for frame in frames]
         hits: dict[int, tuple[str, float]] = {}
         for i, key in enumerate(keys):
             hit = self.cache.get(key) if self.cache is not None else None
@@ -82,10 +106,10 @@ class VLMClient:
                 first.setdefault(keys[i], i)
                 send.append(i)
         start = time.perf_counter()
-        texts = answer_all(b, prompt, [frames[i] for i in send]) if send else []
+        fresh = self._fresh(prompt, [frames[i] for i in send], scored) if send else []
         elapsed = time.perf_counter() - start
         latency = elapsed / len(send) if send else 0.0
-        fresh = dict(zip(send, texts, strict=True))
+        answered = dict(zip(send, fresh, strict=True))
         if send:
             self.stats.backend_calls += 1
             self.stats.backend_frames += len(send)
@@ -94,29 +118,73 @@ class VLMClient:
         answers = []
         for i, frame in enumerate(frames):
             self.stats.queries += 1
-            if i not in hits and i not in fresh and self.cache is not None:  # as a later ask would find it
-                hits[i] = (fresh[first[keys[i]]], latency)
+            if i not in hits and i not in answered and self.cache is not None:  # as a later ask would find it
+                hits[i] = (answered[first[keys[i]]][0], latency)
+            confidence: float | None = None
             if i in hits:
                 self.stats.cache_hits += 1
                 text, took, cached = hits[i][0], hits[i][1], True
             else:
                 self.stats.cache_misses += 1
-                text = fresh[i] if i in fresh else fresh[first[keys[i]]]
+                text, confidence, key = answered[i] if i in answered else answered[first[keys[i]]]
                 took, cached = latency, False
-                if self.cache is not None and i in fresh:
-                    self.cache.put(keys[i], b.name, b.model, text, took)
+                if self.cache is not None and i in answered:
+                    self.cache.put(key, b.name, b.model, text, took)
             if self.transcript is not None:
                 self.transcript.write(
                     TranscriptRecord(
                         backend=b.name, model=b.model, prompt_kind=prompt.kind.value,
                         prompt=prompt.text, image_sha256=frame.sha256, answer=text,
                         latency_s=took, simulated=b.simulated, cached=cached,
-                        frame_id=frame.frame_id,
+                        frame_id=frame.frame_id, confidence=confidence,
                     )
                 )
             answers.append(Answer(text=text, latency_s=took, backend=b.name, model=b.model,
-                                  simulated=b.simulated, cached=cached))
+                                  simulated=b.simulated, cached=cached, confidence=confidence))
         return answers
+
+    def scores(self, prompt: Prompt) -> bool:
+        """Whether ``prompt`` is answered by its options' log-probabilities: an MCQ with options,
+        a backend that can score, and a mode other than ``generate``."""
+        return (prompt.options is not None and self.mcq_mode != "generate"
+                and isinstance(self.backend, ScoringBackend) and bool(self.backend.can_score))
+
+    def mcq_mode_entry(self, prompt: Prompt) -> dict[str, str]:
+        """``{"mcq.mode": "logprob" | "generate"}``, how ``prompt`` is answered, for a backend that
+        can score; empty for the others (the simulated VLM, replay), whose records stay as they were."""
+        if not isinstance(self.backend, ScoringBackend):
+            return {}
+        return {"mcq.mode": "logprob" if self.scores(prompt) else "generate"}
+
+    def _key(self, prompt: Prompt, frame: Frame, scored: bool) -> str:
+        b = self.backend
+        return cache_key(b.name, b.model + (SCORED_KEY if scored else ""), prompt.text, frame.sha256)
+
+    def _fresh(self, prompt: Prompt, frames: list[Frame], scored: bool) -> list[tuple[str, float | None, str]]:
+        """(text, confidence, cache key) of each of ``frames`` from the backend: scored where it
+        can (``scores``), generated for the rest (``BackendUnavailable`` in ``logprob`` mode)."""
+        results: list[OptionScores | None] = [None] * len(frames)
+        if scored:
+            assert isinstance(self.backend, ScoringBackend)
+            results = list(self.backend.score_many(prompt, frames))
+            if len(results) != len(frames):
+                raise ValueError(f"{self.backend.name} scored {len(results)} of {len(frames)} frames")
+        fallback = [j for j, r in enumerate(results) if r is None]
+        if scored and fallback and self.mcq_mode == "logprob":
+            raise BackendUnavailable(
+                f"{describe(self.backend)} returned no log-probabilities for the MCQ's options "
+                "(vlm.mcq_mode=logprob); serve the model where they are returned (vLLM, SGLang) or set "
+                "vlm.mcq_mode=auto to generate instead.")
+        texts = dict(zip(fallback, answer_all(self.backend, prompt, [frames[j] for j in fallback]), strict=True))
+        self.stats.scored += len(frames) - len(fallback)
+        self.stats.generated += len(fallback)
+        out: list[tuple[str, float | None, str]] = []
+        for j, (frame, r) in enumerate(zip(frames, results, strict=True)):
+            if r is None:
+                out.append((texts[j], None, self._key(prompt, frame, False)))
+            else:
+                out.append((r.label, r.margin, self._key(prompt, frame, True)))
+        return out
 
     def close(self) -> None:
         if self.transcript is not None:

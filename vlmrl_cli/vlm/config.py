@@ -14,8 +14,14 @@ from pydantic import AfterValidator
 from vlmrl_cli import paper
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.core.fields import one_of
+from vlmrl_cli.core.provenance import to_jsonable
 
 BACKENDS: tuple[str, ...] = ("sim", "hf", "openai", "replay")
+#: How an MCQ with options is answered: ``logprob`` scores each option's log-probability (one
+#: prefill, no decoding) and fails where the backend cannot; ``generate`` decodes an answer and
+#: parses it; ``auto`` scores where the backend can and generates elsewhere (the simulated VLM,
+#: replay, a server that returns no log-probabilities).
+MCQ_MODES: tuple[str, ...] = ("auto", "logprob", "generate")
 PAPER_MODEL = "llava-hf/llava-1.5-7b-hf"
 PAPER_TRANSCRIPT = paper.TABLE1_TRANSCRIPT
 DEFAULT_CACHE = Path(".vlmrl-cache") / "responses.sqlite"
@@ -264,3 +270,39 @@ class VLMConfig:
     max_queries: int | None = field(default=None, metadata={
         "rules": (Ge(0),), "help": "labels a run may ask of the VLM; past it the nearest prototype's (None: no cap)"})
     sim: SimKnobs = field(default_factory=SimKnobs)
+    mcq_mode: str = field(default="auto", metadata={
+        "rules": (AfterValidator(one_of(MCQ_MODES, "MCQ mode")),),
+        "help": "auto (option log-probabilities where the backend can score, else generation), logprob or generate"})
+    max_concurrency: int = field(default=8, metadata={
+        "rules": (Ge(1),), "help": "openai: requests in flight at once; hf: frames per batched forward pass"})
+
+
+#: VLM settings that change speed, not answers: never in a run's identity.
+SPEED_ONLY_VLM: tuple[str, ...] = ("cache_path", "use_cache", "timeout_s", "retries", "api_key_env",
+                                   "max_concurrency")
+#: Settings added after runs were recorded, and the values that leave those runs' answers as they
+#: were: while they hold these values they stay out of the identity, so the runs keep their hashes.
+NEUTRAL_VLM: dict[str, Any] = {"mcq_mode": "auto", "max_queries": None}
+
+
+def vlm_identity(cfg: VLMConfig) -> dict[str, Any]:
+    """``cfg`` as it enters a run's identity: the settings that can change an answer, the simulated
+    VLM's knobs only for ``sim`` (``sim_identity``), the ``NEUTRAL_VLM`` ones only off their neutral value.
+
+    Example:
+        >>> sorted(vlm_identity(VLMConfig()))
+        ['backend', 'base_url', 'device', 'dtype', 'max_new_tokens', 'model', 'sim', 'transcript_in']
+        >>> vlm_identity(VLMConfig(mcq_mode="generate", max_concurrency=1))["mcq_mode"]
+        'generate'
+    """
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(cfg):
+        value = getattr(cfg, f.name)
+        if f.name in SPEED_ONLY_VLM or (f.name in NEUTRAL_VLM and NEUTRAL_VLM[f.name] == value):
+            continue
+        if f.name == "sim":
+            if cfg.backend == "sim":
+                out["sim"] = to_jsonable(sim_identity(value))
+            continue
+        out[f.name] = to_jsonable(value)
+    return out

@@ -9,12 +9,14 @@ fast for the other backends.
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from vlmrl_cli.core.errors import BackendUnavailable, BadInput
 from vlmrl_cli.frames.render import Frame
+from vlmrl_cli.vlm.base import OptionScores
 from vlmrl_cli.vlm.config import PAPER_MODEL, VLMConfig
 from vlmrl_cli.vlm.prompts import Prompt
 
@@ -154,6 +156,25 @@ def hub_problem(model_id: str, timeout_s: float = 10.0) -> str | None:
     return None
 
 
+def _chunks(frames: Sequence[Frame], size: int) -> Iterator[Sequence[Frame]]:
+    """``frames`` in consecutive slices of at most ``size``."""
+    for i in range(0, len(frames), max(1, size)):
+        yield frames[i:i + max(1, size)]
+
+
+def _cache_kwarg(model: Any) -> str:
+    """``forward``'s KV-cache keyword: ``cache`` in newer transformers, ``past_key_values`` before."""
+    import inspect
+
+    return "cache" if "cache" in inspect.signature(model.forward).parameters else "past_key_values"
+
+
+def _kv_cache(output: Any) -> Any:
+    """The KV cache a forward pass returned (``cache`` or, in older transformers, ``past_key_values``)."""
+    cache = output.get("cache") if hasattr(output, "get") else None
+    return cache if cache is not None else output.past_key_values
+
+
 @dataclass
 class _Loaded:
     processor: Any
@@ -163,7 +184,9 @@ class _Loaded:
 
 
 class HFBackend:
-    """A transformers image-text-to-text model, greedy-decoded, answering one (prompt, frame).
+    """A transformers image-text-to-text model, greedy-decoded, answering (prompt, frame) one at a
+    time (``answer``) or a round of frames in batches (``answer_many``), and scoring an MCQ's
+    options by their log-probabilities (``score_many``).
 
     The prompt goes through the processor's chat template as one user turn holding the image
     and the text; only the newly generated tokens are decoded. A failure while generating (an
@@ -174,9 +197,12 @@ class HFBackend:
     name = "hf"
     simulated = False
 
-    def __init__(self, model_id: str, loaded: _Loaded, max_new_tokens: int = 32) -> None:
+    can_score = True
+
+    def __init__(self, model_id: str, loaded: _Loaded, max_new_tokens: int = 32, batch_size: int = 8) -> None:
         self.model = model_id
         self.max_new_tokens = max_new_tokens
+        self.batch_size = batch_size
         self._loaded: _Loaded | None = loaded
 
     def __repr__(self) -> str:
@@ -205,38 +231,143 @@ class HFBackend:
             model = model.to(device).eval()
         except Exception as exc:  # any load failure becomes one actionable sentence
             raise _load_error(model_id, exc) from exc
-        return cls(model_id, _Loaded(processor, model, device, dtype), max_new_tokens=cfg.max_new_tokens)
+        return cls(model_id, _Loaded(processor, model, device, dtype), max_new_tokens=cfg.max_new_tokens,
+                   batch_size=cfg.max_concurrency)
 
-    def _inputs(self, loaded: _Loaded, text: str, image: Any) -> Any:
-        """Processor inputs for one user turn of (image, text), via the chat template if any."""
+    def _chat_text(self, loaded: _Loaded, text: str) -> str:
+        """``text`` as one user turn holding the image, through the chat template if any."""
         processor = loaded.processor
         if getattr(processor, "chat_template", None):
             messages = [{"role": "user", "content": [{"type": "image"}, {"type": "text", "text": text}]}]
-            text = processor.apply_chat_template(messages, add_generation_prompt=True, tokenize=False)
-        # processors without a template (e.g. PaliGemma) insert their image tokens themselves
-        inputs = processor(images=[image], text=[text], return_tensors="pt")
+            return str(processor.apply_chat_template(messages, add_generation_prompt=True, tokenize=False))
+        return text  # processors without a template (e.g. PaliGemma) insert their image tokens themselves
+
+    def _inputs(self, loaded: _Loaded, text: str, images: Sequence[Any]) -> Any:
+        """Processor inputs for one user turn of (image, text) per image, padded on the left (a
+        decoder continues each row from its last token) when the rows differ in length."""
+        processor = loaded.processor
+        chat = self._chat_text(loaded, text)
+        tokenizer = getattr(processor, "tokenizer", None)
+        if tokenizer is not None:
+            tokenizer.padding_side = "left"
+        inputs = processor(images=list(images), text=[chat] * len(images), padding=True, return_tensors="pt")
         return inputs.to(loaded.device, dtype=loaded.dtype)
 
-    def answer(self, prompt: Prompt, frame: Frame) -> str:
-        """The model's greedy answer to ``prompt`` about ``frame``; ``""`` if generation fails."""
+    def _loaded_or_refuse(self) -> _Loaded:
         if self._loaded is None:
             raise BackendUnavailable(f"the hf backend for '{self.model}' was closed; build a new one.")
-        loaded = self._loaded
+        return self._loaded
+
+    def _decoded(self, loaded: _Loaded, out: Any, prompt_len: int) -> list[str]:
+        tokenizer = getattr(loaded.processor, "tokenizer", loaded.processor)
+        return [str(tokenizer.decode(row[prompt_len:], skip_special_tokens=True)).strip() for row in out]
+
+    def _generate(self, loaded: _Loaded, prompt: Prompt, frames: Sequence[Frame]) -> list[str]:
+        """Greedy answers about ``frames`` from one batched ``generate``."""
         import torch
         from PIL import Image
 
-        image = Image.fromarray(frame.pixels)
+        inputs = self._inputs(loaded, prompt.text, [Image.fromarray(f.pixels) for f in frames])
+        with torch.inference_mode():
+            out = loaded.model.generate(**inputs, do_sample=False, max_new_tokens=self.max_new_tokens)
+        return self._decoded(loaded, out, inputs["input_ids"].shape[1])
+
+    def answer(self, prompt: Prompt, frame: Frame) -> str:
+        """The model's greedy answer to ``prompt`` about ``frame``; ``""`` if generation fails."""
+        loaded = self._loaded_or_refuse()
         try:
-            inputs = self._inputs(loaded, prompt.text, image)
-            with torch.inference_mode():
-                out = loaded.model.generate(**inputs, do_sample=False, max_new_tokens=self.max_new_tokens)
-            new_tokens = out[0, inputs["input_ids"].shape[1]:]
-            tokenizer = getattr(loaded.processor, "tokenizer", loaded.processor)
-            return str(tokenizer.decode(new_tokens, skip_special_tokens=True)).strip()
+            return self._generate(loaded, prompt, [frame])[0]
         except Exception as exc:  # a probe over many frames must not die on one bad generation
             logger.warning("hf model %s failed to answer (%s: %s); recording an empty answer",
                            self.model, type(exc).__name__, _one_line(exc))
             return ""
+
+    def answer_many(self, prompt: Prompt, frames: Sequence[Frame]) -> list[str]:
+        """The greedy answers about ``frames``, in order, from batched ``generate`` calls of at most
+        ``batch_size`` frames (left-padded): what ``answer`` says of each. A batch that fails is
+        asked again frame by frame, so one bad frame costs only its own answer."""
+        loaded = self._loaded_or_refuse()
+        answers: list[str] = []
+        for chunk in _chunks(frames, self.batch_size):
+            try:
+                answers.extend(self._generate(loaded, prompt, chunk))
+            except Exception as exc:
+                logger.warning("hf model %s failed on a batch of %d (%s: %s); asking frame by frame",
+                               self.model, len(chunk), type(exc).__name__, _one_line(exc))
+                answers.extend(self.answer(prompt, f) for f in chunk)
+        return answers
+
+    # -- MCQ by option log-probability --------------------------------------------------------
+
+    def option_ids(self, prompt: Prompt) -> list[list[int]]:
+        """The token ids of each of ``prompt.options`` as the model would write it after the
+        prompt: the tail of the tokenised (prompt + answer), where the prompt's own tokens are its
+        head, else the answer tokenised alone. The answer is the label after a space unless the
+        template ends in whitespace (LLaVA-1.5's ``ASSISTANT:`` is followed by `` BOTTOM``; a
+        template ending in a newline, as Qwen's, by ``BOTTOM``)."""
+        if not prompt.options:
+            raise ValueError("option log-probabilities need an MCQ prompt with options (mcq_prompt)")
+        loaded = self._loaded_or_refuse()
+        tokenizer = getattr(loaded.processor, "tokenizer", loaded.processor)
+        chat = self._chat_text(loaded, prompt.text)
+        space = "" if chat[-1:].isspace() else " "
+        head = list(tokenizer(chat, add_special_tokens=False)["input_ids"])
+        ids = []
+        for option in prompt.options:
+            whole = list(tokenizer(chat + space + option, add_special_tokens=False)["input_ids"])
+            tail = whole[len(head):] if whole[:len(head)] == head and len(whole) > len(head) else \
+                list(tokenizer(space + option, add_special_tokens=False)["input_ids"])
+            if not tail:
+                raise ValueError(f"the option '{option}' tokenises to nothing")
+            ids.append(tail)
+        return ids
+
+    def score_many(self, prompt: Prompt, frames: Sequence[Frame]) -> list[OptionScores | None]:
+        """Each option's log-probability about each of ``frames``: one prefill of the prompt and
+        image per frame (batched, left-padded), whose last position scores every option's first
+        token; options of several tokens continue from a copy of the prefill's KV cache, all in
+        one more forward pass."""
+        loaded = self._loaded_or_refuse()
+        assert prompt.options is not None
+        ids = self.option_ids(prompt)
+        out: list[OptionScores | None] = []
+        for chunk in _chunks(frames, self.batch_size):
+            rows = self._option_logprobs(loaded, prompt, chunk, ids)
+            out.extend(OptionScores(prompt.options, tuple(row)) for row in rows)
+        return out
+
+    def _option_logprobs(self, loaded: _Loaded, prompt: Prompt, frames: Sequence[Frame],
+                         ids: list[list[int]]) -> list[list[float]]:
+        import torch
+        from PIL import Image
+
+        inputs = self._inputs(loaded, prompt.text, [Image.fromarray(f.pixels) for f in frames])
+        mask = inputs["attention_mask"]
+        positions = (mask.cumsum(-1) - 1).clamp(min=0)
+        with torch.inference_mode():
+            pre = loaded.model(**inputs, position_ids=positions, use_cache=True)
+            first = torch.log_softmax(pre.logits[:, -1, :].float(), dim=-1)  # (B, V)
+            scores = torch.stack([first[:, tok[0]] for tok in ids], dim=1)  # (B, O)
+            longest = max(len(tok) for tok in ids)
+            if longest > 1:  # the options' later tokens: one pass over (frame, option) rows
+                n_opt, batch = len(ids), len(frames)
+                pad = 0
+                cont = torch.tensor([tok[:-1] + [pad] * (longest - len(tok)) for tok in ids], device=mask.device)
+                real = torch.tensor([[1] * (len(tok) - 1) + [0] * (longest - len(tok)) for tok in ids],
+                                    device=mask.device, dtype=mask.dtype)
+                cache = _kv_cache(pre)
+                cache.batch_repeat_interleave(n_opt)
+                cont_ids = cont.repeat(batch, 1)  # row b * O + o: frame b, option o
+                cont_mask = torch.cat([mask.repeat_interleave(n_opt, dim=0), real.repeat(batch, 1)], dim=1)
+                start = mask.sum(-1).repeat_interleave(n_opt).unsqueeze(1)
+                cont_pos = start + torch.arange(longest - 1, device=mask.device).unsqueeze(0)
+                nxt = loaded.model(input_ids=cont_ids, attention_mask=cont_mask, position_ids=cont_pos,
+                                   use_cache=True, **{_cache_kwarg(loaded.model): cache})
+                logp = torch.log_softmax(nxt.logits.float(), dim=-1)  # (B*O, L-1, V)
+                for o, tok in enumerate(ids):
+                    for j in range(1, len(tok)):
+                        scores[:, o] += logp[o::n_opt, j - 1, tok[j]]
+        return [[float(v) for v in row] for row in scores.cpu()]
 
     def close(self) -> None:
         """Drop the model and processor so their memory can be freed."""

@@ -1,7 +1,9 @@
 """Any OpenAI-compatible chat-completions server (Ollama, vLLM, llama.cpp server, LM Studio).
 
 The frame travels as a base64 PNG data URL in the OpenAI vision message format; decoding is
-greedy (temperature 0). Transient failures (connection errors, timeouts, HTTP 429 and 5xx)
+greedy (temperature 0). A round of frames goes out as concurrent requests (``max_concurrency`` in
+flight); an MCQ with options is scored from the completion's log-probabilities where the server
+returns them (vLLM, SGLang, OpenAI), else generated. Transient failures (connection errors, timeouts, HTTP 429 and 5xx)
 are retried with exponential backoff by tenacity; everything else fails at once with one
 sentence that says what to check. The API key is read from the environment at each request
 and is never stored, logged, shown in ``repr`` or put in an error message.
@@ -11,19 +13,28 @@ from __future__ import annotations
 
 import base64
 import json
+import logging
 import os
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, TypeVar
 
 import httpx
 from tenacity import Retrying, retry_if_exception_type, stop_after_attempt, wait_exponential
 
 from vlmrl_cli.core.errors import BackendUnavailable, BadInput
 from vlmrl_cli.frames.render import Frame
+from vlmrl_cli.vlm.base import OptionScores
 from vlmrl_cli.vlm.config import VLMConfig
 from vlmrl_cli.vlm.prompts import Prompt
 
 DEFAULT_BACKOFF_S = 0.5
 MAX_BACKOFF_S = 10.0
+#: Alternatives asked for at each token when scoring an MCQ (20 is OpenAI's maximum).
+TOP_LOGPROBS = 20
+
+logger = logging.getLogger(__name__)
+T = TypeVar("T")
 
 
 class _Transient(Exception):
@@ -71,6 +82,62 @@ def _content(payload: Any) -> str | None:
     return None
 
 
+def _logprob_steps(payload: Any) -> list[tuple[str, float, dict[str, float]]] | None:
+    """``choices[0].logprobs.content`` as (token, its log-probability, the top alternatives'
+    log-probabilities) per generated token, or None when the server returned none."""
+    try:
+        content = payload["choices"][0]["logprobs"]["content"]
+        steps = []
+        for item in content:
+            top = {str(t["token"]): float(t["logprob"]) for t in item.get("top_logprobs") or []}
+            steps.append((str(item["token"]), float(item["logprob"]), top))
+    except (KeyError, IndexError, TypeError, ValueError):
+        return None
+    return steps or None
+
+
+def _completes(text: str, option: str) -> bool:
+    """Whether ``text`` is ``option`` whole, perhaps followed by punctuation or space."""
+    rest = text[len(option):] if text.startswith(option) else None
+    return rest is not None and not (rest[:1].isalnum() or rest[:1] == "_")
+
+
+def option_logprobs(steps: Sequence[tuple[str, float, Mapping[str, float]]],
+                    options: Sequence[str]) -> tuple[float, ...]:
+    """Each option's log-probability from a greedy completion's per-token log-probabilities:
+    ``steps`` holds (decoded token, its log-probability, the top alternatives'). An option is
+    followed along the decoded tokens while they spell its beginning (leading spaces aside): where
+    a token (decoded or alternative) completes it, its score is the sum so far plus that token's;
+    where it branches off the decoded path, the sum so far plus its best alternative's (its
+    prefix's log-probability: an upper bound on its own); where no token spells it, the sum so far
+    plus the least listed alternative's (an upper bound, as it ranked below them all). Options
+    whose first tokens differ (a server asked for one token suffices) are scored exactly.
+
+    Example:
+        >>> steps = [(" LEFT", -0.2, {" LEFT": -0.2, " BOTTOM": -1.9, " GO": -4.0}),
+        ...          ("_SLOPE", -0.1, {"_SLOPE": -0.1, "_PEAK": -2.4})]
+        >>> option_logprobs(steps, ["LEFT_PEAK", "LEFT_SLOPE", "BOTTOM", "GOAL", "NEAR_GOAL"])
+        (-2.6, -0.30000000000000004, -1.9, -4.0, -4.0)
+    """
+    scores = []
+    for option in options:
+        text, total, score = "", 0.0, None
+        for token, logprob, top in steps:
+            alternatives = {**top, token: logprob}
+            ends = [lp for t, lp in alternatives.items() if _completes((text + t).lstrip(), option)]
+            if ends:
+                score = total + max(ends)
+                break
+            if option.startswith((text + token).lstrip()):
+                text, total = text + token, total + logprob
+                continue
+            partial = [lp for t, lp in alternatives.items() if option.startswith((text + t).lstrip())]
+            score = total + (max(partial) if partial else min(alternatives.values()))
+            break
+        scores.append(total if score is None else score)
+    return tuple(scores)
+
+
 def image_data_url(frame: Frame) -> str:
     """``frame`` as a ``data:image/png;base64,...`` URL (the OpenAI vision image format)."""
     return "data:image/png;base64," + base64.b64encode(frame.png_bytes()).decode("ascii")
@@ -98,6 +165,7 @@ class OpenAIBackend:
         max_tokens: int = 32,
         backoff_s: float = DEFAULT_BACKOFF_S,
         transport: httpx.BaseTransport | None = None,
+        max_concurrency: int = 8,
     ) -> None:
         if not base_url:
             raise BadInput("the openai backend needs --base-url, e.g. http://localhost:11434/v1 for Ollama.")
@@ -107,6 +175,8 @@ class OpenAIBackend:
             raise BadInput("the openai backend needs --model: the model name the server serves (e.g. llava).")
         if retries < 0 or timeout_s <= 0 or backoff_s < 0:
             raise BadInput("--retries must be >= 0 and --timeout > 0.")
+        if max_concurrency < 1:
+            raise BadInput("vlm.max_concurrency must be >= 1 (requests in flight at once).")
         self.base_url = base_url.rstrip("/")
         self.model = model
         self.api_key_env = api_key_env
@@ -114,7 +184,10 @@ class OpenAIBackend:
         self.max_tokens = max_tokens
         self.backoff_s = backoff_s
         self.served_models: tuple[str, ...] = ()
-        self._client = httpx.Client(timeout=timeout_s, transport=transport)
+        self.max_concurrency = max_concurrency
+        self.can_score = True  # until the server answers a request for log-probabilities without them
+        limits = httpx.Limits(max_connections=max(max_concurrency, 10), max_keepalive_connections=max_concurrency)
+        self._client = httpx.Client(timeout=timeout_s, transport=transport, limits=limits)
 
     def __repr__(self) -> str:
         return f"OpenAIBackend(base_url={_display_url(self.base_url)!r}, model={self.model!r})"
@@ -129,6 +202,7 @@ class OpenAIBackend:
         backend = cls(
             cfg.base_url or "", cfg.model or "", api_key_env=cfg.api_key_env, timeout_s=cfg.timeout_s,
             retries=cfg.retries, max_tokens=cfg.max_new_tokens, backoff_s=backoff_s,
+            max_concurrency=cfg.max_concurrency,
         )
         try:
             backend.check()
@@ -220,9 +294,8 @@ class OpenAIBackend:
             except (ValueError, AttributeError, TypeError):
                 self.served_models = ()
 
-    def answer(self, prompt: Prompt, frame: Frame) -> str:
-        """The server's answer to ``prompt`` about ``frame`` (greedy, at most ``max_tokens``)."""
-        payload = {
+    def _payload(self, prompt: Prompt, frame: Frame, *, logprobs: bool = False) -> dict[str, Any]:
+        payload: dict[str, Any] = {
             "model": self.model,
             "messages": [{
                 "role": "user",
@@ -235,19 +308,69 @@ class OpenAIBackend:
             "max_tokens": self.max_tokens,
             "stream": False,
         }
+        if logprobs:
+            payload |= {"logprobs": True, "top_logprobs": TOP_LOGPROBS}
+        return payload
+
+    def _complete(self, payload: dict[str, Any]) -> Any:
+        """The JSON body of a successful chat completion; ``BackendUnavailable`` otherwise."""
         response = self._send("POST", "/chat/completions", payload)
         if not response.is_success:
             raise self._refused(response)
         try:
-            text = _content(response.json())
+            body = response.json()
         except (ValueError, json.JSONDecodeError):
-            text = None
-        if text is None:
+            body = None
+        if _content(body) is None:
             raise BackendUnavailable(
                 f"{self._where} returned a malformed response (no JSON choices[0].message.content); "
                 "check that --base-url points at an OpenAI-compatible /v1 endpoint."
             )
+        return body
+
+    def answer(self, prompt: Prompt, frame: Frame) -> str:
+        """The server's answer to ``prompt`` about ``frame`` (greedy, at most ``max_tokens``)."""
+        text = _content(self._complete(self._payload(prompt, frame)))
+        assert text is not None  # _complete checked it
         return text
+
+    def _in_flight(self, ask: Callable[[Frame], T], frames: Sequence[Frame]) -> list[T]:
+        """``ask`` of each of ``frames``, at most ``max_concurrency`` requests in flight, in the
+        order of ``frames``; the first failure (in that order) is raised, the requests not yet
+        started are dropped."""
+        if len(frames) <= 1 or self.max_concurrency == 1:
+            return [ask(f) for f in frames]
+        pool = ThreadPoolExecutor(max_workers=min(self.max_concurrency, len(frames)),
+                                  thread_name_prefix="vlmrl-openai")
+        try:
+            futures = [pool.submit(ask, f) for f in frames]
+            return [future.result() for future in futures]
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+    def answer_many(self, prompt: Prompt, frames: Sequence[Frame]) -> list[str]:
+        """The server's answers about ``frames``, in order, from concurrent requests (at most
+        ``max_concurrency`` in flight): what ``answer`` says of each."""
+        return self._in_flight(lambda frame: self.answer(prompt, frame), frames)
+
+    def score(self, prompt: Prompt, frame: Frame) -> OptionScores | None:
+        """``prompt.options`` scored about ``frame`` from the log-probabilities of a greedy
+        completion (``logprobs``, ``top_logprobs``): ``option_logprobs``. None, and ``can_score``
+        False from then on, when the server returns none (it does not support them)."""
+        assert prompt.options is not None
+        body = self._complete(self._payload(prompt, frame, logprobs=True))
+        steps = _logprob_steps(body)
+        if steps is None:
+            if self.can_score:
+                logger.warning("%s returned no log-probabilities; the MCQ is answered by generation instead",
+                               self._where)
+            self.can_score = False
+            return None
+        return OptionScores(prompt.options, option_logprobs(steps, prompt.options))
+
+    def score_many(self, prompt: Prompt, frames: Sequence[Frame]) -> list[OptionScores | None]:
+        """``score`` of each of ``frames``, concurrently as ``answer_many``."""
+        return self._in_flight(lambda frame: self.score(prompt, frame), frames)
 
     def close(self) -> None:
         """Close the HTTP connection pool."""

@@ -9,10 +9,11 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Protocol
 
+from vlmrl_cli.core.fields import CARRIED
 from vlmrl_cli.frames.render import Frame
 
 
@@ -26,10 +27,26 @@ class PromptKind(StrEnum):
 
 @dataclass(frozen=True)
 class Prompt:
-    """A prompt kind and the exact text sent to the VLM with the frame."""
+    """A prompt kind and the exact text sent to the VLM with the frame; an MCQ's ``options`` (its
+    labels, in order) let a backend that can score answer it by each option's log-probability.
+    ``options`` is carried beside the text, never hashed: the text alone is the cache key and what
+    configs hash (``core.fields.CARRIED``).
+
+    Example:
+        >>> from vlmrl_cli.core.provenance import to_jsonable
+        >>> p = mcq_prompt("Lit?", ("DARK", "LIT"))
+        >>> p.options, sorted(to_jsonable(p))
+        (('DARK', 'LIT'), ['kind', 'text'])
+    """
 
     kind: PromptKind
     text: str
+    options: tuple[str, ...] | None = field(default=None, metadata=CARRIED)
+
+    def __post_init__(self) -> None:
+        if self.options is not None and (self.kind is not PromptKind.MCQ or len(set(self.options)) < 2
+                                         or len(set(self.options)) != len(self.options)):
+            raise ValueError(f"only an MCQ prompt has options, at least two distinct ones, got {self.options}")
 
 
 @dataclass(frozen=True)
@@ -51,12 +68,17 @@ class Milestones:
             raise ValueError(f"a milestone vocabulary needs at least two distinct labels, got {self.labels}")
         if self.prompt.kind is not PromptKind.MCQ:
             raise ValueError("a milestone vocabulary is asked with an MCQ prompt")
+        if self.prompt.options is None:  # the labels are the prompt's options (its text unchanged)
+            object.__setattr__(self, "prompt", dataclasses.replace(self.prompt, options=self.labels))
+        elif self.prompt.options != self.labels:
+            raise ValueError(f"the MCQ prompt's options {self.prompt.options} are not the labels {self.labels}")
 
 
 def mcq_prompt(scene: str, labels: tuple[str, ...]) -> Prompt:
     """The MCQ prompt of a task: ``scene`` describes the picture and asks the question; the
-    choices and the answer format follow, as in MountainCar's prompt."""
-    return Prompt(PromptKind.MCQ, f"{scene} Choose exactly one of: {', '.join(labels)}. Answer with the label only.")
+    choices and the answer format follow, as in MountainCar's prompt; ``labels`` are its options."""
+    return Prompt(PromptKind.MCQ, f"{scene} Choose exactly one of: {', '.join(labels)}. Answer with the label only.",
+                  options=tuple(labels))
 
 
 @dataclass(frozen=True)

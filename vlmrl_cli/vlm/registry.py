@@ -45,4 +45,10 @@ def build_client(cfg: VLMConfig, transcript: Path | None = None, stream: int = 0
     """The backend of ``cfg`` behind the shared response cache (unless disabled)."""
     backend = build_backend(cfg, stream, reader)
     cache = ResponseCache(cfg.cache_path) if cfg.use_cache and cfg.cache_path is not None else None
-    return VLMClient(backend, cache=cache, transcript=transcript)
+    try:
+        return VLMClient(backend, cache=cache, transcript=transcript, mcq_mode=cfg.mcq_mode)
+    except BaseException:
+        backend.close()
+        if cache is not None:
+            cache.close()
+        raise

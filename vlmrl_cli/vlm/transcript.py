@@ -25,6 +25,7 @@ class TranscriptRecord:
     cached: bool = False
     frame_id: str | None = None
     note: str | None = None
+    confidence: float | None = None  # an MCQ scored by option log-probability: best minus second
 
 
 class TranscriptWriter:
@@ -41,7 +42,10 @@ class TranscriptWriter:
     def write(self, record: TranscriptRecord) -> None:
         if self._fh is None:
             raise ValueError("transcript writer is closed")
-        self._fh.write(json.dumps(asdict(record), sort_keys=True) + "\n")
+        fields = asdict(record)
+        if fields["confidence"] is None:  # written only where there is one: older lines stay as they were
+            del fields["confidence"]
+        self._fh.write(json.dumps(fields, sort_keys=True) + "\n")
         self._fh.flush()
 
     def close(self) -> None:

@@ -24,6 +24,7 @@ PROMPTS: dict[PromptKind, Prompt] = {
         PromptKind.MCQ,
         "This image shows a car on a valley-shaped track with a flag at the right. Where is "
         f"the car? Choose exactly one of: {ZONE_CHOICES}. Answer with the label only.",
+        options=tuple(z.value for z in ZONES),
     ),
 }
 
