@@ -166,3 +166,16 @@ def test_the_bare_env_is_the_sparse_one() -> None:
     assert isinstance(env, pusher.SparsePush) and isinstance(env.unwrapped, TASK.scene.sim_type)
     assert env.observation_space.shape == TASK.scene.obs_shape and isinstance(env, gym.Env)
     env.close()
+
+
+@pytest.mark.slow
+def test_a_smoke_run_of_the_hybrid_trains_headless() -> None:
+    """The CI's Pusher smoke run: the hybrid (camera, reader, oracle) trains 1,024 steps off screen."""
+    from vlmrl_cli.training.config import RunConfig
+    from vlmrl_cli.training.trace import native_returns
+
+    sources = {"task": "pusher", "arms": ["hybrid"], "seeds": [0], "preset": "smoke"}
+    job = RunConfig.from_sources(None, sources).jobs()[0]
+    returns = native_returns(job)
+    assert job.timesteps == 1_024 and len(returns) >= 8
+    assert all(-pusher.MAX_STEPS <= r <= -1 for r in returns)
