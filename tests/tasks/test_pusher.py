@@ -179,3 +179,15 @@ def test_a_smoke_run_of_the_hybrid_trains_headless() -> None:
     returns = native_returns(job)
     assert job.timesteps == 1_024 and len(returns) >= 8
     assert all(-pusher.MAX_STEPS <= r <= -1 for r in returns)
+
+
+def test_presets_of_other_tasks_stay_known_where_pusher_cannot_load(monkeypatch: pytest.MonkeyPatch) -> None:
+    from vlmrl_cli.tasks import registry
+    from vlmrl_cli.training import config
+
+    def refused() -> Any:
+        raise BadInput("task 'pusher' cannot render: no working OpenGL")
+
+    monkeypatch.setitem(registry.BUILTIN, "pusher", refused)
+    known = config._builtin_presets()
+    assert "paper" in known and "zoo" in known and "pusher" not in known
