@@ -53,8 +53,8 @@ MAX_STEPS = 100
 OBS_DIM = 23
 INSTALL = 'pip install -e ".[pusher]"'
 use_headless_gl()  # before anything imports mujoco: MUJOCO_GL=egl unless the user chose a back end
-GL_HELP = ("install Mesa's EGL (Debian: apt-get install libegl1 libgl1-mesa-dri) or set MUJOCO_GL=osmesa with "
-           "libosmesa6")
+GL_HELP = ("install Mesa's EGL (Debian: apt-get install libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri) or set "
+           "MUJOCO_GL=osmesa with libosmesa6")
 
 
 def puck_goal_distance(obs: np.ndarray) -> float:
