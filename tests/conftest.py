@@ -11,6 +11,11 @@ import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+# Pusher's MuJoCo frames: Mesa's EGL, chosen before mujoco is imported (it sets PYOPENGL_PLATFORM
+# itself where unset); the task sets the same where nothing is set (tasks/pusher_scene.py)
+os.environ.setdefault("MUJOCO_GL", "egl")
+if os.environ["MUJOCO_GL"] in ("egl", "osmesa"):  # PyOpenGL's platform must match MuJoCo's back end
+    os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
 # Ray's driver replaces builtins.print when it relays a worker's tqdm output (ray.experimental.
 # tqdm_ray): a process-wide change that outlives the Ray tests in their xdist worker, after which
 # `print` is a Python function (test_task_factory_marks_functions_only saw it). Not here.

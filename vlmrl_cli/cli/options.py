@@ -221,7 +221,7 @@ Preset = Annotated[str | None, typer.Option(
     help=f"PPO preset, the bottom layer of [ppo]: one of the task's own presets (listed: {DEFAULT_TASK}'s) "
          f"[default: the task's default preset; {DEFAULT_TASK}'s is {DEFAULT_PRESET}].")]
 TaskOpt = Annotated[str | None, typer.Option(
-    "--task", metavar="mountain-car|mountain-car-continuous|acrobot|minigrid-doorkey|MODULE:NAME",
+    "--task", metavar="mountain-car|mountain-car-continuous|acrobot|minigrid-doorkey|pusher|MODULE:NAME",
     help="The environment (default mountain-car): a built-in task, or a Task in your code as "
          "package.module:NAME (see the docs' 'Add a task').")]
 TrustPickle = Annotated[bool, typer.Option(

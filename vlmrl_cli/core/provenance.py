@@ -14,7 +14,8 @@ from pathlib import Path
 from typing import Any
 
 _PACKAGES = ("vlmrl", "torch", "gymnasium", "stable-baselines3", "transformers", "mlflow",
-             "numpy", "pandas", "scipy", "pygame-ce", "pygame")  # pygame draws the frames
+             "numpy", "pandas", "scipy", "pygame-ce", "pygame",  # pygame draws the frames
+             "mujoco")  # draws Pusher's, on Mesa (``mesa`` below)
 
 
 def to_jsonable(obj: Any) -> Any:
@@ -106,7 +107,27 @@ def _package_versions() -> dict[str, str]:
             versions[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
             versions[name] = "not installed"
+    versions["mesa"] = mesa_version()
     return versions
+
+
+def mesa_version() -> str:
+    """The installed Mesa (the OpenGL that MuJoCo's offscreen frames are drawn with on a CPU), from
+    the Debian package database ("unknown" elsewhere or when none is installed).
+
+    Example:
+        >>> isinstance(mesa_version(), str)
+        True
+    """
+    for package in ("libgl1-mesa-dri", "libegl-mesa0", "libosmesa6"):
+        try:
+            found = subprocess.run(["dpkg-query", "-W", "-f=${Version}", package], capture_output=True, text=True,
+                                   timeout=5, check=False)
+        except (OSError, subprocess.SubprocessError):
+            return "unknown"
+        if found.returncode == 0 and found.stdout.strip():
+            return f"{found.stdout.strip()} ({package})"
+    return "unknown"
 
 
 def cpu_paths() -> dict[str, str]:

@@ -58,6 +58,7 @@ def init_worker(progress: Any, stop: Any, ignore_sigint: bool = True) -> None:
     torch.set_num_threads(1)
     # the cameras render through gymnasium's rgb_array mode, whose pygame.display.init() needs a driver
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+    os.environ.setdefault("MUJOCO_GL", "egl")  # MuJoCo's frames (--task pusher), headless
     if ignore_sigint:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     _channels.progress = progress

@@ -87,11 +87,21 @@ def _minigrid_doorkey() -> Task:
     return DOORKEY
 
 
+def _pusher() -> Task:
+    """Pusher-v5 (the ``pusher`` extra: MuJoCo): a ``BadInput`` in one line where MuJoCo or a
+    headless OpenGL is missing."""
+    from vlmrl_cli.tasks.pusher import pusher_task
+
+    task: Task = pusher_task()
+    return task
+
+
 BUILTIN: dict[str, Callable[[], Task]] = {
     "mountain-car": _mountain_car,
     "mountain-car-continuous": _mountain_car_continuous,
     "acrobot": _acrobot,
     "minigrid-doorkey": _minigrid_doorkey,
+    "pusher": _pusher,
 }
 
 

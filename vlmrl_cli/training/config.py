@@ -37,7 +37,7 @@ import dataclasses
 import json
 import os
 import tomllib
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -135,7 +135,17 @@ def _known_preset(value: str) -> str:
 def _builtin_presets() -> list[str]:
     from vlmrl_cli.tasks.registry import BUILTIN
 
-    return list(dict.fromkeys(name for load in BUILTIN.values() for name in preset_names(load())))
+    tasks = (task for task in map(_loaded, BUILTIN.values()) if task is not None)
+    return list(dict.fromkeys(name for task in tasks for name in preset_names(task)))
+
+
+def _loaded(load: Callable[[], Task]) -> Task | None:
+    """A built-in task, or None where this machine cannot run it (an optional extra missing:
+    Pusher without MuJoCo or OpenGL); asking for that task by name says why."""
+    try:
+        return load()
+    except BadInput:
+        return None
 
 
 def _default_plugin() -> Task:

@@ -1,0 +1,305 @@
+"""Pusher-v5 as a task: a 7-DoF MuJoCo arm pushes a puck onto a goal, with a sparse success reward.
+
+Needs the ``pusher`` extra (``pip install -e ".[pusher]"``: gymnasium's MuJoCo envs on a pinned
+``mujoco``) and a headless OpenGL (Mesa's EGL or OSMesa). ``pusher_task()`` checks both once per
+process and refuses the task in one line when either is missing; it sets ``MUJOCO_GL=egl`` only
+where the user set nothing (``pusher_scene.use_headless_gl``).
+
+**Actions**: the 7 torques, rescaled from Pusher's [-2, 2] to [-1, 1] (``sparse_push``).
+
+**Reward.** -1 per step until the puck's centre is within 5 cm of the goal's in the plane, which
+ends the episode (``terminated``); 100 steps (Pusher-v5's limit) otherwise. -1 per step, like
+MountainCar-v0, rather than 0/1: the return is then minus the steps to success (-100 for a
+failure), so reward thresholds read as in the paper's task, a failure's return is one number, and
+with the step cost no dense or potential term below 1 per step can make lingering out-earn
+finishing. The env's own terms (``reward_near``, ``reward_dist``, ``reward_ctrl``) stay in
+``info``. Success (``Task.success``) is the default rule: the episode terminated (reached the
+goal) within the time limit.
+
+**Dense term** (the ``kinematic`` arm's, from the observation only: fingertip ``obs[14:17]``, puck
+``obs[17:20]``, goal ``obs[20:23]``): Eq. 1 on the negated distance the env's reward pays for,
+``c = d_pg + 0.5 d_tp`` (puck-goal in the plane, plus half the fingertip-puck distance, the env's
+own weights): ``max(0, scale (offset - c))``. With the defaults 2.0 and 0.4 it pays nothing at a
+typical start (c about 0.5 m), about 0.2 per step with the fingertip at a puck 0.3 m out, and at
+most 0.8 per step: below the step cost, so hovering never pays. Its potential form is the
+harness's (``dense-potential`` arms: ``Phi_kin = 100 x R_kin``).
+
+Milestones, camera and reader: ``pusher_scene``.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+
+from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.tasks.pusher_scene import (
+    FRAME_SHAPE,
+    MILESTONES,
+    POTENTIALS,
+    SUCCESS_M,
+    PusherCamera,
+    PusherReader,
+    label_of,
+    label_of_sim,
+    use_headless_gl,
+)
+
+ENV_ID = "Pusher-v5"
+MAX_STEPS = 100
+OBS_DIM = 23
+INSTALL = 'pip install -e ".[pusher]"'
+use_headless_gl()  # before anything imports mujoco: MUJOCO_GL=egl unless the user chose a back end
+GL_HELP = ("install Mesa's EGL (Debian: apt-get install libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri) or set "
+           "MUJOCO_GL=osmesa with libosmesa6")
+
+
+def puck_goal_distance(obs: np.ndarray) -> float:
+    """The puck's distance to the goal in the plane, from Pusher's observation.
+
+    Example:
+        >>> obs = np.zeros(OBS_DIM); obs[17:19] = (0.3, 0.4)
+        >>> puck_goal_distance(obs)
+        0.5
+    """
+    return float(np.hypot(obs[17] - obs[20], obs[18] - obs[21]))
+
+
+def pusher_dense(obs: np.ndarray, scale: float, offset: float) -> float:
+    """Eq. 1 on ``-(d_pg + 0.5 d_tp)``, metres: ``max(0, scale (offset - d_pg - 0.5 d_tp))``.
+
+    Example:
+        >>> obs = np.zeros(OBS_DIM); obs[14:17] = (0.1, 0.0, 0.0)  # puck on the goal, fingertip 0.1 away
+        >>> round(pusher_dense(obs, 2.0, 0.4), 6)
+        0.7
+    """
+    d_tp = float(np.sqrt((obs[14] - obs[17]) ** 2 + (obs[15] - obs[18]) ** 2 + (obs[16] - obs[19]) ** 2))
+    return max(0.0, scale * (offset - puck_goal_distance(obs) - 0.5 * d_tp))
+
+
+def label_of_obs(obs: np.ndarray) -> str:
+    """The milestone of an observation (the same rule as the truth of a simulator).
+
+    Example:
+        >>> label_of_obs(np.zeros(OBS_DIM))
+        'ON_TARGET'
+    """
+    d_tp = float(np.linalg.norm(obs[14:17] - obs[17:20]))
+    return label_of(d_tp, puck_goal_distance(obs))
+
+
+class SparsePush(gym.Wrapper[np.ndarray, np.ndarray, np.ndarray, np.ndarray], gym.utils.RecordConstructorArgs):
+    """Pusher-v5 with the task's sparse reward: -1 per step, the episode ends (``terminated``) when
+    the puck is within ``SUCCESS_M`` of the goal in the plane; the env's own reward and its terms
+    stay in ``info`` (``dense_reward``, ``reward_near``, ...).
+
+    Example:
+        >>> env = SparsePush(gym.make(ENV_ID))
+        >>> obs, _ = env.reset(seed=0)
+        >>> _, reward, terminated, truncated, info = env.step(np.zeros(7, dtype=np.float32))
+        >>> reward, terminated, "dense_reward" in info
+        (-1.0, False, True)
+        >>> env.close()
+    """
+
+    def __init__(self, env: gym.Env[np.ndarray, np.ndarray]) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.Wrapper.__init__(self, env)
+        # headless: MuJoCo's "human" window needs a display (GLFW aborts the process without one)
+        modes = [mode for mode in env.metadata.get("render_modes", []) if mode != "human"]
+        self.metadata = {**env.metadata, "render_modes": modes}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, dense, terminated, truncated, info = self.env.step(action)
+        info = dict(info)
+        info["dense_reward"] = float(dense)
+        return obs, -1.0, bool(terminated) or puck_goal_distance(obs) < SUCCESS_M, truncated, info
+
+
+def sparse_push(env: gym.Env[Any, Any]) -> gym.Env[Any, Any]:
+    """``Task.wrap``: around ``gym.make(ENV_ID)``, its torques rescaled from [-2, 2] to [-1, 1] (what
+    SB3's checker asks for: PPO's Gaussian policy starts at std 1), then the sparse success reward.
+
+    Example:
+        >>> env = sparse_push(gym.make(ENV_ID))
+        >>> space = env.action_space
+        >>> float(space.low[0]), float(space.high[0]), env.spec.make().action_space == space
+        (-1.0, 1.0, True)
+    """
+    return SparsePush(gym.wrappers.RescaleAction(env, np.float32(-1.0), np.float32(1.0)))
+
+
+class PusherState:
+    """A Pusher pose without an env: what the camera and the truth read of a simulator (``model``,
+    ``data``, ``get_body_com``), for probes and tests.
+
+    Example:
+        >>> state = PusherState.at(np.zeros(11))  # the puck's slides at 0: its centre over the goal's
+        >>> label_of_sim(state)
+        'ON_TARGET'
+    """
+
+    def __init__(self, model: Any, qpos: np.ndarray) -> None:
+        import mujoco
+
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.data.qpos[:] = qpos
+        mujoco.mj_kinematics(model, self.data)
+
+    @classmethod
+    def at(cls, qpos: np.ndarray) -> PusherState:
+        return cls(_model(), qpos)
+
+    def get_body_com(self, name: str) -> np.ndarray:
+        return np.array(self.data.body(name).xpos)
+
+
+@functools.cache
+def _model() -> Any:
+    """Pusher-v5's MuJoCo model (one per process; read only)."""
+    env = gym.make(ENV_ID)
+    model = env.unwrapped.model  # type: ignore[attr-defined]
+    env.close()
+    return model
+
+
+def random_states(n: int, seed: int = 0) -> list[PusherState]:
+    """``n`` random Pusher poses, a quarter of each true milestone in turn: arm joints uniform in
+    their ranges (rejected until the fingertip is over the table, and for ``AT_PUCK`` at the
+    puck's height), the puck placed by the label: on the goal (within 5 cm), near it (5-12 cm),
+    at the fingertip (within 10 cm) or anywhere a reset could put it, away from the fingertip.
+
+    Example:
+        >>> [label_of_sim(s) for s in random_states(4)]
+        ['FAR_FROM_PUCK', 'AT_PUCK', 'NEAR_TARGET', 'ON_TARGET']
+    """
+    import mujoco
+
+    from vlmrl_cli.tasks.pusher_scene import GOAL_XY, PUCK_Z
+
+    model = _model()
+    rng = np.random.default_rng(seed)
+    low, high = model.jnt_range[:7, 0], model.jnt_range[:7, 1]
+    base = np.asarray(model.body("object").pos[:2])  # the puck's slides move it from here
+    data = mujoco.MjData(model)
+    states: list[PusherState] = []
+    while len(states) < n:
+        want = MILESTONES.labels[len(states) % len(MILESTONES.labels)]
+        qpos = np.zeros(model.nq)
+        qpos[:7] = rng.uniform(low, high)
+        data.qpos[:] = qpos
+        mujoco.mj_kinematics(model, data)
+        tip = np.array(data.body("tips_arm").xpos)
+        if not (0.0 < tip[0] < 0.9 and -0.6 < tip[1] < 0.4 and tip[2] > PUCK_Z - 0.05):
+            continue
+        if want == "ON_TARGET" or want == "NEAR_TARGET":
+            r = rng.uniform(0.0, SUCCESS_M) if want == "ON_TARGET" else rng.uniform(SUCCESS_M, 0.12)
+            angle = rng.uniform(0, 2 * np.pi)
+            puck = np.asarray(GOAL_XY) + r * np.array([np.cos(angle), np.sin(angle)])
+        elif want == "AT_PUCK":
+            if abs(tip[2] - PUCK_Z) > 0.08:
+                continue
+            reach = np.sqrt(max(0.1**2 - (tip[2] - PUCK_Z) ** 2, 0.0))
+            angle = rng.uniform(0, 2 * np.pi)
+            puck = tip[:2] + rng.uniform(0.0, reach) * np.array([np.cos(angle), np.sin(angle)])
+        elif len(states) % 8 == 0:  # half of them just beyond the fingertip's reach of AT_PUCK
+            angle = rng.uniform(0, 2 * np.pi)
+            puck = tip[:2] + rng.uniform(0.1, 0.2) * np.array([np.cos(angle), np.sin(angle)])
+        else:
+            puck = base + np.array([rng.uniform(-0.3, 0.0), rng.uniform(-0.2, 0.2)])
+        qpos[7:9] = puck - base
+        state = PusherState(model, qpos)
+        if label_of_sim(state) == want:
+            states.append(state)
+    return states
+
+
+def probe_states(n: int) -> list[PusherState]:
+    """``vlmrl taxonomy``'s states: ``random_states(n)``."""
+    return random_states(n)
+
+
+def _camera(shaping: Any) -> PusherCamera:
+    return PusherCamera()
+
+
+@functools.cache
+def gl_problem() -> str | None:
+    """Why this process cannot draw Pusher's frames (None: it can): MuJoCo missing, or no working
+    OpenGL for its ``MUJOCO_GL`` back end. Tried once per process (a 1 x 1 px context)."""
+    backend = use_headless_gl()
+    try:
+        import mujoco
+    except ModuleNotFoundError as exc:
+        return f"task 'pusher' needs MuJoCo ({exc}); {INSTALL}"
+    except Exception as exc:  # mujoco loads its GL back end on import (OSMesa missing: an AttributeError)
+        return _no_gl(backend, exc)
+    try:
+        renderer = mujoco.Renderer(mujoco.MjModel.from_xml_string("<mujoco/>"), 8, 8)
+        renderer.close()
+    except Exception as exc:
+        return _no_gl(backend, exc)
+    return None
+
+
+def _no_gl(backend: str, exc: Exception) -> str:
+    said = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    return (f"task 'pusher' cannot render: no working OpenGL for MUJOCO_GL={backend} ({type(exc).__name__}"
+            f"{': ' + said if said else ''}); {GL_HELP}")
+
+
+# Field notes' PPO settings for Pusher (the dense reward's first successes at about 235k steps).
+_FIELD: dict[str, Any] = {
+    "n_envs": 8, "n_steps": 256, "batch_size": 64, "gae_lambda": 0.95, "gamma": 0.99, "n_epochs": 10,
+    "ent_coef": 0.0, "learning_rate": 3e-4, "normalize_obs": True, "normalize_reward": True, "timesteps": 300_000,
+}
+
+
+@functools.cache
+def pusher_task() -> Any:
+    """The Pusher task; a ``BadInput`` in one line where MuJoCo or a headless GL is missing."""
+    problem = gl_problem()
+    if problem is not None:
+        raise BadInput(problem)
+    from gymnasium.envs.mujoco.pusher_v5 import PusherEnv
+
+    from vlmrl_cli.shaping.features import feature_dim
+    from vlmrl_cli.shaping.scales import task_scales
+    from vlmrl_cli.shaping.scene import Scene
+    from vlmrl_cli.tasks.base import SMOKE, Task
+    from vlmrl_cli.tasks.capabilities import TaskCamera
+
+    return Task(
+        name="pusher",
+        env_id=ENV_ID,
+        summary="Pusher-v5: push the puck within 5 cm of the goal (MuJoCo, 7 torques, -1 per step, 100 steps)",
+        scene=Scene("pusher", (OBS_DIM,), pusher_dense, PusherEnv),
+        milestones=MILESTONES,
+        label_potentials=POTENTIALS,
+        truth=label_of_sim,
+        camera=TaskCamera(_camera, feature_dim(FRAME_SHAPE)),
+        reader=PusherReader(),
+        # provisional, until calibration: a failure returns -100, so -99 needs a success in ~2-3% of
+        # episodes (rolling mean of 50)
+        thresholds=(-99.0, -95.0, -85.0),
+        max_steps=MAX_STEPS,
+        presets={
+            # rl-baselines3-zoo has no PPO row for Pusher: "zoo" is the field notes' settings
+            "zoo": _FIELD,
+            "pusher": _FIELD,
+            "smoke": SMOKE,
+        },
+        zoo_reference="rl-baselines3-zoo has no PPO row for Pusher-v5 in benchmark.md; its zoo preset is the "
+                      "field notes' PPO settings (8 envs, n_steps 256, batch 64, 10 epochs, VecNormalize)",
+        probe_states=probe_states,
+        wrap=sparse_push,
+        window=50,
+        # goal: finishing in about 50 steps (-50) over a failure's -100 (provisional); Eq. 1 pays at
+        # most 0.4 per step at scale 1 and the default offset
+        scales=task_scales(goal_return=50.0, potential_span=1.0, dense_peak=0.4, horizon=MAX_STEPS),
+    )
+
