@@ -37,8 +37,8 @@ def _docs(session: nox.Session) -> None:
 @nox.session
 def tests(session: nox.Session) -> None:
     """ruff, mypy, the docs site (mkdocs --strict), then the test suite, in one environment (what CI
-    runs), with the Ray and Pusher (MuJoCo) extras."""
-    _install(session, "dev,ray,pusher")
+    runs), with the Ray extra."""
+    _install(session, "dev,ray")
     _lint(session)
     _docs(session)
     # whole files per worker, in tests/conftest.py's order (the files with the most slow tests first);
@@ -57,7 +57,7 @@ def docs(session: nox.Session) -> None:
 @nox.session
 def lint(session: nox.Session) -> None:
     """ruff and mypy only."""
-    _install(session, "dev,ray,pusher")
+    _install(session, "dev,ray")
     _lint(session)
 
 
