@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.shaping.arms import ARMS, DENSE_POTENTIAL
 from vlmrl_cli.shaping.semantic import SemanticOracle
-from vlmrl_cli.shaping.wrapper import HybridReward
+from vlmrl_cli.shaping.wrapper import wrap_arm
 from vlmrl_cli.tasks import pusher, pusher_scene
 from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.vlm.config import SimKnobs, VLMConfig
@@ -74,11 +74,11 @@ def test_pbrs_telescopes_over_a_pusher_episode(seed: int) -> None:
     shaping = TASK.default_shaping()
     client = build_client(VLMConfig(backend="sim", use_cache=False), reader=TASK.reader)
     oracle = SemanticOracle(client, shaping, arm.potential, TASK.milestones, TASK.camera.feature_dim, rbf=arm.rbf)
-    env = HybridReward(TASK.make_env(), arm, shaping, 1.0, TASK.scene, camera=shared_camera(), oracle=oracle,
+    env = wrap_arm(TASK.make_env(), arm, shaping, 1.0, TASK.scene, camera=shared_camera(), oracle=oracle,
                        horizon=pusher.MAX_STEPS, success=TASK.success)
     obs, _ = env.reset(seed=seed)
     kin = functools.partial(pusher.pusher_dense, scale=shaping.kin_scale, offset=shaping.kin_offset)
-    start = shaping.alpha * env.potential + pusher.MAX_STEPS * kin(obs)
+    start = shaping.alpha * env.get_wrapper_attr("potential") + pusher.MAX_STEPS * kin(obs)
     rng = np.random.default_rng(seed)
     shaped_minus_native, terminated = 0.0, False
     for _ in range(15):
@@ -86,7 +86,7 @@ def test_pbrs_telescopes_over_a_pusher_episode(seed: int) -> None:
         shaped_minus_native += float(reward) - info["native_reward"]
         if terminated:
             break
-    end = 0.0 if terminated else shaping.alpha * env.potential + pusher.MAX_STEPS * kin(obs)
+    end = 0.0 if terminated else shaping.alpha * env.get_wrapper_attr("potential") + pusher.MAX_STEPS * kin(obs)
     assert shaped_minus_native == pytest.approx(end - start, abs=1e-6)
 
 
