@@ -346,6 +346,12 @@ TIMED = [
     "taxonomy --out {tmp}/file/out",
     "run --set ppo.n_envs=1000000",
     "verify --tracking-uri sqlite:///{tmp}/missing.db",
+    # item 2's stores and files
+    "run --tracking-uri sqlite:///:memory:",
+    "report --tracking-uri sqlite:///{tmp}/m.db?mode=ro",
+    "run --tracking-uri postgresql+nosuchdriver://u@127.0.0.1:9/db",
+    "run --tracking-uri sqlite:///{tmp}/file",
+    "import {tmp}/file --tracking-uri sqlite:///{tmp}/store.db",
 ]
 #: Packages that take a second or more to load between them, none of which a refusal needs.
 HEAVY = ("pandas", "scipy", "matplotlib", "mlflow", "torch", "stable_baselines3")
