@@ -73,3 +73,19 @@ def test_performance_profile_falls_from_one_to_zero(values: list[float]) -> None
     taus = np.linspace(-201, -79, 30)
     p = performance_profile(values, taus)
     assert p[0] == 1.0 and p[-1] == 0.0 and np.all(np.diff(p) <= 0)
+
+
+def test_a_crossing_after_the_budget_is_a_dnf_in_the_rank_test() -> None:
+    # issue 51: three seeds crossed after the 100,000-step budget (reached = False). They are DNFs,
+    # tied with the other DNF, not finishes ranked below it.
+    budget = 100_000.0
+    over = [100_240.0, 100_416.0, 101_200.0, np.nan]
+    same_as_dnf = [np.nan] * 4
+    finished = [50_000.0, 60_000.0, 70_000.0, 80_000.0]
+    t_over = censored_rank_test(finished, over, _rng(), budget_a=budget, budget_b=budget)
+    t_nan = censored_rank_test(finished, same_as_dnf, _rng(), budget_a=budget, budget_b=budget)
+    assert t_over.n_dnf_b == 4
+    assert (t_over.u, t_over.p_value) == (t_nan.u, t_nan.p_value)
+    # among the DNFs of b, the over-budget crossings and the NaN are tied: U of b vs a DNF-only arm is 8
+    t_b = censored_rank_test(over, [np.nan, np.nan], _rng(), budget_a=budget, budget_b=budget)
+    assert t_b.u == 4.0 and t_b.p_faster == 0.5

@@ -3,7 +3,9 @@ performance profile.
 
 Steps to a threshold are right-censored: a seed that did not finish (DNF) is only known to need
 more than its budget. Dropping it flatters the arm that fails most; the rank test here keeps it,
-as a value tied with every other DNF and above every finished seed.
+as a value tied with every other DNF and above every finished seed. Which seeds finished is
+decided by ``censored.reached``, the one DNF rule of every test: a crossing after the budget is a
+DNF.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import stats as sps
 
+from vlmrl_cli.analysis.censored import reached
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, bootstrap_ci
 
 #: Permutations of the rank test; small experiments (<= this many splits) are enumerated exactly.
@@ -42,21 +45,30 @@ class RankTest:
     method: str = "exact"  # "exact" (every split enumerated) or "asymptotic" (normal, tie-corrected)
 
 
-def censor(steps: npt.ArrayLike) -> np.ndarray:
+def censor(steps: npt.ArrayLike, budget: npt.ArrayLike | None = None) -> np.ndarray:
     """Steps to a threshold (shape ``(n,)``, NaN = DNF) with each DNF as ``+inf``: tied with every
-    other DNF and ranked above every finished seed.
+    other DNF and ranked above every finished seed. A DNF is what ``censored.reached`` says it is
+    (the one rule): NaN, or a crossing after ``budget`` (scalar or per seed; None: no budget known).
 
     Example:
-        >>> censor([100.0, float("nan")])
-        array([100.,  inf])
+        >>> censor([100.0, float("nan"), 1200.0], 1000)
+        array([100.,  inf,  inf])
     """
     x = np.asarray(steps, dtype=float).reshape(-1)
-    return np.where(np.isnan(x), np.inf, x)
+    return np.where(reached(x, np.inf if budget is None else budget), x, np.inf)
+
+
+def _single_budget(budget: npt.ArrayLike | None) -> float | None:
+    """The one budget of an arm's seeds, or None when unknown or not shared."""
+    if budget is None:
+        return None
+    values = set(np.asarray(budget, dtype=float).reshape(-1).tolist())
+    return values.pop() if len(values) == 1 else None
 
 
 def censored_rank_test(
     steps_a: npt.ArrayLike, steps_b: npt.ArrayLike, rng: np.random.Generator, n_perm: int = DEFAULT_N_PERM,
-    budget_a: float | None = None, budget_b: float | None = None,
+    budget_a: npt.ArrayLike | None = None, budget_b: npt.ArrayLike | None = None,
 ) -> RankTest:
     """Mann-Whitney U test on steps to a threshold with DNF seeds censored at the budget.
 
@@ -67,7 +79,8 @@ def censored_rank_test(
             exact (with ties); beyond, the normal approximation with tie and continuity correction
             (``method="asymptotic"``), which has no resolution floor (9,999 random permutations
             could not give a p below 1/10,000, and printed that floor as if it were exact).
-        budget_a, budget_b: the arms' budgets; when they differ a DNF of the shorter one may not be
+        budget_a, budget_b: the arms' budgets (scalar or per seed): a crossing after its budget is
+            a DNF (``censor``). When the arms' budgets differ a DNF of the shorter one may not be
             slower than a finished seed of the longer one, and the note says so.
 
     Returns:
@@ -78,14 +91,16 @@ def censored_rank_test(
         >>> round(t.p_value, 3), t.p_faster
         (0.1, 1.0)
     """
-    a, b = censor(steps_a), censor(steps_b)
+    a, b = censor(steps_a, budget_a), censor(steps_b, budget_b)
     dnf_a, dnf_b = int(np.isinf(a).sum()), int(np.isinf(b).sum())
     if a.size == 0 or b.size == 0:
         return RankTest(float("nan"), float("nan"), float("nan"), int(a.size), int(b.size), dnf_a, dnf_b,
                         "an arm has no seeds")
     notes = []
-    if budget_a is not None and budget_b is not None and budget_a != budget_b:
-        notes.append(f"budgets differ ({budget_a:g} vs {budget_b:g}): a DNF is only known to exceed its own budget")
+    one_a, one_b = _single_budget(budget_a), _single_budget(budget_b)
+    if budget_a is not None and budget_b is not None and (one_a is None or one_b is None or one_a != one_b):
+        shown = f" ({one_a:g} vs {one_b:g})" if one_a is not None and one_b is not None else ""
+        notes.append(f"budgets differ{shown}: a DNF is only known to exceed its own budget")
     note = "; ".join(notes)
     if a.size < 2 or b.size < 2:
         u = float(np.sum((a[:, None] > b[None, :]) + 0.5 * (a[:, None] == b[None, :])))
