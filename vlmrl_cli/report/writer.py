@@ -247,7 +247,8 @@ def _statistics_md(cfg: ReportConfig, family_size: int = 0, auc_margin: float = 
         "exact p-value. These never collapse to a point: 5/5 vs 5/5 is 0 [-0.43, 0.43].",
         f"- Steps to a threshold, the one DNF rule of every table and verdict: {censored.RULE}. Restricted means "
         f"with a {ci} percentile bootstrap over seeds ({cfg.n_boot} resamples); a speedup is the ratio of "
-        "restricted means (a lower bound on the true ratio when the slower arm DNFs). The paper's convention, "
+        f"restricted means (a lower bound on the true ratio when the slower arm DNFs), its interval "
+        f"{censored.RATIO_INTERVAL}. The paper's convention, "
         "the mean over the seeds that finished, is shown as its own row of Table 2 only. Beside each speedup, a "
         "Mann-Whitney U test on all seeds with each DNF censored at the budget (tied with the other DNFs, slower "
         "than every finish; a crossing after the budget is a DNF): an exact permutation p, conditional on the "
@@ -266,7 +267,7 @@ def _statistics_md(cfg: ReportConfig, family_size: int = 0, auc_margin: float = 
         "measured; the log-rank weighs every finishing step alike and treats different budgets exactly.",
         f"- Verdicts of the attribution table, one rule: faster/slower when the adjusted rank test rejects at "
         f"{alpha:g} and the {ci} interval of the speedup excludes 1 on the same side; "
-        f"{censored.equivalent(cfg.margin)} when the {100 * (1 - 2 * alpha):g}% bootstrap interval of the "
+        f"{censored.equivalent(cfg.margin)} when the {100 * (1 - 2 * alpha):g}% interval of the "
         f"speedup lies inside [1/{cfg.margin:g}, {cfg.margin:g}] (two one-sided tests) and each arm finished on "
         "at least half its seeds; otherwise inconclusive, with 'leans faster' (or slower) when the interval "
         "excludes 1 or the adjusted test rejects and both point one way. Learning-curve area (threshold-free): "
@@ -340,7 +341,8 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
                 f"{cfg.window} episodes, so steps to {t:g} measure how fast episodes end, not learning: read no "
                 "speedup into that row." for t in floor_thresholds(per_seed, table.thresholds, cfg.window)],
               f"- Intervals: {100 * cfg.ci:g}% percentile bootstrap over seeds ({cfg.n_boot} resamples, seed "
-              f"{cfg.seed}) for means and ratios; score intervals for proportions of seeds (see below).", ""]
+              f"{cfg.seed}) for means; speedups by the delta method on the log ratio; score intervals for "
+              "proportions of seeds (see below).", ""]
     if warns:
         parts += ["## Warnings", "", *[f"- {w}" for w in warns], ""]
     parts += ["## Table 2: ours vs the paper" if paper_task else "## Table 2 (ours)", "", to_markdown(table)]

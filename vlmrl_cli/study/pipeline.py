@@ -24,7 +24,7 @@ from typing import Any
 import pandas as pd
 
 from vlmrl_cli.analysis import multiplicity, stats
-from vlmrl_cli.analysis.censored import RULE, equivalent
+from vlmrl_cli.analysis.censored import RATIO_INTERVAL, RULE, equivalent
 from vlmrl_cli.analysis.load import load_experiment
 from vlmrl_cli.calibration.pipeline import log_summary_run, runs_of, train_regimes, wall_s
 from vlmrl_cli.calibration.regimes import Regime
@@ -448,10 +448,10 @@ def _method_lines(cfg: StudyConfig, result: StudyResult) -> list[str]:
             f"The DNF rule, everywhere: {RULE}. Reliability: the share of seeds that reached {cfg.top:g}, Wilson "
             f"interval; differences of reliability with a Newcombe interval and a Fisher exact p. Steps to "
             f"{cfg.top:g}: restricted mean over all seeds, bootstrap CI. Speedup: the ratio of restricted means, "
-            "bootstrap CI; p: two-sided Mann-Whitney U on steps with DNF seeds (a crossing after the budget "
-            "included) tied above every finish, an exact permutation p conditional on the ties (every split of "
-            "the seeds counted: 184,756 at 10 vs 10; past C(60, 30) splits, the normal approximation, "
-            "labelled so); with one budget this is Gehan's censored rank test. The learning-curve "
+            f"its interval {RATIO_INTERVAL}; p: two-sided Mann-Whitney U on steps with DNF seeds (a crossing "
+            "after the budget included) tied above every finish, an exact permutation p conditional on the "
+            "ties (every split of the seeds counted: 184,756 at 10 vs 10; past C(60, 30) splits, the normal "
+            "approximation, labelled so); with one budget this is Gehan's censored rank test. The learning-curve "
             "area's Mann-Whitney p is exact the same way. Beside it, the log-rank test on the same steps, each "
             "DNF censored at its own budget (chi-square, 1 df); where, after adjustment, one of the two rejects "
             "and the other does not, the table says the tests disagree. The rank test drives the verdict: it is "
@@ -464,7 +464,7 @@ def _method_lines(cfg: StudyConfig, result: StudyResult) -> list[str]:
             "and reliability differences are secondary measures, judged on their own raw p and not adjusted. "
             f"Verdict: faster/slower when the adjusted p < {cfg.alpha:g} and the {100 * cfg.ci:g}% interval of the "
             f"speedup excludes 1 on the same side; {equivalent(cfg.margin)} when the "
-            f"{100 * (1 - 2 * cfg.alpha):g}% bootstrap interval of the speedup lies inside [1/{cfg.margin:g}, "
+            f"{100 * (1 - 2 * cfg.alpha):g}% interval of the speedup lies inside [1/{cfg.margin:g}, "
             f"{cfg.margin:g}] (two one-sided tests) and each arm finished on at least half its seeds; otherwise "
             "inconclusive, with 'leans faster' (or slower) when the interval excludes 1 or the adjusted test "
             "rejects, and both point one way. A speedup of restricted means is a lower bound on the speedup of "
