@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from vlmrl_cli.analysis import censored
 from vlmrl_cli.analysis.learning_profile import TargetProfile, regime_profile
 from vlmrl_cli.analysis.load import EPISODE_COLUMNS, RUN_COLUMNS, ExperimentData
+from vlmrl_cli.analysis.power import restricted_mean_steps
 from vlmrl_cli.analysis.stats import Streams
 from vlmrl_cli.study.verdicts import regime_row
 
@@ -223,20 +224,12 @@ def test_a_significant_area_whose_interval_holds_zero_is_never_higher() -> None:
 # ---- the speedup's interval covers (issue 51 item 6) ------------------------------------------------------------
 
 
-def _restricted_lognormal_mean(mu: float, sd: float, budget: float) -> float:
-    """E[min(X, budget)] for log X ~ N(mu, sd^2)."""
-    from scipy import stats as sps
-
-    z = (math.log(budget) - mu) / sd
-    return math.exp(mu + sd**2 / 2) * float(sps.norm.cdf(z - sd)) + budget * float(sps.norm.sf(z))
-
-
 def _coverage(sd_ref: float, sd_arm: float, shift: float, budget: float, reps: int = 1500) -> float:
     """The share of ``reps`` simulated 10-vs-10 experiments (log-normal steps, a crossing past the
     budget a DNF, i.e. NaN) whose 95% speedup interval holds the true ratio of restricted means."""
     rng = np.random.default_rng(51)
     mu_ref, mu_arm = math.log(60_000.0), math.log(60_000.0) - shift
-    truth = _restricted_lognormal_mean(mu_ref, sd_ref, budget) / _restricted_lognormal_mean(mu_arm, sd_arm, budget)
+    truth = restricted_mean_steps(mu_ref, sd_ref, budget) / restricted_mean_steps(mu_arm, sd_arm, budget)
     hits = 0
     for _ in range(reps):
         ref, arm = np.exp(rng.normal(mu_ref, sd_ref, 10)), np.exp(rng.normal(mu_arm, sd_arm, 10))

@@ -122,11 +122,25 @@ def log_ratio_interval(b: npt.ArrayLike, a: npt.ArrayLike, ci: float = 0.95) -> 
     x_b, x_a = np.asarray(b, dtype=float).reshape(-1), np.asarray(a, dtype=float).reshape(-1)
     if min(x_a.size, x_b.size) < 2:
         return math.nan, math.nan
-    m_b, m_a = float(x_b.mean()), float(x_a.mean())
-    se = math.sqrt(float(x_b.var(ddof=1)) / (x_b.size * m_b**2) + float(x_a.var(ddof=1)) / (x_a.size * m_a**2))
-    q = float(sps.t.ppf(0.5 + ci / 2, min(x_a.size, x_b.size) - 1))
-    centre = math.log(m_b / m_a)
-    return math.exp(centre - q * se), math.exp(centre + q * se)
+    low, high = log_ratio_bounds(x_b, x_a, ci)
+    return float(low), float(high)
+
+
+def log_ratio_bounds(b: np.ndarray, a: np.ndarray, ci: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
+    """``log_ratio_interval`` of every row at once: ``b``, ``a`` of shapes ``(..., n_b)``,
+    ``(..., n_a)`` (``n >= 2``); returns the lower and upper bounds, shape ``(...)``.
+
+    Example:
+        >>> low, high = log_ratio_bounds(np.array([[110.0, 120.0, 130.0]]), np.array([[100.0, 100.0, 100.0]]))
+        >>> low.round(3).tolist(), high.round(3).tolist()
+        ([0.976], [1.476])
+    """
+    n_b, n_a = b.shape[-1], a.shape[-1]
+    m_b, m_a = b.mean(axis=-1), a.mean(axis=-1)
+    se = np.sqrt(b.var(axis=-1, ddof=1) / (n_b * m_b**2) + a.var(axis=-1, ddof=1) / (n_a * m_a**2))
+    q = float(sps.t.ppf(0.5 + ci / 2, min(n_a, n_b) - 1))
+    centre = np.log(m_b / m_a)
+    return np.exp(centre - q * se), np.exp(centre + q * se)
 
 
 def speedup(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget: npt.ArrayLike,

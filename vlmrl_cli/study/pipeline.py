@@ -260,9 +260,10 @@ def planned_family(cfg: StudyConfig) -> int:
 
 def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None) -> list[str]:
     """What the study can detect at 80% power, per comparison, simulated on censored data as the
-    verdict sees it (``analysis.power``): each comparison's own reference arm's steps to the top
-    threshold, fitted as a log-normal with its DNFs right-censored at the budget
-    (``power.fit_censored_lognormal``), the rank test at Holm's first step over the study's family
+    verdict sees it (``analysis.power``): each comparison's two arms' steps to the top threshold,
+    each fitted as a log-normal with its DNFs right-censored at the budget
+    (``power.fit_censored_lognormal``; the arm's spread is its own, the reference's when it has too
+    few finishes), the rank test at Holm's first step over the study's family
     (``alpha / m``; ``--adjust none``: ``alpha``) and the 95% interval above 1; each detectable
     effect stated as a ratio of restricted mean steps (a DNF at the budget), the tables' unit, with
     the median ratio it corresponds to. Before any run has finished (a dry run): one line on an
@@ -279,8 +280,9 @@ def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None) -> list[
     level = (f"alpha {cfg.alpha:g} / {family} (Holm's first step over the family of {family} comparisons: "
              f"{pairs} and {len(controls)} controls)" if family > 1 else f"alpha {cfg.alpha:g}")
     lines = [f"Power (80%) per comparison, simulated on censored steps to {cfg.top:g} "
-             f"({power.DEFAULT_N_SIMS:,} simulated studies each): the comparison's reference arm's steps fitted as "
-             f"a log-normal with its DNFs right-censored at the budget ({budget:,.0f} steps); the rank test at {level} "
+             f"({power.DEFAULT_N_SIMS:,} simulated studies each): each arm of the comparison fitted as a log-normal "
+             f"with its DNFs right-censored at the budget ({budget:,.0f} steps), each with its own spread; the rank "
+             f"test (normal approximation) at {level} "
              "and the 95% interval above 1. Effects are ratios of restricted mean steps (a DNF at the budget), the "
              "tables' unit, with the median ratio each corresponds to:"]
     main = per_seed[per_seed["variant"] == ""] if per_seed is not None and len(per_seed) else None
@@ -313,16 +315,21 @@ def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None) -> list[
                              f"finishes to fit a spread: no speedup power stated{fisher}.")
                 continue
             mu, sd = fit
+            own = rows[rows["arm"] == a].drop_duplicates("run_id")
+            arm_fit = power.fit_censored_lognormal(own[key].to_numpy(dtype=float), own["budget"].to_numpy(dtype=float))
+            sd_a = arm_fit[1] if arm_fit is not None else sd
+            spread = (f"{a}'s {sd_a:.2f}" if arm_fit is not None else
+                      f"{a}'s taken as {b}'s ({a} has too few finishes to fit)")
             fitted = power.lognormal_reliability(mu, sd, budget)
-            mde = power.detectable_speedup(cfg.seed, n, sd, fitted, budget, cfg.alpha, family)
+            mde = power.detectable_speedup(cfg.seed, n, sd, fitted, budget, cfg.alpha, family, sd_log_arm=sd_a)
             if math.isfinite(mde):
-                rm_ratio = power.restricted_ratio(mu, sd, budget, mde)
+                rm_ratio = power.restricted_ratio(mu, sd, budget, mde, sd_a)
                 effect = f"a restricted-mean ratio of {rm_ratio:.2f}x or more (a median ratio of {mde:.2f}x)"
             else:
                 effect = "no speedup up to a median ratio of 4x (the budget censors too many seeds)"
             lines.append(f"- {a} vs {b}{where}: {b}'s fit: median {math.exp(mu):,.0f} steps, sd of log steps "
-                         f"{sd:.2f}, reliability {100 * fitted:.0f}% (observed {reached}/{len(ref)}); at {n} seeds per "
-                         f"arm it detects {effect}{fisher}.")
+                         f"{sd:.2f} ({spread}), reliability {100 * fitted:.0f}% (observed {reached}/{len(ref)}); at "
+                         f"{n} seeds per arm it detects {effect}{fisher}.")
     return lines
 
 
