@@ -155,7 +155,9 @@ def run_study(
                                          cfg.window, auc_margin(cfg)) for c in ready]
     rows, control_rows = verdicts.adjust_family(rows, control_rows, cfg.adjust, cfg.alpha, cfg.margin)
     result.controls = pd.DataFrame(control_rows)
-    result.power = power_lines(cfg, result.per_seed)
+    # a finished study sizes its power for the family it adjusted (the comparisons made); a partial one for the plan
+    made = None if any(result.missing.values()) else verdicts.family_size(rows, control_rows)
+    result.power = power_lines(cfg, result.per_seed, made)
     reference = next(r for r in cfg.regimes if r.id == cfg.vlm_regime)
     points = [verdicts.vlm_point(v.id, verdicts.paired(data, reference.run, v.run), cfg.top, accuracy[v.id], streams,
                                  cfg.n_boot, cfg.ci) for v in cfg.variants]
@@ -258,13 +260,14 @@ def planned_family(cfg: StudyConfig) -> int:
     return max(1, len(_planned_pairs(cfg)) * len(cfg.regimes) + len(verdicts.controls(cfg.cells)))
 
 
-def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None) -> list[str]:
+def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None, made: int | None = None) -> list[str]:
     """What the study can detect at 80% power, per comparison, simulated on censored data as the
     verdict sees it (``analysis.power``): each comparison's two arms' steps to the top threshold,
     each fitted as a log-normal with its DNFs right-censored at the budget
     (``power.fit_censored_lognormal``; the arm's spread is its own, the reference's when it has too
     few finishes), the rank test at Holm's first step over the study's family
-    (``alpha / m``; ``--adjust none``: ``alpha``) and the 95% interval above 1; each detectable
+    (``alpha / m``, ``m`` the comparisons ``made`` when the study is finished, else the planned
+    family; ``--adjust none``: ``alpha``) and the 95% interval above 1; each detectable
     effect stated as a ratio of restricted mean steps (a DNF at the budget), the tables' unit, with
     the median ratio it corresponds to. Before any run has finished (a dry run): one line on an
     assumed spread (``DEFAULT_SD_LOG``) and the paper's 60% reliability, said as such."""
@@ -273,12 +276,16 @@ def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None) -> list[
     n = len(cfg.base.seeds)
     comparisons = _planned_pairs(cfg)
     controls = [c.name for c in verdicts.controls(cfg.cells)]
-    family = planned_family(cfg) if cfg.adjust != "none" else 1
+    planned = planned_family(cfg)
+    family = (planned if made is None else max(1, made)) if cfg.adjust != "none" else 1
     budget = float(cfg.base.budget)
     pairs = (f"{len(comparisons)} arm pairs in each of {len(cfg.regimes)} regimes" if len(cfg.regimes) > 1
              else f"{len(comparisons)} arm pairs")
+    which = (f"{pairs} and {len(controls)} controls" if made is None or made == planned else
+             f"the comparisons made, of {planned} planned ({pairs} and {len(controls)} controls): the others have "
+             "no test")
     level = (f"alpha {cfg.alpha:g} / {family} (Holm's first step over the family of {family} comparisons: "
-             f"{pairs} and {len(controls)} controls)" if family > 1 else f"alpha {cfg.alpha:g}")
+             f"{which})" if family > 1 else f"alpha {cfg.alpha:g}")
     lines = [f"Power (80%) per comparison, simulated on censored steps to {cfg.top:g} "
              f"({power.DEFAULT_N_SIMS:,} simulated studies each): each arm of the comparison fitted as a log-normal "
              f"with its DNFs right-censored at the budget ({budget:,.0f} steps), each with its own spread; the rank "
