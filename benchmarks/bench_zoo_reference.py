@@ -159,7 +159,10 @@ def main() -> None:
     for name in args.tasks.split(","):
         rows.append(bench(name, seeds_for.get(name, args.seeds), args.workers, store, not args.no_train))
         print(f"{name}: {rows[-1].verdict}", flush=True)
-    lines = [f"Zoo references, measured {dt.date.today().isoformat()} on {cpu_line()}.", "",
+    when = (f"judged {dt.date.today().isoformat()} from the FINISHED runs in the store (--no-train: imported "
+            "exports, trained earlier; no run trained now)" if args.no_train else
+            f"measured {dt.date.today().isoformat()} on {cpu_line()}")
+    lines = [f"Zoo references, {when}.", "",
              f"Reference: {SOURCE}. Ours: the baseline arm under each task's `zoo` preset at its budget, detached "
              f"evaluation mean return per seed, every seed of that configuration. Verdict: {RULE}. The zoo's std is "
              "over one agent's episodes, ours over seeds.", "", *table(rows)]
