@@ -11,12 +11,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from vlmrl_cli.study.cross_task import TASK_SCALED_STUDIES as STUDIES
 from vlmrl_cli.study.cross_task import family_from_files, to_markdown
-
-#: Each task's study whose main regime enters the family (the task-scaled set of results/compare/task-scaled/).
-STUDIES = {"mountain-car": "results/study", "acrobot": "results/tasks/acrobot/study-scaled",
-           "minigrid-doorkey": "results/tasks/minigrid-doorkey/study-scaled",
-           "mountain-car-continuous": "results/tasks/mountain-car-continuous/study-scaled"}
 
 
 def main() -> None:

@@ -41,3 +41,18 @@ def test_a_comparison_not_made_stays_out_of_the_family() -> None:
     maps = {"a": _map(0.01, math.nan), "b": _map(0.01, 0.01)}
     df = primary_family(maps)
     assert np.isnan(df["p_family"].iloc[1]) and df["p_family"].iloc[0] == pytest.approx(0.03)
+
+
+def test_the_committed_primary_family_is_what_the_committed_studies_give() -> None:
+    # results/compare/primary_family.csv is drawn by scripts/cross_task_family.py from the four
+    # committed regime maps; redrawing a study without redrawing the family fails here
+    from pathlib import Path
+
+    from vlmrl_cli.study.cross_task import TASK_SCALED_STUDIES, family_from_files
+
+    root = Path(__file__).resolve().parents[2]
+    drawn = family_from_files({t: root / d for t, d in TASK_SCALED_STUDIES.items()})
+    committed = pd.read_csv(root / "results/compare/primary_family.csv")
+    assert committed["task"].tolist() == drawn["task"].tolist()
+    assert committed["p_family"].to_numpy() == pytest.approx(drawn["p_family"].to_numpy(), rel=1e-9)
+    assert committed["verdict"].tolist() == drawn["verdict"].tolist()

@@ -27,6 +27,12 @@ from vlmrl_cli.shaping.arms import BASELINE, DENSE, METHOD
 PRIMARY: tuple[str, ...] = (f"{METHOD}_vs_{BASELINE}", f"{METHOD}_vs_{DENSE}")
 FAMILY_WHAT = ("The primary comparisons (each task's hybrid vs baseline and hybrid vs kinematic, steps to the "
                "study's top threshold)")
+#: Each task's study whose main regime enters the committed family (the task-scaled set of
+#: ``results/compare/task-scaled/``): paths relative to the repository root.
+TASK_SCALED_STUDIES: dict[str, str] = {
+    "mountain-car": "results/study", "acrobot": "results/tasks/acrobot/study-scaled",
+    "minigrid-doorkey": "results/tasks/minigrid-doorkey/study-scaled",
+    "mountain-car-continuous": "results/tasks/mountain-car-continuous/study-scaled"}
 COLUMNS = ("task", "comparison", "speedup", "low", "high", "p", "test", "p_within_study", "p_family",
            "verdict_within_study", "verdict")
 
