@@ -21,6 +21,9 @@ NAMES=("$@")
 [[ ${#NAMES[@]} -gt 0 ]] || NAMES=(report extended-all extended-sb3 study acrobot acrobot-scaled mcc mcc-scaled
                                     doorkey-scaled)
 NO_GRID=(--alphas none --kin-scales none --query-flickers none)
+# the studies at MountainCar's scales on other tasks were trained before Task.scales: their shaped arms'
+# config hashes are those of alpha 5 and kin_scale 2, stated here so that every hash stays the runs'
+MC_SCALES=(--set shaping.alpha=5 --set shaping.kin_scale=2)
 SCALED_GRID=(--arms baseline,hybrid,hybrid-shuffled,kinematic,semantic,hybrid-dense-pbrs --query-flickers none
              --profiles none --flickers none)
 for name in "${NAMES[@]}"; do
@@ -35,14 +38,15 @@ for name in "${NAMES[@]}"; do
     study) load vlmrl-study results/study/runs/pinned.jsonl.gz
       vlmrl study --no-train --out results/study --experiment vlmrl-study --tracking-uri "$(uri vlmrl-study)" ;;
     acrobot) load tasks-acrobot-study results/tasks/acrobot/runs-study.jsonl.gz
-      vlmrl study --task acrobot --regime zoo-100k-lr1e-4 --seeds 10 "${NO_GRID[@]}" --no-train \
+      vlmrl study --task acrobot --regime zoo-100k-lr1e-4 --seeds 10 "${NO_GRID[@]}" "${MC_SCALES[@]}" --no-train \
         --experiment tasks-acrobot-study --tracking-uri "$(uri tasks-acrobot-study)" --out results/tasks/acrobot/study ;;
     acrobot-scaled) load tasks-acrobot-scaled results/tasks/acrobot/runs-study-scaled.jsonl.gz
       vlmrl study --task acrobot --regime zoo-100k-lr1e-4 --seeds 10 "${SCALED_GRID[@]}" --alphas 107,214 \
         --kin-scales 0,0.152,0.304 --no-train --experiment tasks-acrobot-scaled \
         --tracking-uri "$(uri tasks-acrobot-scaled)" --out results/tasks/acrobot/study-scaled ;;
     mcc) load tasks-mcc-study results/tasks/mountain-car-continuous/runs-study.jsonl.gz
-      vlmrl study --task mountain-car-continuous --regime sb3-default-100k --seeds 10 "${NO_GRID[@]}" --no-train \
+      vlmrl study --task mountain-car-continuous --regime sb3-default-100k --seeds 10 "${NO_GRID[@]}" "${MC_SCALES[@]}" \
+        --no-train \
         --experiment tasks-mcc-study --tracking-uri "$(uri tasks-mcc-study)" \
         --out results/tasks/mountain-car-continuous/study ;;
     mcc-scaled) load tasks-mcc-scaled results/tasks/mountain-car-continuous/runs-study-scaled.jsonl.gz
