@@ -8,11 +8,11 @@ score is its detached evaluation's mean return (``eval/mean_return``, the preset
 t interval, each seed's score, and rl-baselines3-zoo's ``benchmark.md`` figure (mean +/- std of
 one trained agent's episode returns, ``tasks.zoo``).
 
-Verdict per row: ``met`` when the zoo's interval (mean +/- std) overlaps ours; ``cannot tell``
-when it overlaps but our interval is more than ``WIDE`` times as wide as the zoo's (seeds that
-disagree: an overlap then says nothing), with how many seeds score inside the zoo's interval;
-else ``not met`` with the gap. The zoo's std is over one trained agent's episodes, ours over
-seeds. A row that is not met is not explained away here: the docs' results page says why.
+Verdict per row, the equivalence rule of ``analysis.reference`` (issue 51): ``met`` when the seed
+mean is equivalent to the zoo's score within 10% of the task's span from its random policy's score
+(``Task.random_score``) to the zoo's, by two one-sided t tests on at least 10 seeds; ``not met``
+when the 90% t interval lies wholly outside that band; else ``cannot tell``. A row that is not met
+is not explained away here: the docs' results page says why.
 
 Runs trained elsewhere count when their export is imported first (``vlmrl import FILE --experiment
 zoo-reference-TASK --tracking-uri sqlite:///STORE/zoo-reference.db``): only runs of the zoo preset's
@@ -20,6 +20,7 @@ config hash are read.
 
 Usage: python benchmarks/bench_zoo_reference.py [--seeds 3] [--seeds-for TASK=N ...] [--workers 1] [--store DIR]
        [--tasks a,b] [--markdown FILE]   (also writes the table as markdown, with the date and the CPU)
+       [--no-train]   (judge the FINISHED runs already in the store, e.g. imported exports; train nothing)
 """
 
 from __future__ import annotations
@@ -35,10 +36,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-from scipy import stats as sps
-
-from vlmrl_cli.analysis.stats import wilson_ci
+from vlmrl_cli.analysis.reference import RULE, ReferenceVerdict, reference_equivalence
 from vlmrl_cli.core.numeric_pin import cpu_model
 from vlmrl_cli.core.provenance import cpu_paths
 from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
@@ -47,9 +45,6 @@ from vlmrl_cli.tasks.registry import get_task, task_names
 from vlmrl_cli.tasks.zoo import SOURCE, ZOO_PPO
 from vlmrl_cli.tracking import schema
 from vlmrl_cli.training.config import RunConfig
-
-#: How much wider than the zoo's mean +/- std our interval may be for an overlap to count as met.
-WIDE = 4.0
 
 
 @dataclass(frozen=True)
@@ -61,34 +56,16 @@ class Row:
     zoo_mean: float
     zoo_std: float
     zoo_budget: str
+    random_score: float
 
     @property
-    def mean(self) -> float:
-        return float(np.mean(self.scores))
-
-    @property
-    def interval(self) -> tuple[float, float]:
-        """95% t interval of the mean over seeds (a point when every seed scores the same)."""
-        x = np.asarray(self.scores)
-        if x.size < 2 or float(np.std(x)) == 0.0:
-            return self.mean, self.mean
-        half = float(sps.t.ppf(0.975, x.size - 1) * np.std(x, ddof=1) / math.sqrt(x.size))
-        return self.mean - half, self.mean + half
+    def judged(self) -> ReferenceVerdict:
+        return reference_equivalence(self.scores, self.zoo_mean, self.random_score)
 
     @property
     def verdict(self) -> str:
-        lo, hi = self.interval
-        z_lo, z_hi = self.zoo_mean - self.zoo_std, self.zoo_mean + self.zoo_std
-        if lo <= z_hi and z_lo <= hi:
-            if hi - lo <= WIDE * (z_hi - z_lo):
-                return "met"
-            inside = sum(z_lo <= x <= z_hi for x in self.scores)
-            share = wilson_ci(inside, len(self.scores))
-            return (f"cannot tell (our interval is {(hi - lo) / (z_hi - z_lo):.0f}x as wide as the zoo's; "
-                    f"{inside}/{len(self.scores)} seeds inside the zoo's interval, "
-                    f"{share.value:.0%} [{share.low:.0%}, {share.high:.0%}] Wilson)")
-        gap = z_lo - hi if hi < z_lo else lo - z_hi
-        return f"not met ({'below' if hi < z_lo else 'above'} the zoo's interval by {gap:.3g})"
+        v = self.judged
+        return v.verdict + (f" ({v.note})" if v.note else "")
 
 
 def scores_of(uri: str, experiment: str, config_hash: str) -> dict[int, float]:
@@ -108,19 +85,25 @@ def scores_of(uri: str, experiment: str, config_hash: str) -> dict[int, float]:
     return out
 
 
-def bench(task_name: str, seeds: int, workers: int, store: Path) -> Row:
+def bench(task_name: str, seeds: int, workers: int, store: Path, train: bool = True) -> Row:
     task = get_task(task_name)
     uri, experiment = f"sqlite:///{store / 'zoo-reference.db'}", f"zoo-reference-{task_name}"
     cfg = RunConfig.from_sources(None, {"task": task_name, "preset": "zoo", "arms": ["baseline"],
                                         "seeds": list(range(seeds)), "workers": workers, "tracking_uri": uri,
                                         "experiment": experiment})
-    summary = run_sweep(cfg, SilentReporter(), train_job)
-    if summary.failed:
-        raise SystemExit(f"{task_name}: failed jobs: {[(r.job, r.error) for r in summary.failed][:3]}")
+    if train:
+        summary = run_sweep(cfg, SilentReporter(), train_job)
+        if summary.failed:
+            raise SystemExit(f"{task_name}: failed jobs: {[(r.job, r.error) for r in summary.failed][:3]}")
     found = scores_of(uri, experiment, cfg.jobs()[0].config_hash)
+    missing = [s for s in range(seeds) if s not in found]
+    if missing:
+        raise SystemExit(f"{task_name}: no FINISHED run of seeds {missing} in the store (--no-train trains nothing)")
     zoo = ZOO_PPO[task.env_id]
+    if task.random_score is None:
+        raise SystemExit(f"{task_name}: no measured random-policy score (Task.random_score)")
     return Row(task_name, task.env_id, cfg.budget, tuple(found[s] for s in range(seeds)), zoo.mean, zoo.std,
-               zoo.budget)
+               zoo.budget, task.random_score.mean)
 
 
 def cpu_line() -> str:
@@ -131,13 +114,15 @@ def cpu_line() -> str:
 
 
 def table(rows: list[Row]) -> list[str]:
-    head = ["task", "env", "budget", "seeds", "ours: mean [95% t]", "each seed", "zoo: mean +/- std (budget)",
-            "verdict"]
+    head = ["task", "env", "budget", "seeds", "ours: mean [90% t]", "each seed", "zoo: mean +/- std (budget)",
+            "random policy", "band (zoo +- 10% of the span)", "TOST p", "verdict"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
-        lo, hi = r.interval
-        lines.append(f"| {r.task} | {r.env_id} | {r.budget:,} | {len(r.scores)} | {r.mean:.3f} [{lo:.3f}, {hi:.3f}] | "
+        v = r.judged
+        p = f"{v.p_tost:.2g}" if math.isfinite(v.p_tost) else "—"
+        lines.append(f"| {r.task} | {r.env_id} | {r.budget:,} | {v.n} | {v.mean:.3f} [{v.low:.3f}, {v.high:.3f}] | "
                      f"{', '.join(f'{s:.3f}' for s in r.scores)} | {r.zoo_mean:g} +/- {r.zoo_std:g} ({r.zoo_budget}) | "
+                     f"{r.random_score:g} | [{r.zoo_mean - v.delta:.3f}, {r.zoo_mean + v.delta:.3f}] | {p} | "
                      f"{r.verdict} |")
     return lines
 
@@ -165,19 +150,22 @@ def main() -> None:
                         "(default: a temporary one)")
     parser.add_argument("--tasks", default=",".join(task_names()), help="comma-separated built-in tasks")
     parser.add_argument("--markdown", type=Path, default=None, help="also write the table to this markdown file")
+    parser.add_argument("--no-train", action="store_true", help="judge the FINISHED runs in the store; train nothing")
     args = parser.parse_args()
     store = args.store or Path(tempfile.mkdtemp(prefix="vlmrl-zoo-"))
     store.mkdir(parents=True, exist_ok=True)
     seeds_for = seed_counts(args.seeds_for, args.tasks.split(","))
     rows = []
     for name in args.tasks.split(","):
-        rows.append(bench(name, seeds_for.get(name, args.seeds), args.workers, store))
+        rows.append(bench(name, seeds_for.get(name, args.seeds), args.workers, store, not args.no_train))
         print(f"{name}: {rows[-1].verdict}", flush=True)
-    lines = [f"Zoo references, measured {dt.date.today().isoformat()} on {cpu_line()}.", "",
+    when = (f"judged {dt.date.today().isoformat()} from the FINISHED runs in the store (--no-train: imported "
+            "exports, trained earlier; no run trained now)" if args.no_train else
+            f"measured {dt.date.today().isoformat()} on {cpu_line()}")
+    lines = [f"Zoo references, {when}.", "",
              f"Reference: {SOURCE}. Ours: the baseline arm under each task's `zoo` preset at its budget, detached "
-             "evaluation mean return per seed. Verdict: met when the zoo's mean +/- std overlaps our 95% t "
-             f"interval over seeds and ours is at most {WIDE:g}x as wide; cannot tell when it overlaps a wider "
-             "one; else not met. The zoo's std is over one agent's episodes, ours over seeds.", "", *table(rows)]
+             f"evaluation mean return per seed, every seed of that configuration. Verdict: {RULE}. The zoo's std is "
+             "over one agent's episodes, ours over seeds.", "", *table(rows)]
     print("\n".join(lines))
     if args.markdown is not None:
         args.markdown.write_text("\n".join(lines) + "\n", encoding="utf-8")

@@ -58,3 +58,15 @@ def test_the_simulated_power_matches_the_verdict_run_on_each_simulated_study(spe
     fast = power.censored_power(np.random.default_rng(3), speedup, 10, 0.35, reliability, BUDGET, n_sims=2_000)
     brute = _brute_force(speedup, 10, 0.35, reliability, sims=300)
     assert abs(fast - brute) < 0.09, (fast, brute)  # about 2.5 Monte Carlo standard errors of the loop
+
+
+def test_the_arms_own_wider_spread_makes_a_larger_speedup_needed() -> None:
+    # issue 51 item 5: Acrobot's hybrid spreads 0.14 in log steps against the baseline's 0.06; power
+    # sized on the baseline's spread alone promised a smaller detectable ratio than the data allow
+    from vlmrl_cli.analysis.power import detectable_speedup, restricted_ratio
+
+    same = detectable_speedup(0, 10, 0.06, 0.99, 100_000, family=15, n_sims=400)
+    both = detectable_speedup(0, 10, 0.06, 0.99, 100_000, family=15, n_sims=400, sd_log_arm=0.14)
+    assert 1.0 < same < both
+    mu = 10.6
+    assert restricted_ratio(mu, 0.06, 1e9, 1.2, 0.14) < restricted_ratio(mu, 0.06, 1e9, 1.2)

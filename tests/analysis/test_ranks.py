@@ -8,7 +8,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vlmrl_cli.analysis.ranks import censored_rank_test, performance_profile, probability_of_improvement
+from vlmrl_cli.analysis.ranks import (
+    censored_rank_test,
+    exact_rank_sum_p,
+    performance_profile,
+    probability_of_improvement,
+)
 
 
 def _rng() -> np.random.Generator:
@@ -73,3 +78,62 @@ def test_performance_profile_falls_from_one_to_zero(values: list[float]) -> None
     taus = np.linspace(-201, -79, 30)
     p = performance_profile(values, taus)
     assert p[0] == 1.0 and p[-1] == 0.0 and np.all(np.diff(p) <= 0)
+
+
+def test_a_crossing_after_the_budget_is_a_dnf_in_the_rank_test() -> None:
+    # issue 51: three seeds crossed after the 100,000-step budget (reached = False). They are DNFs,
+    # tied with the other DNF, not finishes ranked below it.
+    budget = 100_000.0
+    over = [100_240.0, 100_416.0, 101_200.0, np.nan]
+    same_as_dnf = [np.nan] * 4
+    finished = [50_000.0, 60_000.0, 70_000.0, 80_000.0]
+    t_over = censored_rank_test(finished, over, _rng(), budget_a=budget, budget_b=budget)
+    t_nan = censored_rank_test(finished, same_as_dnf, _rng(), budget_a=budget, budget_b=budget)
+    assert t_over.n_dnf_b == 4
+    assert (t_over.u, t_over.p_value) == (t_nan.u, t_nan.p_value)
+    # among the DNFs of b, the over-budget crossings and the NaN are tied: U of b vs a DNF-only arm is 8
+    t_b = censored_rank_test(over, [np.nan, np.nan], _rng(), budget_a=budget, budget_b=budget)
+    assert t_b.u == 4.0 and t_b.p_faster == 0.5
+
+
+def _scipy_exact(x: np.ndarray, y: np.ndarray) -> float:
+    from scipy import stats as sps
+
+    def rank_sum(u: np.ndarray, v: np.ndarray, axis: int = -1) -> np.ndarray:
+        pooled = np.concatenate([u, v], axis=axis)
+        return np.sum(sps.rankdata(pooled, axis=axis)[..., : u.shape[axis]], axis=axis)
+
+    return float(sps.permutation_test((x, y), rank_sum, permutation_type="independent", n_resamples=np.inf,
+                                      vectorized=True, alternative="two-sided").pvalue)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.sampled_from([1.0, 2.0, 3.0, 5.0, 8.0, np.inf]), min_size=2, max_size=6),
+       st.lists(st.sampled_from([1.0, 2.0, 3.0, 5.0, 8.0, np.inf]), min_size=2, max_size=6))
+def test_the_exact_p_is_scipys_full_enumeration(x: list[float], y: list[float]) -> None:
+    # ties (DNFs at +inf among them) included: the counted distribution is scipy's enumerated one
+    a, b = np.array(x), np.array(y)
+    assert exact_rank_sum_p(a, b) == pytest.approx(_scipy_exact(a, b), abs=1e-12)
+
+
+def test_the_exact_p_is_scipys_exact_mann_whitney_without_ties() -> None:
+    from scipy import stats as sps
+
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        a, b = rng.normal(size=7), rng.normal(0.8, size=9)
+        assert exact_rank_sum_p(a, b) == pytest.approx(sps.mannwhitneyu(a, b, method="exact").pvalue, rel=1e-9)
+
+
+def test_ten_vs_ten_is_exact_where_the_normal_approximation_is_not() -> None:
+    # issue 51: complete separation at 10 vs 10 is 2 / C(20, 10) = 1.1e-5, not the normal 0.00018;
+    # heavy DNF ties: 1 finish and 9 DNF against 10 DNF is 1.0 exactly
+    sep = censored_rank_test(list(range(1, 11)), [np.nan] * 10, _rng())
+    assert sep.method == "exact" and sep.p_value == pytest.approx(2 / math.comb(20, 10))
+    ties = censored_rank_test([5.0] + [np.nan] * 9, [np.nan] * 10, _rng())
+    assert ties.method == "exact" and ties.p_value == 1.0
+
+
+def test_beyond_the_counted_splits_the_test_says_it_is_approximate() -> None:
+    t = censored_rank_test(list(range(1, 11)), [np.nan] * 10, _rng(), n_perm=1000)
+    assert t.method == "asymptotic" and t.p_value > 2 / math.comb(20, 10)

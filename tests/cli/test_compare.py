@@ -57,9 +57,10 @@ def _compare(*args: str):
 
 def test_compare_writes_every_output_with_hand_computed_scores(tmp_path: Path) -> None:
     out = tmp_path / "cmp"
-    res = _compare(*_files(tmp_path), "--out", str(out))
+    res = _compare(*_files(tmp_path), "--out", str(out), "--normalise", "baseline-best")
     assert res.exit_code == 0, res.output
     assert "left out: kinematic (missing on acrobot)" in res.output and "SIMULATED VLM" in res.output
+    assert "ANCHORS ESTIMATED FROM THE DATA" in res.output
     per_task = pd.read_csv(out / "per_task.csv")
     # baseline-best: mountain-car 0 at the baseline mean -140, 1 at hybrid's -110; acrobot -90 and -80
     hybrid = per_task[per_task["arm"] == "hybrid"].sort_values(["task", "seed"])
@@ -77,17 +78,49 @@ def test_compare_writes_every_output_with_hand_computed_scores(tmp_path: Path) -
     assert (table["vlm"].str.contains("SIMULATED VLM")).all() and (table["normalisation"] == "baseline-best").all()
     md = (out / "aggregate.md").read_text(encoding="utf-8")
     assert "SIMULATED VLM" in md and "baseline-best" in md and "kinematic (missing on acrobot)" in md
+    assert md.index("ANCHORS ESTIMATED FROM THE DATA") < md.index("## Aggregates")
     assert (out / "performance_profile.png").stat().st_size > 0
 
 
-def test_zoo_normalisation_takes_the_published_ppo_score_as_the_top(tmp_path: Path) -> None:
-    out = tmp_path / "zoo"
-    res = _compare(*_files(tmp_path), "--out", str(out), "--normalise", "zoo")
+def test_the_default_normalisation_runs_from_the_random_policy_to_the_zoo(tmp_path: Path) -> None:
+    out = tmp_path / "fixed"
+    res = _compare(*_files(tmp_path), "--out", str(out))
     assert res.exit_code == 0, res.output
-    per_task = pd.read_csv(out / "per_task.csv").drop_duplicates("task").set_index("task")
-    assert per_task.loc["mountain-car", ["lo", "hi"]].tolist() == [-140.0, -110.423]
-    assert per_task.loc["acrobot", ["lo", "hi"]].tolist() == [-90.0, -73.506]
-    assert "rl-baselines3-zoo" in (out / "aggregate.md").read_text(encoding="utf-8")
+    per_task = pd.read_csv(out / "per_task.csv")
+    pairs = per_task.drop_duplicates("task").set_index("task")
+    assert pairs.loc["mountain-car", ["lo", "hi"]].tolist() == [-200.0, -110.423]
+    assert pairs.loc["acrobot", ["lo", "hi"]].tolist() == [-497.37, -73.506]
+    row = per_task[(per_task["task"] == "mountain-car") & (per_task["arm"] == "baseline") & (per_task["seed"] == 0)]
+    assert row["normalised"].item() == pytest.approx((-150.0 + 200.0) / (-110.423 + 200.0))
+    md = (out / "aggregate.md").read_text(encoding="utf-8")
+    assert "rl-baselines3-zoo" in md and "random policy (200 episodes from seed 0" in md
+    assert "ANCHORS ESTIMATED" not in md and "ANCHORS ESTIMATED" not in res.output
+    assert "0 = -497.4 (random policy" in res.output and "1 = -73.51 (zoo PPO Acrobot-v1" in res.output
+
+
+def test_adding_or_removing_an_arm_leaves_every_other_arms_scores_unchanged(tmp_path: Path) -> None:
+    # issue 51: fixed anchors, so no arm's normalised score depends on which other arms are compared
+    more = {t: {**arms, "semantic": [max(arms["baseline"]) + 40.0, max(arms["baseline"]) + 50.0]}
+            for t, arms in SCORES.items()}
+    fewer = {t: {a: v for a, v in arms.items() if a != "kinematic"} for t, arms in SCORES.items()}
+    outs = {}
+    for name, scores in (("same", SCORES), ("more", more), ("fewer", fewer)):
+        (tmp_path / name).mkdir()
+        out = tmp_path / name / "cmp"
+        assert _compare(*_files(tmp_path / name, scores), "--out", str(out)).exit_code == 0
+        outs[name] = pd.read_csv(out / "per_task.csv").set_index(["task", "arm", "seed"])["normalised"]
+    for name in ("more", "fewer"):
+        shared = outs["same"].index.intersection(outs[name].index)
+        assert len(shared) == len(outs["same"])
+        pd.testing.assert_series_equal(outs[name].loc[shared], outs["same"].loc[shared])
+    # the estimated anchors do move: the new best arm on each task rescales the others
+    for name, scores in (("same", SCORES), ("more", more)):
+        out = tmp_path / name / "est"
+        assert _compare(*_files(tmp_path / name, scores), "--out", str(out), "--normalise",
+                        "baseline-best").exit_code == 0
+    same, moved = (pd.read_csv(tmp_path / n / "est" / "per_task.csv").set_index(["task", "arm", "seed"])["normalised"]
+                   for n in ("same", "more"))
+    assert not np.allclose(same.loc[("acrobot", "hybrid")], moved.loc[("acrobot", "hybrid")])
 
 
 def test_a_task_without_a_baseline_is_refused_in_one_line(tmp_path: Path) -> None:

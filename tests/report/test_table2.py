@@ -7,7 +7,15 @@ import pandas as pd
 import pytest
 
 from vlmrl_cli import paper
-from vlmrl_cli.report.table2 import NEEDS_BASELINE, build_table2, format_cell, to_latex, to_long, to_markdown
+from vlmrl_cli.report.table2 import (
+    NEEDS_BASELINE,
+    build_table2,
+    compare_steps,
+    format_cell,
+    to_latex,
+    to_long,
+    to_markdown,
+)
 
 REPORTED = json.loads(paper.REPORTED.read_text())
 THRESHOLDS = (-190.0, -160.0, -130.0)
@@ -64,3 +72,20 @@ def test_markdown_comes_in_narrow_ours_speedup_and_paper_blocks():
     assert "*The paper*" in md and "*Speedup vs baseline" in md
     widest = max(line.count(" | ") + 1 for line in md.splitlines() if line.startswith("| "))
     assert widest <= 5  # the old single table had 11 columns
+
+
+def test_the_rank_test_of_a_comparison_censors_a_crossing_after_the_budget() -> None:
+    # issue 51: a seed whose rolling mean crossed after its budget is a DNF in every test, the rank
+    # test included, exactly as if it had never crossed.
+    def frame(b_steps: list[float]) -> pd.DataFrame:
+        a_steps = [90_000.0, 95_000.0, float("nan"), 99_000.0]
+        rows = [{"arm": "kinematic", "seed": i, "budget": 100_000.0, "steps_-100": s} for i, s in enumerate(a_steps)]
+        rows += [{"arm": "baseline", "seed": i, "budget": 100_000.0, "steps_-100": s} for i, s in enumerate(b_steps)]
+        return pd.DataFrame(rows)
+
+    over = compare_steps(frame([100_240.0, 100_416.0, 101_200.0, 97_000.0]), "kinematic", "baseline", -100.0,
+                         np.random.default_rng(0), n_boot=50)[1]
+    never = compare_steps(frame([float("nan")] * 3 + [97_000.0]), "kinematic", "baseline", -100.0,
+                          np.random.default_rng(0), n_boot=50)[1]
+    assert over.n_dnf_b == 3
+    assert (over.u, over.p_value) == (never.u, never.p_value)

@@ -61,3 +61,7 @@ def test_power_is_stated_per_comparison_from_its_own_reference_in_restricted_mea
     assert "too few finishes" in by_pair["hybrid vs kinematic"]
     assert "Fisher's exact test (alpha 0.05, unadjusted) detects 59% or more against its 0%" in by_pair[
         "hybrid vs kinematic"]
+    # issue 51 item 5: each arm's own spread is fitted and named; a finished study's family is the one it adjusted
+    assert "(hybrid's 0." in by_pair["hybrid vs baseline"]
+    made = power_lines(cfg, pd.DataFrame(rows), made=2)
+    assert "alpha 0.05 / 2 " in made[0] and "the comparisons made" in made[0]

@@ -14,11 +14,12 @@ seeds that finished) survives only as a labelled column of Table 2, never as a v
 
 **Verdicts** (``judge_speedup``, the one rule of the report and the study). Arm ``a`` against
 reference ``b``: ``faster`` / ``slower`` when the censored rank test, its p adjusted within its
-family (``multiplicity.py``), rejects at ``alpha`` *and* the ``ci`` (95%) bootstrap interval of the
-speedup excludes 1 on the test's side; otherwise ``equivalent within M x`` when the ``1 - 2 alpha``
-interval lies inside ``[1/M, M]`` (two one-sided tests, TOST, on the ratio of restricted means;
-default margin 1.15x); otherwise ``inconclusive``, or ``inconclusive, leans faster`` (``slower``)
-when the 95% interval excludes 1 or the adjusted test rejects, and all of that points one way.
+family (``multiplicity.py``), rejects at ``alpha`` *and* the ``ci`` (95%) interval of the speedup
+(``log_ratio_interval``: the delta method on the log ratio, each arm's own spread) excludes 1 on
+the test's side; otherwise ``equivalent within M x`` when the ``1 - 2 alpha`` interval lies inside
+``[1/M, M]`` (two one-sided tests, TOST, on the ratio of restricted means; default margin 1.15x);
+otherwise ``inconclusive``, or ``inconclusive, leans faster`` (``slower``) when the 95% interval
+excludes 1 or the adjusted test rejects, and all of that points one way.
 
 All functions are pure; shapes are ``(n_seeds,)`` arrays with NaN for a DNF; randomness comes in
 as an explicit generator.
@@ -41,6 +42,10 @@ from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, bootstrap_ci
 MIN_FINISHED_FOR_EQUIVALENCE = 0.5
 FASTER, SLOWER, INCONCLUSIVE = "faster", "slower", "inconclusive"
 HIGHER, LOWER = "higher", "lower"
+#: How a speedup's interval is computed, for the Method sections.
+RATIO_INTERVAL = ("the delta method on the log of the ratio of restricted means, each arm's own spread, Student's t "
+                  "on min(n_a, n_b) - 1 degrees of freedom (a percentile bootstrap covered about 90% at nominal 95% "
+                  "at 10 seeds per arm; this covers at least 94% in the simulation test)")
 RULE = ("steps to a threshold are censored at the budget: a seed that never reaches it counts at the budget "
         "(restricted mean, i.e. the RMST up to the budget); a seed reached it when its rolling mean crossed it "
         "within the budget")
@@ -99,18 +104,54 @@ def restricted_mean(steps: npt.ArrayLike, budget: npt.ArrayLike, rng: np.random.
     return Estimate(float(r.mean()), low, high, n=int(r.size), note=note)
 
 
-def _ratio(b: np.ndarray, a: np.ndarray, axis: int = -1) -> np.ndarray:
-    return np.asarray(np.mean(b, axis=axis) / np.mean(a, axis=axis))
+def log_ratio_interval(b: npt.ArrayLike, a: npt.ArrayLike, ci: float = 0.95) -> tuple[float, float]:
+    """An interval for ``mean(b) / mean(a)`` (shapes ``(n_b,)``, ``(n_a,)``, positive values):
+    the delta method on the log ratio, ``log(m_b / m_a) +- t se`` with
+    ``se^2 = s_b^2 / (n_b m_b^2) + s_a^2 / (n_a m_a^2)`` and Student's t on ``min(n_a, n_b) - 1``
+    degrees of freedom (Hsu's conservative choice for unequal variances), exponentiated.
+
+    Why not the percentile bootstrap: at 10 seeds per arm it covers about 90% at nominal 95% on
+    log-normal arms (a bootstrap's variance is ``(n - 1)/n`` of the sample's, and its quantiles are
+    normal ones); this interval covers at least 94% there, censored or not (the coverage test in
+    ``tests/analysis/test_censored.py`` simulates both). Each arm's own spread enters ``se``.
+
+    Example:
+        >>> [round(x, 3) for x in log_ratio_interval([110.0, 120.0, 130.0], [100.0, 100.0, 100.0])]
+        [0.976, 1.476]
+    """
+    x_b, x_a = np.asarray(b, dtype=float).reshape(-1), np.asarray(a, dtype=float).reshape(-1)
+    if min(x_a.size, x_b.size) < 2:
+        return math.nan, math.nan
+    low, high = log_ratio_bounds(x_b, x_a, ci)
+    return float(low), float(high)
+
+
+def log_ratio_bounds(b: np.ndarray, a: np.ndarray, ci: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
+    """``log_ratio_interval`` of every row at once: ``b``, ``a`` of shapes ``(..., n_b)``,
+    ``(..., n_a)`` (``n >= 2``); returns the lower and upper bounds, shape ``(...)``.
+
+    Example:
+        >>> low, high = log_ratio_bounds(np.array([[110.0, 120.0, 130.0]]), np.array([[100.0, 100.0, 100.0]]))
+        >>> low.round(3).tolist(), high.round(3).tolist()
+        ([0.976], [1.476])
+    """
+    n_b, n_a = b.shape[-1], a.shape[-1]
+    m_b, m_a = b.mean(axis=-1), a.mean(axis=-1)
+    se = np.sqrt(b.var(axis=-1, ddof=1) / (n_b * m_b**2) + a.var(axis=-1, ddof=1) / (n_a * m_a**2))
+    q = float(sps.t.ppf(0.5 + ci / 2, min(n_a, n_b) - 1))
+    centre = np.log(m_b / m_a)
+    return np.exp(centre - q * se), np.exp(centre + q * se)
 
 
 def speedup(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget: npt.ArrayLike,
-            arm_budget: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT,
+            arm_budget: npt.ArrayLike, rng: np.random.Generator | None = None, n_boot: int = DEFAULT_N_BOOT,
             ci: float = 0.95) -> Estimate:
     """Restricted mean steps of the reference over the arm's (above 1: the arm is faster), with a
-    percentile bootstrap CI resampling each arm's seeds independently.
+    ``ci`` interval on the log ratio (``log_ratio_interval``; ``rng`` and ``n_boot`` are kept for
+    callers' sake, no resample is drawn).
 
     Example:
-        >>> speedup([280.0, float("nan")], [200.0, 200.0], 300, 300, np.random.default_rng(0), 200).value
+        >>> speedup([280.0, float("nan")], [200.0, 200.0], 300, 300).value
         1.45
     """
     b, a = restricted(ref_steps, ref_budget), restricted(arm_steps, arm_budget)
@@ -123,7 +164,7 @@ def speedup(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget: npt.
     n = int(min(a.size, b.size))
     if n < 2:
         return Estimate(value, n=n, note="fewer than 2 seeds: no CI")
-    low, high = bootstrap_ci((b, a), _ratio, rng, n_boot, ci)
+    low, high = log_ratio_interval(b, a, ci)
     return Estimate(value, low, high, n=n)
 
 

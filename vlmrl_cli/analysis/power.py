@@ -7,12 +7,15 @@ ignores that. Here the data are simulated as the analysis sees them:
 
 * the reference arm's steps are log-normal with spread ``sd_log`` and a median placed so that a
   fraction ``reliability`` of seeds reach the threshold by the ``budget`` (``reference_median``);
-* the other arm's steps are the same distribution divided by the ``speedup``;
+* the other arm's steps are log-normal with its own spread ``sd_log_arm`` (default: the
+  reference's) and the reference's median divided by the ``speedup``;
 * a seed past the budget is a DNF (NaN);
 * "faster" needs what the verdict rule needs (``censored.judge_speedup``): the rank test rejects
   at ``alpha / family`` (Holm's first step, so a lower bound on the power inside a family; Holm's
-  later steps are less strict) and, with ``interval=True``, the percentile bootstrap interval of the
-  ratio of restricted means (a DNF at the budget) lies above 1.
+  later steps are less strict) and, with ``interval=True``, the verdict's interval of the ratio of
+  restricted means (a DNF at the budget; ``censored.log_ratio_bounds``) lies above 1. The rank
+  test here is its normal approximation (the verdict's is exact): a simulation of thousands of
+  studies cannot afford the exact count at every step of a bisection.
 
 All functions are pure; randomness comes in as an explicit generator; shapes are stated.
 """
@@ -25,9 +28,11 @@ import warnings
 import numpy as np
 from scipy import stats as sps
 
+from vlmrl_cli.analysis.censored import log_ratio_bounds
+
 #: Simulated studies per power figure (Monte Carlo standard error at 80% power: about 0.013).
 DEFAULT_N_SIMS = 1_000
-#: Bootstrap resamples of each simulated study's interval.
+#: Kept for callers: the interval is no longer a bootstrap (``censored.log_ratio_bounds``).
 DEFAULT_N_BOOT = 200
 
 
@@ -67,26 +72,20 @@ def _rank_p(ref: np.ndarray, arm: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(p), p, 1.0)
 
 
-def _interval_above_one(rng: np.random.Generator, ref: np.ndarray, arm: np.ndarray, budget: float, n_boot: int,
-                        ci: float) -> np.ndarray:
-    """Whether each row's percentile bootstrap interval of mean(ref) / mean(arm), DNF at the budget,
-    lies above 1 (shape ``(n_sims,)``)."""
-    r, a = np.nan_to_num(ref, nan=budget), np.nan_to_num(arm, nan=budget)
-    n_sims, n_ref = r.shape
-    n_arm = a.shape[1]
-    idx_r = rng.integers(0, n_ref, size=(n_sims, n_boot, n_ref))
-    idx_a = rng.integers(0, n_arm, size=(n_sims, n_boot, n_arm))
-    rows = np.arange(n_sims)[:, None, None]
-    ratio = r[rows, idx_r].mean(axis=2) / a[rows, idx_a].mean(axis=2)
-    low = np.quantile(ratio, (1 - ci) / 2, axis=1)
+def _interval_above_one(ref: np.ndarray, arm: np.ndarray, budget: float, ci: float) -> np.ndarray:
+    """Whether each row's interval of mean(ref) / mean(arm), DNF at the budget, lies above 1 (shape
+    ``(n_sims,)``): the verdict's own interval (``censored.log_ratio_bounds``)."""
+    low, _ = log_ratio_bounds(np.nan_to_num(ref, nan=budget), np.nan_to_num(arm, nan=budget), ci)
     return np.asarray(low > 1.0)
 
 
 def censored_power(rng: np.random.Generator, speedup: float, n: int, sd_log: float, reliability: float,
                    budget: float, alpha: float = 0.05, family: int = 1, interval: bool = True,
-                   n_sims: int = DEFAULT_N_SIMS, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95) -> float:
+                   n_sims: int = DEFAULT_N_SIMS, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95,
+                   sd_log_arm: float | None = None) -> float:
     """The probability that a study of ``n`` seeds per arm calls an arm ``speedup`` times faster than
-    the reference "faster" (module docstring), by ``n_sims`` simulated studies.
+    the reference "faster" (module docstring), by ``n_sims`` simulated studies; ``sd_log`` is the
+    reference's spread, ``sd_log_arm`` the arm's (None: the same). ``n_boot`` is unused (kept for callers).
 
     Example:
         >>> rng = np.random.default_rng(0)
@@ -97,17 +96,17 @@ def censored_power(rng: np.random.Generator, speedup: float, n: int, sd_log: flo
     """
     median = reference_median(reliability, sd_log, budget, n)
     ref = simulate_steps(rng, n_sims, n, median, sd_log, budget)
-    arm = simulate_steps(rng, n_sims, n, median / speedup, sd_log, budget)
+    arm = simulate_steps(rng, n_sims, n, median / speedup, sd_log if sd_log_arm is None else sd_log_arm, budget)
     called = _rank_p(ref, arm) < alpha / max(1, family)
     called &= np.nanmean(np.nan_to_num(ref, nan=budget), axis=1) > np.nanmean(np.nan_to_num(arm, nan=budget), axis=1)
     if interval:
-        called &= _interval_above_one(rng, ref, arm, budget, n_boot, ci)
+        called &= _interval_above_one(ref, arm, budget, ci)
     return float(called.mean())
 
 
 def detectable_speedup(seed: int, n: int, sd_log: float, reliability: float, budget: float, alpha: float = 0.05,
                        family: int = 1, power: float = 0.8, n_sims: int = DEFAULT_N_SIMS,
-                       high: float = 4.0) -> float:
+                       high: float = 4.0, sd_log_arm: float | None = None) -> float:
     """The smallest speedup that ``n`` seeds per arm call "faster" with ``power``, by bisection over
     ``[1, high]`` with the same simulated noise at every step (``seed``); ``inf`` when even ``high``
     is not detected (the budget censors too much to tell).
@@ -120,7 +119,7 @@ def detectable_speedup(seed: int, n: int, sd_log: float, reliability: float, bud
     """
     def power_at(s: float) -> float:
         return censored_power(np.random.default_rng(seed), s, n, sd_log, reliability, budget, alpha, family,
-                              n_sims=n_sims)
+                              n_sims=n_sims, sd_log_arm=sd_log_arm)
 
     if power_at(high) < power:
         return math.inf
@@ -204,13 +203,14 @@ def restricted_mean_steps(mu: float, sd: float, budget: float) -> float:
     return below + budget * float(sps.norm.sf(z))
 
 
-def restricted_ratio(mu: float, sd: float, budget: float, speedup: float) -> float:
-    """The ratio of restricted means, reference over arm, when the arm's steps are the reference's
-    divided by ``speedup`` (a median ratio): what the tables would show for that effect; the budget
-    shrinks it towards 1.
+def restricted_ratio(mu: float, sd: float, budget: float, speedup: float, sd_arm: float | None = None) -> float:
+    """The ratio of restricted means, reference over arm, when the arm's median is the reference's
+    divided by ``speedup`` (a median ratio) and its spread is ``sd_arm`` (None: the reference's
+    ``sd``): what the tables would show for that effect; the budget shrinks it towards 1.
 
     Example:
         >>> round(restricted_ratio(math.log(1000.0), 0.2, 1e9, 1.5), 3), restricted_ratio(20.0, 0.2, 100.0, 1.5)
         (1.5, 1.0)
     """
-    return restricted_mean_steps(mu, sd, budget) / restricted_mean_steps(mu - math.log(speedup), sd, budget)
+    arm_sd = sd if sd_arm is None else sd_arm
+    return restricted_mean_steps(mu, sd, budget) / restricted_mean_steps(mu - math.log(speedup), arm_sd, budget)

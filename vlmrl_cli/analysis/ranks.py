@@ -3,7 +3,9 @@ performance profile.
 
 Steps to a threshold are right-censored: a seed that did not finish (DNF) is only known to need
 more than its budget. Dropping it flatters the arm that fails most; the rank test here keeps it,
-as a value tied with every other DNF and above every finished seed.
+as a value tied with every other DNF and above every finished seed. Which seeds finished is
+decided by ``censored.reached``, the one DNF rule of every test: a crossing after the budget is a
+DNF.
 """
 
 from __future__ import annotations
@@ -11,12 +13,12 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 from scipy import stats as sps
 
+from vlmrl_cli.analysis.censored import reached
 from vlmrl_cli.analysis.defaults import DEFAULT_N_PERM
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, bootstrap_ci
 
@@ -37,69 +39,134 @@ class RankTest:
     n_dnf_a: int
     n_dnf_b: int
     note: str = ""
-    method: str = "exact"  # "exact" (every split enumerated) or "asymptotic" (normal, tie-corrected)
+    method: str = "exact"  # "exact" (every split counted) or "asymptotic" (normal, tie-corrected)
 
 
-def censor(steps: npt.ArrayLike) -> np.ndarray:
+def censor(steps: npt.ArrayLike, budget: npt.ArrayLike | None = None) -> np.ndarray:
     """Steps to a threshold (shape ``(n,)``, NaN = DNF) with each DNF as ``+inf``: tied with every
-    other DNF and ranked above every finished seed.
+    other DNF and ranked above every finished seed. A DNF is what ``censored.reached`` says it is
+    (the one rule): NaN, or a crossing after ``budget`` (scalar or per seed; None: no budget known).
 
     Example:
-        >>> censor([100.0, float("nan")])
-        array([100.,  inf])
+        >>> censor([100.0, float("nan"), 1200.0], 1000)
+        array([100.,  inf,  inf])
     """
     x = np.asarray(steps, dtype=float).reshape(-1)
-    return np.where(np.isnan(x), np.inf, x)
+    return np.where(reached(x, np.inf if budget is None else budget), x, np.inf)
+
+
+def _single_budget(budget: npt.ArrayLike | None) -> float | None:
+    """The one budget of an arm's seeds, or None when unknown or not shared."""
+    if budget is None:
+        return None
+    values = set(np.asarray(budget, dtype=float).reshape(-1).tolist())
+    return values.pop() if len(values) == 1 else None
 
 
 def censored_rank_test(
     steps_a: npt.ArrayLike, steps_b: npt.ArrayLike, rng: np.random.Generator, n_perm: int = DEFAULT_N_PERM,
-    budget_a: float | None = None, budget_b: float | None = None,
+    budget_a: npt.ArrayLike | None = None, budget_b: npt.ArrayLike | None = None,
 ) -> RankTest:
     """Mann-Whitney U test on steps to a threshold with DNF seeds censored at the budget.
 
     Args:
         steps_a, steps_b: shapes ``(n_a,)``, ``(n_b,)``, timesteps to the threshold, NaN for DNF.
-        rng: kept for the signature's sake; no p-value is drawn at random any more.
-        n_perm: up to this many splits of the seeds, every split is enumerated and the p-value is
-            exact (with ties); beyond, the normal approximation with tie and continuity correction
-            (``method="asymptotic"``), which has no resolution floor (9,999 random permutations
-            could not give a p below 1/10,000, and printed that floor as if it were exact).
-        budget_a, budget_b: the arms' budgets; when they differ a DNF of the shorter one may not be
+        rng: kept for the signature's sake; no p-value is drawn at random.
+        n_perm: up to this many splits of the seeds, every split is counted and the p-value is
+            exact, conditional on the ties (``exact_rank_sum_p``); beyond, the normal approximation
+            with tie and continuity correction (``method="asymptotic"``).
+        budget_a, budget_b: the arms' budgets (scalar or per seed): a crossing after its budget is
+            a DNF (``censor``). When the arms' budgets differ a DNF of the shorter one may not be
             slower than a finished seed of the longer one, and the note says so.
 
     Returns:
-        ``RankTest`` with the permutation p-value of U (two-sided) and ``p_faster`` for ``a``.
+        ``RankTest`` with the two-sided p-value of U, its ``method``, and ``p_faster`` for ``a``.
 
     Example:
         >>> t = censored_rank_test([1.0, 2.0, 3.0], [np.nan, np.nan, np.nan], np.random.default_rng(0))
         >>> round(t.p_value, 3), t.p_faster
         (0.1, 1.0)
     """
-    a, b = censor(steps_a), censor(steps_b)
+    a, b = censor(steps_a, budget_a), censor(steps_b, budget_b)
     dnf_a, dnf_b = int(np.isinf(a).sum()), int(np.isinf(b).sum())
     if a.size == 0 or b.size == 0:
         return RankTest(float("nan"), float("nan"), float("nan"), int(a.size), int(b.size), dnf_a, dnf_b,
                         "an arm has no seeds")
     notes = []
-    if budget_a is not None and budget_b is not None and budget_a != budget_b:
-        notes.append(f"budgets differ ({budget_a:g} vs {budget_b:g}): a DNF is only known to exceed its own budget")
+    one_a, one_b = _single_budget(budget_a), _single_budget(budget_b)
+    if budget_a is not None and budget_b is not None and (one_a is None or one_b is None or one_a != one_b):
+        shown = f" ({one_a:g} vs {one_b:g})" if one_a is not None and one_b is not None else ""
+        notes.append(f"budgets differ{shown}: a DNF is only known to exceed its own budget")
     note = "; ".join(notes)
     if a.size < 2 or b.size < 2:
         u = float(np.sum((a[:, None] > b[None, :]) + 0.5 * (a[:, None] == b[None, :])))
         return RankTest(u, float("nan"), 1.0 - u / (a.size * b.size), int(a.size), int(b.size), dnf_a, dnf_b,
                         "; ".join([*notes, "fewer than 2 seeds in an arm: no test"]))
-    exact = math.comb(int(a.size + b.size), int(a.size)) <= n_perm
+    # U of a: pairs where a needs more steps, ties (DNF with DNF) counted half
+    u = float(np.sum((a[:, None] > b[None, :]) + 0.5 * (a[:, None] == b[None, :])))
+    p, method = rank_sum_p(a, b, n_perm)
+    return RankTest(u, p, 1.0 - u / (a.size * b.size), int(a.size), int(b.size), dnf_a, dnf_b, note, method)
+
+
+def rank_sum_p(x: npt.ArrayLike, y: npt.ArrayLike, n_perm: int = DEFAULT_N_PERM) -> tuple[float, str]:
+    """The two-sided Wilcoxon-Mann-Whitney p of ``x`` vs ``y`` (shapes ``(n_x,)``, ``(n_y,)``, at
+    least 2 each; ``+inf`` allowed, NaN not) and its method: ``"exact"`` (``exact_rank_sum_p``)
+    when the splits number at most ``n_perm``, else ``"asymptotic"`` (normal, tie-corrected).
+
+    Example:
+        >>> rank_sum_p([1.0, 2.0], [3.0, 4.0])
+        (0.3333333333333333, 'exact')
+    """
+    a, b = np.asarray(x, dtype=float).reshape(-1), np.asarray(y, dtype=float).reshape(-1)
+    if math.comb(int(a.size + b.size), int(a.size)) <= n_perm:
+        return min(1.0, exact_rank_sum_p(a, b)), "exact"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all values tied
-        method: Any = sps.PermutationMethod(n_resamples=n_perm, rng=rng) if exact else "asymptotic"
         # an infinite DNF is a rank above every finish either way; the normal approximation needs finite values
         finite_a, finite_b = (np.where(np.isinf(v), np.finfo(float).max, v) for v in (a, b))
-        res = sps.mannwhitneyu(finite_a, finite_b, alternative="two-sided", method=method)
-    u = float(res.statistic)
-    p = float(res.pvalue) if np.isfinite(res.pvalue) else 1.0
-    return RankTest(u, min(1.0, p), 1.0 - u / (a.size * b.size), int(a.size), int(b.size), dnf_a, dnf_b, note,
-                    "exact" if exact else "asymptotic")
+        res = sps.mannwhitneyu(finite_a, finite_b, alternative="two-sided", method="asymptotic")
+    return (min(1.0, float(res.pvalue)) if np.isfinite(res.pvalue) else 1.0), "asymptotic"
+
+
+def exact_rank_sum_p(x: npt.ArrayLike, y: npt.ArrayLike) -> float:
+    """The exact two-sided permutation p-value of the Wilcoxon-Mann-Whitney test (midranks for
+    ties), conditional on the ties: every split of the pooled values into groups of ``n_x`` and
+    ``n_y`` is counted, ``p = min(1, 2 min(P(R <= r), P(R >= r)))`` for the rank sum ``R`` of ``x``
+    (scipy's ``permutation_test`` convention, against which the tests check it).
+
+    The splits are counted by dynamic programming over the (doubled, hence integer) midranks, so
+    the cost is ``n_x (n_x + n_y)^3`` additions, not ``C(n_x + n_y, n_x)`` splits.
+
+    Args:
+        x, y: shapes ``(n_x,)``, ``(n_y,)``; ``+inf`` allowed (a DNF: tied with the other DNFs, above
+            every finite value); NaN not allowed. ``C(n_x + n_y, n_x)`` must fit int64.
+
+    Example:
+        >>> round(exact_rank_sum_p([1.0, 2, 3, 4, 5, 6, 7, 8, 9, 10], [11.0] * 10), 7)  # 2 / C(20, 10)
+        1.08e-05
+        >>> exact_rank_sum_p([1.0, np.inf], [np.inf, np.inf])
+        1.0
+    """
+    a, b = np.asarray(x, dtype=float).reshape(-1), np.asarray(y, dtype=float).reshape(-1)
+    if np.isnan(a).any() or np.isnan(b).any():
+        raise ValueError("censor the steps first: NaN has no rank")
+    n_a, n = int(a.size), int(a.size + b.size)
+    if n_a == 0 or n_a == n:
+        return float("nan")
+    ranks2 = np.rint(2 * sps.rankdata(np.concatenate([a, b]))).astype(np.int64)  # midranks are halves
+    top = int(ranks2.sum())
+    # counts[k, s]: subsets of size k of the values seen so far whose doubled ranks sum to s
+    counts = np.zeros((n_a + 1, top + 1), dtype=np.int64)
+    counts[0, 0] = 1
+    for r in ranks2.tolist():
+        shifted = np.zeros_like(counts)
+        shifted[1:, r:] = counts[:-1, : top + 1 - r]
+        counts += shifted
+    dist = counts[n_a]
+    total = float(dist.sum())
+    observed = int(ranks2[:n_a].sum())
+    lower, upper = float(dist[: observed + 1].sum()) / total, float(dist[observed:].sum()) / total
+    return float(min(1.0, 2 * min(lower, upper)))
 
 
 def _p_greater(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:

@@ -10,7 +10,7 @@ import typer
 
 from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import UserTasks, choices
-from vlmrl_cli.report.config import NORMALISATIONS
+from vlmrl_cli.report.config import DEFAULT_NORMALISATION, NORMALISATIONS
 
 NORMALISE_CHOICES = tuple(NORMALISATIONS)
 
@@ -21,8 +21,9 @@ Out = Annotated[Path | None, typer.Option(
                   "that no committed result is overwritten unless named here).", show_default=False)]
 Normalise = Annotated[str, typer.Option(
     "--normalise", metavar=choices(NORMALISE_CHOICES),
-    help="Per-task min-max normalisation of the scores: baseline-best (0 = the baseline arm's mean, 1 = the best "
-         "arm's mean) or zoo (0 = the baseline arm's mean, 1 = rl-baselines3-zoo's published PPO score).")]
+    help="Per-task min-max normalisation of the scores: random-zoo (fixed references: 0 = a random policy's "
+         "measured score, 1 = rl-baselines3-zoo's published PPO score) or baseline-best (anchors estimated from "
+         "the data: 0 = the baseline arm's mean, 1 = the best arm's mean; its outputs say so).")]
 ConfigHashes = Annotated[list[str] | None, typer.Option(
     "--config-hash", help="The configuration of a task's arm to compare, a hash or its prefix, repeatable "
                           "(default per task and arm: the one with the most runs).")]
@@ -33,7 +34,7 @@ Seed = Annotated[int, typer.Option("--seed", help="Seed of the bootstrap.")]
 def compare(
     files: Files,
     out: Out = None,
-    normalise: Normalise = "baseline-best",
+    normalise: Normalise = DEFAULT_NORMALISATION,
     config_hash: ConfigHashes = None,
     n_boot: Boot = 2000,
     seed: Seed = 0,
@@ -62,6 +63,10 @@ def compare(
         result = run_compare(cfg, lookup)
         typer.echo(f"{len(result.arms)} arm(s) on {len(result.tasks)} task(s) ({', '.join(result.tasks)}); "
                    f"normalisation {normalise}" + ("; SIMULATED VLM" if result.simulated else ""))
+        if result.estimated:
+            typer.echo("ANCHORS ESTIMATED FROM THE DATA: 0 and 1 are arms' own means; read random-zoo for verdicts")
+        for task, r in result.pairs.iterrows():
+            typer.echo(f"  {task:<24} 0 = {r.lo:.4g} ({r.lo_from}); 1 = {r.hi:.4g} ({r.hi_from})")
         for r in result.table.itertuples(index=False):
             poi = "" if r.arm == "baseline" else (f"; P(> baseline) {r.poi_over_baseline:.2f} "
                                                    f"[{r.poi_over_baseline_low:.2f}, {r.poi_over_baseline_high:.2f}]")

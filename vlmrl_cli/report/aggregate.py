@@ -3,10 +3,13 @@
 The score of a run is its detached evaluation's mean return (``eval/mean_return``). Scores are
 min-max normalised per task, ``(score - lo) / (hi - lo)``, with a stated pair (``NORMALISATIONS``):
 
-- ``baseline-best`` (default): ``lo`` = the baseline arm's mean score on the task, ``hi`` = the
-  best compared arm's mean score there: 0 is plain PPO, 1 the best arm of this comparison.
-- ``zoo``: ``lo`` = the baseline arm's mean score, ``hi`` = rl-baselines3-zoo's published PPO
-  score of the env (``tasks.zoo``): 1 is the zoo's tuned PPO.
+- ``random-zoo`` (default): fixed references, as rliable's: ``lo`` = a uniformly random policy's
+  measured score (``Task.random_score``, with the command that measured it), ``hi`` =
+  rl-baselines3-zoo's published PPO score of the env (``tasks.zoo``). No arm's runs move them, so
+  adding or removing an arm leaves every other arm's normalised scores as they were.
+- ``baseline-best``: ``lo`` = the baseline arm's mean score on the task, ``hi`` = the best compared
+  arm's mean score there. Its anchors are estimates from the data being compared (a task whose
+  arms differ little is magnified without bound), and every output says so above its tables.
 
 Which runs: the FINISHED training runs of the files, each counted once: by its source run id, and
 by its (task, arm, seed, config hash), since a study's and a calibration's export of one task can
@@ -37,11 +40,11 @@ from vlmrl_cli.analysis.load import numeric_path
 from vlmrl_cli.analysis.stats import Estimate, Streams
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.tables import markdown_rows
-from vlmrl_cli.report.config import NORMALISATIONS, CompareConfig, check_compare
+from vlmrl_cli.report.config import ESTIMATED, ESTIMATED_BANNER, NORMALISATIONS, CompareConfig, check_compare
 from vlmrl_cli.report.figures import plot_normalised_profile
 from vlmrl_cli.report.table2 import BASELINE, order_arms
 from vlmrl_cli.report.writer import check_paths
-from vlmrl_cli.tasks.base import TaskLookup
+from vlmrl_cli.tasks.base import Task, TaskLookup
 from vlmrl_cli.tasks.registry import recorded_task
 from vlmrl_cli.tasks.zoo import ZOO_PPO
 from vlmrl_cli.tracking import schema
@@ -71,6 +74,8 @@ class CompareResult:
     counted_once: int = 0  # runs held by more than one file, counted once (``RUN_RULE``)
     # the configurations of a task's arm not compared (``select_configs`` keeps one), as "arm on task: hash (n runs)"
     other_configs: tuple[str, ...] = ()
+    pairs: pd.DataFrame = field(default_factory=pd.DataFrame)  # per task (index): lo, lo_from, hi, hi_from
+    estimated: bool = False  # the anchors are estimated from the runs (``ESTIMATED``)
 
 
 def read_runs(files: Sequence[Path]) -> pd.DataFrame:
@@ -204,29 +209,44 @@ def compared_arms(runs: pd.DataFrame) -> tuple[list[str], dict[str, list[str]]]:
 
 def normalisation_pairs(runs: pd.DataFrame, arms: Sequence[str], method: str, tasks: TaskLookup) -> pd.DataFrame:
     """Per task, the pair ``lo``/``hi`` of ``method`` and where each comes from (``tasks``: the
-    command's registry, which gives each recorded task's env).
+    command's registry, which gives each recorded task's env, random score and zoo score).
 
-    ``BadInput`` when a task's pair is empty or reversed (``hi <= lo``).
+    ``BadInput`` when a task lacks a reference, or its pair is empty or reversed (``hi <= lo``).
     """
     rows = []
     for task, cell in runs[runs["arm"].isin(arms)].groupby("task", sort=True):
-        means = cell.groupby("arm")["score"].mean()
-        lo = float(means[BASELINE])
-        if method == "zoo":
-            env_id = tasks(str(task)).env_id
-            if env_id not in ZOO_PPO:
-                raise BadInput(f"task {task} ({env_id}) has no published rl-baselines3-zoo PPO score in the package; "
-                               "use --normalise baseline-best.")
-            hi, hi_from = ZOO_PPO[env_id].mean, f"zoo PPO {env_id} ({ZOO_PPO[env_id].budget} steps)"
+        if method == "random-zoo":
+            lo, lo_from, hi, hi_from = fixed_pair(tasks(str(task)))
         else:
+            means = cell.groupby("arm")["score"].mean()
             best = str(means.idxmax())
-            hi, hi_from = float(means[best]), f"{best} mean"
+            lo, lo_from, hi, hi_from = float(means[BASELINE]), f"{BASELINE} mean", float(means[best]), f"{best} mean"
         if not hi > lo:
-            raise BadInput(f"on task {task} the {method} range is empty: baseline mean {lo:g}, top {hi:g} ({hi_from})"
-                           + ("; the baseline is the best arm there, try --normalise zoo." if method != "zoo" else
-                              "; the baseline scores at least the zoo's PPO there, use --normalise baseline-best."))
-        rows.append({"task": task, "lo": lo, "lo_from": f"{BASELINE} mean", "hi": hi, "hi_from": hi_from})
+            raise BadInput(f"on task {task} the {method} range is empty: {lo:g} ({lo_from}) to {hi:g} ({hi_from})"
+                           + ("; the baseline is the best arm there." if method != "random-zoo" else "."))
+        rows.append({"task": task, "lo": lo, "lo_from": lo_from, "hi": hi, "hi_from": hi_from})
     return pd.DataFrame(rows)
+
+
+def fixed_pair(task: Task) -> tuple[float, str, float, str]:
+    """The fixed references of ``task``: its random policy's measured score (0) and the zoo's PPO
+    score of its env (1), each with where it comes from; ``BadInput`` when either is missing.
+
+    Example:
+        >>> from vlmrl_cli.tasks.registry import get_task
+        >>> lo, _, hi, _ = fixed_pair(get_task("acrobot"))
+        >>> lo, hi
+        (-497.37, -73.506)
+    """
+    if task.random_score is None:
+        raise BadInput(f"task {task.name} has no measured random-policy score (Task.random_score); measure it "
+                       "with `python scripts/random_scores.py` or use --normalise baseline-best.")
+    if task.env_id not in ZOO_PPO:
+        raise BadInput(f"task {task.name} ({task.env_id}) has no published rl-baselines3-zoo PPO score in the "
+                       "package; use --normalise baseline-best.")
+    r, zoo = task.random_score, ZOO_PPO[task.env_id]
+    return (r.mean, f"random policy ({r.episodes} episodes from seed {r.seed}, `{r.command}`)", zoo.mean,
+            f"zoo PPO {task.env_id} ({zoo.budget} steps)")
 
 
 def _cell(e: Estimate, digits: int = 3) -> str:
@@ -285,7 +305,8 @@ def compare(cfg: CompareConfig, lookup: TaskLookup) -> CompareResult:
                         encoding="utf-8")
     fig = _profile_figure(scores, cfg, streams, note)
     fig.savefig(files[3], dpi=200)
-    return CompareResult(cfg.out, files, table, arms, tasks, left_out, simulated, len(dropped), other_configs)
+    return CompareResult(cfg.out, files, table, arms, tasks, left_out, simulated, len(dropped), other_configs, pairs,
+                         cfg.normalise in ESTIMATED)
 
 
 def profile_taus(scores: Mapping[str, Sequence[np.ndarray]], n: int) -> np.ndarray:
@@ -304,7 +325,8 @@ def _profile_figure(scores: Mapping[str, Sequence[np.ndarray]], cfg: CompareConf
         curve, low, high = agg.performance_profile_band(tasks, taus, streams(f"compare/profile/{arm}"), cfg.n_boot,
                                                         cfg.ci)
         plot_normalised_profile(taus, curve, low, high, arm, list(scores), ax=ax)
-    ax.set_xlabel(f"normalised score tau ({cfg.normalise})", fontsize=9)
+    estimated = "; anchors estimated from the data" if cfg.normalise in ESTIMATED else ""
+    ax.set_xlabel(f"normalised score tau ({cfg.normalise}{estimated})", fontsize=9)
     fig.suptitle(f"Performance profile across {len(next(iter(scores.values())))} task(s) "
                  f"({100 * cfg.ci:g}% stratified bootstrap band)\n{note}", fontsize=9)
     return fig
@@ -314,6 +336,8 @@ def _markdown(cfg: CompareConfig, table: pd.DataFrame, runs: pd.DataFrame, pairs
               left_out: Mapping[str, Sequence[str]], simulated: bool, counted_once: int = 0) -> str:
     pct = f"{100 * cfg.ci:g}%"
     lines = [f"# Across tasks{' (SIMULATED VLM)' if simulated else ''}", ""]
+    if cfg.normalise in ESTIMATED:
+        lines += [ESTIMATED_BANNER, ""]
     if simulated:
         lines += ["> **SIMULATED VLM.** Some runs used the simulated VLM (a pixel-reading stand-in), not a real "
                   "model: nothing here is evidence about a real VLM.", ""]

@@ -19,12 +19,11 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy import stats as sps
 
 from vlmrl_cli.analysis import censored, stats
 from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST
 from vlmrl_cli.analysis.proportions import compare_proportions
-from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM, probability_of_improvement
+from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM, probability_of_improvement, rank_sum_p
 from vlmrl_cli.core import tables
 from vlmrl_cli.report.table2 import judge_steps, threshold_key
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec
@@ -95,16 +94,18 @@ def _proportion_verdict(diff: float, p_value: float, alpha: float) -> str:
 
 
 def compare_auc(da: pd.DataFrame, db: pd.DataFrame, rng: np.random.Generator, n_boot: int, ci: float,
-                alpha: float, delta: float) -> tuple[stats.Estimate, float, str, tuple[float, float]]:
+                alpha: float, delta: float, n_perm: int = DEFAULT_N_PERM
+                ) -> tuple[stats.Estimate, float, str, tuple[float, float], str]:
     """Learning-curve area of arm a minus arm b (return units): the difference of means with a
-    bootstrap CI, a two-sided Mann-Whitney p (exact for small samples), the verdict and the
-    ``1 - 2 alpha`` interval its equivalence test used."""
+    bootstrap CI, a two-sided Mann-Whitney p (``ranks.rank_sum_p``: exact up to ``DEFAULT_N_PERM``
+    splits), the verdict, the ``1 - 2 alpha`` interval its equivalence test used and the p's method."""
     a, b = da["auc"].to_numpy(dtype=float), db["auc"].to_numpy(dtype=float)
     a, b = a[np.isfinite(a)], b[np.isfinite(b)]
     est = stats.difference_of_means(a, b, rng, n_boot, ci)
     tost = stats.difference_of_means(a, b, rng, n_boot, 1 - 2 * alpha)
-    p = float(sps.mannwhitneyu(a, b, alternative="two-sided").pvalue) if a.size >= 2 and b.size >= 2 else np.nan
-    return est, p, censored.difference_verdict(est, (tost.low, tost.high), p, alpha, delta), (tost.low, tost.high)
+    p, method = rank_sum_p(a, b, n_perm) if a.size >= 2 and b.size >= 2 else (np.nan, "no test")
+    verdict = censored.difference_verdict(est, (tost.low, tost.high), p, alpha, delta)
+    return est, p, verdict, (tost.low, tost.high), method
 
 
 def compare_arms(
@@ -151,10 +152,10 @@ def compare_arms(
                          det.difference, det.p_value, det.test, det.n_a, det.n_b,
                          verdict=_proportion_verdict(det.difference.value, det.p_value, alpha)))
         if "auc" in per_seed:
-            auc, p_auc, v_auc, tost = compare_auc(da, db, stats.stream(rng, f"attribution/auc/{pair.name}"),
-                                                  n_boot, ci, alpha, auc_delta)
+            auc, p_auc, v_auc, tost, how = compare_auc(da, db, stats.stream(rng, f"attribution/auc/{pair.name}"),
+                                                       n_boot, ci, alpha, auc_delta, n_perm)
             rows.append(_row(pair, "auc_diff", "Learning-curve area difference (mean native return over the "
-                             "budget, a minus b)", "return", auc, p_auc, "Mann-Whitney U on per-seed areas",
+                             "budget, a minus b)", "return", auc, p_auc, f"Mann-Whitney U on per-seed areas ({how} p)",
                              int(da["auc"].notna().sum()), int(db["auc"].notna().sum()), verdict=v_auc, tost=tost))
         poi = probability_of_improvement(da["final_return"], db["final_return"],
                                          stats.stream(rng, f"attribution/poi/{pair.name}"), n_boot, ci)

@@ -18,10 +18,18 @@ from vlmrl_cli.tasks.zoo import SOURCE as ZOO_SOURCE
 MAX_N_BOOT = 100_000
 
 NORMALISATIONS: dict[str, str] = {
+    "random-zoo": "min-max per task from a uniformly random policy's measured score (0) to the published PPO "
+                  f"score of {ZOO_SOURCE} (1): fixed references, the same whichever arms are compared",
     "baseline-best": "min-max per task from the baseline arm's mean score (0) to the best compared arm's mean "
                      "score (1)",
-    "zoo": f"min-max per task from the baseline arm's mean score (0) to the published PPO score of {ZOO_SOURCE} (1)",
 }
+DEFAULT_NORMALISATION = "random-zoo"
+#: Normalisations whose anchors are estimated from the runs compared: their outputs say so first.
+ESTIMATED = {"baseline-best"}
+ESTIMATED_BANNER = ("> **ANCHORS ESTIMATED FROM THE DATA.** This normalisation sets 0 and 1 at arms' own mean "
+                    "scores: they move with the runs and the arms compared, a task whose arms differ little is "
+                    "magnified without bound, and adding or removing an arm changes every other arm's scores. "
+                    "Read the default `random-zoo` normalisation (fixed references) for any verdict.")
 
 
 @dataclass(frozen=True)
@@ -38,7 +46,7 @@ class ReportConfig:
     min_episodes: int = 1  # fewest completed episodes before a rolling mean counts
     ci: float = 0.95  # confidence level of every interval
     n_boot: int = DEFAULT_N_BOOT  # bootstrap resamples
-    n_perm: int = DEFAULT_N_PERM  # rank-test permutations (fewer splits of the seeds are enumerated exactly)
+    n_perm: int = DEFAULT_N_PERM  # rank tests count up to this many splits of the seeds exactly
     seed: int = 0  # seed of the random streams (one per report section and metric)
     margin: float = DEFAULT_MARGIN  # equivalence margin of a speedup (TOST within [1/margin, margin])
     # multiplicity adjustment of the speedups' p-values, one family per report: holm | bh | none
@@ -104,7 +112,7 @@ class CompareConfig:
 
     files: tuple[Path, ...]
     out: Path
-    normalise: str = "baseline-best"
+    normalise: str = DEFAULT_NORMALISATION
     config_hashes: tuple[str, ...] = ()
     n_boot: int = DEFAULT_N_BOOT
     ci: float = 0.95

@@ -342,12 +342,6 @@ def speedup_key(threshold: float, arm: str, ref: str) -> str:
     return f"speedup_{threshold:g}/{arm}-vs-{ref}"
 
 
-def arm_budget(per_seed: pd.DataFrame, arm: str) -> float | None:
-    """The arm's budget (timesteps) when all its seeds share one, else None."""
-    values = set(per_seed.loc[per_seed["arm"] == arm, "budget"].dropna().astype(float))
-    return values.pop() if len(values) == 1 else None
-
-
 def compare_steps(
     per_seed: pd.DataFrame, arm: str, ref: str, threshold: float, rng: np.random.Generator | stats.Streams,
     n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, n_perm: int = DEFAULT_N_PERM,
@@ -373,8 +367,7 @@ def judge_steps(
     budget_a = per_seed.loc[mine, "budget"].to_numpy(dtype=float)
     budget_r = per_seed.loc[theirs, "budget"].to_numpy(dtype=float)
     skey = speedup_key(threshold, arm, ref)
-    test = censored_rank_test(a, r, stats.stream(rng, skey + "/rank"), n_perm, arm_budget(per_seed, arm),
-                              arm_budget(per_seed, ref))
+    test = censored_rank_test(a, r, stats.stream(rng, skey + "/rank"), n_perm, budget_a, budget_r)
     judged = censored.steps_verdict(r, a, budget_r, budget_a, test.p_value, stats.stream(rng, skey), n_boot, ci,
                                     alpha, margin, direction=test.p_faster - 0.5)
     return judged, test, censored_logrank(a, r, budget_a, budget_r)

@@ -16,6 +16,7 @@ import pandas as pd
 
 from vlmrl_cli import paper
 from vlmrl_cli.analysis import censored, multiplicity, stats
+from vlmrl_cli.analysis.defaults import DEFAULT_N_PERM
 from vlmrl_cli.analysis.load import ExperimentData, load_experiment
 from vlmrl_cli.core import tables
 from vlmrl_cli.core.errors import BadInput
@@ -190,6 +191,11 @@ def family_reach(cfg: ReportConfig, family: pd.DataFrame, paper_task: bool) -> l
     return out
 
 
+def _splits(n_perm: int) -> str:
+    """The rank test's largest exact case, in words: ``C(60, 30)`` for the default."""
+    return "C(60, 30)" if n_perm == DEFAULT_N_PERM else f"{n_perm:,}"
+
+
 def _statistics_md(cfg: ReportConfig, family_size: int = 0, auc_margin: float = 5.0,
                    reach: list[str] | None = None) -> list[str]:
     ci = f"{100 * cfg.ci:g}%"
@@ -204,12 +210,13 @@ def _statistics_md(cfg: ReportConfig, family_size: int = 0, auc_margin: float = 
         "exact p-value. These never collapse to a point: 5/5 vs 5/5 is 0 [-0.43, 0.43].",
         f"- Steps to a threshold, the one DNF rule of every table and verdict: {censored.RULE}. Restricted means "
         f"with a {ci} percentile bootstrap over seeds ({cfg.n_boot} resamples); a speedup is the ratio of "
-        "restricted means (a lower bound on the true ratio when the slower arm DNFs). The paper's convention, "
+        f"restricted means (a lower bound on the true ratio when the slower arm DNFs), its interval "
+        f"{censored.RATIO_INTERVAL}. The paper's convention, "
         "the mean over the seeds that finished, is shown as its own row of Table 2 only. Beside each speedup, a "
         "Mann-Whitney U test on all seeds with each DNF censored at the budget (tied with the other DNFs, slower "
-        "than every finish): exact when every split of the seeds can be enumerated (up to "
-        f"{cfg.n_perm} splits), else the tie-corrected normal approximation, so no p-value sits at a permutation "
-        "floor.",
+        "than every finish; a crossing after the budget is a DNF): an exact permutation p, conditional on the "
+        f"ties, when the splits of the seeds number at most {_splits(cfg.n_perm)} (every split counted; 184,756 at "
+        "10 vs 10), else the tie-corrected normal approximation, and then the table's test column says 'asymptotic'.",
         f"- Multiplicity: {multiplicity.family_line(cfg.adjust, family_size, FAMILY_WHAT)}; "
         "the claims about speedups use the same adjusted p-values. Each table shows the raw p beside the adjusted "
         "one. The reliability, detached-success and learning-curve-area differences are secondary measures, "
@@ -218,12 +225,12 @@ def _statistics_md(cfg: ReportConfig, family_size: int = 0, auc_margin: float = 
         "- Beside the rank test, a log-rank test on the same steps (each DNF censored at its own budget; chi-square, "
         "1 df), adjusted within the same family; where one of the two rejects after adjustment and the other does "
         "not, the table says so. The rank test drives the verdict: it was the declared test of earlier reports, "
-        "it is exact for small samples (every split enumerated) where the log-rank is a large-sample chi-square, "
+        "its p is exact (every split counted) where the log-rank is a large-sample chi-square, "
         "and with one budget per arm it is Gehan's test, which weighs early finishes more, where speed is "
         "measured; the log-rank weighs every finishing step alike and treats different budgets exactly.",
         f"- Verdicts of the attribution table, one rule: faster/slower when the adjusted rank test rejects at "
         f"{alpha:g} and the {ci} interval of the speedup excludes 1 on the same side; "
-        f"{censored.equivalent(cfg.margin)} when the {100 * (1 - 2 * alpha):g}% bootstrap interval of the "
+        f"{censored.equivalent(cfg.margin)} when the {100 * (1 - 2 * alpha):g}% interval of the "
         f"speedup lies inside [1/{cfg.margin:g}, {cfg.margin:g}] (two one-sided tests) and each arm finished on "
         "at least half its seeds; otherwise inconclusive, with 'leans faster' (or slower) when the interval "
         "excludes 1 or the adjusted test rejects and both point one way. Learning-curve area (threshold-free): "
@@ -297,7 +304,8 @@ def _report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: 
                 f"{cfg.window} episodes, so steps to {t:g} measure how fast episodes end, not learning: read no "
                 "speedup into that row." for t in floor_thresholds(per_seed, table.thresholds, cfg.window)],
               f"- Intervals: {100 * cfg.ci:g}% percentile bootstrap over seeds ({cfg.n_boot} resamples, seed "
-              f"{cfg.seed}) for means and ratios; score intervals for proportions of seeds (see below).", ""]
+              f"{cfg.seed}) for means; speedups by the delta method on the log ratio; score intervals for "
+              "proportions of seeds (see below).", ""]
     if warns:
         parts += ["## Warnings", "", *[f"- {w}" for w in warns], ""]
     parts += ["## Table 2: ours vs the paper" if paper_task else "## Table 2 (ours)", "", to_markdown(table)]

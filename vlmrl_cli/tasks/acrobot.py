@@ -28,7 +28,7 @@ from vlmrl_cli.tasks.acrobot_scene import (
     AcrobotReader,
     label_of_state,
 )
-from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, Task
+from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, RandomScore, Task
 from vlmrl_cli.tasks.capabilities import TaskCamera
 
 BINS_PER_JOINT = 48
@@ -112,6 +112,7 @@ ACROBOT = Task(
         "smoke": SMOKE,
     },
     zoo_reference="rl-baselines3-zoo benchmark.md, PPO Acrobot-v1: -73.506 +/- 18.201 (1M steps)",
+    random_score=RandomScore(-497.37),  # measured by RANDOM_SCORE_COMMAND on 2026-12-07
     probe_states=probe_states,
     # early episodes last 500 steps: 100 of them would be half a 100,000-step budget
     window=20,

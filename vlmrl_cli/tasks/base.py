@@ -46,6 +46,22 @@ SB3_DEFAULT_100K: Mapping[str, Any] = {
 }
 
 
+#: The command that measured every built-in task's ``random_score`` (``training.random_policy``).
+RANDOM_SCORE_COMMAND = "python scripts/random_scores.py"
+
+
+@dataclass(frozen=True)
+class RandomScore:
+    """A uniformly random policy's mean detached evaluation return on a task, and how it was
+    measured: ``episodes`` episodes from ``seed`` (episode ``i`` resets with ``seed + i``, the
+    action space seeded with ``seed``), printed by ``command``. The fixed 0 of ``vlmrl compare``."""
+
+    mean: float
+    episodes: int = 200
+    seed: int = 0
+    command: str = RANDOM_SCORE_COMMAND
+
+
 @dataclass(frozen=True)
 class Task:
     """One environment as the experiment sees it.
@@ -67,6 +83,8 @@ class Task:
         presets: PPO presets as ``PPOConfig`` keyword arguments; at least ``zoo`` and ``smoke``.
         default_preset: the preset a run takes when none is named (``zoo``).
         zoo_reference: rl-baselines3-zoo's published PPO result for the env, cited (empty: none).
+        random_score: a uniformly random policy's measured score (``RandomScore``; None: not
+            measured): with the zoo's score, the fixed pair ``vlmrl compare`` normalises by.
         hover: the hovering diagnostic (``Hover``: the coordinate read from an observation, and
             where hovering starts); None: no diagnostic.
         numbers: the float and box questions of Table 1's rows I and II and of the
@@ -122,6 +140,7 @@ class Task:
     presets: Mapping[str, Mapping[str, Any]]
     default_preset: str = "zoo"
     zoo_reference: str = ""
+    random_score: RandomScore | None = None
     hover: Hover | None = None
     numbers: NumberProbe | None = None
     probe_states: Callable[[int], list[Any]] | None = None

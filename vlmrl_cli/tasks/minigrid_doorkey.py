@@ -324,7 +324,7 @@ def _task() -> Any:
     from vlmrl_cli.shaping.features import feature_dim
     from vlmrl_cli.shaping.scales import task_scales
     from vlmrl_cli.shaping.scene import Scene
-    from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, Task
+    from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, RandomScore, Task
     from vlmrl_cli.tasks.capabilities import TaskCamera
 
     return Task(
@@ -355,6 +355,7 @@ def _task() -> Any:
         step_seconds=1.1e-3,
         zoo_reference="rl-baselines3-zoo benchmark.md (at 22e3ff2), PPO MiniGrid-DoorKey-5x5-v0: "
                       "0.964 +/- 0.006 (100k steps); hyperparams/ppo.yml's MiniGrid defaults",
+        random_score=RandomScore(0.029474),  # measured by RANDOM_SCORE_COMMAND on 2026-12-07
         study_preset="zoo",
         window=50,
         wrap=flat_image,

@@ -23,7 +23,7 @@ from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.shaping.features import FEATURE_DIM
 from vlmrl_cli.shaping.scales import task_scales
 from vlmrl_cli.shaping.scene import Scene
-from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, Task
+from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, RandomScore, Task
 from vlmrl_cli.tasks.capabilities import Hover, PaperTask, TaskCamera
 from vlmrl_cli.tasks.mountain_car import geometry
 from vlmrl_cli.tasks.mountain_car.camera import Camera
@@ -205,6 +205,7 @@ MOUNTAIN_CAR = Task(
     presets=PRESETS,
     default_preset="paper",
     zoo_reference="rl-baselines3-zoo benchmark.md, PPO MountainCar-v0: -110.423 +/- 19.473 (1M steps)",
+    random_score=RandomScore(-200.0),  # measured by RANDOM_SCORE_COMMAND on 2026-12-07
     hover=Hover(_position, start=0.3),
     numbers=NUMBER_PROBE,  # Table 1's float and box probe (probe.py)
     calibration=CALIBRATION,
@@ -264,6 +265,7 @@ MOUNTAIN_CAR_CONTINUOUS = Task(
         "smoke": SMOKE,
     },
     zoo_reference="rl-baselines3-zoo benchmark.md, PPO MountainCarContinuous-v0: 88.343 +/- 2.572 (20k steps)",
+    random_score=RandomScore(-33.20757),  # measured by RANDOM_SCORE_COMMAND on 2026-12-07
     hover=Hover(_position, start=0.3),
     probe_states=continuous_probe_states,
     # an episode that never reaches the flag lasts 999 steps: 100 of them would be a whole budget
