@@ -40,7 +40,7 @@ CASES: list[tuple[str, str]] = [
     ("taxonomy --vlm replay --transcript {tmp}/missing.jsonl", "transcript"),
     ("taxonomy --vlm hf --model {tmp}/no-such-model", "no-such-model"),
     ("taxonomy --vlm openai --model m --base-url http://127.0.0.1:9/v1 --timeout 2 --retries 0", "127.0.0.1:9"),
-    ("taxonomy --sim-profile lava", "Invalid value for '--sim-profile'"),
+    ("taxonomy --sim-profile lava", "unknown simulated-VLM profile 'lava'"),
     # run
     ("run --seeds two", "Invalid value for '--seeds'"),
     ("run --sim-flicker 2", "Invalid value for '--sim-flicker'"),

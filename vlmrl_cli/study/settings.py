@@ -95,9 +95,10 @@ class StudySettings:
         f"Taxonomy sweep positions per VLM variant (default {DEFAULT_STATES}).")})
     margin: float = field(default=DEFAULT_MARGIN, metadata={"help": (
         "equivalence margin of a speedup, a ratio above 1: 'equivalent' when the 90% interval lies inside "
-        "[1/margin, margin]")})
+        f"[1/margin, margin] (default: {DEFAULT_MARGIN:g})")})
     adjust: str = field(default=DEFAULT_ADJUST, metadata={"help": (
-        f"multiplicity adjustment of the study's family of comparisons: {', '.join(METHODS)}")})
+        f"multiplicity adjustment of the study's family of comparisons: {', '.join(METHODS)} (default: "
+        f"{DEFAULT_ADJUST})")})
     out: Path = field(default=DEFAULT_OUT, metadata={"help": (
         f"Output folder of the regime map, figure, report and manifest (default: {DEFAULT_OUT}).")})
 
