@@ -6,6 +6,9 @@ from __future__ import annotations
 
 #: Bootstrap resamples of an interval.
 DEFAULT_N_BOOT = 2000
+#: Bootstrap resamples of each simulated study's interval in a power figure (``analysis/power.py``):
+#: fewer than a report's, as each figure simulates a thousand studies.
+DEFAULT_POWER_N_BOOT = 200
 #: Permutations of the rank test; small experiments (<= this many splits) are enumerated exactly.
 DEFAULT_N_PERM = 9999
 #: The equivalence margin of a speedup (TOST within [1/margin, margin]).

@@ -25,10 +25,10 @@ import warnings
 import numpy as np
 from scipy import stats as sps
 
+from vlmrl_cli.analysis.defaults import DEFAULT_POWER_N_BOOT
+
 #: Simulated studies per power figure (Monte Carlo standard error at 80% power: about 0.013).
 DEFAULT_N_SIMS = 1_000
-#: Bootstrap resamples of each simulated study's interval.
-DEFAULT_N_BOOT = 200
 
 
 def reference_median(reliability: float, sd_log: float, budget: float, n: int) -> float:
@@ -84,7 +84,7 @@ def _interval_above_one(rng: np.random.Generator, ref: np.ndarray, arm: np.ndarr
 
 def censored_power(rng: np.random.Generator, speedup: float, n: int, sd_log: float, reliability: float,
                    budget: float, alpha: float = 0.05, family: int = 1, interval: bool = True,
-                   n_sims: int = DEFAULT_N_SIMS, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95) -> float:
+                   n_sims: int = DEFAULT_N_SIMS, n_boot: int = DEFAULT_POWER_N_BOOT, ci: float = 0.95) -> float:
     """The probability that a study of ``n`` seeds per arm calls an arm ``speedup`` times faster than
     the reference "faster" (module docstring), by ``n_sims`` simulated studies.
 

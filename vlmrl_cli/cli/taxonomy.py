@@ -57,7 +57,7 @@ def taxonomy(
         vlm_cfg = vlm_config(ctx)
         _check_flags(vlm_cfg, states, out, tracking_uri, experiment)
     # the probe's modules load scipy and pandas (seconds): only once the flags are known to be usable
-    from vlmrl_cli.probe.scoring import DEFAULT_STATES
+    from vlmrl_cli.probe.states import DEFAULT_STATES
     from vlmrl_cli.probe.table1 import with_ci
     from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
     from vlmrl_cli.tasks.registry import command_tasks
@@ -127,7 +127,7 @@ def _other_task(name: str, vlm_cfg: VLMConfig, states: int | None, out: Path | N
                 experiment: str, console: Console) -> None:
     """Table 1 and Figure 1 of another task: its milestone MCQ (``probe/milestones.py``)."""
     from vlmrl_cli.probe.milestones import run_milestone_taxonomy
-    from vlmrl_cli.probe.scoring import DEFAULT_STATES
+    from vlmrl_cli.probe.states import DEFAULT_STATES
     from vlmrl_cli.tasks.registry import command_tasks
     from vlmrl_cli.tracking.store import check_store
 

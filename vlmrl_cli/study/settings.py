@@ -19,7 +19,9 @@ from typing import Any
 
 from annotated_types import Ge
 
+from vlmrl_cli.analysis.defaults import DEFAULT_MARGIN
 from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST, METHODS
+from vlmrl_cli.probe.states import DEFAULT_STATES
 from vlmrl_cli.shaping.arms import BASELINE, DENSE, METHOD, PLACEBO_OF, POTENTIAL_ONLY
 
 DEFAULT_EXPERIMENT = "vlmrl-study"
@@ -41,11 +43,6 @@ DEFAULT_QUERY_FLICKERS: tuple[float, ...] = (0.3,)
 #: it could detect; ``--profiles ideal,default,llava-table1 --flickers 0,0.1,0.3,0.5`` runs them again.
 DEFAULT_PROFILES: tuple[str, ...] = ()
 DEFAULT_FLICKERS: tuple[float, ...] = ()
-#: ``probe.scoring.DEFAULT_STATES``, the taxonomy commands' sweep, not imported from there: that
-#: module loads scipy, and this one is read by `vlmrl --help` (tests/study/test_settings.py checks
-#: that the two agree).
-DEFAULT_STATES = 101
-DEFAULT_MARGIN = 1.15
 DEFAULT_OUT = Path("results/study")
 
 #: A study's regimes: name -> overrides (dotted keys, as ``--set`` takes them).
