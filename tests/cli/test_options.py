@@ -14,12 +14,18 @@ from vlmrl_cli.cli import options as opt
 from vlmrl_cli.cli.app import app
 from vlmrl_cli.core.fields import AtMost, help_of, rules_of
 from vlmrl_cli.study.settings import StudySettings
+from vlmrl_cli.training.config import RunConfig
+from vlmrl_cli.training.presets import PPOConfig
 from vlmrl_cli.vlm.config import SimKnobs, VLMConfig
 
 #: The config section of each prefix of a field option's key.
-SECTIONS: dict[str, Any] = {"vlm": VLMConfig, "vlm.sim": SimKnobs, "study": StudySettings}
-#: The options of a command that share a field's declaration under the field's own name.
-ALIASES = {"use_cache": "vlm.use_cache", "cache_path": "vlm.cache_path"}
+SECTIONS: dict[str, Any] = {"vlm": VLMConfig, "vlm.sim": SimKnobs, "study": StudySettings, "ppo": PPOConfig,
+                            "run": RunConfig}
+#: The options that share a field's declaration under their own name, and the commands that have them.
+ALIASES = {"use_cache": ("vlm.use_cache", {"evaluate"}), "cache_path": ("vlm.cache_path", {"evaluate"}),
+           "timesteps": ("ppo.timesteps", {"run", "calibrate", "study"}),
+           "eval_episodes": ("ppo.eval_episodes", {"run", "calibrate", "study"}),
+           "workers": ("run.workers", {"run", "calibrate", "study"})}
 
 
 def _field(key: str) -> dataclasses.Field[Any]:
@@ -31,20 +37,20 @@ def _bounds(f: dataclasses.Field[Any]) -> tuple[Any, Any]:
     """The closed range the field's rules declare, read from the rules themselves."""
     low = high = None
     for rule in rules_of(f):
-        if isinstance(rule, Gt):
-            continue  # an open bound is the config's validation's, not click's
+        if isinstance(rule, Gt | AtMost):
+            continue  # an open bound, or one refused with its reason, is the config's validation's
         low = getattr(rule, "ge", None) if getattr(rule, "ge", None) is not None else low
         high = getattr(rule, "le", None) if getattr(rule, "le", None) is not None else high
     return low, high
 
 
 def test_every_field_option_states_its_fields_help_and_range() -> None:
-    keys = {o.name: o.key for o in (*opt.VLM_OPTIONS, *opt.field_options(StudySettings, "study"))} | ALIASES
+    keys = {o.name: o.key for o in (*opt.VLM_OPTIONS, *opt.field_options(StudySettings, "study"))}
     checked = set()
     for name, command in typer.main.get_command(app).commands.items():  # type: ignore[attr-defined]
         for param in command.params:
-            key = keys.get(param.name)
-            if key is None or (param.name in ALIASES and name != "evaluate"):
+            key, commands = ALIASES.get(param.name, (keys.get(param.name), {name}))
+            if key is None or name not in commands:
                 continue
             f = _field(key)
             assert param.help == help_of(f) and param.help, (name, param.name)
@@ -52,8 +58,9 @@ def test_every_field_option_states_its_fields_help_and_range() -> None:
             assert bounds == _bounds(f), (name, param.name, bounds)
             checked.add(key)
     # every VLMConfig and SimKnobs field has its option, and so does every study setting
-    for section, cls in SECTIONS.items():
-        assert {f"{section}.{f.name}" for f in dataclasses.fields(cls) if f.name != "sim"} <= checked
+    for section in ("vlm", "vlm.sim", "study"):
+        assert {f"{section}.{f.name}" for f in dataclasses.fields(SECTIONS[section]) if f.name != "sim"} <= checked
+    assert {key for key, _ in ALIASES.values()} <= checked
 
 
 def test_a_new_field_gets_its_option_from_its_declaration() -> None:
@@ -63,7 +70,7 @@ def test_a_new_field_gets_its_option_from_its_declaration() -> None:
         label_name: str = field(default="x", metadata={"flag": "--label", "help": "a label"})
 
     depth, label = (o.click_param() for o in opt.field_options(Toy, "toy"))
-    assert (depth.opts, depth.help, depth.min, depth.max, depth.default) == (["--depth"], "how deep", 1, 9, 3)
+    assert (depth.opts, depth.help, depth.min, depth.max, depth.default) == (["--depth"], "how deep", 1, None, 3)
     assert (label.name, label.opts, label.help) == ("toy_label_name", ["--label"], "a label")
 
 

@@ -16,13 +16,13 @@ from typer.core import TyperCommand
 
 from vlmrl_cli.analysis.multiplicity import METHODS
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.core.fields import AtMost, help_of, rules_of
+from vlmrl_cli.core.fields import help_of, rules_of
 from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.tasks.registry import get_task
-from vlmrl_cli.training.config import DEFAULT_PRESET, DEFAULT_TASK, seed_count_problem, source_layers
+from vlmrl_cli.training.config import DEFAULT_PRESET, DEFAULT_TASK, RunConfig, seed_count_problem, source_layers
 from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.overrides import nest
-from vlmrl_cli.training.presets import preset_names
+from vlmrl_cli.training.presets import PPOConfig, preset_names
 from vlmrl_cli.vlm.config import SimKnobs, VLMConfig, resolve_sim_profile
 
 TrackingUri = Annotated[
@@ -56,12 +56,13 @@ _TYPED = "vlmrl.typed_fields"
 def field_option(f: dataclasses.Field[Any], hint: Any, flag: str, shown_default: bool | str = True) -> Any:
     """The ``Annotated`` typer option ``flag`` (``--a/--no-a`` for a switch) of config field ``f``
     (of type ``hint``), declared by the field alone: the help is the field's ``help``, the range
-    its ``Ge``/``Interval``/``AtMost`` rules (``Gt``, open, is left to the config's validation)."""
+    its ``Ge``/``Interval`` rules (an ``AtMost``, refused with its reason, and a ``Gt``, open, are
+    left to the config's validation)."""
     bounds: dict[str, Any] = {}
     for rule in rules_of(f):
-        if isinstance(rule, Ge | Interval) and getattr(rule, "ge", None) is not None:
+        if isinstance(rule, Ge | Interval) and rule.ge is not None:
             bounds["min"] = rule.ge
-        if isinstance(rule, Interval | AtMost) and getattr(rule, "le", None) is not None:
+        if isinstance(rule, Interval) and rule.le is not None:
             bounds["max"] = rule.le
     return Annotated[hint, typer.Option(flag, help=help_of(f), show_default=shown_default, **bounds)]
 
@@ -195,10 +196,15 @@ def check_sim_flags(ctx: typer.Context, arms: Sequence[str], backend: str,
 
 # --- the options of commands that train (`run`, `calibrate`) and how they layer -----------
 
+def _field(cls: type, name: str) -> dataclasses.Field[Any]:
+    return next(f for f in dataclasses.fields(cls) if f.name == name)
+
+
+
 Arms = Annotated[str, typer.Option("--arms", help=f"Comma-separated arms, any of: {', '.join(ARMS)}.")]
 Seeds = Annotated[int, typer.Option("--seeds", help="Number of seeds: 0..N-1.")]
 SeedList = Annotated[str | None, typer.Option("--seed-list", help="Explicit seeds, e.g. 3,7,11.")]
-Timesteps = Annotated[int | None, typer.Option("--timesteps", help="Budget per run (= --set ppo.timesteps=N).")]
+Timesteps = field_option(_field(PPOConfig, "timesteps"), int | None, "--timesteps", shown_default=False)
 # No default of its own: a run that names no preset takes its task's (``Task.default_preset``), so
 # the help states that rather than one task's name (``[default: paper]`` is false for Acrobot).
 Preset = Annotated[str | None, typer.Option(
@@ -217,7 +223,7 @@ UserTasks = Annotated[list[str] | None, typer.Option(
     "--user-task", metavar="MODULE:NAME",
     help="A task of your own code that the runs recorded, imported for them (repeatable): vlmrl imports a module "
          "only when the command line names it, never from a file, an export or a store.")]
-Workers = Annotated[int | None, typer.Option("--workers", help="Worker processes (default: cores).")]
+Workers = field_option(_field(RunConfig, "workers"), int | None, "--workers", shown_default=False)
 ExecutorOpt = Annotated[str | None, typer.Option(
     "--executor", metavar=choices(EXECUTORS),
     help="Where jobs run: local (a process pool, the default) or ray (tasks on a Ray cluster; pip install "
@@ -225,9 +231,7 @@ ExecutorOpt = Annotated[str | None, typer.Option(
 RayAddress = Annotated[str | None, typer.Option(
     "--ray-address", help="Ray cluster to join with --executor ray (default: a cluster running on this machine, "
                           "else a new local Ray instance with --workers CPUs).")]
-EvalEpisodes = Annotated[
-    int | None, typer.Option("--eval-episodes", help="Detached evaluation episodes (= --set ppo.eval_episodes=N).")
-]
+EvalEpisodes = field_option(_field(PPOConfig, "eval_episodes"), int | None, "--eval-episodes", shown_default=False)
 ConfigFile = Annotated[Path | None, typer.Option("--config", help="TOML file with any of these knobs.")]
 Sets = Annotated[
     list[str] | None,
