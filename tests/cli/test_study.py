@@ -109,9 +109,9 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     (["--flickers", "abc"], "--flickers takes numbers"),
     (["--flickers", "2"], "vlm.sim.flicker"),
     (["--vlm-regime", "other"], "not a regime of this study"),
-    (["--alphas", "-1"], "alphas must be finite and >= 0"),
-    (["--margin", "0.9"], "--margin is a ratio above 1"),
-    (["--adjust", "bonferroni"], "--adjust is one of holm, bh, none"),
+    (["--alphas", "-1"], "study.alphas = [-1.0]: must be finite and >= 0"),
+    (["--margin", "0.9"], "study.margin = 0.9: must be a ratio above 1"),
+    (["--adjust", "bonferroni"], "unknown multiplicity adjustment 'bonferroni'; choose from holm, bh, none"),
     (["--experiment", ""], "an experiment needs a name"),
     (["--kin-scales", "x"], "--kin-scales takes numbers"),
     (["--query-flickers", "2"], "vlm.sim.query_flicker"),
@@ -123,7 +123,7 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     (["--tracking-uri", "sqlite:///{tmp}/file/mlflow.db"], "cannot be reached"),
     (["--tracking-uri", "nope://x"], "cannot be reached"),
     (["--dry-run", "--arms", "teleport"], "unknown arm 'teleport'"),
-    (["--set", "study.margin=0.9"], "--margin is a ratio above 1"),  # the [study] table takes --set too
+    (["--set", "study.margin=0.9"], "study.margin = 0.9: must be a ratio above 1"),  # the [study] table takes --set too
     (["--set", "study.vlm_regime=other"], "not a regime of this study"),
 ])
 def test_a_bad_study_exits_2_before_anything_exists(tmp_path: Path, args: list[str], needle: str) -> None:
