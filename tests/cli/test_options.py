@@ -25,7 +25,8 @@ SECTIONS: dict[str, Any] = {"vlm": VLMConfig, "vlm.sim": SimKnobs, "study": Stud
 ALIASES = {"use_cache": ("vlm.use_cache", {"evaluate"}), "cache_path": ("vlm.cache_path", {"evaluate"}),
            "timesteps": ("ppo.timesteps", {"run", "calibrate", "study"}),
            "eval_episodes": ("ppo.eval_episodes", {"run", "calibrate", "study"}),
-           "workers": ("run.workers", {"run", "calibrate", "study"})}
+           "workers": ("run.workers", {"run", "calibrate", "study"}),
+           "margin": ("study.margin", {"report"}), "adjust": ("study.adjust", {"report"})}
 
 
 def _field(key: str) -> dataclasses.Field[Any]:

@@ -14,10 +14,10 @@ import typer
 from annotated_types import Ge, Interval
 from typer.core import TyperCommand
 
-from vlmrl_cli.analysis.multiplicity import METHODS
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.fields import help_of, rules_of
 from vlmrl_cli.shaping.arms import ARMS
+from vlmrl_cli.study.settings import StudySettings
 from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import DEFAULT_PRESET, DEFAULT_TASK, RunConfig, seed_count_problem, source_layers
 from vlmrl_cli.training.events import EXECUTORS
@@ -31,8 +31,6 @@ TrackingUri = Annotated[
 ]
 OutDir = Annotated[Path | None, typer.Option("--out", help="Output folder (default under results/).")]
 Experiment = Annotated[str, typer.Option("--experiment", help="MLflow experiment name.")]
-Margin = Annotated[float, typer.Option(
-    "--margin", help="Equivalence margin of a speedup: 'equivalent' when the 90% interval lies inside [1/M, M].")]
 
 def choices(names: Sequence[str]) -> str:
     """The metavar listing an option's choices in the help (``[a|b|c]``); the values are checked,
@@ -40,11 +38,6 @@ def choices(names: Sequence[str]) -> str:
     return "[" + "|".join(names) + "]"
 
 
-Adjust = Annotated[str, typer.Option(
-    "--adjust", metavar=choices(METHODS),
-    help="Multiplicity adjustment of the speedups' p-values within the command's family of comparisons: holm "
-         "(Holm's step-down, the family-wise error rate), bh (Benjamini-Hochberg, the false discovery rate) or none. "
-         "Verdicts use the adjusted p.")]
 
 
 # --- options built from a config's fields --------------------------------------------------
@@ -198,6 +191,11 @@ def check_sim_flags(ctx: typer.Context, arms: Sequence[str], backend: str,
 
 def _field(cls: type, name: str) -> dataclasses.Field[Any]:
     return next(f for f in dataclasses.fields(cls) if f.name == name)
+
+
+#: The verdicts' knobs of `report`, declared with the study's (``StudySettings``).
+Margin = field_option(_field(StudySettings, "margin"), float, "--margin", shown_default=False)
+Adjust = field_option(_field(StudySettings, "adjust"), str, "--adjust", shown_default=False)
 
 
 

@@ -132,12 +132,13 @@ class StudySettings:
         f"Taxonomy sweep positions per VLM variant (default {DEFAULT_STATES}).")})
     margin: float = field(default=DEFAULT_MARGIN, metadata={"rules": (AfterValidator(_ratio_above_one),),
                                                           "help": (
-        "equivalence margin of a speedup, a ratio above 1: 'equivalent' when the 90% interval lies inside "
-        f"[1/margin, margin] (default: {DEFAULT_MARGIN:g})")})
+        "Equivalence margin of a speedup, a ratio above 1: 'equivalent' when the 90% interval lies inside "
+        f"[1/margin, margin] (default: {DEFAULT_MARGIN:g}).")})
     adjust: str = field(default=DEFAULT_ADJUST, metadata={"rules": (AfterValidator(one_of(METHODS, (
         "multiplicity adjustment"))),), "help": (
-        f"multiplicity adjustment of the study's family of comparisons: {', '.join(METHODS)} (default: "
-        f"{DEFAULT_ADJUST})")})
+        "Multiplicity adjustment of the speedups' p-values within the command's family of comparisons: holm "
+        "(Holm's step-down, the family-wise error rate), bh (Benjamini-Hochberg, the false discovery rate) or none; "
+        f"verdicts use the adjusted p (default: {DEFAULT_ADJUST}).")})
     out: Path = field(default=DEFAULT_OUT, metadata={"help": (
         f"Output folder of the regime map, figure, report and manifest (default: {DEFAULT_OUT}).")})
 
