@@ -81,6 +81,7 @@ CASES: list[tuple[str, str]] = [
     ("run --tracking-uri postgresql+nosuchdriver://u@127.0.0.1:9/db", "no Python module nosuchdriver"),
     ("run --set n_envs", "KEY=VALUE"),
     ("run --workers 0", "workers"),
+    ("calibrate --workers 0", "Invalid value for '--workers'"),  # RunConfig.workers' Ge(1), as its range
     ("run --timesteps -5", "timesteps"),
     ("run --experiment ''", "an experiment needs a name"),
     ("run --tracking-uri nope://x", "cannot be reached"),
