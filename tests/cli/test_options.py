@@ -92,3 +92,5 @@ def test_only_the_options_typed_set_config_keys() -> None:
     assert seen == {"vlm.sim.flicker": 0.3, "vlm.use_cache": False, "vlm.sim.profile": "ideal"}
     assert (config.use_cache, config.sim.flicker, config.sim.float_noise) == (False, 0.3, 0.0)  # the profile's
     assert CliRunner().invoke(toy, ["--max-new-tokens", "0"]).exit_code == 2  # the field's Ge(1)
+    refused = CliRunner().invoke(toy, ["--timeout", "0"])  # Gt(0), open: the config's validation, by its key
+    assert "invalid vlm.timeout_s = 0.0: input should be greater than 0" in str(refused.exception)

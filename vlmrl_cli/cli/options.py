@@ -161,7 +161,7 @@ def vlm_config(ctx: typer.Context) -> VLMConfig:
 
     raw = nest(typed_fields(ctx).items()).get("vlm", {})
     raw["sim"] = resolve_sim_profile(raw.get("sim", {}), _PROFILE_TASK)
-    return typing.cast(VLMConfig, validate_as(VLMConfig, raw))
+    return typing.cast(VLMConfig, validate_as(VLMConfig, raw, at="vlm"))
 
 
 def given(ctx: typer.Context, name: str) -> bool:
