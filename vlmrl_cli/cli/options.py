@@ -77,13 +77,17 @@ class FieldOption:
     parse: Callable[[Any, str], Any]
 
     def click_param(self) -> Any:
-        from typer.main import _get_param
+        """The click option typer would make of a parameter ``name: annotation = default``."""
+        from typer import main
         from typer.models import ParamMeta
 
         # what typer does with an ``Annotated`` parameter: its first string is the flag
         kind, info = typing.get_args(self.annotation)[0], copy.copy(self.annotation.__metadata__[0])
         info.param_decls, info.default = (info.default, *(info.param_decls or ())), self.default
-        return _get_param(ParamMeta(name=self.name, default=info, annotation=kind))
+        meta = ParamMeta(name=self.name, default=info, annotation=kind)
+        if hasattr(main, "_get_param"):  # a recent typer, which runs its own copy of click
+            return main._get_param(meta)
+        return main.get_click_param(meta)[0]  # type: ignore[attr-defined]  # pragma: no cover - older typer
 
 
 def _as_typed(value: Any, flag: str) -> Any:
