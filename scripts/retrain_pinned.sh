@@ -34,10 +34,11 @@ uri() { echo "sqlite:///$STORE/${DB[$1]}"; }
 
 on_pin() {  # true when every run in export $1 was trained on this package's numeric pin
   "$PY" - "$1" <<'PYEOF'
-import gzip, json, sys
+import sys
+from pathlib import Path
 from vlmrl_cli.core.numeric_pin import PIN_ID
-with gzip.open(sys.argv[1], "rt") as fh:
-    runs = [json.loads(line) for line in fh if line.strip()]
+from vlmrl_cli.tracking.transfer import read_records
+runs = list(read_records(Path(sys.argv[1])))
 sys.exit(0 if runs and all(r["tags"].get("vlmrl.pin") == PIN_ID for r in runs) else 1)
 PYEOF
 }

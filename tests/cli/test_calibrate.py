@@ -99,7 +99,6 @@ def test_a_smoke_grid_writes_every_output_once_and_a_rerun_trains_nothing(tmp_pa
         (["--set", "vlm.backend=gpt9"], "", "unknown VLM backend 'gpt9'"),
         (["--preset", "nope"], "", "unknown preset 'nope'"),
         (["--seed-list", "a,b"], "", "--seed-list"),
-        (["--workers", "0"], "", "invalid workers"),
         (["--config", "{tmp}/missing.toml"], "", "cannot read the config file"),
         (["--out", "{tmp}/file/out"], "", "output folder"),  # checked before training, not after
         (["--tracking-uri", "sqlite:///{tmp}/file/mlflow.db"], "", "cannot be reached"),

@@ -208,24 +208,20 @@ def test_the_console_summary_reads_at_80_columns_in_a_pipe_even_when_every_seed_
 
 
 def _export_of(records: list[dict], path: Path) -> Path:  # type: ignore[type-arg]
-    import gzip
-    import json
+    from vlmrl_cli.tracking.transfer import FORMAT, write_records
 
-    with gzip.open(path, "wt", encoding="utf-8") as out:
-        out.write("".join(json.dumps(r) + "\n" for r in records))
+    write_records(path, [{**r, "format": FORMAT} for r in records])
     return path
 
 
 @pytest.mark.slow  # imports runs into a store
 def test_runs_of_two_numeric_paths_are_refused_unless_allowed(tmp_path: Path) -> None:
     """Committed Acrobot runs trained before the pin, two of them re-tagged as if trained on it."""
-    import gzip
-    import json
+    from vlmrl_cli.tracking.transfer import read_records
 
     source = Path(__file__).resolve().parents[2] / "results" / "tasks" / "acrobot" / "runs-study.jsonl.gz"
-    with gzip.open(source, "rt", encoding="utf-8") as stream:
-        records = [r for r in map(json.loads, stream) if r["tags"].get("vlmrl.arm") in ("baseline", "hybrid")
-                   and r["tags"].get("vlmrl.seed") in ("0", "1")]
+    records = [r for r in read_records(source) if r["tags"].get("vlmrl.arm") in ("baseline", "hybrid")
+               and r["tags"].get("vlmrl.seed") in ("0", "1")]
     for r in records:
         r["tags"].pop("vlmrl.pin", None)
     for r in records[:2]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 from mlflow.tracking import MlflowClient
@@ -191,3 +192,34 @@ def test_the_banner_says_when_the_tasks_own_scales_replace_the_defaults(
         assert "scales:" not in text
     else:
         assert line in text
+
+
+@pytest.mark.parametrize("dry_run", [True, False])
+def test_a_runs_config_is_validated_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, dry_run: bool) -> None:
+    """Where its layers are merged (``RunConfig.from_sources``); the preflight and the sweep take
+    the validated config as it is."""
+    from types import SimpleNamespace
+
+    from vlmrl_cli.sweep import runner as sweep_runner
+    from vlmrl_cli.training import validation
+
+    validated: list[str] = []
+    real = validation.validate_as
+
+    def counting(cls: type, raw: dict[str, Any], **carried: Any) -> Any:
+        validated.append(cls.__name__)
+        return real(cls, raw, **carried)
+
+    monkeypatch.setattr(validation, "validate_as", counting)
+    swept: list[bool] = []
+
+    def run_sweep(cfg: Any, reporter: Any, checked: bool) -> SimpleNamespace:
+        swept.append(checked)
+        return SimpleNamespace(elsewhere=[], parent_run_id=None)
+
+    monkeypatch.setattr(sweep_runner, "run_sweep", run_sweep)
+    args = ["run", "--arms", "hybrid", "--preset", "smoke", "--seeds", "1", "--tracking-uri", _uri(tmp_path)]
+    result = runner.invoke(app, [*args, *(["--dry-run"] if dry_run else [])])
+    assert result.exit_code == 0, result.output
+    assert validated.count("RunConfig") == 1, validated
+    assert swept == ([] if dry_run else [True])  # the preflight ran before the sweep, which ran

@@ -109,9 +109,9 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     (["--flickers", "abc"], "--flickers takes numbers"),
     (["--flickers", "2"], "vlm.sim.flicker"),
     (["--vlm-regime", "other"], "not a regime of this study"),
-    (["--alphas", "-1"], "alphas must be finite and >= 0"),
-    (["--margin", "0.9"], "--margin is a ratio above 1"),
-    (["--adjust", "bonferroni"], "--adjust is one of holm, bh, none"),
+    (["--alphas", "-1"], "study.alphas = [-1.0]: must be finite and >= 0"),
+    (["--margin", "0.9"], "study.margin = 0.9: must be a ratio above 1"),
+    (["--adjust", "bonferroni"], "unknown multiplicity adjustment 'bonferroni'; choose from holm, bh, none"),
     (["--experiment", ""], "an experiment needs a name"),
     (["--kin-scales", "x"], "--kin-scales takes numbers"),
     (["--query-flickers", "2"], "vlm.sim.query_flicker"),
@@ -123,7 +123,7 @@ def test_a_smoke_study_writes_the_map_the_figure_and_the_report(tmp_path: Path) 
     (["--tracking-uri", "sqlite:///{tmp}/file/mlflow.db"], "cannot be reached"),
     (["--tracking-uri", "nope://x"], "cannot be reached"),
     (["--dry-run", "--arms", "teleport"], "unknown arm 'teleport'"),
-    (["--set", "study.margin=0.9"], "--margin is a ratio above 1"),  # the [study] table takes --set too
+    (["--set", "study.margin=0.9"], "study.margin = 0.9: must be a ratio above 1"),  # the [study] table takes --set too
     (["--set", "study.vlm_regime=other"], "not a regime of this study"),
 ])
 def test_a_bad_study_exits_2_before_anything_exists(tmp_path: Path, args: list[str], needle: str) -> None:
@@ -174,16 +174,16 @@ def test_every_study_option_is_a_config_field_a_run_option_or_a_documented_cli_o
     command = typer.main.get_command(app).commands["study"]  # type: ignore[attr-defined]
     options = {p.name: p for p in command.params}
     fields = {f.name: f for f in dataclasses.fields(StudySettings)}
-    vlm = {o.param for o in opt.VLM_OPTIONS}
-    assert set(options) == set(fields) | set(cmd.RUN_OPTIONS) | vlm | set(cmd.CLI_ONLY)
-    assert not set(fields) & (set(cmd.RUN_OPTIONS) | vlm | set(cmd.CLI_ONLY))
-    # each study option is its field's: the field's flag and help, or the alias the field shares
+    vlm = {o.name for o in opt.VLM_OPTIONS}
+    own = {o.name for o in cmd.SETTING_OPTIONS}
+    assert own == {f"study_{name}" for name in fields}
+    assert set(options) == own | set(cmd.RUN_OPTIONS) | vlm | set(cmd.CLI_ONLY)
+    assert not own & (set(cmd.RUN_OPTIONS) | vlm | set(cmd.CLI_ONLY))
+    # each study option is its field's: the field's flag and help
     for name, f in fields.items():
         flag = f.metadata.get("flag", "--" + name.replace("_", "-"))
-        assert options[name].opts == [flag], name
-        shared = cmd.SHARED.get(name)
-        help_text = shared.__metadata__[0].help if shared is not None else help_of(f)  # type: ignore[attr-defined]
-        assert options[name].help == help_text and help_text, name
+        assert options[f"study_{name}"].opts == [flag], name
+        assert options[f"study_{name}"].help == help_of(f) and help_of(f), name
     # each run option sets a key of the runs' own config
     run_fields = {f.name for f in dataclasses.fields(RunConfig)}
     keys = opt._RUN_KEYS | {"seeds": "seeds", "seed_list": "seeds"}

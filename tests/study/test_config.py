@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.study.config import build_study, choose_regimes, study_section
+from vlmrl_cli.study.config import build_study, choose_regimes, settings_of, study_section
 from vlmrl_cli.tasks.registry import get_task
 
 
@@ -53,7 +53,7 @@ def test_file_regimes_and_variants() -> None:
 @pytest.mark.parametrize("raw", [{"regimes": {"a": 3}}, {"regimez": {}}, {"flickers": ["x"]}])
 def test_bad_study_tables(raw: dict) -> None:  # type: ignore[type-arg]
     with pytest.raises(BadInput):
-        study_section(raw)
+        settings_of([raw])
 
 
 def test_a_study_of_another_task_takes_its_study_preset_thresholds_and_window() -> None:
@@ -93,10 +93,12 @@ def test_the_study_table_layers_file_then_set_then_flags(tmp_path) -> None:  # t
     assert [r.id for r in over.regimes] == ["x"] and over.margin == 1.3 and not over.cells
 
 
-@pytest.mark.parametrize(("raw", "needle"), [({"states": 1}, "study.states must be an integer >= 2"),
+@pytest.mark.parametrize(("raw", "needle"), [({"states": 1}, "study.states = 1: input should be greater than or "
+                                                               "equal to 2"),
                                              ({"states": 2.5}, "study.states"), ({"margin": "big"}, "study.margin"),
                                              ({"adjust": 3}, "study.adjust"), ({"out": 3}, "study.out"),
-                                             ({"margn": 1.2}, "did you mean 'margin'")])
+                                             ({"adjust": "holmm"}, "did you mean 'holm'"),
+                                             ({"margn": 1.2}, "did you mean 'study.margin'")])
 def test_bad_study_settings(raw: dict, needle: str) -> None:  # type: ignore[type-arg]
     with pytest.raises(BadInput, match=needle):
-        study_section(raw)
+        settings_of([raw])

@@ -7,13 +7,7 @@ import subprocess
 import sys
 
 from vlmrl_cli.core.fields import help_of
-from vlmrl_cli.study.settings import DEFAULT_STATES, StudySettings
-
-
-def test_the_taxonomy_sweep_is_the_taxonomy_commands_own() -> None:
-    from vlmrl_cli.probe.scoring import DEFAULT_STATES as TAXONOMY_STATES
-
-    assert DEFAULT_STATES == TAXONOMY_STATES == StudySettings().states
+from vlmrl_cli.study.settings import StudySettings
 
 
 def test_every_setting_says_what_it_is() -> None:

@@ -6,6 +6,9 @@ from __future__ import annotations
 
 #: Bootstrap resamples of an interval.
 DEFAULT_N_BOOT = 2000
+#: Bootstrap resamples of each simulated study's interval in a power figure (``analysis/power.py``), for
+#: callers that still pass one: the interval is no longer a bootstrap (``censored.log_ratio_bounds``).
+DEFAULT_POWER_N_BOOT = 200
 #: The rank test is exact (every split of the seeds counted) up to this many splits: C(60, 30), whose
 #: counts still fit int64. The splits are counted by their rank sums, not one by one, so 10 vs 10
 #: (C(20, 10) = 184,756 splits) takes a millisecond; beyond, the normal approximation, labelled so.

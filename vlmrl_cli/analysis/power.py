@@ -29,11 +29,10 @@ import numpy as np
 from scipy import stats as sps
 
 from vlmrl_cli.analysis.censored import log_ratio_bounds
+from vlmrl_cli.analysis.defaults import DEFAULT_POWER_N_BOOT
 
 #: Simulated studies per power figure (Monte Carlo standard error at 80% power: about 0.013).
 DEFAULT_N_SIMS = 1_000
-#: Kept for callers: the interval is no longer a bootstrap (``censored.log_ratio_bounds``).
-DEFAULT_N_BOOT = 200
 
 
 def reference_median(reliability: float, sd_log: float, budget: float, n: int) -> float:
@@ -81,7 +80,7 @@ def _interval_above_one(ref: np.ndarray, arm: np.ndarray, budget: float, ci: flo
 
 def censored_power(rng: np.random.Generator, speedup: float, n: int, sd_log: float, reliability: float,
                    budget: float, alpha: float = 0.05, family: int = 1, interval: bool = True,
-                   n_sims: int = DEFAULT_N_SIMS, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95,
+                   n_sims: int = DEFAULT_N_SIMS, n_boot: int = DEFAULT_POWER_N_BOOT, ci: float = 0.95,
                    sd_log_arm: float | None = None) -> float:
     """The probability that a study of ``n`` seeds per arm calls an arm ``speedup`` times faster than
     the reference "faster" (module docstring), by ``n_sims`` simulated studies; ``sd_log`` is the

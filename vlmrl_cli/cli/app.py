@@ -65,12 +65,17 @@ SUMMARY_WIDTH = 60
 
 def _register() -> None:
     from vlmrl_cli.cli import calibrate, compare, evaluate, report, run, study, taxonomy, transfer, verify
+    from vlmrl_cli.cli.options import VLM_OPTIONS, fields_command
 
+    # the options built from config fields that a command takes beside its signature's
+    field_options = {"taxonomy": VLM_OPTIONS, "run": VLM_OPTIONS, "calibrate": VLM_OPTIONS,
+                     "study": study.FIELD_OPTIONS}
     for name, command in (("taxonomy", taxonomy.taxonomy), ("run", run.run), ("report", report.report),
                           ("compare", compare.compare), ("calibrate", calibrate.calibrate),
                           ("evaluate", evaluate.evaluate), ("study", study.study), ("export", transfer.export),
                           ("import", transfer.import_), ("verify", verify.verify)):
-        app.command(name, short_help=SUMMARIES[name])(command)
+        cls = fields_command(*field_options[name]) if name in field_options else None
+        app.command(name, short_help=SUMMARIES[name], cls=cls)(command)
 
 
 _register()

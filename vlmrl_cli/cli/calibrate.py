@@ -13,7 +13,6 @@ from rich.console import Console
 from vlmrl_cli.cli import options as opt
 from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.progress import RichSweepReporter
-from vlmrl_cli.vlm.config import VLMConfig
 
 Grid = Annotated[
     list[str] | None,
@@ -29,10 +28,8 @@ Out = Annotated[Path, typer.Option("--out", help="Output folder of calibration.m
 DryRun = Annotated[bool, typer.Option("--dry-run", help="Print the regimes and the cost estimate; train nothing.")]
 
 
-@opt.with_vlm_options
 def calibrate(
     ctx: typer.Context,
-    vlm_cfg: VLMConfig,
     seeds: opt.Seeds = 10,
     seed_list: opt.SeedList = None,
     task: opt.TaskOpt = None,
@@ -59,7 +56,7 @@ def calibrate(
 
     console = Console()
     with exit_codes():
-        file_layer, *upper = opt.config_layers(ctx, config, sets, vlm_cfg)
+        file_layer, *upper = opt.config_layers(ctx, config, sets)
         file_grid = calibrate_section(file_layer.pop("calibrate", {}))
         regimes = build_regimes([file_layer, *upper], file_grid | grid_flags(grid or []), command_tasks([task]))
         opt.check_sim_flags(ctx, regimes[0].run.arms, regimes[0].run.vlm.backend,

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from vlmrl_cli.cli.exit_codes import exit_codes
-from vlmrl_cli.cli.options import CachePath, NoCache, TrackingUri, TrustPickle, UserTasks
+from vlmrl_cli.cli.options import CachePath, TrackingUri, TrustPickle, UseCache, UserTasks
 from vlmrl_cli.vlm.config import DEFAULT_CACHE
 
 EvalOut = Annotated[Path | None, typer.Option(
@@ -90,7 +90,7 @@ def evaluate(
     ] = 0,
     out: EvalOut = None,
     tracking_uri: TrackingUri = None,
-    no_cache: NoCache = False,
+    use_cache: UseCache = True,
     cache_path: CachePath = DEFAULT_CACHE,
     arm: Annotated[str | None, typer.Option("--arm", help="With a sweep's parent run id: the arm of the child "
                                                           "run to evaluate.")] = None,
@@ -110,7 +110,7 @@ def evaluate(
     with exit_codes():
         tasks = command_tasks(user_task or ())
         cfg = EvaluateConfig(run_id=run_id, tracking_uri=tracking_uri, out=out, episodes=episodes,
-                             episode_index=episode_index, use_cache=not no_cache, cache_path=cache_path,
+                             episode_index=episode_index, use_cache=use_cache, cache_path=cache_path,
                              trust_pickle=trust_pickle)
         cfg.validate()  # the flags, before the store is opened
         cfg = dataclasses.replace(cfg, run_id=resolve_child(run_id, tracking_uri, arm, seed))

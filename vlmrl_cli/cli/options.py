@@ -2,25 +2,28 @@
 
 from __future__ import annotations
 
-import enum
-import functools
-import inspect
+import copy
+import dataclasses
 import typing
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from annotated_types import Ge, Interval
+from typer.core import TyperCommand
 
-from vlmrl_cli.analysis.multiplicity import METHODS
 from vlmrl_cli.core.errors import BadInput
+from vlmrl_cli.core.fields import help_of, rules_of
 from vlmrl_cli.shaping.arms import ARMS
+from vlmrl_cli.study.settings import StudySettings
 from vlmrl_cli.tasks.registry import get_task
-from vlmrl_cli.training.config import DEFAULT_PRESET, DEFAULT_TASK, seed_count_problem, source_layers
+from vlmrl_cli.training.config import DEFAULT_PRESET, DEFAULT_TASK, RunConfig, seed_count_problem, source_layers
 from vlmrl_cli.training.events import EXECUTORS
-from vlmrl_cli.training.presets import preset_names
-from vlmrl_cli.vlm.config import BACKENDS, DEFAULT_SIM_PROFILE, SimKnobs, VLMConfig, sim_profiles
+from vlmrl_cli.training.overrides import nest
+from vlmrl_cli.training.presets import PPOConfig, preset_names
+from vlmrl_cli.vlm.config import SimKnobs, VLMConfig, resolve_sim_profile
 
 TrackingUri = Annotated[
     str | None,
@@ -28,8 +31,6 @@ TrackingUri = Annotated[
 ]
 OutDir = Annotated[Path | None, typer.Option("--out", help="Output folder (default under results/).")]
 Experiment = Annotated[str, typer.Option("--experiment", help="MLflow experiment name.")]
-Margin = Annotated[float, typer.Option(
-    "--margin", help="Equivalence margin of a speedup: 'equivalent' when the 90% interval lies inside [1/M, M].")]
 
 def choices(names: Sequence[str]) -> str:
     """The metavar listing an option's choices in the help (``[a|b|c]``); the values are checked,
@@ -37,142 +38,134 @@ def choices(names: Sequence[str]) -> str:
     return "[" + "|".join(names) + "]"
 
 
-Adjust = Annotated[str, typer.Option(
-    "--adjust", metavar=choices(METHODS),
-    help="Multiplicity adjustment of the speedups' p-values within the command's family of comparisons: holm "
-         "(Holm's step-down, the family-wise error rate), bh (Benjamini-Hochberg, the false discovery rate) or none. "
-         "Verdicts use the adjusted p.")]
 
 
-_DEFAULT = VLMConfig()
-_SIM = SimKnobs()
-#: The profiles as a choice typer validates and lists in the help: the generic ones and the default
-#: task's own (a run of another task is checked against its own where its layers are resolved).
-_PROFILE_TASK = get_task(DEFAULT_TASK)
-SimProfileName = enum.StrEnum(  # type: ignore[misc]
-    "SimProfileName", [(name, name) for name in sim_profiles(_PROFILE_TASK)])
+# --- options built from a config's fields --------------------------------------------------
+
+#: Where a ``fields_command`` leaves the options typed on the command line for the command to read.
+_TYPED = "vlmrl.typed_fields"
+
+
+def field_option(f: dataclasses.Field[Any], hint: Any, flag: str, shown_default: bool | str = True) -> Any:
+    """The ``Annotated`` typer option ``flag`` (``--a/--no-a`` for a switch) of config field ``f``
+    (of type ``hint``), declared by the field alone: the help is the field's ``help``, the range
+    its ``Ge``/``Interval`` rules (an ``AtMost``, refused with its reason, and a ``Gt``, open, are
+    left to the config's validation)."""
+    bounds: dict[str, Any] = {}
+    for rule in rules_of(f):
+        if isinstance(rule, Ge | Interval) and rule.ge is not None:
+            bounds["min"] = rule.ge
+        if isinstance(rule, Interval) and rule.le is not None:
+            bounds["max"] = rule.le
+    return Annotated[hint, typer.Option(flag, help=help_of(f), show_default=shown_default, **bounds)]
+
+
+#: How the text of a flag becomes its field's value, by the field's type: (the option's type, the parser).
+Syntax = Mapping[Any, tuple[Any, Callable[[Any, str], Any]]]
 
 
 @dataclass(frozen=True)
-class VlmOption:
-    """One shared VLM option, declared once: its parameter, the ``VLMConfig`` field it sets (dotted
-    under ``sim.`` for a ``SimKnobs`` field), its type, flag, help and typer's extra checks. The
-    typer options, the config mapping and the help's defaults all derive from this table."""
+class FieldOption:
+    """The option of one config field: its parameter name, the dotted config key it sets, its
+    flag, its ``Annotated`` typer option, its default and the parser of the flag's value."""
 
-    param: str
-    target: str
-    kind: Any
+    name: str
+    key: str
     flag: str
-    help: str
-    extra: dict[str, Any] = field(default_factory=dict)
-    # the option's default when it is not the field's own (None: "the profile's"; the inverted no-cache)
-    default: Any = "field"
+    annotation: Any
+    default: Any
+    parse: Callable[[Any, str], Any]
 
-    @property
-    def annotation(self) -> Any:
-        return Annotated[self.kind, typer.Option(self.flag, help=self.help, **self.extra)]
+    def click_param(self) -> Any:
+        """The click option typer would make of a parameter ``name: annotation = default``."""
+        from typer import main
+        from typer.models import ParamMeta
 
-    @property
-    def default_value(self) -> Any:
-        if self.default != "field":
-            return self.default
-        holder: Any = _SIM if self.target.startswith("sim.") else _DEFAULT
-        return getattr(holder, self.target.removeprefix("sim."))
-
-
-VLM_OPTIONS: tuple[VlmOption, ...] = (
-    VlmOption("vlm", "backend", str, "--vlm", "VLM backend: sim (simulated, default), hf, openai, replay.",
-              {"metavar": choices(BACKENDS)}),
-    VlmOption("model", "model", str | None, "--model",
-              "hf: hub id or local path; openai: served model name; sim/replay: ignored."),
-    VlmOption("base_url", "base_url", str | None, "--base-url", "openai: server URL, e.g. http://localhost:11434/v1."),
-    VlmOption("api_key_env", "api_key_env", str, "--api-key-env", "openai: environment variable holding the API key."),
-    VlmOption("device", "device", str | None, "--device", "hf: torch device (default: cuda if present)."),
-    VlmOption("dtype", "dtype", str, "--dtype", "hf: torch dtype (auto, float32, float16, bfloat16)."),
-    VlmOption("max_new_tokens", "max_new_tokens", int, "--max-new-tokens", "hf/openai: answer length cap.",
-              {"min": 1}),
-    VlmOption("timeout", "timeout_s", float, "--timeout", "openai: seconds per request.", {"min": 0.1}),
-    VlmOption("retries", "retries", int, "--retries", "openai: retries with exponential backoff.", {"min": 0}),
-    VlmOption("transcript", "transcript_in", Path | None, "--transcript",
-              "replay: JSONL transcript (default: the paper's Table 1 outputs)."),
-    VlmOption("no_cache", "use_cache", bool, "--no-cache", "Bypass the on-disk VLM response cache.", default=False),
-    VlmOption("cache_path", "cache_path", Path, "--cache-path", "sqlite file of the VLM response cache."),
-    VlmOption("sim_profile", "sim.profile", SimProfileName, "--sim-profile",
-              "sim: named set of knobs: ideal (no noise), default (the results so far), llava-table1 (the paper's "
-              "Table 1 failures). Explicit --sim-* knobs beat the profile's values.",
-              default=SimProfileName(DEFAULT_SIM_PROFILE)),
-    VlmOption("sim_flicker", "sim.flicker", float | None, "--sim-flicker",
-              "sim: P(neighbouring MCQ label) [default: the profile's].", {"min": 0.0, "max": 1.0}, default=None),
-    VlmOption("sim_float_noise", "sim.float_noise", float | None, "--sim-float-noise",
-              "sim: std of float answers, x units [default: the profile's].", {"min": 0.0}, default=None),
-    VlmOption("sim_seed", "sim.seed", int, "--sim-seed", "sim: seed of the simulated answers."),
-    VlmOption("sim_latency", "sim.latency_s", float, "--sim-latency", "sim: fixed seconds per query.", {"min": 0.0}),
-)
-_BY_PARAM = {o.param: o for o in VLM_OPTIONS}
-#: The cache options alone, for a command that takes no other VLM option (``evaluate``).
-NoCache = _BY_PARAM["no_cache"].annotation
-CachePath = _BY_PARAM["cache_path"].annotation
-_INVERTED = {"no_cache"}  # a flag that sets its field to the opposite
-# sim knobs that default to the profile's value: laid over the profile only when given
-_OVER_PROFILE = {"sim_flicker", "sim_float_noise"}
+        # what typer does with an ``Annotated`` parameter: its first string is the flag
+        kind, info = typing.get_args(self.annotation)[0], copy.copy(self.annotation.__metadata__[0])
+        info.param_decls, info.default = (info.default, *(info.param_decls or ())), self.default
+        meta = ParamMeta(name=self.name, default=info, annotation=kind)
+        if hasattr(main, "_get_param"):  # a recent typer, which runs its own copy of click
+            return main._get_param(meta)
+        return main.get_click_param(meta)[0]  # type: ignore[attr-defined]  # pragma: no cover - older typer
 
 
-def vlm_config(**values: Any) -> VLMConfig:
-    """The ``VLMConfig`` of the shared VLM options (``VLM_OPTIONS``, by parameter name): the
-    profile's knobs, then the knobs given.
+def _as_typed(value: Any, flag: str) -> Any:
+    return value
+
+
+def field_options(cls: type, key: str, flag_prefix: str = "", defaults: bool = True, shown_default: bool | str = True,
+                  syntax: Syntax | None = None) -> tuple[FieldOption, ...]:
+    """One option per field of config dataclass ``cls`` (a nested dataclass field gets none: give
+    it its own ``field_options``): the flag ``--{flag_prefix}{name}`` (or the field's ``flag``),
+    setting the config key ``{key}.{name}`` when typed. Its default is the field's (else None,
+    where the default comes from elsewhere), the help states ``shown_default`` where it is text.
+    ``syntax`` maps a field type to the option's type and the parser of its text, where they differ.
 
     Example:
-        >>> defaults = {o.param: o.default_value for o in VLM_OPTIONS}
-        >>> vlm_config(**defaults) == VLMConfig()
-        True
-        >>> vlm_config(**(defaults | {"sim_flicker": 0.3, "no_cache": True})).sim.flicker
-        0.3
+        >>> [o.flag for o in field_options(SimKnobs, "vlm.sim", "sim-")][:2]
+        ['--sim-flicker', '--sim-float-noise']
     """
-    top: dict[str, Any] = {}
-    sim: dict[str, Any] = {}
-    for option in VLM_OPTIONS:
-        value = values[option.param]
-        if option.param in _INVERTED:
-            value = not value
-        if isinstance(value, enum.Enum):
-            value = value.value
-        if option.param in _OVER_PROFILE and value is None:
+    hints = typing.get_type_hints(cls)
+    out = []
+    for f in dataclasses.fields(cls):
+        if dataclasses.is_dataclass(hints[f.name]):
             continue
-        if option.target.startswith("sim."):
-            sim[option.target.removeprefix("sim.")] = value
-        else:
-            top[option.target] = value
-    profile = str(sim.pop("profile"))
-    return VLMConfig(**top, sim=SimKnobs.of_profile(profile, _PROFILE_TASK, **sim))
+        kind, parse = (syntax or {}).get(hints[f.name], (hints[f.name] | None, _as_typed))
+        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc,operator]
+        flag = str(f.metadata.get("flag", f"--{flag_prefix}{f.name.replace('_', '-')}"))
+        out.append(FieldOption(f"{key}.{f.name}".replace(".", "_"), f"{key}.{f.name}", flag.split("/")[0],
+                               field_option(f, kind, flag, shown_default), default if defaults else None, parse))
+    return tuple(out)
 
 
-def with_vlm_options(command: Callable[..., None]) -> Callable[..., None]:
-    """Give ``command`` the shared VLM options (``VLM_OPTIONS``); it receives them as one
-    ``vlm_cfg: VLMConfig``.
+def fields_command(*options: FieldOption) -> type[TyperCommand]:
+    """The typer command class that adds ``options`` to a command's own: a command's options that
+    only set config keys, built from the config's fields (``field_options``). The command reads
+    those typed with ``typed_fields(ctx)``."""
 
-    Declared once here so ``taxonomy``, ``run``, ``calibrate`` and ``study`` cannot drift apart.
-    """
-    hints = typing.get_type_hints(command, include_extras=True)
-    own = [
-        p.replace(annotation=hints.get(p.name, p.annotation))
-        for p in inspect.signature(command).parameters.values()
-        if p.name != "vlm_cfg"
-    ]
-    shared = [
-        inspect.Parameter(o.param, inspect.Parameter.KEYWORD_ONLY, annotation=o.annotation, default=o.default_value)
-        for o in VLM_OPTIONS
-    ]
+    class FieldsCommand(TyperCommand):
+        def __init__(self, *args: Any, params: list[Any], **kwargs: Any) -> None:
+            super().__init__(*args, params=[*params, *(o.click_param() for o in options)], **kwargs)
 
-    @functools.wraps(command)
-    def wrapper(**kwargs: Any) -> None:
-        vlm_kwargs = {o.param: kwargs.pop(o.param) for o in VLM_OPTIONS}
-        command(vlm_cfg=vlm_config(**vlm_kwargs), **kwargs)
+        def invoke(self, ctx: Any) -> Any:
+            values = {o.name: ctx.params.pop(o.name) for o in options}
+            ctx.meta[_TYPED] = [(o, values[o.name]) for o in options if given(ctx, o.name)]
+            return super().invoke(ctx)
 
-    params = [p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for p in own] + shared
-    wrapper.__signature__ = inspect.Signature(params)  # type: ignore[attr-defined]
-    wrapper.__annotations__ = {p.name: p.annotation for p in params}
-    del wrapper.__wrapped__  # typer must see the merged signature, not the original
-    return wrapper
+    return FieldsCommand
+
+
+def typed_fields(ctx: typer.Context) -> dict[str, Any]:
+    """The field options (``fields_command``) typed on the command line, as dotted config keys
+    (``{"vlm.sim.flicker": 0.3}``), each parsed to its field's value."""
+    return {o.key: o.parse(value, o.flag) for o, value in ctx.meta.get(_TYPED, [])}
+
+
+def typed_flags_of(ctx: typer.Context, prefix: str) -> list[str]:
+    """The flags of the field options typed whose config key starts with ``prefix``."""
+    return [o.flag for o, _ in ctx.meta.get(_TYPED, []) if o.key.startswith(prefix)]
+
+
+#: The VLM options of the commands that ask a VLM: one per ``VLMConfig`` field and one per
+#: ``SimKnobs`` field (``--sim-*``, laid over the profile's knobs).
+VLM_OPTIONS = (*field_options(VLMConfig, "vlm"),
+               *field_options(SimKnobs, "vlm.sim", "sim-", defaults=False, shown_default="the profile's"))
+_PROFILE_TASK = get_task(DEFAULT_TASK)
+_BY_KEY = {o.key: o.annotation for o in VLM_OPTIONS}
+#: The cache options alone, for a command that takes no other VLM option (``evaluate``).
+UseCache = _BY_KEY["vlm.use_cache"]
+CachePath = _BY_KEY["vlm.cache_path"]
+
+
+def vlm_config(ctx: typer.Context) -> VLMConfig:
+    """The ``VLMConfig`` of the VLM options typed (``VLM_OPTIONS``), validated: the profile's
+    knobs (a generic one or the default task's), then the knobs given."""
+    from vlmrl_cli.training.validation import validate_as
+
+    raw = nest(typed_fields(ctx).items()).get("vlm", {})
+    raw["sim"] = resolve_sim_profile(raw.get("sim", {}), _PROFILE_TASK)
+    return typing.cast(VLMConfig, validate_as(VLMConfig, raw, at="vlm"))
 
 
 def given(ctx: typer.Context, name: str) -> bool:
@@ -181,23 +174,13 @@ def given(ctx: typer.Context, name: str) -> bool:
     return source is not None and source.name in ("COMMANDLINE", "ENVIRONMENT", "PROMPT")
 
 
-def vlm_flags(ctx: typer.Context, flags: VLMConfig) -> dict[str, Any]:
-    """The VLM options typed on the command line, as dotted config keys (``{"vlm.sim.flicker": 0.3}``)."""
-    out: dict[str, Any] = {}
-    for param, target in ((o.param, o.target) for o in VLM_OPTIONS):
-        if given(ctx, param):
-            obj: Any = flags.sim if target.startswith("sim.") else flags
-            out[f"vlm.{target}"] = getattr(obj, target.removeprefix("sim."))
-    return out
-
-
 def check_sim_flags(ctx: typer.Context, arms: Sequence[str], backend: str,
                     remedy: str = "drop it, or add an arm that uses the VLM (e.g. --arms baseline,hybrid)") -> None:
     """``BadInput`` for a simulated-VLM knob (``--sim-*``) typed for runs that never ask it: no arm
     of ``arms`` queries a VLM (the message then ends with ``remedy``), or the VLM is not the
     simulated one (``backend``). A knob from a config file is left alone: one file may serve
     several commands."""
-    typed = [o.flag for o in VLM_OPTIONS if o.target.startswith("sim.") and given(ctx, o.param)]
+    typed = typed_flags_of(ctx, "vlm.sim.")
     if not typed:
         return
     if not any(ARMS[arm].uses_vlm for arm in arms):
@@ -210,10 +193,20 @@ def check_sim_flags(ctx: typer.Context, arms: Sequence[str], backend: str,
 
 # --- the options of commands that train (`run`, `calibrate`) and how they layer -----------
 
+def _field(cls: type, name: str) -> dataclasses.Field[Any]:
+    return next(f for f in dataclasses.fields(cls) if f.name == name)
+
+
+#: The verdicts' knobs of `report`, declared with the study's (``StudySettings``).
+Margin = field_option(_field(StudySettings, "margin"), float, "--margin", shown_default=False)
+Adjust = field_option(_field(StudySettings, "adjust"), str, "--adjust", shown_default=False)
+
+
+
 Arms = Annotated[str, typer.Option("--arms", help=f"Comma-separated arms, any of: {', '.join(ARMS)}.")]
 Seeds = Annotated[int, typer.Option("--seeds", help="Number of seeds: 0..N-1.")]
 SeedList = Annotated[str | None, typer.Option("--seed-list", help="Explicit seeds, e.g. 3,7,11.")]
-Timesteps = Annotated[int | None, typer.Option("--timesteps", help="Budget per run (= --set ppo.timesteps=N).")]
+Timesteps = field_option(_field(PPOConfig, "timesteps"), int | None, "--timesteps", shown_default=False)
 # No default of its own: a run that names no preset takes its task's (``Task.default_preset``), so
 # the help states that rather than one task's name (``[default: paper]`` is false for Acrobot).
 Preset = Annotated[str | None, typer.Option(
@@ -232,7 +225,7 @@ UserTasks = Annotated[list[str] | None, typer.Option(
     "--user-task", metavar="MODULE:NAME",
     help="A task of your own code that the runs recorded, imported for them (repeatable): vlmrl imports a module "
          "only when the command line names it, never from a file, an export or a store.")]
-Workers = Annotated[int | None, typer.Option("--workers", help="Worker processes (default: cores).")]
+Workers = field_option(_field(RunConfig, "workers"), int | None, "--workers", shown_default=False)
 ExecutorOpt = Annotated[str | None, typer.Option(
     "--executor", metavar=choices(EXECUTORS),
     help="Where jobs run: local (a process pool, the default) or ray (tasks on a Ray cluster; pip install "
@@ -240,9 +233,7 @@ ExecutorOpt = Annotated[str | None, typer.Option(
 RayAddress = Annotated[str | None, typer.Option(
     "--ray-address", help="Ray cluster to join with --executor ray (default: a cluster running on this machine, "
                           "else a new local Ray instance with --workers CPUs).")]
-EvalEpisodes = Annotated[
-    int | None, typer.Option("--eval-episodes", help="Detached evaluation episodes (= --set ppo.eval_episodes=N).")
-]
+EvalEpisodes = field_option(_field(PPOConfig, "eval_episodes"), int | None, "--eval-episodes", shown_default=False)
 ConfigFile = Annotated[Path | None, typer.Option("--config", help="TOML file with any of these knobs.")]
 Sets = Annotated[
     list[str] | None,
@@ -288,9 +279,10 @@ def seeds_of(n: int, seed_list: str | None) -> tuple[int, ...]:
     return tuple(range(n))
 
 
-def typed_flags(ctx: typer.Context, vlm_cfg: VLMConfig) -> dict[str, Any]:
+def typed_flags(ctx: typer.Context) -> dict[str, Any]:
     """The options of a training command typed on the command line, as dotted config keys: the top
-    layer of its configuration (``{"arms": ["baseline"], "ppo.timesteps": 512}``)."""
+    layer of its configuration (``{"arms": ["baseline"], "ppo.timesteps": 512}``), its field
+    options (``typed_fields``) included."""
     p = ctx.params
     flags: dict[str, Any] = {key: p[param] for param, key in _RUN_KEYS.items() if given(ctx, param)}
     if "arms" in flags:
@@ -299,11 +291,10 @@ def typed_flags(ctx: typer.Context, vlm_cfg: VLMConfig) -> dict[str, Any]:
         raise BadInput("--seeds and --seed-list both given; pass --seeds N for 0..N-1 or --seed-list A,B,... alone.")
     if given(ctx, "seeds") or given(ctx, "seed_list"):
         flags["seeds"] = list(seeds_of(p["seeds"], p.get("seed_list")))
-    return flags | vlm_flags(ctx, vlm_cfg)
+    return flags | typed_fields(ctx)
 
 
-def config_layers(ctx: typer.Context, config: Path | None, sets: list[str] | None, vlm_cfg: VLMConfig
-                  ) -> list[dict[str, Any]]:
+def config_layers(ctx: typer.Context, config: Path | None, sets: list[str] | None) -> list[dict[str, Any]]:
     """The raw layers of a training command's configuration above the preset, lowest first: the
     config file, ``--set`` assignments, then the flags typed on the command line."""
-    return source_layers(config, typed_flags(ctx, vlm_cfg), sets or [])
+    return source_layers(config, typed_flags(ctx), sets or [])

@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 from rich.console import Console
 
+from vlmrl_cli.analysis.defaults import DEFAULT_MARGIN
+from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST
 from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import Adjust, Experiment, Margin, OutDir, TrackingUri, UserTasks
 from vlmrl_cli.core.errors import BadInput
@@ -63,8 +65,8 @@ def report(
     window: Annotated[int | None, typer.Option(
         "--window", help="Episodes in the rolling mean return [default: the task's; MountainCar's 100].",
         show_default=False)] = None,
-    margin: Margin = 1.15,
-    adjust: Adjust = "holm",
+    margin: Margin = DEFAULT_MARGIN,
+    adjust: Adjust = DEFAULT_ADJUST,
     user_task: UserTasks = None,
     allow_mixed_paths: Annotated[bool, typer.Option(
         "--allow-mixed-paths", help="Compare runs computed on different numeric paths (vlmrl.pin tags) instead of "

@@ -25,13 +25,11 @@ from vlmrl_cli.cli.options import (
     Workers,
     check_sim_flags,
     typed_flags,
-    with_vlm_options,
 )
 from vlmrl_cli.cli.progress import RichSweepReporter
 from vlmrl_cli.tasks.registry import command_tasks
 from vlmrl_cli.training.config import DEFAULT_EXPERIMENT, RunConfig, to_toml
 from vlmrl_cli.training.events import SweepSummary
-from vlmrl_cli.vlm.config import VLMConfig
 
 DryRun = Annotated[
     bool, typer.Option("--dry-run", help="Print the resolved config (TOML) and the job list; train nothing.")
@@ -42,10 +40,8 @@ VlmQps = Annotated[float, typer.Option(
          "transformers at batch 1; a vLLM/SGLang server with many requests in flight answers 10-20).")]
 
 
-@with_vlm_options
 def run(
     ctx: typer.Context,
-    vlm_cfg: VLMConfig,
     arms: Arms = "baseline,hybrid",
     task: TaskOpt = None,
     seeds: Seeds = 5,
@@ -71,7 +67,7 @@ def run(
 
     console = Console(stderr=False)
     with exit_codes():
-        cfg = RunConfig.from_sources(config, typed_flags(ctx, vlm_cfg), sets or [], tasks=command_tasks([task]))
+        cfg = RunConfig.from_sources(config, typed_flags(ctx), sets or [], tasks=command_tasks([task]))
         check_sim_flags(ctx, cfg.arms, cfg.vlm.backend)
         check_store(cfg.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
         # the sweep's modules load torch and MLflow (seconds): only once the store is known to be usable

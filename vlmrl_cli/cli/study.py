@@ -1,35 +1,28 @@
 """`vlmrl study`: regimes x arms x seeds and the hybrid's VLM-quality variants, one regime map and report.
 
 The study's own options are the fields of ``StudySettings`` (``study/settings.py``), one option
-per field, built here from the field (``SETTING_OPTIONS``); its runs take `vlmrl run`'s options
-(``RUN_OPTIONS``) and the VLM options; ``CLI_ONLY`` are the few that set no config key. Which
-layer wins (file < ``--set`` < flags) is ``StudyConfig.from_sources``'s business, not this module's.
+per field, built from the field (``SETTING_OPTIONS``, ``options.field_options``); its runs take
+`vlmrl run`'s options (``RUN_OPTIONS``, in the signature) and the VLM options (``VLM_OPTIONS``);
+``CLI_ONLY`` are the few that set no config key. Which layer wins (file < ``--set`` < flags)
+is ``StudyConfig.from_sources``'s business, not this module's.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import functools
-import inspect
 import sys
-import typing
-from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
-from annotated_types import Ge
 from rich.console import Console
 
 from vlmrl_cli.cli import options as opt
 from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.progress import RichSweepReporter
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.core.fields import help_of, rules_of
 from vlmrl_cli.study.settings import DEFAULT_ARMS, DEFAULT_EXPERIMENT, DEFAULT_SEEDS, Regimes, StudySettings
 from vlmrl_cli.tasks.registry import command_tasks
-from vlmrl_cli.vlm.config import VLMConfig
 
 if TYPE_CHECKING:
     from vlmrl_cli.calibration.regimes import Regime
@@ -48,8 +41,6 @@ RUN_OPTIONS = ("arms", "task", "seeds", "seed_list", "timesteps", "workers", "ex
                "eval_episodes", "experiment", "tracking_uri")
 #: The options that set no config key: where the layers come from, and what to do with the study.
 CLI_ONLY = ("config", "sets", "dry_run", "no_train")
-#: The ``StudySettings`` fields whose option other commands share: the alias in ``cli/options.py``.
-SHARED = {"margin": opt.Margin, "adjust": opt.Adjust}
 
 
 def _names(text: str, flag: str) -> list[str]:
@@ -76,78 +67,20 @@ def _regimes(texts: list[str], flag: str) -> dict[str, dict[str, Any]]:
     return regimes_of(texts)
 
 
-def _as_typed(value: Any, flag: str) -> Any:
-    return value
-
-
 #: How the text of a flag becomes its field's value, by the field's type: (the option's type, the parser).
-_SYNTAX: dict[Any, tuple[Any, Callable[[Any, str], Any]]] = {
+_SYNTAX: opt.Syntax = {
     tuple[str, ...]: (str | None, _names),
     tuple[float, ...]: (str | None, _numbers),
     Regimes: (list[str] | None, _regimes),
 }
+#: The study's own options, one per ``StudySettings`` field; with the VLM options, the options
+#: that `vlmrl study` adds to its signature's (``cli/app.py`` registers it with them).
+SETTING_OPTIONS = opt.field_options(StudySettings, "study", defaults=False, shown_default=False, syntax=_SYNTAX)
+FIELD_OPTIONS = (*SETTING_OPTIONS, *opt.VLM_OPTIONS)
 
 
-@dataclass(frozen=True)
-class SettingOption:
-    """The option of one ``StudySettings`` field: a flag of the field's name (or its ``flag``), the
-    field's help and checks (or the shared alias of ``SHARED``), and the parser of the flag's text."""
-
-    name: str
-    flag: str
-    annotation: Any
-    default: Any
-    parse: Callable[[Any, str], Any]
-
-
-def setting_option(f: dataclasses.Field[Any], hint: Any) -> SettingOption:
-    """The option of field ``f`` (of type ``hint``). An option of its own defaults to None, "not
-    given", and its help states the field's default; a shared one shows the field's default."""
-    flag = str(f.metadata.get("flag", "--" + f.name.replace("_", "-")))
-    if f.name in SHARED:
-        return SettingOption(f.name, flag, SHARED[f.name], f.default, _as_typed)
-    kind, parse = _SYNTAX.get(hint, (hint | None, _as_typed))
-    least = typing.cast(float | None, next((rule.ge for rule in rules_of(f) if isinstance(rule, Ge)), None))
-    return SettingOption(f.name, flag, Annotated[kind, typer.Option(flag, help=help_of(f), min=least)], None, parse)
-
-
-_HINTS = typing.get_type_hints(StudySettings)
-SETTING_OPTIONS = tuple(setting_option(f, _HINTS[f.name]) for f in dataclasses.fields(StudySettings))
-
-
-def with_setting_options(command: Callable[..., None]) -> Callable[..., None]:
-    """Give ``command`` the options of ``SETTING_OPTIONS``, first after its ``ctx``; it reads the
-    ones typed with ``setting_flags(ctx)``."""
-    hints = typing.get_type_hints(command, include_extras=True)
-    own = [p.replace(annotation=hints.get(p.name, p.annotation), kind=inspect.Parameter.KEYWORD_ONLY)
-           for p in inspect.signature(command).parameters.values()]
-    added = [inspect.Parameter(o.name, inspect.Parameter.KEYWORD_ONLY, annotation=o.annotation, default=o.default)
-             for o in SETTING_OPTIONS]
-    params = [p for p in own if p.name == "ctx"] + added + [p for p in own if p.name != "ctx"]
-
-    @functools.wraps(command)
-    def wrapper(**kwargs: Any) -> None:
-        for o in SETTING_OPTIONS:
-            kwargs.pop(o.name)
-        command(**kwargs)
-
-    wrapper.__signature__ = inspect.Signature(params)  # type: ignore[attr-defined]
-    wrapper.__annotations__ = {p.name: p.annotation for p in params}
-    del wrapper.__wrapped__  # typer must see the merged signature, not the original
-    return wrapper
-
-
-def setting_flags(ctx: typer.Context) -> dict[str, Any]:
-    """The study's settings typed on the command line, as dotted config keys (``{"study.alphas":
-    [25.0]}``): the top layer of its ``[study]`` table."""
-    return {f"study.{o.name}": o.parse(ctx.params[o.name], o.flag) for o in SETTING_OPTIONS if opt.given(ctx, o.name)}
-
-
-@opt.with_vlm_options
-@with_setting_options
 def study(
     ctx: typer.Context,
-    vlm_cfg: VLMConfig,
     arms: StudyArms = None,
     task: opt.TaskOpt = None,
     seeds: opt.Seeds = DEFAULT_SEEDS,
@@ -172,7 +105,7 @@ def study(
 
     console = Console()
     with exit_codes():
-        cfg = StudyConfig.from_sources(config, opt.typed_flags(ctx, vlm_cfg) | setting_flags(ctx), sets or [],
+        cfg = StudyConfig.from_sources(config, opt.typed_flags(ctx), sets or [],
                                        tasks=command_tasks([task]))
         check_out_folder(cfg.out)  # the pipeline checks it again; here, before its modules load (seconds)
         check_store(cfg.base.tracking_uri, write=not dry_run)  # before MLflow, the header or any file

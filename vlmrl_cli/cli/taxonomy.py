@@ -14,7 +14,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from vlmrl_cli.cli.exit_codes import exit_codes
-from vlmrl_cli.cli.options import Experiment, OutDir, TaskOpt, TrackingUri, with_vlm_options
+from vlmrl_cli.cli.options import Experiment, OutDir, TaskOpt, TrackingUri, vlm_config
 from vlmrl_cli.vlm.config import VLMConfig
 
 States = Annotated[
@@ -44,9 +44,8 @@ def _is_papers_task(name: str) -> bool:
     return False  # exit_codes() has exited
 
 
-@with_vlm_options
 def taxonomy(
-    vlm_cfg: VLMConfig,
+    ctx: typer.Context,
     task: TaskOpt = None,
     states: States = None,
     out: OutDir = None,
@@ -55,9 +54,10 @@ def taxonomy(
 ) -> None:
     """Probe a VLM with float, box and MCQ prompts (paper Section 2); write Table 1 and Figure 1."""
     with exit_codes():
+        vlm_cfg = vlm_config(ctx)
         _check_flags(vlm_cfg, states, out, tracking_uri, experiment)
     # the probe's modules load scipy and pandas (seconds): only once the flags are known to be usable
-    from vlmrl_cli.probe.scoring import DEFAULT_STATES
+    from vlmrl_cli.probe.states import DEFAULT_STATES
     from vlmrl_cli.probe.table1 import with_ci
     from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
     from vlmrl_cli.tasks.registry import command_tasks
@@ -127,7 +127,7 @@ def _other_task(name: str, vlm_cfg: VLMConfig, states: int | None, out: Path | N
                 experiment: str, console: Console) -> None:
     """Table 1 and Figure 1 of another task: its milestone MCQ (``probe/milestones.py``)."""
     from vlmrl_cli.probe.milestones import run_milestone_taxonomy
-    from vlmrl_cli.probe.scoring import DEFAULT_STATES
+    from vlmrl_cli.probe.states import DEFAULT_STATES
     from vlmrl_cli.tasks.registry import command_tasks
     from vlmrl_cli.tracking.store import check_store
 

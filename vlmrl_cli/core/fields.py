@@ -4,7 +4,9 @@ its rules (``annotated_types`` ranges, pydantic validators) in the field's metad
     n_envs: int = field(default=16, metadata={"rules": (Ge(1), AtMost(256, "...")), "help": "parallel envs"})
 
 The input schema (``training/validation.py``) applies ``rules_of`` to every field; the docs'
-configuration reference prints both. A renamed field keeps its rules.
+configuration reference prints both; a command's option of the field (``cli/options.field_option``)
+takes its help and range from them, and its flag from ``"flag"`` where it is not ``--NAME``. A
+renamed field keeps its rules.
 """
 
 from __future__ import annotations

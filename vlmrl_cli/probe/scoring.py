@@ -22,6 +22,7 @@ import numpy as np
 from vlmrl_cli.core.errors import BadInput, MissingAnswer
 from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.probe import metrics
+from vlmrl_cli.probe.states import DEFAULT_STATES
 from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.client import VLMClient
@@ -35,12 +36,6 @@ from vlmrl_cli.vlm.parsers import (
     parse_mcq,
 )
 from vlmrl_cli.vlm.prompts import NumberProbe, NumberQuestions, NumberRenderer, NumberTruth, Prompt, PromptKind
-
-# 101 sweep positions (+ the paper's two frames): a rank correlation of 0 over 103 frames has a 95%
-# interval of about +-0.2 (25 positions gave +-0.4, too wide to tell "no rank signal" from a weak
-# one), and on MountainCar no position falls within 2 px of a zone edge, where a reader off by a
-# fraction of a pixel flips the label (25 positions put three frames exactly on edges).
-DEFAULT_STATES = 101
 
 
 @dataclass(frozen=True)

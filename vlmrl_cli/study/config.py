@@ -23,9 +23,9 @@ else the task's study preset (``task_regimes``)::
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import re
+import typing
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,8 +34,7 @@ from typing import Any
 from vlmrl_cli.analysis.defaults import DEFAULT_N_BOOT
 from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST, METHODS
 from vlmrl_cli.calibration.regimes import Regime, resolve_regime
-from vlmrl_cli.core.errors import BadInput, did_you_mean, first_repeated
-from vlmrl_cli.probe.states import states_problem
+from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.shaping.arms import BASELINE, DENSE, METHOD, NO_LOCK, POTENTIAL_ONLY
 from vlmrl_cli.study.settings import (
     DEFAULT_ALPHAS,
@@ -51,7 +50,6 @@ from vlmrl_cli.study.settings import (
     DEFAULT_STATES,
     PLACEBO_ARM,
     StudySettings,
-    listed,
 )
 from vlmrl_cli.tasks.base import Task, TaskLookup
 from vlmrl_cli.training.config import RunConfig, once, resolve, source_layers
@@ -68,11 +66,6 @@ LOCK_ARMS: tuple[str, ...] = (METHOD, NO_LOCK)
 DEFAULT_REGIMES: dict[str, Mapping[str, Any]] = {
     CALIBRATED: {"preset": CALIBRATED},
 }
-#: The keys of a ``[study]`` table: the fields of ``StudySettings``.
-STUDY_KEYS = tuple(f.name for f in dataclasses.fields(StudySettings))
-#: The ``[study]`` keys that hold a list, and the type of each entry.
-_LISTS: dict[str, type | tuple[type, ...]] = {"profiles": str, "flickers": (int, float), "alphas": (int, float),
-                                              "kin_scales": (int, float), "query_flickers": (int, float)}
 
 
 @dataclass(frozen=True)
@@ -237,14 +230,10 @@ def regimes_of(flags: Sequence[str]) -> dict[str, dict[str, Any]]:
 
 
 def study_section(raw: Any) -> dict[str, Any]:
-    """A config file's ``[study]`` table (or one layer's), checked: regimes as ``{name: point}``, the
-    rest as given."""
+    """A config file's ``[study]`` table (or one layer's) with its regimes as ``{name: point}``;
+    its keys and values are ``StudySettings``' to check (``settings_of``)."""
     if not isinstance(raw, Mapping):
         raise BadInput("[study] must be a table (regimes, profiles, flickers, vlm_regime).")
-    unknown = [k for k in raw if k not in STUDY_KEYS]
-    if unknown:
-        raise BadInput(f"unknown key 'study.{unknown[0]}'{did_you_mean(unknown[0], STUDY_KEYS)}; "
-                       f"[study] holds {', '.join(STUDY_KEYS)}.")
     out = dict(raw)
     regimes = raw.get("regimes")
     if regimes is not None:
@@ -255,53 +244,24 @@ def study_section(raw: Any) -> dict[str, Any]:
             else _bad_regime(str(name))
             for name, spec in regimes.items()
         }
-    for key, kind in _LISTS.items():
-        values = raw.get(key)
-        if values is not None and (not isinstance(values, list) or not all(isinstance(v, kind) for v in values)):
-            raise BadInput(f"study.{key} must be a list of {'names' if kind is str else 'numbers'}.")
-        twice = first_repeated(list(values or ()))
-        if twice is not None:  # a repeated point trains nothing new but counts twice in the verdicts' family
-            raise BadInput(f"study.{key} lists {listed((twice,))} twice; list each value once (a repeated value adds "
-                           "its comparisons to the multiplicity family again).")
-    _check_scalars(raw)
     return out
-
-
-def _check_scalars(raw: Mapping[str, Any]) -> None:
-    """The types of the ``[study]`` keys that hold one value (their ranges are ``build_study``'s)."""
-    states = raw.get("states")
-    if states is not None and (isinstance(states, bool) or not isinstance(states, int) or states < 2):
-        raise BadInput(f"study.states must be an integer >= 2, got {states!r}.")
-    problem = states_problem(states) if states is not None else None
-    if problem:
-        raise BadInput(f"study.states: {problem}.")
-    margin = raw.get("margin")
-    if margin is not None and (isinstance(margin, bool) or not isinstance(margin, int | float)):
-        raise BadInput(f"study.margin must be a number above 1 (e.g. 1.15), got {margin!r}.")
-    for key, what in (("adjust", f"one of {', '.join(METHODS)}"), ("out", "a folder path")):
-        value = raw.get(key)
-        if value is not None and not isinstance(value, str | Path):
-            raise BadInput(f"study.{key} must be {what}, got {value!r}.")
 
 
 def settings_of(tables: Sequence[Any]) -> StudySettings:
     """The ``StudySettings`` of the layers' ``[study]`` tables, lowest first (file, ``--set``,
-    flags): each table checked (``study_section``), each key replacing the one below whole.
+    flags), each key replacing the one below whole, checked by the fields' own rules.
 
     Example:
         >>> s = settings_of([{"alphas": [5], "regimes": {"a": "smoke", "b": "paper"}}, {}, {"regimes": {"c": "zoo"}}])
         >>> s.alphas, s.regimes, s.kin_scales == StudySettings().kin_scales
-        ((5,), {'c': {'preset': 'zoo'}}, True)
+        ((5.0,), {'c': {'preset': 'zoo'}}, True)
     """
+    from vlmrl_cli.training.validation import validate_as
+
     merged: dict[str, Any] = {}
     for table in tables:
         merged |= study_section(table)
-    for key in _LISTS:
-        if key in merged:
-            merged[key] = tuple(merged[key])
-    if "out" in merged:
-        merged["out"] = Path(merged["out"])
-    return StudySettings(**merged)
+    return typing.cast(StudySettings, validate_as(StudySettings, merged, at="study"))
 
 
 def _bad_regime(name: str) -> dict[str, Any]:
@@ -381,19 +341,9 @@ def build_study(
         raise BadInput(f"--vlm-regime '{target}' is not a regime of this study{did_you_mean(target, regimes)}.")
     variants: list[Regime] = []
     reference = next(r for r in built if r.id == target)
-    margin = settings.get("margin", DEFAULT_MARGIN)
-    if not (math.isfinite(margin) and margin > 1):
-        raise BadInput(f"--margin is a ratio above 1 (e.g. 1.15), got {margin}.")
     adjust = settings.get("adjust", DEFAULT_ADJUST)
     if adjust not in METHODS:
         raise BadInput(f"--adjust is one of {', '.join(METHODS)}, got '{adjust}'.")
-    for name, values in (("alphas", alphas), ("kin_scales", kin_scales), ("query_flickers", query_flickers)):
-        bad = [v for v in values if not (math.isfinite(v) and v >= 0)]
-        if bad:
-            raise BadInput(f"{name} must be finite and >= 0, got {bad[0]}.")
-    if 0 in alphas:  # a second copy of each alpha-0 cell, and of its comparisons in the verdicts' family
-        raise BadInput("study.alphas lists 0, which the dose-response always includes (the dense term alone; with "
-                       "kin_scale 0, the baseline); drop it.")
     if reference.run.vlm.backend != "sim" and query_flickers:
         notes.append(f"no query-flicker cells: the VLM backend is '{reference.run.vlm.backend}', and query_flicker "
                      "is a knob of the simulated VLM.")

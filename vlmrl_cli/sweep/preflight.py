@@ -10,8 +10,8 @@ from vlmrl_cli.vlm.preflight import check_coverage, check_vlm
 
 
 def preflight(cfg: RunConfig) -> None:
-    """``BadInput`` for anything that would fail a job once the sweep has started."""
-    cfg.validate()
+    """``BadInput`` for anything that would fail a job once the sweep has started. ``cfg`` is
+    valid (built from its sources, or ``RunConfig.validate``'d), and not validated again."""
     check_executor(cfg)
     shaped = [job for job in cfg.jobs() if job.arm.uses_vlm]
     if not shaped:

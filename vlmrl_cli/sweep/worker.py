@@ -262,7 +262,9 @@ def _save_artifacts(out: Path, job: TrainJob, model: Any, env: Any) -> None:
     from vlmrl_cli.training import trained
 
     model.save(out / trained.MODEL)
-    if isinstance(env, VecNormalize):  # arrays, not SB3's pickle: evaluation unpickles nothing
+    # the observation statistics, as arrays rather than SB3's pickle (evaluation unpickles nothing); a
+    # VecNormalize of rewards alone keeps none, and its policy reads raw observations
+    if isinstance(env, VecNormalize) and env.norm_obs:
         trained.save_normalizer(env, out / trained.NORMALIZER)
     config = {"config_hash": job.config_hash, **job.params()}
     (out / trained.CONFIG).write_text(json.dumps(config, indent=2, sort_keys=True))

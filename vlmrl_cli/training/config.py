@@ -199,6 +199,9 @@ class RunConfig:
 
     def __post_init__(self) -> None:
         _check_plugin(self.task, self.plugin)
+        if self.stale_after_s < 2 * self.heartbeat_s:
+            raise BadInput(f"stale_after_s ({self.stale_after_s:g}) must be at least twice heartbeat_s "
+                           f"({self.heartbeat_s:g}), or live runs would be taken for dead ones.")
 
     @classmethod
     def from_sources(
@@ -220,14 +223,12 @@ class RunConfig:
         return resolve(source_layers(file, flags or {}, overrides), tasks)
 
     def validate(self) -> None:
-        """Raise ``BadInput`` for anything that would fail later; nothing is trained before."""
+        """Raise ``BadInput`` for anything that would fail later; nothing is trained before. For a
+        config built by hand: one built from its sources (``from_sources``, ``resolve``) is valid."""
         from vlmrl_cli.training.validation import validate_as
 
         validate_as(RunConfig, to_jsonable(self), plugin=self.plugin)
         self._check_task()
-        if self.stale_after_s < 2 * self.heartbeat_s:
-            raise BadInput(f"stale_after_s ({self.stale_after_s:g}) must be at least twice heartbeat_s "
-                           f"({self.heartbeat_s:g}), or live runs would be taken for dead ones.")
 
     def _check_task(self) -> None:
         """What only the task can say: its presets, its labels, the arms it supports."""
@@ -365,7 +366,7 @@ def resolve(layers: Iterable[Mapping[str, Any]], tasks: TaskLookup | None = None
     ref = task_ref(layers, DEFAULT_TASK)
     task = lookup_task(ref, tasks) if isinstance(ref, str) else None  # else the schema says what is wrong
     raw = resolve_raw(layers, task)
-    cfg: RunConfig = validate_as(RunConfig, raw, **({} if task is None else {"plugin": task}))
+    cfg: RunConfig = validate_as(RunConfig, raw) if task is None else validate_as(RunConfig, raw, plugin=task)
     cfg._check_task()
     return cfg
 

@@ -124,14 +124,16 @@ def preset_of(task: Task, name: str) -> PPOConfig:
                        f"choose from {', '.join(table)}.")
     items = tuple(sorted(table[name].items()))
     try:
-        return _validated(items)
+        return _memo(items)
     except TypeError:  # a value that cannot be hashed (a list): checked without the memo
-        return _validated.__wrapped__(items)
+        return _validated(items)
 
 
-@functools.lru_cache(maxsize=256)
 def _validated(items: tuple[tuple[str, object], ...]) -> PPOConfig:
     from vlmrl_cli.training.validation import validate_as
 
     ppo: PPOConfig = validate_as(PPOConfig, dict(items))  # a plug-in's table is checked like a config file
     return ppo
+
+
+_memo = functools.lru_cache(maxsize=256)(_validated)

@@ -136,12 +136,13 @@ def _to_dataclass(cls: type, model: BaseModel, carried: dict[str, Any] | None = 
     return cls(**kwargs)
 
 
-def _sentence(err: Any, cls: type) -> str:
-    loc = [str(part) for part in err["loc"] if not isinstance(part, int)]
+def _sentence(err: Any, cls: type, at: str = "") -> str:
+    rel = [str(part) for part in err["loc"] if not isinstance(part, int)]
+    loc = [*filter(None, at.split(".")), *rel]
     key = ".".join(loc)
     if err["type"] == "extra_forbidden":
         section = loc[:-1]
-        known = [".".join([*section, k]) for k in _section_fields(cls, section)]
+        known = [".".join([*section, k]) for k in _section_fields(cls, rel[:-1])]
         where = f"[{'.'.join(section)}]" if section else "the top level"
         return (
             f"unknown key '{key}'{did_you_mean(key, known)}; known keys in {where}: "
@@ -149,7 +150,7 @@ def _sentence(err: Any, cls: type) -> str:
         )
     msg = str(err["msg"]).removeprefix("Value error, ")
     msg = msg[:1].lower() + msg[1:]
-    if err["type"] == "value_error" and loc and loc[0] in CHECKS and len(loc) == 1:
+    if err["type"] == "value_error" and rel and rel[0] in CHECKS and len(rel) == 1 and not at:
         return f"inconsistent [{key}]: {msg}."
     shown = json.dumps(err.get("input"), default=str)
     shown = shown if len(shown) <= 60 else shown[:57] + "..."
@@ -170,10 +171,11 @@ def _section_fields(cls: type, section: list[str]) -> list[str]:
     return list(model.model_fields)
 
 
-def validate_as(cls: type, raw: dict[str, Any], **carried: Any) -> Any:
+def validate_as(cls: type, raw: dict[str, Any], at: str = "", **carried: Any) -> Any:
     """``raw`` (nested plain values, as TOML gives them) checked against the schema of dataclass
     ``cls`` and built into it, with the values of its ``CARRIED`` fields given as ``carried``;
-    ``BadInput`` naming the first wrong key otherwise."""
+    ``BadInput`` naming the first wrong key otherwise (under ``at``, the table ``raw`` is, e.g.
+    ``study``)."""
     try:
         blob = json.dumps(_jsonable(raw))
     except (TypeError, ValueError) as exc:
@@ -181,5 +183,5 @@ def validate_as(cls: type, raw: dict[str, Any], **carried: Any) -> Any:
     try:
         model = _model(cls).model_validate_json(blob)
     except ValidationError as exc:
-        raise BadInput(_sentence(exc.errors()[0], cls)) from None
+        raise BadInput(_sentence(exc.errors()[0], cls, at)) from None
     return _to_dataclass(cls, model, carried)

@@ -65,7 +65,8 @@ class SimKnobs:
                                                       "help": "P(box format collapse)"})
     patch_px: int = field(default=28, metadata={"rules": (Ge(1),),
                                                 "help": "spatial resolution: agent seen on this pixel grid"})
-    latency_s: float = field(default=0.0, metadata={"rules": (Ge(0),), "help": "fixed latency per query (benchmarks)"})
+    latency_s: float = field(default=0.0, metadata={"rules": (Ge(0),), "flag": "--sim-latency",
+                                                    "help": "fixed latency per query (benchmarks)"})
     seed: int = field(default=0, metadata={"help": "seed of the simulated answers"})
     profile: str = field(default=DEFAULT_SIM_PROFILE, metadata={
         "rules": (AfterValidator(_profile_name),),
@@ -254,6 +255,7 @@ class VLMConfig:
     itself is never stored, logged or hashed."""
 
     backend: str = field(default="sim", metadata={"rules": (AfterValidator(one_of(BACKENDS, "VLM backend")),),
+                                                  "flag": "--vlm",
                                                   "help": "sim (the SIMULATED VLM), hf, openai or replay"})
     model: str | None = field(default=None, metadata={"help": "hf: hub id or local folder; openai: served model name"})
     base_url: str | None = field(default=None, metadata={"help": "openai: server URL, e.g. http://host:8000/v1"})
@@ -261,12 +263,14 @@ class VLMConfig:
     device: str | None = field(default=None, metadata={"help": "hf: torch device (None: cuda if present)"})
     dtype: str = field(default="auto", metadata={"help": "hf: torch dtype (auto, float32, float16, bfloat16)"})
     max_new_tokens: int = field(default=32, metadata={"rules": (Ge(1),), "help": "hf/openai: answer length cap"})
-    timeout_s: float = field(default=30.0, metadata={"rules": (Gt(0),), "help": "openai: seconds per request"})
+    timeout_s: float = field(default=30.0, metadata={"rules": (Gt(0),), "flag": "--timeout",
+                                                     "help": "openai: seconds per request"})
     retries: int = field(default=3, metadata={"rules": (Ge(0),), "help": "openai: retries with backoff"})
     transcript_in: Path | None = field(default=None, metadata={
-        "help": "replay: JSONL transcript (None: the paper's Table 1 transcript)"})
+        "flag": "--transcript", "help": "replay: JSONL transcript (None: the paper's Table 1 transcript)"})
     cache_path: Path | None = field(default=DEFAULT_CACHE, metadata={"help": "sqlite file of the response cache"})
-    use_cache: bool = field(default=True, metadata={"help": "read and write the response cache"})
+    use_cache: bool = field(default=True, metadata={"flag": "--cache/--no-cache",
+                                                    "help": "read and write the response cache"})
     max_queries: int | None = field(default=None, metadata={
         "rules": (Ge(0),), "help": "labels a run may ask of the VLM; past it the nearest prototype's (None: no cap)"})
     sim: SimKnobs = field(default_factory=SimKnobs)
