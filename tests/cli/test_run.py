@@ -132,7 +132,7 @@ def _closed_port() -> int:
         (["--arms", "baseline,teleport"], "unknown arm"),
         (["--arms", "baseline", "--preset", "huge"], "unknown preset"),
         (["--arms", "baseline", "--seeds", "0"], "--seeds"),
-        (["--arms", "baseline", "--timesteps", "0"], "ppo.timesteps"),
+        (["--arms", "baseline", "--set", "ppo.timesteps=0"], "ppo.timesteps"),
         (["--arms", "hybrid", "--vlm", "nonsense"], "unknown VLM backend"),
         (["--arms", "hybrid", "--vlm", "openai", "--model", "m", "--timeout", "1", "--retries", "0",
           "--base-url", "http://127.0.0.1:{port}/v1"], "unreachable"),

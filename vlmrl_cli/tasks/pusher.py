@@ -270,7 +270,7 @@ def pusher_task() -> Any:
     from vlmrl_cli.shaping.features import feature_dim
     from vlmrl_cli.shaping.scales import task_scales
     from vlmrl_cli.shaping.scene import Scene
-    from vlmrl_cli.tasks.base import SMOKE, Task
+    from vlmrl_cli.tasks.base import SMOKE, RandomScore, Task
     from vlmrl_cli.tasks.capabilities import TaskCamera
 
     return Task(
@@ -298,6 +298,7 @@ def pusher_task() -> Any:
         probe_states=probe_states,
         wrap=sparse_push,
         window=50,
+        random_score=RandomScore(-100.0),  # measured by RANDOM_SCORE_COMMAND on 2026-12-07 (0/200 successes)
         # goal: finishing in about 50 steps (-50) over a failure's -100 (provisional); Eq. 1 pays at
         # most 0.4 per step at scale 1 and the default offset
         scales=task_scales(goal_return=50.0, potential_span=1.0, dense_peak=0.4, horizon=MAX_STEPS),
