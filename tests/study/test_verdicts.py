@@ -145,3 +145,19 @@ def test_a_comparison_without_a_test_is_not_called_unmeasured() -> None:
     assert "not measured yet" not in lines[0]
     assert "not measured yet" in verdicts.summary(rows, pd.DataFrame(), -130.0, 0.05, "paper", controls,
                                                    planned=8)[0]
+
+
+def test_a_dose_point_that_is_the_hybrids_own_regime_is_not_counted_twice() -> None:
+    """The dose control at the hybrid's own alpha and kin_scale against alpha 0 is the map's hybrid vs
+    kinematic on the same runs: it is listed once (in the map), and the family holds it once."""
+    layers = [{"arms": ["baseline", "hybrid", "kinematic", "hybrid-shuffled"], "seeds": [0, 1],
+               "shaping": {"alpha": 5.0, "kin_scale": 0.5}}]
+    cfg = build_study(layers, {"paper": {"preset": "smoke"}}, profiles=(), flickers=(), alphas=(5.0, 10.0),
+                      kin_scales=(0.5,), query_flickers=())
+    every = [c.name for c in verdicts.controls(cfg.cells)]
+    kept = [c.name for c in verdicts.controls(cfg.cells, cfg.regimes)]
+    assert kept == ["alpha=10 kin=0.5 vs alpha=0", "alpha=10 kin=0.5 vs its placebo"] and len(every) == 3
+    assert verdicts.twin_lines(cfg.cells, cfg.regimes) == [
+        "- Control `alpha=5 kin=0.5 vs alpha=0` is the map's `paper: hybrid vs kinematic` (the same runs): listed and "
+        "counted there, once."]
+    assert pipeline.planned_family(cfg) == 4 + 2  # 4 map pairs in one regime, 2 controls

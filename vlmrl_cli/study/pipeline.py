@@ -149,7 +149,7 @@ def run_study(
     # two cells share counts once)
     every_run = result.per_seed["run_id"].drop_duplicates() if len(result.per_seed) else []
     result.runs, result.runs_wall_s = len(every_run), float(sum(wall_s(client, r) for r in every_run))
-    ready = [c for c in verdicts.controls(cfg.cells)
+    ready = [c for c in verdicts.controls(cfg.cells, cfg.regimes)
              if all(len(runs_of(data.runs, side.regime.run)) >= 2 for side in (c.a, c.b))]
     control_rows = [verdicts.control_row(c, data, cfg.thresholds, streams, cfg.n_boot, cfg.ci, cfg.alpha, cfg.margin,
                                          cfg.window, auc_margin(cfg)) for c in ready]
@@ -166,7 +166,7 @@ def run_study(
                                                       "hybrid_seeds", "baseline_seeds"])
     result.summary = verdicts.summary(rows, result.vlm_points, cfg.top, cfg.alpha, cfg.vlm_regime, control_rows,
                                       cfg.margin, cfg.adjust, cfg.ci, hacking=hacking_answers,
-                                      planned=planned_family(cfg))
+                                      planned=planned_family(cfg)) + verdicts.twin_lines(cfg.cells, cfg.regimes)
     hack_frame = pd.concat(hack, ignore_index=True) if hack else pd.DataFrame()
     simulated = any(r.run.vlm.backend == "sim" for r in cfg.all_regimes())
     stage("analysis", start)
@@ -257,7 +257,7 @@ def _planned_pairs(cfg: StudyConfig) -> list[tuple[str, str]]:
 def planned_family(cfg: StudyConfig) -> int:
     """The family the finished study holds: its arm pairs (per regime) and its controls, the family
     the power line sizes the study for; a partial study's verdicts are adjusted within those measured."""
-    return max(1, len(_planned_pairs(cfg)) * len(cfg.regimes) + len(verdicts.controls(cfg.cells)))
+    return max(1, len(_planned_pairs(cfg)) * len(cfg.regimes) + len(verdicts.controls(cfg.cells, cfg.regimes)))
 
 
 def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None, made: int | None = None) -> list[str]:
@@ -275,7 +275,7 @@ def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None, made: in
 
     n = len(cfg.base.seeds)
     comparisons = _planned_pairs(cfg)
-    controls = [c.name for c in verdicts.controls(cfg.cells)]
+    controls = [c.name for c in verdicts.controls(cfg.cells, cfg.regimes)]
     planned = planned_family(cfg)
     family = (planned if made is None else max(1, made)) if cfg.adjust != "none" else 1
     budget = float(cfg.base.budget)

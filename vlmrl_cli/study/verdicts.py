@@ -24,6 +24,7 @@ from vlmrl_cli.analysis import censored, multiplicity, stats
 from vlmrl_cli.analysis.load import ExperimentData
 from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST
 from vlmrl_cli.calibration.pipeline import runs_of
+from vlmrl_cli.calibration.regimes import Regime
 from vlmrl_cli.core import tables
 from vlmrl_cli.probe.metrics import spearman
 from vlmrl_cli.report import attribution, figures
@@ -153,11 +154,38 @@ class Control:
     b: Cell
 
 
-def controls(cells: Sequence[Cell]) -> list[Control]:
+def _jobs(run: RunConfig, arm: str) -> frozenset[tuple[str, int, str]]:
+    return frozenset((j.arm.name, j.seed, j.config_hash) for j in run.jobs() if j.arm.name == arm)
+
+
+def map_twin(control: Control, regimes: Sequence[Regime], registry: Mapping[str, ArmSpec] = ARMS) -> str | None:
+    """The regime-map comparison that ``control`` repeats (the same two arms on the same jobs: a
+    dose point that is the hybrid's own regime against the kinematic arm), as ``"R1: hybrid vs
+    kinematic"``; None when it repeats none. Such a control is listed, and counted, once."""
+    for regime in regimes:
+        for a, b, _ in map_pairs(registry):
+            if (control.a.arm, control.b.arm) == (a, b) and _jobs(control.a.regime.run, a) == _jobs(regime.run, a) \
+                    and _jobs(control.b.regime.run, b) == _jobs(regime.run, b):
+                return f"{regime.id}: {a} vs {b}"
+    return None
+
+
+def controls(cells: Sequence[Cell], regimes: Sequence[Regime] = ()) -> list[Control]:
     """The comparisons the control cells exist for: each dose cell with a potential against the dense
     term alone at the same kinematic scale (does the VLM's potential help, by dose?); each VLM dose
     cell against its placebo (is it the labels' content?); the hybrid against hybrid-no-lock under
-    the same per-query flicker (what the lock is for)."""
+    the same per-query flicker (what the lock is for). A control that repeats a comparison of one of
+    ``regimes``' maps (``map_twin``) is left out: the map lists it."""
+    return [c for c in _controls(cells) if map_twin(c, regimes) is None]
+
+
+def twin_lines(cells: Sequence[Cell], regimes: Sequence[Regime]) -> list[str]:
+    """The summary's line for each control left out as a repeat of a map comparison."""
+    return [f"- Control `{c.name}` is the map's `{twin}` (the same runs): listed and counted there, once."
+            for c in _controls(cells) if (twin := map_twin(c, regimes)) is not None]
+
+
+def _controls(cells: Sequence[Cell]) -> list[Control]:
     dose = [c for c in cells if c.kind == "dose"]
     out = []
     for c in dose:
