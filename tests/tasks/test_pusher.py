@@ -191,3 +191,16 @@ def test_presets_of_other_tasks_stay_known_where_pusher_cannot_load(monkeypatch:
     monkeypatch.setitem(registry.BUILTIN, "pusher", refused)
     known = config._builtin_presets()
     assert "paper" in known and "zoo" in known and "pusher" not in known
+
+
+def test_the_dense_term_pays_everywhere_on_the_table_at_the_tasks_scales() -> None:
+    """The task's offset (1 m) is part of its scales: a run that sets none takes it, and the dense term
+    pays at a typical start (c about 0.5 m), where Eq. 1's default offset 0.4 paid nothing."""
+    task = get_task("pusher")
+    shaping = task.default_shaping()
+    assert (shaping.alpha, shaping.kin_scale, shaping.kin_offset) == (12.5, 0.125, 1.0)
+    obs = np.zeros(pusher.OBS_DIM)
+    obs[14:17], obs[17:20], obs[20:23] = (0.0, 0.0, 0.0), (0.4, 0.0, 0.0), (0.4, 0.3, 0.0)  # c = 0.3 + 0.2
+    assert pusher.pusher_dense(obs, shaping.kin_scale, 0.4) == 0.0
+    assert pusher.pusher_dense(obs, shaping.kin_scale, shaping.kin_offset) == pytest.approx(0.125 * 0.5)
+    assert "kin_offset 1 replace" in (task.scales_note(shaping) or "")

@@ -28,11 +28,23 @@ DENSE_SHARE = 0.25
 
 @dataclass(frozen=True)
 class TaskScales:
-    """A task's alpha and kin_scale and how they were set (``rule``: one line for reports)."""
+    """A task's alpha and kin_scale and how they were set (``rule``: one line for reports); a task
+    whose dense term needs another offset than Eq. 1's default names it (``kin_offset``)."""
 
     alpha: float
     kin_scale: float
     rule: str
+    kin_offset: float | None = None
+
+    def knobs(self) -> dict[str, float]:
+        """The ``[shaping]`` keys these scales set.
+
+        Example:
+            >>> TaskScales(12.5, 0.125, "r", kin_offset=1.0).knobs()
+            {'alpha': 12.5, 'kin_scale': 0.125, 'kin_offset': 1.0}
+        """
+        own = {"alpha": self.alpha, "kin_scale": self.kin_scale}
+        return own if self.kin_offset is None else own | {"kin_offset": self.kin_offset}
 
     def __post_init__(self) -> None:
         for name in ("alpha", "kin_scale"):
@@ -42,7 +54,8 @@ class TaskScales:
 
 
 def task_scales(goal_return: float, potential_span: float, dense_peak: float, horizon: int,
-                potential_share: float = POTENTIAL_SHARE, dense_share: float = DENSE_SHARE) -> TaskScales:
+                potential_share: float = POTENTIAL_SHARE, dense_share: float = DENSE_SHARE,
+                kin_offset: float | None = None) -> TaskScales:
     """alpha and kin_scale by the module's rule.
 
     Example:
@@ -61,7 +74,7 @@ def task_scales(goal_return: float, potential_span: float, dense_peak: float, ho
     rule = (f"to 3 significant figures, alpha x potential span = {potential_share:g} x goal return "
             f"({goal_return:g}); dense term's whole-episode maximum ({horizon} steps x {dense_peak:.4g} x "
             f"kin_scale) = {dense_share:g} x goal return")
-    return TaskScales(alpha, kin_scale, rule)
+    return TaskScales(alpha, kin_scale, rule, kin_offset)
 
 
 def _three_figures(value: float) -> float:

@@ -252,7 +252,7 @@ class Task:
         shaping = self.shaping_for(ShapingConfig())
         if self.scales is None:
             return shaping
-        return dataclasses.replace(shaping, alpha=self.scales.alpha, kin_scale=self.scales.kin_scale)
+        return dataclasses.replace(shaping, **self.scales.knobs())
 
     def scales_note(self, shaping: ShapingConfig) -> str | None:
         """One line saying which of ``shaping``'s scales are this task's own (``scales``) in place of
@@ -271,8 +271,8 @@ class Task:
         if self.scales is None:
             return None
         paper = ShapingConfig()
-        own = [(name, getattr(self.scales, name), getattr(paper, name)) for name in ("alpha", "kin_scale")
-               if getattr(shaping, name) == getattr(self.scales, name) != getattr(paper, name)]
+        own = [(name, value, getattr(paper, name)) for name, value in self.scales.knobs().items()
+               if getattr(shaping, name) == value != getattr(paper, name)]
         if not own:
             return None
         ours = ", ".join(f"{name} {value:g}" for name, value, _ in own)

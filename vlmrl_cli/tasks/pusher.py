@@ -19,9 +19,11 @@ goal) within the time limit.
 **Dense term** (the ``kinematic`` arm's, from the observation only: fingertip ``obs[14:17]``, puck
 ``obs[17:20]``, goal ``obs[20:23]``): Eq. 1 on the negated distance the env's reward pays for,
 ``c = d_pg + 0.5 d_tp`` (puck-goal in the plane, plus half the fingertip-puck distance, the env's
-own weights): ``max(0, scale (offset - c))``. With the defaults 2.0 and 0.4 it pays nothing at a
-typical start (c about 0.5 m), about 0.2 per step with the fingertip at a puck 0.3 m out, and at
-most 0.8 per step: below the step cost, so hovering never pays. Its potential form is the
+own weights): ``max(0, scale (offset - c))``. The task's offset is 1 m (``Task.scales.kin_offset``;
+Eq. 1's default 0.4 paid nothing at a typical start, c about 0.5 m, so it gave PPO no gradient there:
+the pilot's dense arm learned nothing in 300,000 steps), so the term pays everywhere on the table, as
+the env's own reward does, at most ``scale`` per step (c = 0); at the task's kin_scale that is far
+below the step cost, so hovering never pays. Its potential form is the
 harness's (``dense-potential`` arms: ``Phi_kin = 100 x R_kin``).
 
 Milestones, camera and reader: ``pusher_scene``.
@@ -299,8 +301,8 @@ def pusher_task() -> Any:
         wrap=sparse_push,
         window=50,
         random_score=RandomScore(-100.0),  # measured by RANDOM_SCORE_COMMAND on 2026-12-07 (0/200 successes)
-        # goal: finishing in about 50 steps (-50) over a failure's -100 (provisional); Eq. 1 pays at
-        # most 0.4 per step at scale 1 and the default offset
-        scales=task_scales(goal_return=50.0, potential_span=1.0, dense_peak=0.4, horizon=MAX_STEPS),
+        # goal: finishing in about 50 steps (-50) over a failure's -100; Eq. 1 pays at most 1 per
+        # step at scale 1 and the task's offset 1 m
+        scales=task_scales(goal_return=50.0, potential_span=1.0, dense_peak=1.0, horizon=MAX_STEPS, kin_offset=1.0),
     )
 

@@ -170,7 +170,7 @@ def resolve_raw(layers: Iterable[Mapping[str, Any]], task: Task | None) -> dict[
     if isinstance(preset, str) and task is not None:  # else the schema says what is wrong
         raw["ppo"] = to_jsonable(preset_of(task, preset))
     if task is not None and task.scales is not None:  # the task's scales: the bottom layer of [shaping]
-        raw["shaping"] = {"alpha": task.scales.alpha, "kin_scale": task.scales.kin_scale}
+        raw["shaping"] = task.scales.knobs()
     for layer in lifted:
         raw = merge(raw, layer)
     shaping = raw.get("shaping")
