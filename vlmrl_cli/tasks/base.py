@@ -252,7 +252,8 @@ class Task:
         shaping = self.shaping_for(ShapingConfig())
         if self.scales is None:
             return shaping
-        return dataclasses.replace(shaping, **self.scales.knobs())
+        knobs: dict[str, Any] = self.scales.knobs()
+        return dataclasses.replace(shaping, **knobs)
 
     def scales_note(self, shaping: ShapingConfig) -> str | None:
         """One line saying which of ``shaping``'s scales are this task's own (``scales``) in place of
