@@ -2,8 +2,8 @@
 
 A study's steps to a threshold are right-censored: a seed that never reaches it is a DNF at the
 budget, and the verdict's test (``ranks.censored_rank_test``: Mann-Whitney U with DNF censored)
-loses power as DNFs tie. The normal approximation on log steps (``censored.detectable_speedup``)
-ignores that. Here the data are simulated as the analysis sees them:
+loses power as DNFs tie, which a normal approximation on log steps ignores. Here the data are
+simulated as the analysis sees them:
 
 * the reference arm's steps are log-normal with spread ``sd_log`` and a median placed so that a
   fraction ``reliability`` of seeds reach the threshold by the ``budget`` (``reference_median``);
@@ -150,6 +150,67 @@ def seeds_for_speedup(seed: int, speedup: float, sd_log: float, reliability: flo
         mid = (lo + hi) // 2
         lo, hi = (lo, mid) if enough(mid) else (mid + 1, hi)
     return hi
+
+
+# --- reliability: Fisher's exact test, enumerated -------------------------------------------------
+
+def fisher_power(p_a: float, p_b: float, n: int, alpha: float = 0.05) -> float:
+    """Power of a two-sided Fisher exact test at ``alpha`` telling success rates ``p_a`` and ``p_b``
+    apart with ``n`` seeds per arm (exact: every outcome pair enumerated).
+
+    Example:
+        >>> round(fisher_power(1.0, 0.6, 16), 2) >= 0.8 > round(fisher_power(1.0, 0.6, 10), 2)
+        True
+    """
+    if n < 1:
+        return math.nan
+    ks = np.arange(n + 1)
+    pa, pb = sps.binom.pmf(ks, n, p_a), sps.binom.pmf(ks, n, p_b)
+    total = 0.0
+    for i in ks:
+        if pa[i] < 1e-12:
+            continue
+        for j in ks:
+            if pb[j] < 1e-12:
+                continue
+            if sps.fisher_exact([[i, n - i], [j, n - j]]).pvalue < alpha:
+                total += pa[i] * pb[j]
+    return float(total)
+
+
+def detectable_reliability(p_b: float, n: int, alpha: float = 0.05, power: float = 0.8) -> float | None:
+    """The smallest reliability (on a 1% grid) that a two-sided Fisher exact test at ``alpha`` tells
+    from ``p_b`` with ``power``, at ``n`` seeds per arm; None when not even 100% is detected. Found by
+    bisection: above ``p_b`` the power grows with the other arm's reliability.
+
+    Example:
+        >>> detectable_reliability(0.0, 10), detectable_reliability(0.6, 10)
+        (0.59, None)
+    """
+    lo, hi = math.floor(100 * p_b) + 1, 100  # percent
+    if lo > hi or fisher_power(hi / 100, p_b, n, alpha) < power:
+        return None
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if fisher_power(mid / 100, p_b, n, alpha) >= power:
+            hi = mid
+        else:
+            lo = mid + 1
+    return hi / 100
+
+
+def seeds_for_reliability(p_a: float, p_b: float, alpha: float = 0.05, power: float = 0.8,
+                          max_n: int = 200) -> int | None:
+    """The fewest seeds per arm whose Fisher test reaches ``power`` for ``p_a`` vs ``p_b`` (None past ``max_n``).
+
+    Example:
+        >>> seeds_for_reliability(1.0, 0.6)
+        16
+    """
+    for n in range(2, max_n + 1):
+        if fisher_power(p_a, p_b, n, alpha) >= power:
+            return n
+    return None
 
 
 # --- one comparison's own reference: fitted with censoring, stated in restricted-mean ratios --------
