@@ -84,11 +84,7 @@ class Plan:
 
 def plan(client: Any, experiment_id: str, jobs: list[TrainJob], stale_after_s: float = 300.0) -> Plan:
     """Split jobs into pending, done and owned elsewhere, and list the stale runs of pending jobs."""
-    by_key: dict[tuple[str, str, str], list[Any]] = {}
-    for run in schema.search_all(client, experiment_id, schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN})):
-        t = run.data.tags
-        key = (t.get(schema.TAG_ARM, ""), t.get(schema.TAG_SEED, ""), t.get(schema.TAG_CONFIG_HASH, ""))
-        by_key.setdefault(key, []).append(run)
+    by_key = schema.train_runs_by_job(client, experiment_id)
     result = Plan([], [], [], [])
     live = Liveness.here(stale_after_s)
     for job in jobs:
