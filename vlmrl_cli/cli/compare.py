@@ -58,7 +58,7 @@ def compare(
                             config_hashes=tuple(config_hash or ()), n_boot=n_boot, seed=seed,
                             allow_mixed_paths=allow_mixed_paths)
         check_compare(cfg)  # before the analysis stack loads (seconds)
-        from vlmrl_cli.report.aggregate import compare as run_compare
+        from vlmrl_cli.report.compare import compare as run_compare
 
         result = run_compare(cfg, lookup)
         typer.echo(f"{len(result.arms)} arm(s) on {len(result.tasks)} task(s) ({', '.join(result.tasks)}); "
