@@ -27,7 +27,6 @@ as an explicit generator.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -242,9 +241,8 @@ def judge_speedup(p_adjusted: float, direction: float, interval: tuple[float, fl
 @dataclass(frozen=True)
 class Verdict:
     """A comparison's verdict and what it rests on: the speedup (at the report's CI), the ``1 - 2 alpha``
-    interval the equivalence test used, the censored rank test's p (raw, and as adjusted within its
-    family: the same until ``rejudge``), the test's direction, the margin and whether enough seeds
-    finished for an equivalence."""
+    interval the equivalence test used, the censored rank test's raw p, the margin, the test's
+    direction and whether enough seeds finished for an equivalence."""
 
     text: str
     speedup: Estimate
@@ -254,20 +252,6 @@ class Verdict:
     margin: float
     direction: float = math.nan
     equivalence_allowed: bool = True
-    p_adjusted: float = math.nan
-    alpha: float = 0.05
-
-    def rejudge(self, p_adjusted: float) -> Verdict:
-        """The same comparison judged on ``p_adjusted`` (its p adjusted within its family).
-
-        Example:
-            >>> v = Verdict("faster", Estimate(1.1, 1.05, 1.2), 1.06, 1.18, 0.01, 1.15, 1.0, True, 0.01)
-            >>> v.rejudge(0.2).text
-            'inconclusive, leans faster'
-        """
-        text = judge_speedup(p_adjusted, self.direction, (self.speedup.low, self.speedup.high),
-                             (self.tost_low, self.tost_high), self.margin, self.alpha, self.equivalence_allowed)
-        return dataclasses.replace(self, text=text, p_adjusted=p_adjusted)
 
 
 def steps_verdict(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget: npt.ArrayLike,
@@ -277,7 +261,7 @@ def steps_verdict(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget
     """The verdict of arm vs reference on steps to one threshold (``judge_speedup``), from their
     steps (NaN = DNF), budgets and the censored rank test's ``p_value`` and ``direction`` (> 0: the
     arm is faster), judged on ``p_value`` as given: a family's adjustment comes after, by
-    ``Verdict.rejudge``.
+    ``judge_family``.
 
     Example:
         >>> rng = np.random.default_rng(0)
@@ -290,7 +274,7 @@ def steps_verdict(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget
                    float(reached(arm_steps, arm_budget).mean()) if np.size(arm_steps) else 0.0)
     allowed = finished >= MIN_FINISHED_FOR_EQUIVALENCE
     text = judge_speedup(p_value, direction, (est.low, est.high), (tost.low, tost.high), margin, alpha, allowed)
-    return Verdict(text, est, tost.low, tost.high, p_value, margin, direction, allowed, p_value, alpha)
+    return Verdict(text, est, tost.low, tost.high, p_value, margin, direction, allowed)
 
 
 @dataclass(frozen=True)

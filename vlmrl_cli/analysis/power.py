@@ -129,29 +129,6 @@ def detectable_speedup(seed: int, n: int, sd_log: float, reliability: float, bud
     return hi
 
 
-def seeds_for_speedup(seed: int, speedup: float, sd_log: float, reliability: float, budget: float,
-                      alpha: float = 0.05, family: int = 1, power: float = 0.8, n_sims: int = DEFAULT_N_SIMS,
-                      most: int = 200) -> int | None:
-    """The fewest seeds per arm that call ``speedup`` "faster" with ``power`` (None above ``most``).
-
-    Example:
-        >>> seeds_for_speedup(0, 2.0, 0.3, 0.6, 300_000, n_sims=300) < seeds_for_speedup(0, 1.3, 0.3, 0.6, 300_000,
-        ...                                                                             n_sims=300)
-        True
-    """
-    def enough(n: int) -> bool:
-        return censored_power(np.random.default_rng(seed), speedup, n, sd_log, reliability, budget, alpha, family,
-                              n_sims=n_sims) >= power
-
-    if not enough(most):
-        return None
-    lo, hi = 2, most  # enough(hi); search the smallest
-    while lo < hi:
-        mid = (lo + hi) // 2
-        lo, hi = (lo, mid) if enough(mid) else (mid + 1, hi)
-    return hi
-
-
 # --- reliability: Fisher's exact test, enumerated -------------------------------------------------
 
 def fisher_power(p_a: float, p_b: float, n: int, alpha: float = 0.05) -> float:
@@ -197,20 +174,6 @@ def detectable_reliability(p_b: float, n: int, alpha: float = 0.05, power: float
         else:
             lo = mid + 1
     return hi / 100
-
-
-def seeds_for_reliability(p_a: float, p_b: float, alpha: float = 0.05, power: float = 0.8,
-                          max_n: int = 200) -> int | None:
-    """The fewest seeds per arm whose Fisher test reaches ``power`` for ``p_a`` vs ``p_b`` (None past ``max_n``).
-
-    Example:
-        >>> seeds_for_reliability(1.0, 0.6)
-        16
-    """
-    for n in range(2, max_n + 1):
-        if fisher_power(p_a, p_b, n, alpha) >= power:
-            return n
-    return None
 
 
 # --- one comparison's own reference: fitted with censoring, stated in restricted-mean ratios --------
