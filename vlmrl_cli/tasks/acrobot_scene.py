@@ -317,11 +317,6 @@ class AcrobotCamera(CellCamera[tuple[int, int]]):
             self._renderer = AcrobotRenderer()
         return self._renderer.render(self._centre(cell[0]), self._centre(cell[1]), sha256=sha256)
 
-    def _release(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-
     def view(self, theta1: float, theta2: float) -> FrameView:
         """The view of the pendulum at angles ``theta1``, ``theta2``, rendered at most once per cell."""
         return self._view_of(self._cell(theta1, theta2))

@@ -394,11 +394,6 @@ class PusherCamera(CellCamera[Cell]):
             self._renderer = PusherRenderer(self._model)
         return self._renderer.render(self._poses[cell], sha256=sha256)
 
-    def _release(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-
     def look(self, sim: Any) -> FrameView:
         cell = cell_of(sim)
         view = self._views.get(cell)
