@@ -70,3 +70,19 @@ def test_the_arms_own_wider_spread_makes_a_larger_speedup_needed() -> None:
     assert 1.0 < same < both
     mu = 10.6
     assert restricted_ratio(mu, 0.06, 1e9, 1.2, 0.14) < restricted_ratio(mu, 0.06, 1e9, 1.2)
+
+
+def test_fisher_power_matches_the_guides_figures() -> None:
+    assert power.fisher_power(1.0, 0.6, 5) < 0.2 and power.fisher_power(1.0, 0.6, 16) >= 0.8
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(0, 9), st.integers(5, 12))
+def test_the_detectable_reliability_is_the_smallest_with_power(k: int, n: int) -> None:
+    p_b = k / 10
+    found = power.detectable_reliability(p_b, n)
+    if found is None:
+        assert power.fisher_power(1.0, p_b, n) < 0.8
+        return
+    assert p_b < found <= 1.0 and power.fisher_power(found, p_b, n) >= 0.8
+    assert power.fisher_power(round(found - 0.01, 2), p_b, n) < 0.8 or round(found - 0.01, 2) <= p_b

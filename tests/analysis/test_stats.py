@@ -26,32 +26,6 @@ def test_mean_ci_contains_mean_and_is_reproducible(xs):
     assert min(xs) - 1e-6 <= a.low and a.high <= max(xs) + 1e-6
 
 
-@settings(max_examples=40, deadline=None)
-@given(values, values)
-def test_speedup_is_ratio_of_means_and_inverts(b, a):
-    s = stats.speedup(b, a, rng(), N_BOOT)
-    assert math.isclose(s.value, np.mean(b) / np.mean(a), rel_tol=1e-12)
-    inv = stats.speedup(a, b, rng(), N_BOOT)
-    assert math.isclose(s.value * inv.value, 1.0, rel_tol=1e-9)
-    assert s.low <= s.value * (1 + 1e-9) and s.high >= s.value * (1 - 1e-9)
-
-
-@settings(max_examples=40, deadline=None)
-@given(values, st.floats(1.5, 4.0))
-def test_speedup_scales_with_the_arm(b, factor):
-    faster = stats.speedup(b, np.asarray(b) / factor, rng(), N_BOOT)
-    assert math.isclose(faster.value, factor, rel_tol=1e-9)
-
-
-def test_speedup_dnf_and_small_n_give_nan_ci_with_reason():
-    s = stats.speedup([100.0, np.nan, 200.0], [100.0, 100.0], rng(), N_BOOT)
-    assert s.value == 1.5 and s.has_ci and "DNF" in s.note
-    one = stats.speedup([100.0, np.nan], [50.0, 50.0], rng(), N_BOOT)
-    assert one.value == 2.0 and not one.has_ci and "fewer than 2" in one.note
-    none = stats.speedup([np.nan, np.nan], [50.0, 50.0], rng(), N_BOOT)
-    assert math.isnan(none.value) and "never reached" in none.note
-
-
 def test_summarize_steps_counts_and_censoring():
     s = stats.summarize_steps([100.0, np.nan, 300.0, np.nan], [1000, 1000, 1000, 500], rng(), N_BOOT)
     assert (s.n, s.n_reached, s.n_dnf) == (4, 2, 2)

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 from vlmrl_cli.cli.app import app
 from vlmrl_cli.cli.compare import NORMALISE_CHOICES
-from vlmrl_cli.report.aggregate import NORMALISATIONS
+from vlmrl_cli.report.compare import NORMALISATIONS
 from vlmrl_cli.tracking.transfer import FORMAT, write_records
 
 runner = CliRunner()

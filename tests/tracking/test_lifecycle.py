@@ -35,3 +35,18 @@ def test_an_exception_closes_the_run_and_propagates(error: type[BaseException], 
 def test_terminate_refuses_a_status_mlflow_does_not_know() -> None:
     with pytest.raises(ValueError):
         terminate(_Client(), "r", "DONE")  # type: ignore[arg-type]
+
+
+def test_a_block_that_was_stopping_closes_killed_and_a_failing_store_hides_no_error() -> None:
+    client = _Client()
+    with pytest.raises(RuntimeError), tracked_run(client, "s") as handle:
+        handle.status = RunStatus.KILLED
+        raise RuntimeError("the executor failed while it stopped")
+    assert client.closed == [("s", "KILLED", None)]
+
+    class _Down:
+        def set_terminated(self, run_id: str, status: str, end_time: int | None = None) -> None:
+            raise ConnectionError("store down")
+
+    with pytest.raises(ValueError, match="the job's own error"), tracked_run(_Down(), "d"):
+        raise ValueError("the job's own error")

@@ -27,7 +27,6 @@ as an explicit generator.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -242,9 +241,8 @@ def judge_speedup(p_adjusted: float, direction: float, interval: tuple[float, fl
 @dataclass(frozen=True)
 class Verdict:
     """A comparison's verdict and what it rests on: the speedup (at the report's CI), the ``1 - 2 alpha``
-    interval the equivalence test used, the censored rank test's p (raw, and as adjusted within its
-    family: the same until ``rejudge``), the test's direction, the margin and whether enough seeds
-    finished for an equivalence."""
+    interval the equivalence test used, the censored rank test's raw p, the margin, the test's
+    direction and whether enough seeds finished for an equivalence."""
 
     text: str
     speedup: Estimate
@@ -254,20 +252,6 @@ class Verdict:
     margin: float
     direction: float = math.nan
     equivalence_allowed: bool = True
-    p_adjusted: float = math.nan
-    alpha: float = 0.05
-
-    def rejudge(self, p_adjusted: float) -> Verdict:
-        """The same comparison judged on ``p_adjusted`` (its p adjusted within its family).
-
-        Example:
-            >>> v = Verdict("faster", Estimate(1.1, 1.05, 1.2), 1.06, 1.18, 0.01, 1.15, 1.0, True, 0.01)
-            >>> v.rejudge(0.2).text
-            'inconclusive, leans faster'
-        """
-        text = judge_speedup(p_adjusted, self.direction, (self.speedup.low, self.speedup.high),
-                             (self.tost_low, self.tost_high), self.margin, self.alpha, self.equivalence_allowed)
-        return dataclasses.replace(self, text=text, p_adjusted=p_adjusted)
 
 
 def steps_verdict(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget: npt.ArrayLike,
@@ -277,7 +261,7 @@ def steps_verdict(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget
     """The verdict of arm vs reference on steps to one threshold (``judge_speedup``), from their
     steps (NaN = DNF), budgets and the censored rank test's ``p_value`` and ``direction`` (> 0: the
     arm is faster), judged on ``p_value`` as given: a family's adjustment comes after, by
-    ``Verdict.rejudge``.
+    ``judge_family``.
 
     Example:
         >>> rng = np.random.default_rng(0)
@@ -290,7 +274,7 @@ def steps_verdict(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget
                    float(reached(arm_steps, arm_budget).mean()) if np.size(arm_steps) else 0.0)
     allowed = finished >= MIN_FINISHED_FOR_EQUIVALENCE
     text = judge_speedup(p_value, direction, (est.low, est.high), (tost.low, tost.high), margin, alpha, allowed)
-    return Verdict(text, est, tost.low, tost.high, p_value, margin, direction, allowed, p_value, alpha)
+    return Verdict(text, est, tost.low, tost.high, p_value, margin, direction, allowed)
 
 
 @dataclass(frozen=True)
@@ -405,92 +389,3 @@ def learning_curve_area(timesteps: npt.ArrayLike, returns: npt.ArrayLike, length
     if not keep.any():
         return math.nan
     return float(np.sum(ret[keep] * length[keep]) / np.sum(length[keep]))
-
-
-# ---- power -------------------------------------------------------------------------------------
-
-
-def detectable_speedup(sd_log: float, n_a: int, n_b: int, alpha: float = 0.05, power: float = 0.8) -> float:
-    """The smallest speedup a two-sided test at ``alpha`` detects with ``power``, for seeds whose log
-    steps have standard deviation ``sd_log`` (normal approximation on log steps, two arms).
-
-    Example:
-        >>> round(detectable_speedup(0.2, 10, 10), 2)
-        1.28
-    """
-    if n_a < 2 or n_b < 2 or not sd_log > 0:
-        return math.nan
-    z = sps.norm.ppf(1 - alpha / 2) + sps.norm.ppf(power)
-    return float(math.exp(z * sd_log * math.sqrt(1 / n_a + 1 / n_b)))
-
-
-def seeds_for_speedup(effect: float, sd_log: float, alpha: float = 0.05, power: float = 0.8) -> int:
-    """Seeds per arm that detect a speedup of ``effect`` (e.g. 1.2) with ``power`` (same model).
-
-    Example:
-        >>> seeds_for_speedup(1.2, 0.2)
-        19
-    """
-    if not effect > 1 or not sd_log > 0:
-        raise ValueError("effect must be > 1 and sd_log > 0")
-    z = sps.norm.ppf(1 - alpha / 2) + sps.norm.ppf(power)
-    return math.ceil(2 * (z * sd_log / math.log(effect)) ** 2)
-
-
-def fisher_power(p_a: float, p_b: float, n: int, alpha: float = 0.05) -> float:
-    """Power of a two-sided Fisher exact test at ``alpha`` telling success rates ``p_a`` and ``p_b``
-    apart with ``n`` seeds per arm (exact: every outcome pair enumerated).
-
-    Example:
-        >>> round(fisher_power(1.0, 0.6, 16), 2) >= 0.8 > round(fisher_power(1.0, 0.6, 10), 2)
-        True
-    """
-    if n < 1:
-        return math.nan
-    ks = np.arange(n + 1)
-    pa, pb = sps.binom.pmf(ks, n, p_a), sps.binom.pmf(ks, n, p_b)
-    total = 0.0
-    for i in ks:
-        if pa[i] < 1e-12:
-            continue
-        for j in ks:
-            if pb[j] < 1e-12:
-                continue
-            if sps.fisher_exact([[i, n - i], [j, n - j]]).pvalue < alpha:
-                total += pa[i] * pb[j]
-    return float(total)
-
-
-def detectable_reliability(p_b: float, n: int, alpha: float = 0.05, power: float = 0.8) -> float | None:
-    """The smallest reliability (on a 1% grid) that a two-sided Fisher exact test at ``alpha`` tells
-    from ``p_b`` with ``power``, at ``n`` seeds per arm; None when not even 100% is detected. Found by
-    bisection: above ``p_b`` the power grows with the other arm's reliability.
-
-    Example:
-        >>> detectable_reliability(0.0, 10), detectable_reliability(0.6, 10)
-        (0.59, None)
-    """
-    lo, hi = math.floor(100 * p_b) + 1, 100  # percent
-    if lo > hi or fisher_power(hi / 100, p_b, n, alpha) < power:
-        return None
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if fisher_power(mid / 100, p_b, n, alpha) >= power:
-            hi = mid
-        else:
-            lo = mid + 1
-    return hi / 100
-
-
-def seeds_for_reliability(p_a: float, p_b: float, alpha: float = 0.05, power: float = 0.8,
-                          max_n: int = 200) -> int | None:
-    """The fewest seeds per arm whose Fisher test reaches ``power`` for ``p_a`` vs ``p_b`` (None past ``max_n``).
-
-    Example:
-        >>> seeds_for_reliability(1.0, 0.6)
-        16
-    """
-    for n in range(2, max_n + 1):
-        if fisher_power(p_a, p_b, n, alpha) >= power:
-            return n
-    return None

@@ -2,8 +2,8 @@
 
 A study's steps to a threshold are right-censored: a seed that never reaches it is a DNF at the
 budget, and the verdict's test (``ranks.censored_rank_test``: Mann-Whitney U with DNF censored)
-loses power as DNFs tie. The normal approximation on log steps (``censored.detectable_speedup``)
-ignores that. Here the data are simulated as the analysis sees them:
+loses power as DNFs tie, which a normal approximation on log steps ignores. Here the data are
+simulated as the analysis sees them:
 
 * the reference arm's steps are log-normal with spread ``sd_log`` and a median placed so that a
   fraction ``reliability`` of seeds reach the threshold by the ``budget`` (``reference_median``);
@@ -129,27 +129,51 @@ def detectable_speedup(seed: int, n: int, sd_log: float, reliability: float, bud
     return hi
 
 
-def seeds_for_speedup(seed: int, speedup: float, sd_log: float, reliability: float, budget: float,
-                      alpha: float = 0.05, family: int = 1, power: float = 0.8, n_sims: int = DEFAULT_N_SIMS,
-                      most: int = 200) -> int | None:
-    """The fewest seeds per arm that call ``speedup`` "faster" with ``power`` (None above ``most``).
+# --- reliability: Fisher's exact test, enumerated -------------------------------------------------
+
+def fisher_power(p_a: float, p_b: float, n: int, alpha: float = 0.05) -> float:
+    """Power of a two-sided Fisher exact test at ``alpha`` telling success rates ``p_a`` and ``p_b``
+    apart with ``n`` seeds per arm (exact: every outcome pair enumerated).
 
     Example:
-        >>> seeds_for_speedup(0, 2.0, 0.3, 0.6, 300_000, n_sims=300) < seeds_for_speedup(0, 1.3, 0.3, 0.6, 300_000,
-        ...                                                                             n_sims=300)
+        >>> round(fisher_power(1.0, 0.6, 16), 2) >= 0.8 > round(fisher_power(1.0, 0.6, 10), 2)
         True
     """
-    def enough(n: int) -> bool:
-        return censored_power(np.random.default_rng(seed), speedup, n, sd_log, reliability, budget, alpha, family,
-                              n_sims=n_sims) >= power
+    if n < 1:
+        return math.nan
+    ks = np.arange(n + 1)
+    pa, pb = sps.binom.pmf(ks, n, p_a), sps.binom.pmf(ks, n, p_b)
+    total = 0.0
+    for i in ks:
+        if pa[i] < 1e-12:
+            continue
+        for j in ks:
+            if pb[j] < 1e-12:
+                continue
+            if sps.fisher_exact([[i, n - i], [j, n - j]]).pvalue < alpha:
+                total += pa[i] * pb[j]
+    return float(total)
 
-    if not enough(most):
+
+def detectable_reliability(p_b: float, n: int, alpha: float = 0.05, power: float = 0.8) -> float | None:
+    """The smallest reliability (on a 1% grid) that a two-sided Fisher exact test at ``alpha`` tells
+    from ``p_b`` with ``power``, at ``n`` seeds per arm; None when not even 100% is detected. Found by
+    bisection: above ``p_b`` the power grows with the other arm's reliability.
+
+    Example:
+        >>> detectable_reliability(0.0, 10), detectable_reliability(0.6, 10)
+        (0.59, None)
+    """
+    lo, hi = math.floor(100 * p_b) + 1, 100  # percent
+    if lo > hi or fisher_power(hi / 100, p_b, n, alpha) < power:
         return None
-    lo, hi = 2, most  # enough(hi); search the smallest
     while lo < hi:
         mid = (lo + hi) // 2
-        lo, hi = (lo, mid) if enough(mid) else (mid + 1, hi)
-    return hi
+        if fisher_power(mid / 100, p_b, n, alpha) >= power:
+            hi = mid
+        else:
+            lo = mid + 1
+    return hi / 100
 
 
 # --- one comparison's own reference: fitted with censoring, stated in restricted-mean ratios --------

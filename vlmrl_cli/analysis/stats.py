@@ -167,43 +167,6 @@ def summarize_steps(
     )
 
 
-def _ratio_of_means(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
-    return np.asarray(np.mean(a, axis=axis) / np.mean(b, axis=axis))
-
-
-def speedup(
-    baseline_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, rng: np.random.Generator,
-    n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95,
-) -> Estimate:
-    """Speedup = mean baseline steps / mean arm steps, over seeds that reached the threshold.
-
-    Args:
-        baseline_steps: shape ``(n_b,)``, NaN for DNF seeds (excluded, as in the paper's Table 2).
-        arm_steps: shape ``(n_a,)``, NaN for DNF seeds.
-
-    Returns:
-        The ratio with a bootstrap CI (seeds of each arm resampled independently); NaN CI with
-        a reason when either arm has fewer than 2 seeds that reached the threshold.
-
-    Example:
-        >>> speedup([280.0, 260.0], [200.0, 200.0], np.random.default_rng(0), n_boot=100).value
-        1.35
-    """
-    b, a = _finite(baseline_steps), _finite(arm_steps)
-    nb, na = np.asarray(baseline_steps).size, np.asarray(arm_steps).size
-    notes = []
-    if b.size < nb or a.size < na:
-        notes.append(f"DNF seeds excluded (baseline {nb - b.size}/{nb}, arm {na - a.size}/{na})")
-    if b.size == 0 or a.size == 0:
-        return Estimate(float("nan"), n=int(min(a.size, b.size)),
-                        note="; ".join([*notes, "an arm never reached the threshold"]))
-    value = float(b.mean() / a.mean())
-    if b.size < 2 or a.size < 2:
-        return Estimate(value, n=int(min(a.size, b.size)), note="; ".join([*notes, "fewer than 2 seeds: no CI"]))
-    low, high = bootstrap_ci((b, a), _ratio_of_means, rng, n_boot, ci)
-    return Estimate(value, low, high, n=int(min(a.size, b.size)), note="; ".join(notes))
-
-
 def wilson_ci(successes: int, n: int, ci: float = 0.95) -> Estimate:
     """A proportion ``successes / n`` with its Wilson score interval.
 

@@ -67,25 +67,6 @@ class CalibrateConfig:
         return self.regimes[0].run
 
 
-def flatten_grid(table: Mapping[str, Any], prefix: str = "") -> dict[str, list[Any]]:
-    """``[calibrate.grid]`` (dotted keys or nested tables, a list per key) -> ``{dotted key: values}``.
-
-    Example:
-        >>> flatten_grid({"ppo": {"n_envs": [1, 4]}, "ppo.ent_coef": [0.0, 0.01]})
-        {'ppo.n_envs': [1, 4], 'ppo.ent_coef': [0.0, 0.01]}
-    """
-    out: dict[str, list[Any]] = {}
-    for key, value in table.items():
-        dotted = f"{prefix}{key}"
-        if isinstance(value, Mapping):
-            out.update(flatten_grid(value, f"{dotted}."))
-        elif isinstance(value, list) and value:
-            out[dotted] = list(value)
-        else:
-            raise BadInput(f"calibrate.grid.{dotted} must be a non-empty list of values, got {json.dumps(value)}.")
-    return out
-
-
 def grid_flags(items: Sequence[str]) -> dict[str, list[Any]]:
     """``--grid KEY=V1,V2`` flags -> ``{dotted key: values}``; a key given twice is ``BadInput`` (one
     of the two lists would be dropped).
@@ -114,7 +95,13 @@ def grid_product(grid: Mapping[str, Sequence[Any]]) -> list[dict[str, Any]]:
 
 
 def calibrate_section(raw: Mapping[str, Any]) -> dict[str, list[Any]]:
-    """The grid of a config file's ``[calibrate]`` table (its only key is ``grid``)."""
+    """The grid of a config file's ``[calibrate]`` table (its only key is ``grid``: dotted keys or
+    nested tables, a list per key) -> ``{dotted key: values}``.
+
+    Example:
+        >>> calibrate_section({"grid": {"ppo": {"n_envs": [1, 4]}, "ppo.ent_coef": [0.0, 0.01]}})
+        {'ppo.n_envs': [1, 4], 'ppo.ent_coef': [0.0, 0.01]}
+    """
     if not isinstance(raw, Mapping):
         raise BadInput("[calibrate] must be a table, e.g. [calibrate.grid] with a list per key.")
     unknown = [k for k in raw if k != "grid"]
@@ -125,7 +112,11 @@ def calibrate_section(raw: Mapping[str, Any]) -> dict[str, list[Any]]:
     grid = raw.get("grid", {})
     if not isinstance(grid, Mapping):
         raise BadInput("calibrate.grid must be a table with a list of values per key.")
-    return flatten_grid(grid)
+    flat = dotted(grid)
+    for key, values in flat.items():
+        if not isinstance(values, list) or not values:
+            raise BadInput(f"calibrate.grid.{key} must be a non-empty list of values, got {json.dumps(values)}.")
+    return flat
 
 
 def build_regimes(layers: Sequence[Mapping[str, Any]], grid: Mapping[str, Sequence[Any]],

@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from vlmrl_cli.cli.exit_codes import exit_codes
-from vlmrl_cli.cli.options import UserTasks, choices
+from vlmrl_cli.cli.options import AllowMixedPaths, UserTasks, choices
 from vlmrl_cli.report.config import DEFAULT_NORMALISATION, NORMALISATIONS
 
 NORMALISE_CHOICES = tuple(NORMALISATIONS)
@@ -39,9 +39,7 @@ def compare(
     n_boot: Boot = 2000,
     seed: Seed = 0,
     user_task: UserTasks = None,
-    allow_mixed_paths: Annotated[bool, typer.Option(
-        "--allow-mixed-paths", help="Compare runs computed on different numeric paths (vlmrl.pin tags) instead of "
-        "refusing.")] = False,
+    allow_mixed_paths: AllowMixedPaths = False,
 ) -> None:
     """Aggregate the arms' detached evaluation scores across tasks: aggregate.md/.csv, per_task.csv and
     performance_profile.png.
@@ -58,7 +56,7 @@ def compare(
                             config_hashes=tuple(config_hash or ()), n_boot=n_boot, seed=seed,
                             allow_mixed_paths=allow_mixed_paths)
         check_compare(cfg)  # before the analysis stack loads (seconds)
-        from vlmrl_cli.report.aggregate import compare as run_compare
+        from vlmrl_cli.report.compare import compare as run_compare
 
         result = run_compare(cfg, lookup)
         typer.echo(f"{len(result.arms)} arm(s) on {len(result.tasks)} task(s) ({', '.join(result.tasks)}); "

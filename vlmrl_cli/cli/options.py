@@ -221,6 +221,9 @@ TrustPickle = Annotated[bool, typer.Option(
     "--trust-pickle",
     help="Accept a pickled artifact (the vecnormalize.pkl of a run saved before vlmrl kept it as arrays): loading "
          "a pickle runs whatever code it holds, so pass this only for files whose source you trust.")]
+AllowMixedPaths = Annotated[bool, typer.Option(
+    "--allow-mixed-paths",
+    help="Compare runs computed on different numeric paths (vlmrl.pin tags) instead of refusing.")]
 UserTasks = Annotated[list[str] | None, typer.Option(
     "--user-task", metavar="MODULE:NAME",
     help="A task of your own code that the runs recorded, imported for them (repeatable): vlmrl imports a module "

@@ -11,7 +11,7 @@ from rich.console import Console
 from vlmrl_cli.analysis.defaults import DEFAULT_MARGIN
 from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST
 from vlmrl_cli.cli.exit_codes import exit_codes
-from vlmrl_cli.cli.options import Adjust, Experiment, Margin, OutDir, TrackingUri, UserTasks
+from vlmrl_cli.cli.options import Adjust, AllowMixedPaths, Experiment, Margin, OutDir, TrackingUri, UserTasks
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.report.config import check_thresholds
 
@@ -68,9 +68,7 @@ def report(
     margin: Margin = DEFAULT_MARGIN,
     adjust: Adjust = DEFAULT_ADJUST,
     user_task: UserTasks = None,
-    allow_mixed_paths: Annotated[bool, typer.Option(
-        "--allow-mixed-paths", help="Compare runs computed on different numeric paths (vlmrl.pin tags) instead of "
-        "refusing.")] = False,
+    allow_mixed_paths: AllowMixedPaths = False,
 ) -> None:
     """Write Table 2, Figures 2-4, the claims table and report.md from finished runs in MLflow."""
     from vlmrl_cli.core.paths import check_out_folder

@@ -53,7 +53,6 @@ def registry_pairs(registry: Mapping[str, ArmSpec] = ARMS) -> tuple[Pair, ...]:
     return tuple(Pair(a, b, meaning) for a, b, meaning in registry_comparisons(registry))
 
 
-PAIRS = registry_pairs()
 #: ``p_value``: the raw p of the row's test; ``p_adj``: for speedups, adjusted within the family of
 #: every speedup of the table (NaN for other metrics, and for a speedup not measured);
 #: ``logrank_p``/``logrank_p_adj``: the log-rank test beside the rank test; ``tests_disagree``: which

@@ -48,11 +48,7 @@ def _pick(runs: Iterable[Any]) -> Any | None:
 def child_rows(client: Any, experiment_id: str, jobs: Sequence[TrainJob], threshold: float = TOP_THRESHOLD,
                window: int = 100) -> list[ChildRow]:
     """One row per job, from the experiment's training runs (matched by arm, seed and config hash)."""
-    by_key: dict[tuple[str, str, str], list[Any]] = {}
-    for run in schema.search_all(client, experiment_id, schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN})):
-        tags = run.data.tags
-        key = (tags.get(schema.TAG_ARM, ""), tags.get(schema.TAG_SEED, ""), tags.get(schema.TAG_CONFIG_HASH, ""))
-        by_key.setdefault(key, []).append(run)
+    by_key = schema.train_runs_by_job(client, experiment_id)
     rows = []
     for job in jobs:
         run = _pick(by_key.get((job.arm.name, str(job.seed), job.config_hash), []))

@@ -1,6 +1,6 @@
 """The configurations of `vlmrl report` and `vlmrl compare` and their checks, in a module that loads
 no numpy, scipy, pandas or matplotlib: the commands check their flags here before the analysis
-stack loads (seconds), and ``report/writer.py`` and ``report/aggregate.py`` check them again."""
+stack loads (seconds), and ``report/writer.py`` and ``report/compare.py`` check them again."""
 
 from __future__ import annotations
 

@@ -13,7 +13,7 @@ import functools
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
@@ -55,7 +55,7 @@ class CellCamera(Generic[Cell]):
     """What every camera shares: a state snapped to a grid ``Cell`` is rendered at most once per
     cell, its ``FrameView`` (key, features) memoised for good, its pixels kept in an LRU of
     ``pixel_cache`` frames and drawn again on demand (same pixels, same key). A subclass says how a
-    cell is drawn (``_draw``) and how its renderer is released (``_release``).
+    cell is drawn (``_draw``, with a ``_renderer`` it opens on demand: ``_release`` closes it).
 
     ``renders`` counts calls to the renderer; ``cells`` how many cells have been seen.
     """
@@ -67,12 +67,16 @@ class CellCamera(Generic[Cell]):
         self.renders = 0
         self._views: dict[Cell, FrameView] = {}
         self._frames: OrderedDict[Cell, Frame] = OrderedDict()
+        self._renderer: Any = None  # what a subclass's ``_draw`` opens on demand; ``_release`` closes it
 
     def _draw(self, cell: Cell, sha256: str | None) -> Frame:
         raise NotImplementedError
 
     def _release(self) -> None:
         """Close the renderer (it reopens on demand)."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
 
     def _render(self, cell: Cell) -> Frame:
         self.renders += 1

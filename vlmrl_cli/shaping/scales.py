@@ -80,7 +80,3 @@ def task_scales(goal_return: float, potential_span: float, dense_peak: float, ho
 def _three_figures(value: float) -> float:
     """``value`` to 3 significant figures (a config's number a reader can type back)."""
     return float(f"{value:.3g}")
-
-
-#: MountainCar-v0's scales, the paper's (``ShapingConfig``'s defaults).
-PAPER_SCALES = TaskScales(5.0, 2.0, "the paper's MountainCar-v0 scales (alpha 5, kin_scale 2)")

@@ -343,9 +343,9 @@ def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None, made: in
 def _reliability_power(rate: float, n: int, alpha: float) -> str:
     """The power line's reliability clause: the smallest reliability Fisher's test (unadjusted, as
     reliability differences are judged) tells from the reference's ``rate`` at 80% power."""
-    from vlmrl_cli.analysis import censored
+    from vlmrl_cli.analysis import power
 
-    found = censored.detectable_reliability(rate, n, alpha)
+    found = power.detectable_reliability(rate, n, alpha)
     what = f"{100 * found:.0f}% or more" if found is not None else "no reliability up to 100%"
     return (f"; in reliability, Fisher's exact test (alpha {alpha:g}, unadjusted) detects {what} against its "
             f"{100 * rate:.0f}% at {n} seeds per arm")

@@ -27,7 +27,7 @@ from vlmrl_cli.sweep.executors import Executor, JobFn, LocalExecutor, train_job
 from vlmrl_cli.sweep.leases import ACTIVE, Liveness, RunRecord, is_stale, mark_stale
 from vlmrl_cli.sweep.preflight import preflight
 from vlmrl_cli.tracking import schema, store
-from vlmrl_cli.tracking.lifecycle import RunStatus, terminate
+from vlmrl_cli.tracking.lifecycle import RunStatus, tracked_run
 from vlmrl_cli.training.config import RunConfig, TrainJob
 from vlmrl_cli.training.events import JobContext, JobResult, ProgressEvent, SweepSummary
 
@@ -84,11 +84,7 @@ class Plan:
 
 def plan(client: Any, experiment_id: str, jobs: list[TrainJob], stale_after_s: float = 300.0) -> Plan:
     """Split jobs into pending, done and owned elsewhere, and list the stale runs of pending jobs."""
-    by_key: dict[tuple[str, str, str], list[Any]] = {}
-    for run in schema.search_all(client, experiment_id, schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN})):
-        t = run.data.tags
-        key = (t.get(schema.TAG_ARM, ""), t.get(schema.TAG_SEED, ""), t.get(schema.TAG_CONFIG_HASH, ""))
-        by_key.setdefault(key, []).append(run)
+    by_key = schema.train_runs_by_job(client, experiment_id)
     result = Plan([], [], [], [])
     live = Liveness.here(stale_after_s)
     for job in jobs:
@@ -209,7 +205,6 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
     # before the parent run: Ray may refuse the store
     executor = pool.executor(cfg, len(pending)) if pool is not None else make_executor(cfg, len(pending))
     release = pool.release if pool is not None else (lambda ex: ex.close())
-    status = "FINISHED"
     # The flag handler is installed before the parent run exists and stays installed through the
     # shutdown: a Ctrl-C while the parent is being created or its params logged, while the executor
     # closes (Ray's shutdown sleeps) or the parent run is being closed must not escape half-way and
@@ -229,36 +224,33 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
             release(executor)
             raise
         summary.parent_run_id = parent.info.run_id
-        try:
-            store.log_params(client, parent.info.run_id, flatten(dataclasses.replace(cfg, ppo=cfg.ppo_config)))
-            ctx = JobContext(tracking_uri, experiment_id, parent.info.run_id, vlm_label, simulated,
-                             heartbeat_s=cfg.heartbeat_s, stale_after_s=cfg.stale_after_s)
-            if not interrupted.is_set():  # a Ctrl-C during start-up: nothing is submitted
-                executor.submit(pending, job_fn, ctx)
-            while executor.outstanding:
-                polled = executor.poll(0.2)
-                for event in polled.events:
-                    reporter.progress(event)
-                for result in polled.results:
-                    summary.results.append(result)
-                    reporter.finished(result)
-                if interrupted.is_set() and status != "KILLED":
-                    status = "KILLED"
-                    executor.stop()
-            if summary.failed and status != "KILLED":
-                status = "FAILED"
-        except BaseException:
-            status = "KILLED" if status == "KILLED" or interrupted.is_set() else "FAILED"
-            raise
-        finally:
-            release(executor)
-            summary.wall_s = time.perf_counter() - start
-            store.log_params(client, parent.info.run_id, {"sweep.pending": ",".join(j.name for j in pending)})
-            client.log_metric(parent.info.run_id, schema.METRIC_SWEEP_WALL_S, summary.wall_s)
-            if interrupted.is_set():
-                status = "KILLED"
-            terminate(client, parent.info.run_id, RunStatus(status))
-    if status == "KILLED":
+        with tracked_run(client, parent.info.run_id) as run:
+            try:
+                store.log_params(client, run.run_id, flatten(dataclasses.replace(cfg, ppo=cfg.ppo_config)))
+                ctx = JobContext(tracking_uri, experiment_id, run.run_id, vlm_label, simulated,
+                                 heartbeat_s=cfg.heartbeat_s, stale_after_s=cfg.stale_after_s)
+                if not interrupted.is_set():  # a Ctrl-C during start-up: nothing is submitted
+                    executor.submit(pending, job_fn, ctx)
+                while executor.outstanding:
+                    polled = executor.poll(0.2)
+                    for event in polled.events:
+                        reporter.progress(event)
+                    for result in polled.results:
+                        summary.results.append(result)
+                        reporter.finished(result)
+                    if interrupted.is_set() and run.status != RunStatus.KILLED:
+                        run.status = RunStatus.KILLED
+                        executor.stop()
+                if summary.failed and run.status != RunStatus.KILLED:
+                    run.status = RunStatus.FAILED
+            finally:
+                release(executor)
+                summary.wall_s = time.perf_counter() - start
+                store.log_params(client, run.run_id, {"sweep.pending": ",".join(j.name for j in pending)})
+                client.log_metric(run.run_id, schema.METRIC_SWEEP_WALL_S, summary.wall_s)
+                if interrupted.is_set():
+                    run.status = RunStatus.KILLED
+    if run.status == RunStatus.KILLED:
         raise KeyboardInterrupt
     return summary
 

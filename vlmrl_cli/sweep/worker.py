@@ -7,7 +7,6 @@ inheritance), never as module state that the library reads elsewhere.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import json
 import os
@@ -26,7 +25,7 @@ from vlmrl_cli.core.provenance import flatten
 from vlmrl_cli.shaping.placebo import describe_map, placebo_map
 from vlmrl_cli.sweep import leases
 from vlmrl_cli.tracking import schema, store
-from vlmrl_cli.tracking.lifecycle import RunStatus, terminate
+from vlmrl_cli.tracking.lifecycle import RunStatus, tracked_run
 from vlmrl_cli.training.callbacks import EpisodeTracker
 from vlmrl_cli.training.config import EVAL_SEED, TrainJob
 from vlmrl_cli.training.evaluation import EvalResult, evaluate_detached
@@ -139,34 +138,31 @@ def run_claimed(job: TrainJob, ctx: JobContext, body: Body) -> JobResult:
         return JobResult(job.name, "", "FAILED", time.perf_counter() - start, error=f"{type(exc).__name__}: {exc}")
     if not decision.won:
         return JobResult(job.name, run_id, "SKIPPED", time.perf_counter() - start, error=decision.reason)
+    message = ""
     try:
-        with leases.heartbeat(client, run_id, ctx.heartbeat_s):
-            result = body(job, client, run_id, channels)
-        if result.status == "FINISHED":
-            rival = _finished_rival(client, ctx.experiment_id, job, run_id)
-            if rival is not None:  # two claimants raced past each other: keep the first FINISHED run only
-                store.set_tags(client, run_id, {schema.TAG_ERROR: f"duplicate of FINISHED run {rival}"})
-                terminate(client, run_id, RunStatus.KILLED)
-                return dataclasses.replace(result, status="SKIPPED", error=f"duplicate of FINISHED run {rival}",
-                                           superseded=decision.superseded, wall_s=time.perf_counter() - start)
-            terminate(client, run_id, RunStatus.FINISHED)
-        else:
-            terminate(client, run_id, RunStatus(result.status))
+        with tracked_run(client, run_id) as run:
+            try:
+                with leases.heartbeat(client, run_id, ctx.heartbeat_s):
+                    result = body(job, client, run_id, channels)
+                run.status = RunStatus(result.status)
+                rival = _finished_rival(client, ctx.experiment_id, job, run_id) if result.status == "FINISHED" else None
+                if rival is not None:  # two claimants raced past each other: keep the first FINISHED run only
+                    store.set_tags(client, run_id, {schema.TAG_ERROR: f"duplicate of FINISHED run {rival}"})
+                    run.status = RunStatus.KILLED
+                    result = dataclasses.replace(result, status="SKIPPED", error=f"duplicate of FINISHED run {rival}")
+            except KeyboardInterrupt:
+                raise
+            except BaseException as exc:
+                message = f"{type(exc).__name__}: {exc}"
+                store.set_tags(client, run_id, {schema.TAG_ERROR: message[:4000],
+                                                schema.TAG_TRACEBACK: traceback.format_exc()[-4000:]})
+                raise
         return dataclasses.replace(result, superseded=decision.superseded, wall_s=time.perf_counter() - start)
     except KeyboardInterrupt:  # a terminal's Ctrl-C reaches Ray's workers too: a stop, not a failure
-        with contextlib.suppress(Exception):
-            terminate(client, run_id, RunStatus.KILLED)
         return JobResult(job.name, run_id, "KILLED", time.perf_counter() - start, superseded=decision.superseded)
-    except BaseException as exc:  # a failed job must not take the sweep down
-        message = f"{type(exc).__name__}: {exc}"
-        try:
-            store.set_tags(client, run_id, {schema.TAG_ERROR: message[:4000],
-                                            schema.TAG_TRACEBACK: traceback.format_exc()[-4000:]})
-            terminate(client, run_id, RunStatus.FAILED)
-        except Exception:  # the store itself failed; the parent reports the error
-            pass
-        return JobResult(job.name, run_id, "FAILED", time.perf_counter() - start, error=message,
-                         superseded=decision.superseded)
+    except BaseException as exc:  # a failed job must not take the sweep down; nor a store that failed too
+        return JobResult(job.name, run_id, "FAILED", time.perf_counter() - start,
+                         error=message or f"{type(exc).__name__}: {exc}", superseded=decision.superseded)
 
 
 def _finished_rival(client: Any, experiment_id: str, job: TrainJob, run_id: str) -> str | None:

@@ -40,7 +40,6 @@ SCALE = SCREEN / (2 * (AcrobotEnv.LINK_LENGTH_1 + AcrobotEnv.LINK_LENGTH_2 + 0.2
 PIVOT_PIXEL = (SCREEN - 1 - SCREEN / 2, SCREEN / 2)
 LINK_COLOUR = (0, 204, 204)
 JOINT_COLOUR = (204, 204, 0)
-LINK_HALF_WIDTH_PX = 0.1 * SCALE
 JOINT_RADIUS_PX = int(0.1 * SCALE)
 
 LABELS: tuple[str, ...] = ("HANGING", "LOW_SWING", "HIGH_SWING", "ABOVE_BAR")  # low to high
@@ -317,11 +316,6 @@ class AcrobotCamera(CellCamera[tuple[int, int]]):
         if self._renderer is None:
             self._renderer = AcrobotRenderer()
         return self._renderer.render(self._centre(cell[0]), self._centre(cell[1]), sha256=sha256)
-
-    def _release(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
 
     def view(self, theta1: float, theta2: float) -> FrameView:
         """The view of the pendulum at angles ``theta1``, ``theta2``, rendered at most once per cell."""

@@ -45,7 +45,6 @@ from vlmrl_cli.tasks.pusher_scene import (
     SUCCESS_M,
     PusherCamera,
     PusherReader,
-    label_of,
     label_of_sim,
     use_headless_gl,
 )
@@ -80,17 +79,6 @@ def pusher_dense(obs: np.ndarray, scale: float, offset: float) -> float:
     """
     d_tp = float(np.sqrt((obs[14] - obs[17]) ** 2 + (obs[15] - obs[18]) ** 2 + (obs[16] - obs[19]) ** 2))
     return max(0.0, scale * (offset - puck_goal_distance(obs) - 0.5 * d_tp))
-
-
-def label_of_obs(obs: np.ndarray) -> str:
-    """The milestone of an observation (the same rule as the truth of a simulator).
-
-    Example:
-        >>> label_of_obs(np.zeros(OBS_DIM))
-        'ON_TARGET'
-    """
-    d_tp = float(np.linalg.norm(obs[14:17] - obs[17:20]))
-    return label_of(d_tp, puck_goal_distance(obs))
 
 
 class SparsePush(gym.Wrapper[np.ndarray, np.ndarray, np.ndarray, np.ndarray], gym.utils.RecordConstructorArgs):

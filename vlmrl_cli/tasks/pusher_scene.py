@@ -242,19 +242,6 @@ def colour_masks(pixels: np.ndarray) -> dict[str, np.ndarray]:
             "goal": (r > 90) & (r > 3 * g) & (r > 3 * b)}
 
 
-def find_objects(pixels: np.ndarray) -> dict[str, tuple[float, float] | None]:
-    """Pixel centres (row, col) of the ``tip`` marker, the ``puck`` and the ``goal``, each None when
-    not in sight, from an RGB frame's pixels only.
-
-    Example:
-        >>> blank = np.zeros(FRAME_SHAPE, dtype=np.uint8)
-        >>> blank[10:13, 20:23] = (250, 250, 250)
-        >>> find_objects(blank)
-        {'tip': None, 'puck': (11.5, 21.5), 'goal': None}
-    """
-    return {name: _blob(mask) for name, mask in colour_masks(pixels).items()}
-
-
 _OFFSETS = np.arange(-3.0, 3.01, 0.5)  # px: where a disc's outline is tried around its blob's centroid
 
 
@@ -406,11 +393,6 @@ class PusherCamera(CellCamera[Cell]):
         if self._renderer is None:
             self._renderer = PusherRenderer(self._model)
         return self._renderer.render(self._poses[cell], sha256=sha256)
-
-    def _release(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
 
     def look(self, sim: Any) -> FrameView:
         cell = cell_of(sim)

@@ -7,6 +7,7 @@ KILLED on Ctrl-C, FAILED on any other error, so that no run is left RUNNING by a
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -41,7 +42,9 @@ class RunHandle:
 @contextmanager
 def tracked_run(client: Any, run_id: str) -> Iterator[RunHandle]:
     """Close ``run_id`` when the block ends: ``handle.status`` (FINISHED unless changed) when it
-    completes, KILLED on KeyboardInterrupt, FAILED on any other exception (which propagates).
+    completes; on an exception (which propagates) KILLED for a KeyboardInterrupt or a block that
+    set ``handle.status`` KILLED (it was stopping), FAILED otherwise. A store that fails to close
+    the run then does not hide the exception.
 
     Example:
         >>> class Client:
@@ -59,10 +62,9 @@ def tracked_run(client: Any, run_id: str) -> Iterator[RunHandle]:
     handle = RunHandle(run_id)
     try:
         yield handle
-    except KeyboardInterrupt:
-        terminate(client, run_id, RunStatus.KILLED)
-        raise
-    except BaseException:
-        terminate(client, run_id, RunStatus.FAILED)
+    except BaseException as exc:
+        killed = isinstance(exc, KeyboardInterrupt) or handle.status == RunStatus.KILLED
+        with contextlib.suppress(Exception):
+            terminate(client, run_id, RunStatus.KILLED if killed else RunStatus.FAILED)
         raise
     terminate(client, run_id, handle.status, handle.end_time)

@@ -141,6 +141,24 @@ def runs_filter(tags: Mapping[str, str], finished: bool = False) -> str:
     return " and ".join(terms)
 
 
+def job_key(tags: Mapping[str, str]) -> tuple[str, str, str]:
+    """The job a training run trains, ``(arm, seed, config_hash)`` as its tags spell them ("" where absent).
+
+    Example:
+        >>> job_key({TAG_ARM: "hybrid", TAG_SEED: "3", TAG_CONFIG_HASH: "ab12"})
+        ('hybrid', '3', 'ab12')
+    """
+    return tags.get(TAG_ARM, ""), tags.get(TAG_SEED, ""), tags.get(TAG_CONFIG_HASH, "")
+
+
+def train_runs_by_job(client: Any, experiment_id: str) -> dict[tuple[str, str, str], list[Any]]:
+    """The experiment's training runs by ``job_key``, each job's in search order."""
+    by_key: dict[tuple[str, str, str], list[Any]] = {}
+    for run in search_all(client, experiment_id, runs_filter({TAG_KIND: KIND_TRAIN})):
+        by_key.setdefault(job_key(run.data.tags), []).append(run)
+    return by_key
+
+
 def search_all(client: Any, experiment_id: str, filter_string: str, page_size: int = PAGE_SIZE) -> list[Any]:
     """Every run of ``experiment_id`` that matches ``filter_string``, following MLflow's page tokens
     (one ``search_runs`` call answers at most one page)."""

@@ -436,8 +436,7 @@ def _check_arrays(blob: bytes) -> None:
 def _present(client: Any, experiment_id: str) -> tuple[set[tuple[str, str, str]], set[str]]:
     runs = schema.search_all(client, experiment_id,
                              schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN}, finished=True))
-    keys = {(r.data.tags.get(schema.TAG_ARM, ""), r.data.tags.get(schema.TAG_SEED, ""),
-             r.data.tags.get(schema.TAG_CONFIG_HASH, "")) for r in runs}
+    keys = {schema.job_key(r.data.tags) for r in runs}
     sources = {r.data.tags[TAG_IMPORTED_FROM] for r in runs if TAG_IMPORTED_FROM in r.data.tags}
     return keys, sources
 
@@ -488,8 +487,7 @@ def import_runs(client: Any, path: Path | ExportFile, experiment: str,
     created: list[str] = []
     try:
         for i, record in enumerate(export.records, start=1):
-            tags = record["tags"]
-            key = (tags[schema.TAG_ARM], tags[schema.TAG_SEED], tags[schema.TAG_CONFIG_HASH])
+            key = schema.job_key(record["tags"])
             if key in keys or record["source_run_id"] in sources:
                 skipped += 1
             else:

@@ -36,11 +36,8 @@ class ParseStatus(StrEnum):
 
 
 @dataclass(frozen=True)
-class FloatResult:
-    """A parsed number (the task's units). ``value`` is set for OK and OUT_OF_RANGE, else None."""
-
+class _Parsed:
     status: ParseStatus
-    value: float | None = None
 
     @property
     def ok(self) -> bool:
@@ -48,31 +45,28 @@ class FloatResult:
 
 
 @dataclass(frozen=True)
-class BoxResult:
+class FloatResult(_Parsed):
+    """A parsed number (the task's units). ``value`` is set for OK and OUT_OF_RANGE, else None."""
+
+    value: float | None = None
+
+
+@dataclass(frozen=True)
+class BoxResult(_Parsed):
     """A parsed box (x0, y0, x1, y1) in image pixels, set for OK and OUT_OF_RANGE, else None.
 
     ``normalised`` is True when the text gave 0-1 coordinates, which were scaled to pixels.
     """
 
-    status: ParseStatus
     box: Box | None = None
     normalised: bool = False
 
-    @property
-    def ok(self) -> bool:
-        return self.status is ParseStatus.OK
-
 
 @dataclass(frozen=True)
-class MCQResult:
+class MCQResult(_Parsed):
     """A parsed zone label, set only for OK."""
 
-    status: ParseStatus
     label: str | None = None
-
-    @property
-    def ok(self) -> bool:
-        return self.status is ParseStatus.OK
 
 
 _NUM = r"[-+\u2212]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?"

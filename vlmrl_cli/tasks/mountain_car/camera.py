@@ -63,11 +63,6 @@ class Camera(CellCamera[int]):
             self._renderer = FrameRenderer(self.env_id)
         return self._renderer.render(self._cell_position(cell), sha256=sha256)
 
-    def _release(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-
     def view(self, x: float) -> FrameView:
         """The view of the car at position ``x`` (x units), rendered at most once per grid cell."""
         return self._view_of(self._cell(float(x)))
