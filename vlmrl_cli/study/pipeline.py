@@ -26,7 +26,6 @@ import pandas as pd
 from vlmrl_cli.analysis import multiplicity, stats
 from vlmrl_cli.analysis.censored import RATIO_INTERVAL, RULE, equivalent
 from vlmrl_cli.analysis.load import load_experiment
-from vlmrl_cli.calibration.pipeline import log_summary_run, runs_of, train_regimes, wall_s
 from vlmrl_cli.calibration.regimes import Regime
 from vlmrl_cli.core import tables
 from vlmrl_cli.core.errors import BadInput
@@ -40,6 +39,7 @@ from vlmrl_cli.study import verdicts
 from vlmrl_cli.study.config import StudyConfig
 from vlmrl_cli.sweep import cost as cost_model
 from vlmrl_cli.sweep.cost import CostEstimate
+from vlmrl_cli.sweep.multi import log_summary_run, runs_of, train_sweeps, wall_s
 from vlmrl_cli.sweep.runner import JobResult, SweepReporter, vlm_identity
 from vlmrl_cli.tracking import schema, store
 
@@ -115,7 +115,7 @@ def run_study(
     check_out_folder(cfg.out)
     start = time.perf_counter()
     if train:
-        result.trained, result.failed = train_regimes(cfg.all_regimes(), reporter_for)
+        result.trained, result.failed = train_sweeps(cfg.all_regimes(), reporter_for)
     stage("train", start, runs_trained_now=result.trained)
     if result.failed:
         return result
