@@ -59,24 +59,13 @@ def log_summary_run(client: Any, experiment_id: str, kind: str, key: str, params
     """One MLflow run tagged ``vlmrl.kind=kind`` holding ``files``: the existing run of the same
     ``key`` (config hash) when there is one, else a new one with ``params``; ``vlm``: its
     (label, simulated) provenance."""
-    found = client.search_runs(
-        [experiment_id],
-        filter_string=schema.runs_filter({schema.TAG_KIND: kind, schema.TAG_CONFIG_HASH: key}),
-        max_results=1,
-    )
+    keys = {schema.TAG_KIND: kind, schema.TAG_CONFIG_HASH: key}
+    found = client.search_runs([experiment_id], filter_string=schema.runs_filter(keys), max_results=1)
     if found:
         run_id = str(found[0].info.run_id)
     else:
-        run = client.create_run(
-            experiment_id,
-            tags={
-                **store.provenance_tags(*vlm),
-                schema.MLFLOW_RUN_NAME: f"{kind}-{time.strftime('%Y%m%d-%H%M%S')}",
-                schema.TAG_KIND: kind,
-                schema.TAG_CONFIG_HASH: key,
-            },
-        )
-        run_id = str(run.info.run_id)
+        name = {schema.MLFLOW_RUN_NAME: f"{kind}-{time.strftime('%Y%m%d-%H%M%S')}"}
+        run_id = str(client.create_run(experiment_id, tags={**store.provenance_tags(*vlm), **name, **keys}).info.run_id)
         store.log_params(client, run_id, params)
     with tracked_run(client, run_id):
         store.log_artifacts(client, run_id, files)
