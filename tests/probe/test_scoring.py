@@ -63,11 +63,11 @@ def test_frames_truths_and_potentials_come_from_the_task() -> None:
     assert true_phi == pytest.approx((0.1 + 0.3) / 0.9) and vlm_phi == pytest.approx(true_phi, abs=0.01)
 
 
-def test_a_task_that_asks_for_no_number_is_refused_naming_it(tmp_path: Path) -> None:
+def test_a_task_with_neither_numbers_nor_probe_states_is_refused_naming_it(tmp_path: Path) -> None:
     cfg = TaxonomyConfig(vlm=VLMConfig(cache_path=tmp_path / "c.sqlite"), states=2, out=tmp_path / "out",
                          tracking_uri=f"sqlite:///{tmp_path}/m.db")
-    with pytest.raises(BadInput, match="task acrobot asks for no number"):
-        run_taxonomy(cfg, task=get_task("acrobot"))
+    with pytest.raises(BadInput, match="task 'acrobot' names no probe states"):
+        run_taxonomy(cfg, task=dataclasses.replace(get_task("acrobot"), probe_states=None))
     assert not (tmp_path / "out").exists() and not (tmp_path / "m.db").exists()
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,10 +29,9 @@ from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, flatten, git_commit, package_versions, to_jsonable
 from vlmrl_cli.report import figures
 from vlmrl_cli.report.table2 import threshold_key
-from vlmrl_cli.sweep.runner import JobResult, SharedPool, SweepReporter, run_sweep
+from vlmrl_cli.sweep.multi import log_summary_run, runs_of, train_sweeps, wall_s
+from vlmrl_cli.sweep.runner import JobResult, SweepReporter
 from vlmrl_cli.tracking import schema, store
-from vlmrl_cli.tracking.lifecycle import tracked_run
-from vlmrl_cli.training.config import RunConfig
 
 KIND = schema.KIND_CALIBRATION
 
@@ -56,7 +55,7 @@ def calibrate(
     check_out_folder(cfg.out)  # before training: a bad --out must not cost a sweep, nor leave a store
     start = time.perf_counter()
     result = CalibrationResult(pd.DataFrame())
-    result.trained, result.failed = train_regimes(cfg.regimes, reporter_for)
+    result.trained, result.failed = train_sweeps(cfg.regimes, reporter_for)
     if result.failed:
         result.wall_s = time.perf_counter() - start
         return result
@@ -79,33 +78,6 @@ def calibrate(
     result.files = _write(cfg, result, curves, rng, command)
     result.run_id = _log_run(client, data.experiment_id, cfg, result.files)
     return result
-
-
-def train_regimes(
-    regimes: Sequence[Regime], reporter_for: Callable[[Regime], AbstractContextManager[SweepReporter]]
-) -> tuple[int, list[JobResult]]:
-    """Train what is missing of each regime (one resumable sweep each, with a fresh
-    ``reporter_for(regime)``, all on one ``SharedPool`` of local workers): the number of runs
-    trained now and the failed ones."""
-    trained, failed = 0, []
-    with SharedPool() as pool:
-        for regime in regimes:
-            with reporter_for(regime) as reporter:
-                summary = run_sweep(regime.run, reporter, pool=pool)
-            trained += len(summary.results)
-            failed += summary.failed
-    return trained, failed
-
-
-def runs_of(runs: pd.DataFrame, run: RunConfig) -> pd.DataFrame:
-    """The rows of ``runs`` (see ``analysis/load.py``) that are jobs of ``run``: same arm, seed and config hash."""
-    keys = {(j.arm.name, j.seed, j.config_hash) for j in run.jobs()}
-    mine = [(a, s, h) in keys for a, s, h in zip(runs["arm"], runs["seed"], runs["config_hash"], strict=True)]
-    return runs[pd.Series(mine, index=runs.index, dtype=bool)]
-
-
-def wall_s(client: Any, run_id: str) -> float:
-    return float(client.get_run(run_id).data.metrics.get(schema.METRIC_WALL_S, 0.0))
 
 
 def knob_columns(regimes: tuple[Regime, ...]) -> list[str]:
@@ -262,31 +234,3 @@ def _log_run(client: Any, experiment_id: str, cfg: CalibrateConfig, files: list[
     return log_summary_run(client, experiment_id, KIND, config_hash(identity(cfg)), params, files,
                            ("none (the baseline arm queries no VLM)", False))
 
-
-def log_summary_run(client: Any, experiment_id: str, kind: str, key: str, params: dict[str, str],
-                    files: list[Path], vlm: tuple[str, bool]) -> str:
-    """One MLflow run tagged ``vlmrl.kind=kind`` holding ``files``: the existing run of the same
-    ``key`` (config hash) when there is one, else a new one with ``params``; ``vlm``: its
-    (label, simulated) provenance."""
-    found = client.search_runs(
-        [experiment_id],
-        filter_string=schema.runs_filter({schema.TAG_KIND: kind, schema.TAG_CONFIG_HASH: key}),
-        max_results=1,
-    )
-    if found:
-        run_id = str(found[0].info.run_id)
-    else:
-        run = client.create_run(
-            experiment_id,
-            tags={
-                **store.provenance_tags(*vlm),
-                schema.MLFLOW_RUN_NAME: f"{kind}-{time.strftime('%Y%m%d-%H%M%S')}",
-                schema.TAG_KIND: kind,
-                schema.TAG_CONFIG_HASH: key,
-            },
-        )
-        run_id = str(run.info.run_id)
-        store.log_params(client, run_id, params)
-    with tracked_run(client, run_id):
-        store.log_artifacts(client, run_id, files)
-    return run_id

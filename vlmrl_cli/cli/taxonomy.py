@@ -7,7 +7,7 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.console import Console
@@ -16,6 +16,10 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import Experiment, OutDir, TaskOpt, TrackingUri, vlm_config
 from vlmrl_cli.vlm.config import VLMConfig
+
+if TYPE_CHECKING:
+    from vlmrl_cli.probe.taxonomy import TaxonomyResult
+    from vlmrl_cli.tasks.base import Task
 
 States = Annotated[
     int | None,
@@ -36,14 +40,6 @@ def _probe_progress(console: Console) -> Iterator[Callable[[int, int], None]]:
         yield progress
 
 
-def _is_papers_task(name: str) -> bool:
-    from vlmrl_cli.tasks.registry import command_tasks
-
-    with exit_codes():
-        return command_tasks([name])(name).paper is not None
-    return False  # exit_codes() has exited
-
-
 def taxonomy(
     ctx: typer.Context,
     task: TaskOpt = None,
@@ -58,47 +54,63 @@ def taxonomy(
         _check_flags(vlm_cfg, states, out, tracking_uri, experiment)
     # the probe's modules load scipy and pandas (seconds): only once the flags are known to be usable
     from vlmrl_cli.probe.states import DEFAULT_STATES
-    from vlmrl_cli.probe.table1 import with_ci
     from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
-    from vlmrl_cli.tasks.registry import command_tasks
+    from vlmrl_cli.tasks.registry import command_tasks, paper_task
     from vlmrl_cli.tracking.store import check_store
 
-    console = Console(stderr=True)
-    if task is not None and not _is_papers_task(task):  # the paper's Table 1 is MountainCar's probe
-        _other_task(task, vlm_cfg, states, out, tracking_uri, experiment, console)
-        return
     with exit_codes():
-        resolved_states = states if states is not None or vlm_cfg.backend == "replay" else DEFAULT_STATES
+        chosen = paper_task() if task is None else command_tasks([task])(task)
+        numbers = chosen.numbers is not None  # else the milestone MCQ alone (``probe/milestones.py``)
+        default_out = vlm_cfg.backend if numbers else f"{chosen.name}-{vlm_cfg.backend}"
         cfg = TaxonomyConfig(
             vlm=vlm_cfg,
-            states=resolved_states,
-            out=out if out is not None else Path("results") / "taxonomy" / vlm_cfg.backend,
+            states=states if states is not None or (numbers and vlm_cfg.backend == "replay") else DEFAULT_STATES,
+            out=out if out is not None else Path("results") / "taxonomy" / default_out,
             tracking_uri=tracking_uri,
             experiment=experiment,
         )
         check_store(cfg.tracking_uri)  # before MLflow, the VLM or any file
-        with _probe_progress(console) as progress:
-            result = run_taxonomy(cfg, progress=progress, task=None if task is None else command_tasks([task])(task))
-
+        with _probe_progress(Console(stderr=True)) as progress:
+            result = run_taxonomy(cfg, progress=progress, task=None if task is None else chosen)
     if result.simulated:
         typer.secho("WARNING: SIMULATED VLM (not a real model): the answers come from a pixel reader with "
                     "noise.", fg=typer.colors.YELLOW, err=True)
-    typer.echo(f"backend:   {result.backend_label}")
-    if vlm_cfg.backend == "sim":
-        sim = vlm_cfg.sim
-        typer.echo(f"profile:   {sim.profile} (flicker {sim.flicker:g}, float noise {sim.float_noise:g}, box noise "
-                   f"{sim.box_noise_px:g} px, box failure {sim.box_failure:g}, patch {sim.patch_px} px)")
-    typer.echo(f"frames:    {len(result.probes)} probed, {result.queries} queries "
-               f"(cache: {result.cache_hits} hits, {result.cache_misses} misses)")
-    sweep = result.sweep
-    if math.isfinite(sweep.get("mcq.accuracy", math.nan)):
-        typer.echo(f"sweep:     MCQ accuracy {sweep['mcq.accuracy']:.2f}, float Spearman "
-                   f"{with_ci(sweep, 'float.spearman', 2)}, box IoU {sweep['box.mean_iou']:.2f}, MCQ dPhi dead zone "
-                   f"{sweep['mcq.dphi.dead_zone']:.2f}")
-    else:
-        typer.echo("sweep:     n/a (only the transcript's frames were probed)")
+    for line in _number_lines(result, vlm_cfg) if numbers else _milestone_lines(result, chosen):
+        typer.echo(line)
     typer.echo(f"outputs:   {result.out}/ ({', '.join(p.name for p in result.files)})")
     typer.echo(f"MLflow:    run {result.run_id}")
+
+
+def _number_lines(result: TaxonomyResult, vlm_cfg: VLMConfig) -> list[str]:
+    """The summary of a probe with number questions: the backend, the frames, the sweep."""
+    from vlmrl_cli.probe.table1 import with_ci
+
+    lines = [f"backend:   {result.backend_label}"]
+    if vlm_cfg.backend == "sim":
+        sim = vlm_cfg.sim
+        lines.append(f"profile:   {sim.profile} (flicker {sim.flicker:g}, float noise {sim.float_noise:g}, box noise "
+                     f"{sim.box_noise_px:g} px, box failure {sim.box_failure:g}, patch {sim.patch_px} px)")
+    lines.append(f"frames:    {len(result.probes)} probed, {result.queries} queries "
+                 f"(cache: {result.cache_hits} hits, {result.cache_misses} misses)")
+    sweep = result.sweep
+    if math.isfinite(sweep.get("mcq.accuracy", math.nan)):
+        lines.append(f"sweep:     MCQ accuracy {sweep['mcq.accuracy']:.2f}, float Spearman "
+                     f"{with_ci(sweep, 'float.spearman', 2)}, box IoU {sweep['box.mean_iou']:.2f}, MCQ dPhi dead "
+                     f"zone {sweep['mcq.dphi.dead_zone']:.2f}")
+    else:
+        lines.append("sweep:     n/a (only the transcript's frames were probed)")
+    return lines
+
+
+def _milestone_lines(result: TaxonomyResult, task: Task) -> list[str]:
+    """The summary of a probe of the milestone MCQ alone."""
+    m = result.metrics
+    return [f"task:      {task.name} ({task.env_id}); float and box prompts are not defined for it",
+            f"backend:   {result.backend_label}",
+            f"frames:    {m['frames']} probed",
+            f"MCQ:       accuracy {m['mcq.accuracy']:.2f} [{m['mcq.accuracy_low']:.2f}, "
+            f"{m['mcq.accuracy_high']:.2f}], format failures {m['mcq.format_failure_rate']:.2f}, "
+            f"mean |dPhi| {m['mcq.mean_abs_dphi']:.3f}"]
 
 
 def _check_flags(vlm_cfg: VLMConfig, states: int | None, out: Path | None, tracking_uri: str | None,
@@ -121,31 +133,3 @@ def _check_flags(vlm_cfg: VLMConfig, states: int | None, out: Path | None, track
     if out is not None:
         check_out_folder(out)
     check_vlm(vlm_cfg)
-
-
-def _other_task(name: str, vlm_cfg: VLMConfig, states: int | None, out: Path | None, tracking_uri: str | None,
-                experiment: str, console: Console) -> None:
-    """Table 1 and Figure 1 of another task: its milestone MCQ (``probe/milestones.py``)."""
-    from vlmrl_cli.probe.milestones import run_milestone_taxonomy
-    from vlmrl_cli.probe.states import DEFAULT_STATES
-    from vlmrl_cli.tasks.registry import command_tasks
-    from vlmrl_cli.tracking.store import check_store
-
-    with exit_codes():
-        task = command_tasks([name])(name)
-        check_store(tracking_uri)  # before MLflow, the VLM or any file
-        folder = out if out is not None else Path("results") / "taxonomy" / f"{task.name}-{vlm_cfg.backend}"
-        with _probe_progress(console) as progress:
-            result = run_milestone_taxonomy(task, vlm_cfg, states or DEFAULT_STATES, folder, tracking_uri,
-                                            experiment, progress)
-    if result["simulated"]:
-        typer.secho("WARNING: SIMULATED VLM (not a real model): the answers come from a pixel reader with "
-                    "noise.", fg=typer.colors.YELLOW, err=True)
-    typer.echo(f"task:      {task.name} ({task.env_id}); float and box prompts are not defined for it")
-    typer.echo(f"backend:   {result['label']}")
-    typer.echo(f"frames:    {result['frames']} probed")
-    typer.echo(f"MCQ:       accuracy {result['mcq.accuracy']:.2f} [{result['mcq.accuracy_low']:.2f}, "
-               f"{result['mcq.accuracy_high']:.2f}], format failures {result['mcq.format_failure_rate']:.2f}, "
-               f"mean |dPhi| {result['mcq.mean_abs_dphi']:.3f}")
-    typer.echo(f"outputs:   {folder}/ ({', '.join(p.name for p in result['files'])})")
-    typer.echo(f"MLflow:    run {result['run_id']}")

@@ -1,19 +1,17 @@
-"""The taxonomy probe of a task other than MountainCar-v0: its milestone MCQ only.
+"""The milestone MCQ of the taxonomy probe, and Table 1 of a task that asks for no number.
 
-The float and box prompts of the paper's Table 1 ask for MountainCar's position and car box;
-another task has no such answer key, so its Table 1 has the MCQ row alone (and says so). Each
-probed state is drawn by the task's training camera (the frames a run's VLM sees), its true label
-comes from the task (``Task.truth``), the VLM's answer is parsed in the task's vocabulary, and the
-potential error ``|dPhi|`` uses the task's label map. One MLflow run is logged, tagged with the
-task; everything made with the simulated VLM says SIMULATED.
+Every task's probe asks its milestone MCQ; the float and box prompts of the paper's Table 1 need a
+number answer key (``Task.numbers``, MountainCar's position and car box), so a task without one
+has the MCQ row alone (and says so). Each probed state is drawn by the task's training camera (the
+frames a run's VLM sees), its true label comes from the task (``Task.truth``), the VLM's answer is
+parsed in the task's vocabulary, and the potential error ``|dPhi|`` uses the task's label map.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
@@ -24,20 +22,12 @@ import pandas as pd
 from scipy import stats
 
 from vlmrl_cli.core import tables
-from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.core.paths import check_out_folder
-from vlmrl_cli.core.provenance import config_hash, flatten
 from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.probe import metrics
 from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.tasks.base import Task
-from vlmrl_cli.tracking import schema, store
-from vlmrl_cli.tracking.lifecycle import tracked_run
 from vlmrl_cli.vlm.client import VLMClient
-from vlmrl_cli.vlm.config import profile_problem
 from vlmrl_cli.vlm.parsers import ParseStatus, parse_mcq
-from vlmrl_cli.vlm.preflight import check_vlm
-from vlmrl_cli.vlm.registry import build_client
 
 ProgressFn = Callable[[int, int], None]
 NOT_DEFINED = "not defined for this task (no position or box answer key)"
@@ -93,97 +83,74 @@ def summarize(probes: list[MilestoneProbe], potentials: dict[str, float], ci: fl
                             float(np.mean(dphi)) if dphi else math.nan)
 
 
-def run_milestone_taxonomy(task: Task, vlm: Any, states: int, out: Path, tracking_uri: str | None,
-                           experiment: str, progress: ProgressFn | None = None) -> dict[str, Any]:
-    """Probe ``task``'s milestone MCQ on about ``states`` states, write ``table1.md``/``.csv``,
-    ``probes.csv``, ``figure1.png`` and ``metrics.json`` into ``out``, log one MLflow run; return
-    the metrics. Nothing is created before the folder, the VLM and the store are checked."""
-    if task.probe_states is None:
-        raise BadInput(f"task '{task.name}' names no probe states; give its Task a probe_states function.")
-    problem = profile_problem(vlm.sim.profile, task) if vlm.backend == "sim" else None
-    if problem:  # a profile another task offers: its knobs mean nothing to this task's reader
-        raise BadInput(problem + ".")
-    check_out_folder(out)
-    check_vlm(vlm)
-    tracker = store.connect(tracking_uri)
-    client = build_client(vlm, reader=task.reader)
+def mcq_probe(frame_id: str, truth: str, answer: str | None, labels: Sequence[str]) -> MilestoneProbe:
+    """One answer to the MCQ, parsed in ``labels``."""
+    parsed = parse_mcq(answer, labels)
+    return MilestoneProbe(frame_id, truth, answer, str(parsed.label) if parsed.ok and parsed.label is not None
+                          else None, parsed.status)
+
+
+def potentials_of(task: Task) -> dict[str, float]:
+    return {str(label): float(p) for label, p in task.label_potentials}
+
+
+def probe_milestones(client: VLMClient, task: Task, states: int, progress: ProgressFn | None
+                     ) -> tuple[list[MilestoneProbe], list[Frame]]:
+    """Ask ``task``'s MCQ of about ``states`` states (``Task.probe_states``), each drawn by the
+    task's training camera: the probes and the frames shown."""
     camera = task.camera.make(ShapingConfig(label_potentials=task.label_potentials))
-    potentials = {str(label): float(p) for label, p in task.label_potentials}
-    made_out = not out.exists()  # only a folder this probe made is removed when it fails
+    probes, shown = [], []
     try:
-        experiment_id = store.ensure_experiment(tracker, experiment)
-        ident = {"task": task.name, "states": states, "vlm": vlm}
-        run = tracker.create_run(experiment_id, run_name=f"taxonomy-{task.name}-{client.backend.name}-{states}")
-        run_id = str(run.info.run_id)
-        with tracked_run(tracker, run_id):
-            store.set_tags(tracker, run_id, {
-                **store.provenance_tags(client.label, client.backend.simulated),
-                schema.TAG_COMMAND: schema.COMMAND_TAXONOMY, schema.TAG_TASK: task.name,
-                schema.TAG_CONFIG_HASH: config_hash(ident),
-            })
-            store.log_params(tracker, run_id, {**flatten(ident), "prompt.mcq": task.milestones.prompt.text})
-            probes, shown = [], []
-            planned = task.probe_states(states)
-            for i, state in enumerate(planned, start=1):
-                vector = isinstance(state, np.ndarray)  # else a simulator of the task's own
-                sim = SimpleNamespace(state=np.asarray(state, dtype=float)) if vector else state
-                view = camera.look(sim)
-                frame = view.frame()
-                answer = client.ask(task.milestones.prompt, frame).text
-                parsed = parse_mcq(answer, task.milestones.labels)
-                frame_id = _frame_id(state) if vector else f"{task.name}-{i:04d}-{view.key[:12]}"
-                probe = MilestoneProbe(frame_id, task.truth(sim), answer,
-                                       str(parsed.label) if parsed.ok and parsed.label is not None else None,
-                                       parsed.status)
-                probes.append(probe)
-                shown.append(frame)
-                if progress is not None:
-                    progress(i, len(planned))
-            summary = summarize(probes, potentials)
-            both = _generated_too(client, task, probes, shown, potentials)
-            label = f"{client.backend.name}:{client.backend.model}"
-            simulated = bool(client.backend.simulated)
-            out.mkdir(parents=True, exist_ok=True)
-            files = _write(out, task, probes, summary, label, simulated)
-            files.append(_figure(out / "figure1.png", task, probes, shown, label, simulated))
-            metrics = {"task": task.name, "backend": client.backend.name, "model": client.backend.model,
-                       "simulated": simulated, "frames": summary.frames, "mcq.accuracy": summary.accuracy,
-                       "mcq.accuracy_low": summary.accuracy_low, "mcq.accuracy_high": summary.accuracy_high,
-                       "mcq.format_failure_rate": summary.format_failure_rate,
-                       "mcq.mean_abs_dphi": summary.mean_abs_dphi,
-                       **client.mcq_mode_entry(task.milestones.prompt), **both}
-            (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
-            files.append(out / "metrics.json")
-            batch = store.BatchLogger(tracker, run_id)
-            batch.log({f"taxonomy.{k}": float(v) for k, v in metrics.items()
-                       if isinstance(v, float) and math.isfinite(v)}, step=0)
-            batch.flush()
-            store.log_artifacts(tracker, run_id, files)
-        return {**metrics, "run_id": run_id, "files": files, "label": client.label}
-    except BaseException:
-        if made_out and out.exists() and not any(out.iterdir()):
-            shutil.rmtree(out, ignore_errors=True)
-        raise
+        planned = task.probe_states(states) if task.probe_states is not None else []
+        for i, state in enumerate(planned, start=1):
+            vector = isinstance(state, np.ndarray)  # else a simulator of the task's own
+            sim = SimpleNamespace(state=np.asarray(state, dtype=float)) if vector else state
+            view = camera.look(sim)
+            frame = view.frame()
+            frame_id = _frame_id(state) if vector else f"{task.name}-{i:04d}-{view.key[:12]}"
+            probes.append(mcq_probe(frame_id, task.truth(sim), client.ask(task.milestones.prompt, frame).text,
+                                    task.milestones.labels))
+            shown.append(frame)
+            if progress is not None:
+                progress(i, len(planned))
     finally:
         camera.close()
-        client.close()
+    return probes, shown
 
 
-def _generated_too(client: VLMClient, task: Task, probes: list[MilestoneProbe], frames: list[Frame],
-                   potentials: dict[str, float]) -> dict[str, float]:
+def write_milestones(out: Path, task: Task, client: VLMClient, probes: list[MilestoneProbe], frames: list[Frame]
+                     ) -> tuple[dict[str, Any], dict[str, float]]:
+    """Write ``table1.md``/``.csv``, ``probes.csv``, ``figure1.png`` and ``metrics.json`` into
+    ``out``: the metrics, and those logged to MLflow."""
+    summary = summarize(probes, potentials_of(task))
+    both = generated_too(client, task, probes, frames)
+    backend = client.backend
+    label = f"{backend.name}:{backend.model}"
+    simulated = bool(backend.simulated)
+    _write(out, task, probes, summary, label, simulated)
+    _figure(out / "figure1.png", task, probes, frames, label, simulated)
+    values = {"task": task.name, "backend": backend.name, "model": backend.model,
+               "simulated": simulated, "frames": summary.frames, "mcq.accuracy": summary.accuracy,
+               "mcq.accuracy_low": summary.accuracy_low, "mcq.accuracy_high": summary.accuracy_high,
+               "mcq.format_failure_rate": summary.format_failure_rate,
+               "mcq.mean_abs_dphi": summary.mean_abs_dphi,
+               **client.mcq_mode_entry(task.milestones.prompt), **both}
+    (out / "metrics.json").write_text(json.dumps(values, indent=2) + "\n", encoding="utf-8")
+    logged = {f"taxonomy.{k}": float(v) for k, v in values.items() if isinstance(v, float) and math.isfinite(v)}
+    return values, logged
+
+
+def generated_too(client: VLMClient, task: Task, probes: list[MilestoneProbe], frames: Sequence[Frame]
+                  ) -> dict[str, float]:
     """Where the MCQ was scored by option log-probability, the same frames answered by generation
     as well (one round), summarised under ``mcq.generate.*``, with the share of frames on which
     the two modes agree; nothing where the MCQ was generated anyway."""
     prompt = task.milestones.prompt
     if not client.scores(prompt) or not frames:
         return {}
-    generated = []
-    for probe, answer in zip(probes, client.ask_many(prompt, frames, generate=True), strict=True):
-        parsed = parse_mcq(answer.text, task.milestones.labels)
-        generated.append(MilestoneProbe(probe.frame_id, probe.truth, answer.text,
-                                        str(parsed.label) if parsed.ok and parsed.label is not None else None,
-                                        parsed.status))
-    s = summarize(generated, potentials)
+    generated = [mcq_probe(p.frame_id, p.truth, a.text, task.milestones.labels)
+                 for p, a in zip(probes, client.ask_many(prompt, frames, generate=True), strict=True)]
+    s = summarize(generated, potentials_of(task))
     agree = sum(a.label == b.label for a, b in zip(probes, generated, strict=True)) / len(probes)
     return {"mcq.generate.accuracy": s.accuracy, "mcq.generate.format_failure_rate": s.format_failure_rate,
             "mcq.generate.mean_abs_dphi": s.mean_abs_dphi, "mcq.modes_agree": agree}
@@ -195,7 +162,7 @@ def _frame_id(state: Any) -> str:
 
 
 def _write(out: Path, task: Task, probes: list[MilestoneProbe], s: MilestoneSummary, label: str,
-           simulated: bool) -> list[Path]:
+           simulated: bool) -> None:
     banner = "SIMULATED VLM (not a real model): answers from a pixel reader with noise." if simulated else ""
     rows = [
         {"prompt": "I float regression", "frames": 0, "result": NOT_DEFINED},
@@ -226,11 +193,10 @@ def _write(out: Path, task: Task, probes: list[MilestoneProbe], s: MilestoneSumm
     per_frame = out / "probes.csv"
     pd.DataFrame([{"frame_id": p.frame_id, "truth": p.truth, "answer": p.answer, "label": p.label,
                    "status": p.status.value} for p in probes]).assign(vlm=label).to_csv(per_frame, index=False)
-    return [md, csv, per_frame]
 
 
 def _figure(path: Path, task: Task, probes: list[MilestoneProbe], frames: list[Any], label: str,
-            simulated: bool) -> Path:
+            simulated: bool) -> None:
     """Figure 1 of a task: one probed frame per true label (the first of each), with its answer."""
     from matplotlib.figure import Figure
 
@@ -247,4 +213,3 @@ def _figure(path: Path, task: Task, probes: list[MilestoneProbe], frames: list[A
     fig.suptitle(title + ("\nSIMULATED VLM (not a real model)" if simulated else ""), fontsize=9,
                  color="darkred" if simulated else "black")
     fig.savefig(path, dpi=120)
-    return path

@@ -224,18 +224,18 @@ def write_tables(
           f"**{cap_sweep}**", "", tables.markdown(stats), ""]
     if simulated:
         md.insert(0, "> **SIMULATED VLM (not a real model)**: these numbers test the pipeline, not a VLM.\n")
-    paths = [folder / "table1.md", folder / "table1.csv", folder / "table1.tex", folder / "table1_sweep.csv",
-             folder / "probes.csv"]
-    paths[0].write_text("\n".join(md), encoding="utf-8")
+    md_path, csv, tex_path, sweep_csv, per_frame = (folder / name for name in (
+        "table1.md", "table1.csv", "table1.tex", "table1_sweep.csv", "probes.csv"))
+    md_path.write_text("\n".join(md), encoding="utf-8")
     # CSVs carry no caption: every row names the backend instead, SIMULATED said plainly
     vlm = f"{label} (SIMULATED VLM, not a real model)" if simulated and "SIMULATED" not in label else label
-    main.assign(vlm=vlm).to_csv(paths[1], index=False)
+    main.assign(vlm=vlm).to_csv(csv, index=False)
     tex = [f"% {cap_main}", *(f"% {n}" for n in notes), latex_table(main, cap_main, "tab:taxonomy"), "",
            latex_table(stats, cap_sweep, "tab:taxonomy-sweep"), ""]
-    paths[2].write_text("\n".join(tex), encoding="utf-8")
-    stats.assign(vlm=vlm).to_csv(paths[3], index=False)
-    probes_frame(probes).assign(vlm=vlm).to_csv(paths[4], index=False)
-    return paths
+    tex_path.write_text("\n".join(tex), encoding="utf-8")
+    stats.assign(vlm=vlm).to_csv(sweep_csv, index=False)
+    probes_frame(probes).assign(vlm=vlm).to_csv(per_frame, index=False)
+    return [md_path, csv, tex_path, sweep_csv, per_frame]
 
 
 def probes_frame(probes: Sequence[FrameProbe]) -> pd.DataFrame:

@@ -1,16 +1,16 @@
 """The taxonomy probe (paper Section 2, Table 1, Figure 1): ask a VLM about frames, score it.
 
-Every probed frame gets all three prompts (float regression, box grounding, semantic MCQ);
-the answers are parsed, compared with the geometric ground truth, and turned into the
-potential Phi each answer would give PBRS, so that the paper's consequences (noise, ROI
-instability, the MCQ dead zone) are computed rather than asserted.
+Every probed frame gets the task's questions: its milestone MCQ always, and where the task has a
+number answer key (``Task.numbers``, a ``NumberProbe``; MountainCar-v0's, the paper's) the float
+regression and box grounding prompts too. The answers are parsed, compared with the ground truth,
+and turned into the potential Phi each answer would give PBRS, so that the paper's consequences
+(noise, ROI instability, the MCQ dead zone) are computed rather than asserted.
 
-``run_taxonomy`` is the one entry point. It takes the task whose frames it probes (its
-``Task.numbers``, a ``NumberProbe``; MountainCar-v0's, the paper's, by default) and validates
-everything the user can get wrong (the task, the simulated VLM's profile, output folder, backend,
-transcript, tracking store) before probing, writes its files into a
-temporary sibling folder that is moved into place only when everything succeeded, and logs
-exactly one MLflow run, marked FAILED if the probe fails after it was created.
+``run_taxonomy`` is the one entry point. It validates everything the user can get wrong (the
+task, the simulated VLM's profile, output folder, backend, transcript, tracking store) before
+probing, writes its files into a temporary sibling folder that is moved into place only when
+everything succeeded, and logs exactly one MLflow run, marked FAILED if the probe fails after it
+was created.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, flatten
-from vlmrl_cli.probe.metrics import format_failure_rate, mcq_accuracy
+from vlmrl_cli.probe.milestones import generated_too, mcq_probe, probe_milestones, write_milestones
 from vlmrl_cli.probe.scoring import (
     DEFAULT_STATES,
     FrameProbe,
@@ -49,8 +49,8 @@ from vlmrl_cli.tracking.lifecycle import tracked_run
 from vlmrl_cli.vlm.base import Backend
 from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.config import VLMConfig, profile_problem
-from vlmrl_cli.vlm.parsers import parse_mcq
 from vlmrl_cli.vlm.preflight import check_vlm
+from vlmrl_cli.vlm.prompts import PromptKind
 from vlmrl_cli.vlm.registry import build_client
 
 ProgressFn = Callable[[int, int], None]
@@ -78,19 +78,22 @@ class TaxonomyConfig:
 
 @dataclass(frozen=True)
 class TaxonomyResult:
-    """What a finished probe produced and where it went."""
+    """What a finished probe produced and where it went: ``probes`` are ``FrameProbe``s where the
+    task has number questions (``sweep`` their statistics), else ``milestones.MilestoneProbe``s
+    (``sweep`` empty); ``metrics`` is what ``metrics.json`` holds."""
 
     out: Path
     run_id: str
     backend_label: str
     simulated: bool
     provenance: str
-    probes: tuple[FrameProbe, ...]
+    probes: tuple[Any, ...]
     sweep: Mapping[str, float]
     files: tuple[Path, ...]
     queries: int
     cache_hits: int
     cache_misses: int
+    metrics: Mapping[str, Any] = field(default_factory=dict)
 
     def panel(self, name: str) -> FrameProbe | None:
         return next((p for p in self.probes if p.panel == name), None)
@@ -159,77 +162,124 @@ def _default_task() -> Task:
     return paper_task()
 
 
-def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None, task: Task | None = None) -> TaxonomyResult:
-    """Probe ``task``'s frames (None: the paper's task), score, write Table 1 and
-    Figure 1 into ``cfg.out`` and log one MLflow run.
+@dataclass
+class _Outcome:
+    """What one kind of probe found, wrote into its folder and logs: its probes, sweep statistics
+    (number questions only), ``metrics.json`` and the MLflow metrics."""
 
-    ``progress(done, total)`` is called after each frame. User errors are ``BadInput``,
-    raised before any result file exists in ``cfg.out``: a task without ``numbers`` and a
-    simulated-VLM profile the task does not offer among them.
-    """
-    from vlmrl_cli.probe.figure1 import save_figure1
-    from vlmrl_cli.probe.table1 import write_tables
+    probes: tuple[Any, ...]
+    sweep: Mapping[str, float]
+    metrics: dict[str, Any]
+    logged: dict[str, float]
 
-    task = _default_task() if task is None else task
-    numbers = number_probe(task)
+
+class _NumberTable:
+    """Table 1 of a task with number questions (MountainCar's, the paper's): the float, box and MCQ
+    prompts on a sweep of readings; its run is named and hashed by the ``TaxonomyConfig`` alone."""
+
+    def __init__(self, cfg: TaxonomyConfig, task: Task, backend: Backend) -> None:
+        self.task = task
+        self.planned, self.is_sweep = plan_frames(cfg.states, backend, number_probe(task))
+        key = config_hash(cfg)
+        self.run_name = f"taxonomy-{backend.name}-{cfg.states if self.is_sweep else 'transcript'}-{key[:6]}"
+        self.tags = {schema.TAG_CONFIG_HASH: key}
+        self.params = _params(cfg, task, backend, len(self.planned), self.is_sweep)
+
+    def probe(self, client: VLMClient, staging: Path, progress: ProgressFn | None) -> _Outcome:
+        from vlmrl_cli.probe.figure1 import save_figure1
+        from vlmrl_cli.probe.table1 import write_tables
+
+        probes = _probe_all(client, self.task, self.planned, progress)
+        sweep = sweep_statistics(probes) if self.is_sweep else empty_sweep_statistics()
+        both = _generated_too(client, self.task, self.planned, probes)
+        backend, stats = client.backend, client.stats
+        provenance, plain = provenance_line(backend), f"{backend.name}:{backend.model}"
+        write_tables(probes, sweep, staging, number_probe(self.task), label=plain, provenance=provenance,
+                     simulated=backend.simulated)
+        save_figure1(probes, staging / "figure1.png", label=plain, simulated=backend.simulated,
+                     note=_figure_note(backend))
+        summary: dict[str, Any] = {
+            "backend": backend.name, "model": backend.model, "simulated": backend.simulated,
+            "label": client.label, "provenance": provenance, "sweep": self.is_sweep,
+            "queries": stats.queries, "cache_hits": stats.cache_hits, "cache_misses": stats.cache_misses,
+            "metrics": _jsonable(sweep), **client.mcq_mode_entry(self.task.milestones.prompt), **both,
+        }
+        (staging / "metrics.json").write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+        logged = {f"taxonomy.{k}": v for k, v in sweep.items() if math.isfinite(v)}
+        logged.update({"taxonomy.cache_hits": stats.cache_hits, "taxonomy.cache_misses": stats.cache_misses,
+                       "taxonomy.frames": len(probes)})
+        logged.update({f"taxonomy.{k}": v for k, v in both.items() if math.isfinite(v)})
+        return _Outcome(tuple(probes), sweep, summary, logged)
+
+
+class _MilestoneTable:
+    """Table 1 of a task that asks for no number: its milestone MCQ on ``Task.probe_states``; its
+    run is named after and tagged with the task, hashed by the task, the states and the VLM."""
+
+    def __init__(self, cfg: TaxonomyConfig, task: Task, backend: Backend) -> None:
+        self.task, self.states = task, cfg.states or DEFAULT_STATES
+        ident = {"task": task.name, "states": self.states, "vlm": cfg.vlm}
+        self.run_name = f"taxonomy-{task.name}-{backend.name}-{self.states}"
+        self.tags = {schema.TAG_TASK: task.name, schema.TAG_CONFIG_HASH: config_hash(ident)}
+        self.params = {**flatten(ident), "prompt.mcq": task.milestones.prompt.text}
+
+    def probe(self, client: VLMClient, staging: Path, progress: ProgressFn | None) -> _Outcome:
+        probes, frames = probe_milestones(client, self.task, self.states, progress)
+        values, logged = write_milestones(staging, self.task, client, probes, frames)
+        return _Outcome(tuple(probes), {}, values, logged)
+
+
+def _check(cfg: TaxonomyConfig, task: Task) -> None:
+    """``BadInput`` for what can be wrong before anything exists: a task with neither number
+    questions nor probe states, a simulated-VLM profile the task does not offer, the output
+    folder, the VLM (cache path, model, server, transcript)."""
+    if task.numbers is None and task.probe_states is None:
+        raise BadInput(f"task '{task.name}' names no probe states; give its Task a probe_states function.")
     problem = profile_problem(cfg.vlm.sim.profile, task) if cfg.vlm.backend == "sim" else None
     if problem:
         raise BadInput(problem + ".")
     check_out_folder(cfg.out)
-    check_vlm(cfg.vlm)  # cache path, model, server, transcript: before the store and folders exist
+    check_vlm(cfg.vlm)
+
+
+def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None, task: Task | None = None) -> TaxonomyResult:
+    """Probe ``task``'s frames (None: the paper's task) with its questions (the MCQ; the float and
+    box prompts where it has ``numbers``), score, write Table 1 and Figure 1 into ``cfg.out`` and
+    log one MLflow run.
+
+    ``progress(done, total)`` is called after each frame. User errors are ``BadInput``, raised
+    before any result file exists in ``cfg.out`` (``_check``).
+    """
+    task = _default_task() if task is None else task
+    _check(cfg, task)
     tracker = store.connect(cfg.tracking_uri)
     staging = _staging_folder(cfg.out)
     client: VLMClient | None = None
     try:
-        client = build_client(cfg.vlm, transcript=staging / "transcript.jsonl", reader=task.reader)
-        backend = client.backend
+        transcript = staging / "transcript.jsonl" if task.numbers is not None else None
+        client = build_client(cfg.vlm, transcript=transcript, reader=task.reader)
+        backend, label = client.backend, client.label
+        kind = (_NumberTable if task.numbers is not None else _MilestoneTable)(cfg, task, backend)
         experiment_id = store.ensure_experiment(tracker, cfg.experiment)
-        planned, is_sweep = plan_frames(cfg.states, backend, numbers)
-        run_name = f"taxonomy-{backend.name}-{cfg.states if is_sweep else 'transcript'}-{config_hash(cfg)[:6]}"
-        run = tracker.create_run(experiment_id, run_name=run_name)
-        run_id = str(run.info.run_id)
+        run_id = str(tracker.create_run(experiment_id, run_name=kind.run_name).info.run_id)
         with tracked_run(tracker, run_id):
-            store.set_tags(tracker, run_id, {
-                **store.provenance_tags(client.label, backend.simulated),
-                schema.TAG_COMMAND: schema.COMMAND_TAXONOMY,
-                schema.TAG_CONFIG_HASH: config_hash(cfg),
-            })
-            store.log_params(tracker, run_id, _params(cfg, task, backend, len(planned), is_sweep))
-            probes = _probe_all(client, task, planned, progress)
-            sweep = sweep_statistics(probes) if is_sweep else empty_sweep_statistics()
-            both = _generated_too(client, task, planned, probes)
-            label = client.label
-            provenance = provenance_line(backend)
-            plain = f"{backend.name}:{backend.model}"
-            write_tables(probes, sweep, staging, numbers, label=plain, provenance=provenance,
-                         simulated=backend.simulated)
-            save_figure1(probes, staging / "figure1.png", label=plain, simulated=backend.simulated,
-                         note=_figure_note(backend))
+            store.set_tags(tracker, run_id, {**store.provenance_tags(label, backend.simulated),
+                                             schema.TAG_COMMAND: schema.COMMAND_TAXONOMY, **kind.tags})
+            store.log_params(tracker, run_id, kind.params)
+            outcome = kind.probe(client, staging, progress)
             stats = client.stats
-            summary: dict[str, Any] = {
-                "backend": backend.name, "model": backend.model, "simulated": backend.simulated,
-                "label": label, "provenance": provenance, "sweep": is_sweep,
-                "queries": stats.queries, "cache_hits": stats.cache_hits, "cache_misses": stats.cache_misses,
-                "metrics": _jsonable(sweep),
-                **client.mcq_mode_entry(task.milestones.prompt), **both,
-            }
-            (staging / "metrics.json").write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n",
-                                                  encoding="utf-8")
             client.close()  # flushes the transcript before it is logged
             client = None
-            logged = {f"taxonomy.{k}": v for k, v in sweep.items() if math.isfinite(v)}
-            logged.update({"taxonomy.cache_hits": stats.cache_hits, "taxonomy.cache_misses": stats.cache_misses,
-                           "taxonomy.frames": len(probes)})
-            logged.update({f"taxonomy.{k}": v for k, v in both.items() if math.isfinite(v)})
             batch = store.BatchLogger(tracker, run_id)
-            batch.log(logged, step=0)
+            batch.log(outcome.logged, step=0)
             batch.flush()
             store.log_artifacts(tracker, run_id, sorted(staging.iterdir()))
             files = _move_into_place(staging, cfg.out)
         return TaxonomyResult(
             out=cfg.out, run_id=run_id, backend_label=label, simulated=backend.simulated,
-            provenance=provenance, probes=tuple(probes), sweep=sweep, files=files,
+            provenance=provenance_line(backend), probes=outcome.probes, sweep=outcome.sweep, files=files,
             queries=stats.queries, cache_hits=stats.cache_hits, cache_misses=stats.cache_misses,
+            metrics=outcome.metrics,
         )
     finally:
         if client is not None:
@@ -250,23 +300,15 @@ def _probe_all(client: VLMClient, task: Task, planned: list[_Planned], progress:
 
 def _generated_too(client: VLMClient, task: Task, planned: list[_Planned], probes: list[FrameProbe]
                    ) -> dict[str, float]:
-    """Where the MCQ was scored by option log-probability, the same frames (drawn again) answered
-    by generation as well, in one round: its accuracy and format failure rate, and the share of
-    frames on which the two modes agree (``mcq.generate.*``, ``mcq.modes_agree``); nothing where the
-    MCQ was generated."""
-    prompt = task.milestones.prompt
-    if not client.scores(prompt) or not planned:
+    """The MCQ answered by generation too where it was scored (``milestones.generated_too``), on
+    the same frames, drawn again."""
+    if not client.scores(task.milestones.prompt) or not planned:
         return {}
     with closing(number_probe(task).renderer()) as renderer:
         frames = [renderer.render(item.x, frame_id=item.frame_id) for item in planned]
-    answers = client.ask_many(prompt, frames, generate=True)
-    parsed = [parse_mcq(a.text, task.milestones.labels) for a in answers]
-    labels = [str(p.label) if p.ok and p.label is not None else None for p in parsed]
-    scored = [str(p.mcq_result.label) if p.mcq_result.ok and p.mcq_result.label is not None else None
+    scored = [mcq_probe(p.frame_id, str(p.truth.label), p.answers[PromptKind.MCQ], task.milestones.labels)
               for p in probes]
-    return {"mcq.generate.accuracy": mcq_accuracy(labels, [p.truth.label for p in probes]),
-            "mcq.generate.format_failure_rate": format_failure_rate(p.status for p in parsed),
-            "mcq.modes_agree": sum(a == b for a, b in zip(labels, scored, strict=True)) / len(probes)}
+    return generated_too(client, task, scored, frames)
 
 
 def _params(cfg: TaxonomyConfig, task: Task, backend: Backend, frames: int, is_sweep: bool) -> dict[str, str]:

@@ -18,7 +18,9 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
+from string import Template
 from typing import Any
 
 import pandas as pd
@@ -26,7 +28,6 @@ import pandas as pd
 from vlmrl_cli.analysis import multiplicity, stats
 from vlmrl_cli.analysis.censored import RATIO_INTERVAL, RULE, equivalent
 from vlmrl_cli.analysis.load import load_experiment
-from vlmrl_cli.calibration.pipeline import log_summary_run, runs_of, train_regimes, wall_s
 from vlmrl_cli.calibration.regimes import Regime
 from vlmrl_cli.core import tables
 from vlmrl_cli.core.errors import BadInput
@@ -40,6 +41,7 @@ from vlmrl_cli.study import verdicts
 from vlmrl_cli.study.config import StudyConfig
 from vlmrl_cli.sweep import cost as cost_model
 from vlmrl_cli.sweep.cost import CostEstimate
+from vlmrl_cli.sweep.multi import log_summary_run, runs_of, train_sweeps, wall_s
 from vlmrl_cli.sweep.runner import JobResult, SweepReporter, vlm_identity
 from vlmrl_cli.tracking import schema, store
 
@@ -115,7 +117,7 @@ def run_study(
     check_out_folder(cfg.out)
     start = time.perf_counter()
     if train:
-        result.trained, result.failed = train_regimes(cfg.all_regimes(), reporter_for)
+        result.trained, result.failed = train_sweeps(cfg.all_regimes(), reporter_for)
     stage("train", start, runs_trained_now=result.trained)
     if result.failed:
         return result
@@ -127,6 +129,24 @@ def run_study(
     client = store.connect(cfg.base.tracking_uri)
     data = load_experiment(client, cfg.base.experiment)
     check_paths(data.runs, allow_mixed=False)  # one numeric path, as a report needs (core.numeric_pin)
+    hack_frame = _analyse(cfg, result, client, data, accuracy)
+    simulated = any(r.run.vlm.backend == "sim" for r in cfg.all_regimes())
+    stage("analysis", start)
+    result.files = _write(cfg, result, hack_frame, simulated, command, cost)
+    label, sim = vlm_identity(cfg.base)
+    result.run_id = log_summary_run(client, data.experiment_id, KIND, config_hash(identity(cfg)),
+                                    {"regimes": " | ".join(f"{r.id}: {r.label}" for r in cfg.regimes),
+                                     "variants": " | ".join(v.id for v in cfg.variants),
+                                     "vlm_regime": cfg.vlm_regime, "thresholds": str(list(cfg.thresholds))},
+                                    result.files, (label, sim))
+    return result
+
+
+def _analyse(cfg: StudyConfig, result: StudyResult, client: Any, data: Any, accuracy: Mapping[str, float]
+             ) -> pd.DataFrame:
+    """Fill ``result`` from the study's runs in ``data``: the regime map, the controls (both adjusted
+    as one family), the per-seed table, what is missing, the power, the VLM points and the summary;
+    return the reward-hacking table."""
     streams = stats.Streams(cfg.seed)
     rows, hack, seeds, hacking_answers = [], [], [], {}
     for regime in cfg.regimes:
@@ -142,8 +162,7 @@ def run_study(
         answer = verdicts.hacking_answer(per_seed, streams(f"study/hacking/{regime.id}"), cfg.alpha, cfg.n_boot, cfg.ci)
         if answer:
             hacking_answers[regime.id] = answer
-    seeds += _other_sweep_frames(cfg, data)
-    result.per_seed = study_per_seed(seeds, cfg.thresholds)
+    result.per_seed = study_per_seed(seeds + _other_sweep_frames(cfg, data), cfg.thresholds)
     result.missing = missing_runs(cfg, result.per_seed)
     # the cost of everything reported, not only of the regimes' runs (cells and variants too; a run that
     # two cells share counts once)
@@ -167,17 +186,7 @@ def run_study(
     result.summary = verdicts.summary(rows, result.vlm_points, cfg.top, cfg.alpha, cfg.vlm_regime, control_rows,
                                       cfg.margin, cfg.adjust, cfg.ci, hacking=hacking_answers,
                                       planned=planned_family(cfg)) + verdicts.twin_lines(cfg.cells, cfg.regimes)
-    hack_frame = pd.concat(hack, ignore_index=True) if hack else pd.DataFrame()
-    simulated = any(r.run.vlm.backend == "sim" for r in cfg.all_regimes())
-    stage("analysis", start)
-    result.files = _write(cfg, result, hack_frame, simulated, command, cost)
-    label, sim = vlm_identity(cfg.base)
-    result.run_id = log_summary_run(client, data.experiment_id, KIND, config_hash(identity(cfg)),
-                                    {"regimes": " | ".join(f"{r.id}: {r.label}" for r in cfg.regimes),
-                                     "variants": " | ".join(v.id for v in cfg.variants),
-                                     "vlm_regime": cfg.vlm_regime, "thresholds": str(list(cfg.thresholds))},
-                                    result.files, (label, sim))
-    return result
+    return pd.concat(hack, ignore_index=True) if hack else pd.DataFrame()
 
 
 def _other_sweep_frames(cfg: StudyConfig, data: Any) -> list[pd.DataFrame]:
@@ -273,25 +282,9 @@ def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None, made: in
     assumed spread (``DEFAULT_SD_LOG``) and the paper's 60% reliability, said as such."""
     from vlmrl_cli.analysis import power
 
-    n = len(cfg.base.seeds)
-    comparisons = _planned_pairs(cfg)
-    controls = [c.name for c in verdicts.controls(cfg.cells, cfg.regimes)]
-    planned = planned_family(cfg)
-    family = (planned if made is None else max(1, made)) if cfg.adjust != "none" else 1
+    n, family = len(cfg.base.seeds), _power_family(cfg, made)
     budget = float(cfg.base.budget)
-    pairs = (f"{len(comparisons)} arm pairs in each of {len(cfg.regimes)} regimes" if len(cfg.regimes) > 1
-             else f"{len(comparisons)} arm pairs")
-    which = (f"{pairs} and {len(controls)} controls" if made is None or made == planned else
-             f"the comparisons made, of {planned} planned ({pairs} and {len(controls)} controls): the others have "
-             "no test")
-    level = (f"alpha {cfg.alpha:g} / {family} (Holm's first step over the family of {family} comparisons: "
-             f"{which})" if family > 1 else f"alpha {cfg.alpha:g}")
-    lines = [f"Power (80%) per comparison, simulated on censored steps to {cfg.top:g} "
-             f"({power.DEFAULT_N_SIMS:,} simulated studies each): each arm of the comparison fitted as a log-normal "
-             f"with its DNFs right-censored at the budget ({budget:,.0f} steps), each with its own spread; the rank "
-             f"test (normal approximation) at {level} "
-             "and the 95% interval above 1. Effects are ratios of restricted mean steps (a DNF at the budget), the "
-             "tables' unit, with the median ratio each corresponds to:"]
+    lines = [_power_head(cfg, made)]
     main = per_seed[per_seed["variant"] == ""] if per_seed is not None and len(per_seed) else None
     if main is None or not len(main):
         rate, sd = 0.6, DEFAULT_SD_LOG
@@ -303,41 +296,71 @@ def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None, made: in
                      f"per arm detects a restricted-mean ratio of {ratio}"
                      + (f" (a median ratio of {mde:.2f}x)." if math.isfinite(mde) else "."))
         return lines
-    key, hit = f"steps_{cfg.top:g}", f"reached_{cfg.top:g}"
     regimes = list(dict.fromkeys(main["regime"]))
     for regime in regimes:
         rows = main[main["regime"] == regime]
         where = f" [{regime}]" if len(regimes) > 1 else ""
-        for a, b in comparisons:
-            ref = rows[rows["arm"] == b].drop_duplicates("run_id")
-            if not len(ref):
-                lines.append(f"- {a} vs {b}{where}: no finished run of {b} yet.")
-                continue
-            reached = int(ref[hit].sum())
-            fit = power.fit_censored_lognormal(ref[key].to_numpy(dtype=float), ref["budget"].to_numpy(dtype=float))
-            rate = reached / len(ref)
-            fisher = _reliability_power(rate, n, cfg.alpha) if rate < 1 else ""
-            if fit is None:
-                lines.append(f"- {a} vs {b}{where}: {b} reached {cfg.top:g} on {reached}/{len(ref)} seeds, too few "
-                             f"finishes to fit a spread: no speedup power stated{fisher}.")
-                continue
-            mu, sd = fit
-            own = rows[rows["arm"] == a].drop_duplicates("run_id")
-            arm_fit = power.fit_censored_lognormal(own[key].to_numpy(dtype=float), own["budget"].to_numpy(dtype=float))
-            sd_a = arm_fit[1] if arm_fit is not None else sd
-            spread = (f"{a}'s {sd_a:.2f}" if arm_fit is not None else
-                      f"{a}'s taken as {b}'s ({a} has too few finishes to fit)")
-            fitted = power.lognormal_reliability(mu, sd, budget)
-            mde = power.detectable_speedup(cfg.seed, n, sd, fitted, budget, cfg.alpha, family, sd_log_arm=sd_a)
-            if math.isfinite(mde):
-                rm_ratio = power.restricted_ratio(mu, sd, budget, mde, sd_a)
-                effect = f"a restricted-mean ratio of {rm_ratio:.2f}x or more (a median ratio of {mde:.2f}x)"
-            else:
-                effect = "no speedup up to a median ratio of 4x (the budget censors too many seeds)"
-            lines.append(f"- {a} vs {b}{where}: {b}'s fit: median {math.exp(mu):,.0f} steps, sd of log steps "
-                         f"{sd:.2f} ({spread}), reliability {100 * fitted:.0f}% (observed {reached}/{len(ref)}); at "
-                         f"{n} seeds per arm it detects {effect}{fisher}.")
+        lines += [f"- {a} vs {b}{where}: " + _pair_power(cfg, rows, a, b, family) for a, b in _planned_pairs(cfg)]
     return lines
+
+
+def _power_family(cfg: StudyConfig, made: int | None) -> int:
+    """The family size power is sized for: the comparisons ``made`` (a finished study), else the
+    planned family; 1 with ``--adjust none``."""
+    return (planned_family(cfg) if made is None else max(1, made)) if cfg.adjust != "none" else 1
+
+
+def _power_head(cfg: StudyConfig, made: int | None) -> str:
+    """The power paragraph's first line: the simulation, the level and the family it is sized for."""
+    from vlmrl_cli.analysis import power
+
+    comparisons, planned, family = _planned_pairs(cfg), planned_family(cfg), _power_family(cfg, made)
+    controls = [c.name for c in verdicts.controls(cfg.cells, cfg.regimes)]
+    pairs = (f"{len(comparisons)} arm pairs in each of {len(cfg.regimes)} regimes" if len(cfg.regimes) > 1
+             else f"{len(comparisons)} arm pairs")
+    which = (f"{pairs} and {len(controls)} controls" if made is None or made == planned else
+             f"the comparisons made, of {planned} planned ({pairs} and {len(controls)} controls): the others have "
+             "no test")
+    level = (f"alpha {cfg.alpha:g} / {family} (Holm's first step over the family of {family} comparisons: "
+             f"{which})" if family > 1 else f"alpha {cfg.alpha:g}")
+    return (f"Power (80%) per comparison, simulated on censored steps to {cfg.top:g} "
+            f"({power.DEFAULT_N_SIMS:,} simulated studies each): each arm of the comparison fitted as a log-normal "
+            f"with its DNFs right-censored at the budget ({float(cfg.base.budget):,.0f} steps), each with its own "
+            f"spread; the rank test (normal approximation) at {level} "
+            "and the 95% interval above 1. Effects are ratios of restricted mean steps (a DNF at the budget), the "
+            "tables' unit, with the median ratio each corresponds to:")
+
+
+def _pair_power(cfg: StudyConfig, rows: pd.DataFrame, a: str, b: str, family: int) -> str:
+    """What the comparison of arm ``a`` with its reference ``b`` detects, from their finished runs in ``rows``."""
+    from vlmrl_cli.analysis import power
+
+    n, budget = len(cfg.base.seeds), float(cfg.base.budget)
+    key, hit = f"steps_{cfg.top:g}", f"reached_{cfg.top:g}"
+    ref = rows[rows["arm"] == b].drop_duplicates("run_id")
+    if not len(ref):
+        return f"no finished run of {b} yet."
+    reached = int(ref[hit].sum())
+    fit = power.fit_censored_lognormal(ref[key].to_numpy(dtype=float), ref["budget"].to_numpy(dtype=float))
+    rate = reached / len(ref)
+    fisher = _reliability_power(rate, n, cfg.alpha) if rate < 1 else ""
+    if fit is None:
+        return (f"{b} reached {cfg.top:g} on {reached}/{len(ref)} seeds, too few finishes to fit a spread: no "
+                f"speedup power stated{fisher}.")
+    mu, sd = fit
+    own = rows[rows["arm"] == a].drop_duplicates("run_id")
+    arm_fit = power.fit_censored_lognormal(own[key].to_numpy(dtype=float), own["budget"].to_numpy(dtype=float))
+    sd_a = arm_fit[1] if arm_fit is not None else sd
+    spread = f"{a}'s {sd_a:.2f}" if arm_fit is not None else f"{a}'s taken as {b}'s ({a} has too few finishes to fit)"
+    fitted = power.lognormal_reliability(mu, sd, budget)
+    mde = power.detectable_speedup(cfg.seed, n, sd, fitted, budget, cfg.alpha, family, sd_log_arm=sd_a)
+    if math.isfinite(mde):
+        rm_ratio = power.restricted_ratio(mu, sd, budget, mde, sd_a)
+        effect = f"a restricted-mean ratio of {rm_ratio:.2f}x or more (a median ratio of {mde:.2f}x)"
+    else:
+        effect = "no speedup up to a median ratio of 4x (the budget censors too many seeds)"
+    return (f"{b}'s fit: median {math.exp(mu):,.0f} steps, sd of log steps {sd:.2f} ({spread}), reliability "
+            f"{100 * fitted:.0f}% (observed {reached}/{len(ref)}); at {n} seeds per arm it detects {effect}{fisher}.")
 
 
 def _reliability_power(rate: float, n: int, alpha: float) -> str:
@@ -399,12 +422,8 @@ def _head_lines(cfg: StudyConfig, result: StudyResult, simulated: bool) -> list[
     lines = ["# Study: where does the hybrid's advantage hold?", "", vlm_line, ""]
     if result.missing:
         jobs = {(j.arm.name, j.seed, j.config_hash) for s in cfg.all_regimes() for j in s.run.jobs()}
-        have = finished_keys(result.per_seed)
-        lines += [f"**PARTIAL: {len(jobs - have)} of the {len(jobs)} runs are not FINISHED yet** (the "
-                  "study is still training; rerun `vlmrl study` with the same arguments to resume). Comparisons "
-                  "with a side that has fewer than 2 runs are left out; the others use the seeds finished so far. "
-                  "Missing, per sweep (a run shared by two sweeps counts in both): "
-                  + "; ".join(f"`{k}` {v}" for k, v in result.missing.items()) + ".", ""]
+        lines += [prose("partial", missing=len(jobs - finished_keys(result.per_seed)), jobs=len(jobs),
+                        per_sweep="; ".join(f"`{k}` {v}" for k, v in result.missing.items())), ""]
     return lines
 
 
@@ -422,22 +441,13 @@ def _controls_lines(cfg: StudyConfig, result: StudyResult) -> list[str]:
     """The placebo, dose-response and lock controls, when the study has any."""
     if not len(result.controls):
         return []
-    return ["## Controls: placebo, dose-response, the lock", "",
-            f"In regime `{cfg.vlm_regime}`. Dose-response: the reward pays alpha x PBRS + kin_scale x R_kin "
-            "(alpha 0: the dense term alone, the kinematic arm, or the baseline at kin_scale 0; kin_scale 0: "
-            "the VLM's potential alone, the semantic arm); each cell with a potential is compared with the "
-            "dense term alone at its kin_scale, and at the largest alpha with its placebo (the same labels "
-            "through a label map shuffled per seed). The lock: the hybrid against hybrid-no-lock when the "
-            "VLM's labels are drawn afresh at every query.", "",
+    return ["## Controls: placebo, dose-response, the lock", "", prose("controls", vlm_regime=cfg.vlm_regime), "",
             verdicts.controls_markdown(result.controls.to_dict("records"), cfg.top, cfg.margin, cfg.ci, cfg.adjust)]
 
 
 def _vlm_lines(cfg: StudyConfig, result: StudyResult) -> list[str]:
     """The hybrid's speedup against each VLM variant's measured accuracy, and its figure."""
-    return ["## VLM quality", "",
-            f"The hybrid alone, in regime `{cfg.vlm_regime}`, with other simulated-VLM knobs; each variant's MCQ "
-            f"accuracy is measured by `vlmrl taxonomy` on the same knobs ({cfg.states} sweep positions; "
-            "`taxonomy/<variant>/`). The baseline is the regime's own.", "",
+    return ["## VLM quality", "", prose("vlm_quality", vlm_regime=cfg.vlm_regime, states=cfg.states), "",
             _vlm_table(result.vlm_points, cfg.top) if len(result.vlm_points) else "No VLM variant was run.\n",
             "![VLM quality](vlm_quality.png)", ""]
 
@@ -459,46 +469,22 @@ def _method_lines(cfg: StudyConfig, result: StudyResult) -> list[str]:
     """How every number was computed: the DNF rule, the tests, the family, the verdict rule; then the power."""
     family = verdicts.family_size(result.regime_map.to_dict("records"), result.controls.to_dict("records"))
     return ["## Method", "",
-            f"The DNF rule, everywhere: {RULE}. Reliability: the share of seeds that reached {cfg.top:g}, Wilson "
-            f"interval; differences of reliability with a Newcombe interval and a Fisher exact p. Steps to "
-            f"{cfg.top:g}: restricted mean over all seeds, bootstrap CI. Speedup: the ratio of restricted means, "
-            f"its interval {RATIO_INTERVAL}; p: two-sided Mann-Whitney U on steps with DNF seeds (a crossing "
-            "after the budget included) tied above every finish, an exact permutation p conditional on the "
-            "ties (every split of the seeds counted: 184,756 at 10 vs 10; past C(60, 30) splits, the normal "
-            "approximation, labelled so); with one budget this is Gehan's censored rank test. The learning-curve "
-            "area's Mann-Whitney p is exact the same way. Beside it, the log-rank test on the same steps, each "
-            "DNF censored at its own budget (chi-square, 1 df); where, after adjustment, one of the two rejects "
-            "and the other does not, the table says the tests disagree. The rank test drives the verdict: it is "
-            "the test this study declared before its runs, it is exact at these seed counts where the log-rank "
-            "is a large-sample chi-square, and it weighs the early finishes that a speedup is about, where the "
-            "log-rank weighs every finishing step alike. Multiplicity: "
-            f"{multiplicity.family_line(cfg.adjust, family, verdicts.FAMILY_WHAT)}"
-            "; each table shows the raw p and the adjusted p side by side, and the verdict uses the adjusted "
-            "one. The VLM-quality points carry no verdict and are not in the family; the learning-curve area "
-            "and reliability differences are secondary measures, judged on their own raw p and not adjusted. "
-            f"Verdict: faster/slower when the adjusted p < {cfg.alpha:g} and the {100 * cfg.ci:g}% interval of the "
-            f"speedup excludes 1 on the same side; {equivalent(cfg.margin)} when the "
-            f"{100 * (1 - 2 * cfg.alpha):g}% interval of the speedup lies inside [1/{cfg.margin:g}, "
-            f"{cfg.margin:g}] (two one-sided tests) and each arm finished on at least half its seeds; otherwise "
-            "inconclusive, with 'leans faster' (or slower) when the interval excludes 1 or the adjusted test "
-            "rejects, and both point one way. A speedup of restricted means is a lower bound on the speedup of "
-            "true means when the slower arm DNFs. Learning-curve area: per seed, the mean native return over the "
-            "budget (each step weighs its episode's return); a difference of means with a bootstrap CI, a "
-            f"Mann-Whitney p (not adjusted), and equivalence within +-{auc_margin(cfg):.3g} return points "
-            "(the task's margin); higher or lower only when p < 0.05 and the interval excludes 0 on the same "
-            "side. The unit is the seed. "
-            "`per_seed.csv` holds every run's figures, so every number here can be recomputed.", "",
+            prose("method", rule=RULE, top=f"{cfg.top:g}", ratio_interval=RATIO_INTERVAL,
+                  family_line=multiplicity.family_line(cfg.adjust, family, verdicts.FAMILY_WHAT),
+                  alpha=f"{cfg.alpha:g}", ci=f"{100 * cfg.ci:g}", equivalent=equivalent(cfg.margin),
+                  tost=f"{100 * (1 - 2 * cfg.alpha):g}", margin=f"{cfg.margin:g}",
+                  auc_margin=f"{auc_margin(cfg):.3g}"), "",
             *result.power, ""]
 
 
 def _cost_lines(result: StudyResult, cost: CostEstimate | None) -> list[str]:
     """This invocation's wall time, the worker time of every run the report reads, and the estimate."""
     train = sum(r.get("train_wall_s", 0.0) for r in result.regime_map.to_dict("records"))
-    cost_line = (f" Estimated up front: {cost.pending} run(s) to train, {cost.total_s / 60:.0f} min ({cost.how})."
-                 if cost else "")
-    return [f"Cost: {result.wall_s:,.0f} s of wall time in this invocation ({result.trained} run(s) trained now); "
-            f"the {result.runs} run(s) this report reads took {result.runs_wall_s:,.0f} s of worker time "
-            f"({result.runs_wall_s / 3600:.1f} h; the regimes' own runs {train:,.0f} s).{cost_line}", ""]
+    estimate = (" " + prose("estimate", pending=cost.pending, minutes=f"{cost.total_s / 60:.0f}", how=cost.how)
+                if cost else "")
+    return [prose("cost", wall_s=f"{result.wall_s:,.0f}", trained=result.trained, runs=result.runs,
+                  runs_wall_s=f"{result.runs_wall_s:,.0f}", runs_wall_h=f"{result.runs_wall_s / 3600:.1f}",
+                  train=f"{train:,.0f}", estimate=estimate), ""]
 
 
 def _history_lines(history: Sequence[Mapping[str, Any]]) -> list[str]:
@@ -509,8 +495,20 @@ def _history_lines(history: Sequence[Mapping[str, Any]]) -> list[str]:
         f"commit {str(h.get('git_commit', '?'))[:7]} on {str(h.get('written_at', '?'))[:10]}: "
         f"{h.get('runs_trained_now', '?')} run(s) trained, {float(h.get('wall_s', math.nan)):,.0f} s"
         for h in history)
-    return [f"Earlier invocations of this study on the same store (`manifest.json`, `earlier_invocations`): "
-            f"{earlier}.", ""]
+    return [prose("history", earlier=earlier), ""]
+
+
+def _sections() -> dict[str, Template]:
+    """The report's prose, from ``report.md`` in this package: section name -> its paragraph."""
+    text = resources.files("vlmrl_cli.study").joinpath("report.md").read_text(encoding="utf-8")
+    parts = re.split(r"^<!-- (\w+) -->\n", text, flags=re.MULTILINE)[1:]
+    return {name: Template(" ".join(body.split("\n")).strip()) for name, body in zip(parts[::2], parts[1::2],
+                                                                                     strict=True)}
+
+
+def prose(section: str, **values: object) -> str:
+    """The paragraph ``section`` of the report's prose with ``values`` filled in."""
+    return _sections()[section].substitute(values)
 
 
 #: The fields of a manifest that say what one invocation did; earlier invocations keep only these.
@@ -543,33 +541,46 @@ def _read_manifest(path: Path) -> Any:
         return None
 
 
+#: The files a study writes into ``--out``, in the order they are listed and logged.
+OUTPUTS = ("regime_map.md", "regime_map.csv", "vlm_quality.csv", "vlm_quality.png", "hacking.csv", "report.md",
+           "manifest.json", "per_seed.csv", "controls.csv", "controls.md")
+
+
 def _write(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simulated: bool, command: str,
            cost: CostEstimate | None) -> list[Path]:
     out = cfg.out
     out.mkdir(parents=True, exist_ok=True)
+    path = {name: out / name for name in OUTPUTS}
     tracking_uri = store.resolve_tracking_uri(cfg.base.tracking_uri)
-    history = earlier_invocations(_read_manifest(out / "manifest.json"), cfg.base.experiment, tracking_uri)
-    names = ["regime_map.md", "regime_map.csv", "vlm_quality.csv", "vlm_quality.png", "hacking.csv", "report.md",
-             "manifest.json", "per_seed.csv", "controls.csv", "controls.md"]
-    paths = [out / n for n in names]
-    vlm_note = " SIMULATED VLM, not a real model." if simulated else ""
-    paths[0].write_text(f"# Regime map{' (SIMULATED VLM)' if simulated else ''}\n\n"
-                        + verdicts.map_markdown(result.regime_map.to_dict("records"), cfg.top, cfg.ci, cfg.margin,
-                                                cfg.adjust)
-                        + "\n" + "\n".join(f"- {n}" for n in cfg.notes) + "\n", encoding="utf-8")
+    history = earlier_invocations(_read_manifest(path["manifest.json"]), cfg.base.experiment, tracking_uri)
+    vlm_note = "SIMULATED VLM, not a real model." if simulated else ""
+    heading = " (SIMULATED VLM)" if simulated else ""
+    path["regime_map.md"].write_text(f"# Regime map{heading}\n\n"
+                                     + verdicts.map_markdown(result.regime_map.to_dict("records"), cfg.top, cfg.ci,
+                                                             cfg.margin, cfg.adjust)
+                                     + "\n" + "\n".join(f"- {n}" for n in cfg.notes) + "\n", encoding="utf-8")
     result.regime_map.drop(columns=[c for c in result.regime_map if c.endswith("_text")]).assign(
-        vlm=vlm_note.strip()).to_csv(paths[1], index=False)
-    result.vlm_points.assign(vlm=vlm_note.strip()).to_csv(paths[2], index=False)
-    verdicts.vlm_figure(result.vlm_points, cfg.top, cfg.vlm_regime, simulated).savefig(paths[3], dpi=150)
-    hack_frame.to_csv(paths[4], index=False)
-    paths[5].write_text(to_markdown(cfg, result, hack_frame, simulated, cost, history), encoding="utf-8")
-    result.per_seed.assign(vlm=vlm_note.strip()).to_csv(paths[7], index=False)
-    result.controls.assign(vlm=vlm_note.strip()).to_csv(paths[8], index=False)
-    paths[9].write_text(f"# Controls{' (SIMULATED VLM)' if simulated else ''}\n\n"
-                        + (verdicts.controls_markdown(result.controls.to_dict("records"), cfg.top, cfg.margin, cfg.ci,
-                                                      cfg.adjust)
-                           if len(result.controls) else "No control cell was run.\n"), encoding="utf-8")
-    manifest = {
+        vlm=vlm_note).to_csv(path["regime_map.csv"], index=False)
+    result.vlm_points.assign(vlm=vlm_note).to_csv(path["vlm_quality.csv"], index=False)
+    verdicts.vlm_figure(result.vlm_points, cfg.top, cfg.vlm_regime, simulated).savefig(path["vlm_quality.png"],
+                                                                                       dpi=150)
+    hack_frame.to_csv(path["hacking.csv"], index=False)
+    path["report.md"].write_text(to_markdown(cfg, result, hack_frame, simulated, cost, history), encoding="utf-8")
+    result.per_seed.assign(vlm=vlm_note).to_csv(path["per_seed.csv"], index=False)
+    result.controls.assign(vlm=vlm_note).to_csv(path["controls.csv"], index=False)
+    path["controls.md"].write_text(f"# Controls{heading}\n\n"
+                                   + (verdicts.controls_markdown(result.controls.to_dict("records"), cfg.top,
+                                                                 cfg.margin, cfg.ci, cfg.adjust)
+                                      if len(result.controls) else "No control cell was run.\n"), encoding="utf-8")
+    manifest = _manifest(cfg, result, simulated, command, cost, tracking_uri, history)
+    path["manifest.json"].write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
+    return list(path.values())
+
+
+def _manifest(cfg: StudyConfig, result: StudyResult, simulated: bool, command: str, cost: CostEstimate | None,
+              tracking_uri: str, history: list[dict[str, Any]]) -> dict[str, Any]:
+    """``manifest.json``: what was run, by which command and commit, at what cost, with which hashes."""
+    return {
         "what": "vlmrl study" + (" with the SIMULATED VLM, not a real model" if simulated else ""),
         "command": command,
         "git_commit": git_commit(),
@@ -594,5 +605,3 @@ def _write(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simu
         "written_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "earlier_invocations": history,
     }
-    paths[6].write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
-    return paths

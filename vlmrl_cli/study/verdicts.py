@@ -23,7 +23,6 @@ from matplotlib.figure import Figure
 from vlmrl_cli.analysis import censored, multiplicity, stats
 from vlmrl_cli.analysis.load import ExperimentData
 from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST
-from vlmrl_cli.calibration.pipeline import runs_of
 from vlmrl_cli.calibration.regimes import Regime
 from vlmrl_cli.core import tables
 from vlmrl_cli.probe.metrics import spearman
@@ -38,6 +37,7 @@ from vlmrl_cli.report.table2 import (
 )
 from vlmrl_cli.shaping.arms import ARMS, BASELINE, DENSE, METHOD, NO_LOCK, ArmSpec, comparisons
 from vlmrl_cli.study.config import PLACEBO_ARM, Cell
+from vlmrl_cli.sweep.multi import runs_of
 from vlmrl_cli.training.config import RunConfig
 
 FASTER, SLOWER, INCONCLUSIVE = censored.FASTER, censored.SLOWER, censored.INCONCLUSIVE
