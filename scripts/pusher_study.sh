@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Pusher-v5's study (issue 54), resumable: run it from a worktree at the commit the study started
+# from (d0221fd); it trains what its store lacks, a wave of 3 seeds per arm, then 10, one job per
+# worker. Rerunning it resumes. A new session imports the committed partial export first:
+#
+#   git worktree add ../bg-pstudy d0221fd && cd ../bg-pstudy
+#   IMPORTS=/path/to/main/results/tasks/pusher/runs-study-partial.jsonl.gz V=/path/to/venv/bin/vlmrl \
+#       nohup bash scripts/pusher_study.sh > results/_scratch/study.log 2>&1 &
+#
+# Before a session ends: vlmrl export --experiment tasks-pusher-study --tracking-uri "sqlite:///$PWD/results/_scratch/pusher-study.db" \
+#     --out .../results/tasks/pusher/runs-study-partial.jsonl.gz
+set -u
+cd "$(dirname "$0")/.."
+mkdir -p results/_scratch
+export PYTHONPATH=$PWD OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
+V=${V:-vlmrl}
+URI=sqlite:///$PWD/results/_scratch/pusher-study.db
+EXP=tasks-pusher-study
+ARGS=(--task pusher --regime pusher --arms baseline,kinematic,hybrid,semantic,hybrid-shuffled,hybrid-dense-pbrs
+      --alphas none --kin-scales none --query-flickers none --profiles none --flickers none
+      --experiment $EXP --tracking-uri "$URI")
+date
+for f in ${IMPORTS:-}; do "$V" import "$f" --experiment $EXP --tracking-uri "$URI" || true; done
+for n in 3 10; do "$V" study "${ARGS[@]}" --seeds $n --workers "${WORKERS:-1}" --out results/_scratch/study-$n; done
+date
