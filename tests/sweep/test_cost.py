@@ -38,7 +38,12 @@ def test_more_workers_than_cores_slow_each_run_and_idle_time_adds_up() -> None:
 
 def test_an_arm_never_measured_takes_the_median_and_an_empty_store_the_fallback(tmp_path) -> None:  # type: ignore[no-untyped-def]
     timings = Timings({"baseline": (1e-4, 1)}, runs=1)
-    assert estimate(_jobs(("semantic",), 1), 0, 1, timings, cores=2).per_run_s == pytest.approx(10)
+    guess = estimate(_jobs(("semantic",), 1), 0, 1, timings, cores=2)
+    assert guess.per_run_s == pytest.approx(10) and "a lower bound" in guess.how
+    # an arm that asks the VLM takes the median of the timed arms that ask it, not of the others
+    timed = Timings({"baseline": (1e-4, 1), "kinematic": (1e-4, 1), "hybrid": (6e-4, 1)}, runs=3)
+    both = estimate(_jobs(("semantic", "hybrid-shuffled", "baseline"), 1), 0, 1, timed, cores=2)
+    assert both.per_run_s == pytest.approx((60 + 60 + 10) / 3) and "lower bound" not in both.how
     cfg = RunConfig(arms=("baseline",), seeds=(0,), tracking_uri=f"sqlite:///{tmp_path}/none.db")
     cost = estimate_sweeps([cfg])
     assert cost.per_run_s == pytest.approx(cfg.budget * FALLBACK_S_PER_STEP) and "no finished run" in cost.how

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.tracking import schema
 from vlmrl_cli.training.config import RunConfig, TrainJob
 
@@ -120,15 +121,21 @@ def estimate(pending: Sequence[TrainJob], done: int, workers: int, timings: Timi
     """The wall time of training ``pending`` with ``workers`` workers on ``cores`` (this machine's)."""
     cores = cores or os.cpu_count() or 1
     workers = max(1, workers)
-    fallback = (statistics.median(s for s, _ in timings.per_arm.values()), 1) if timings.per_arm else None
-    seconds = 0.0
+    seconds, guessed = 0.0, False
     for job in pending:
-        s_per_step, measured_at = timings.per_arm.get(job.arm.name) or fallback or (unmeasured(job), cores)
+        measured = timings.per_arm.get(job.arm.name)
+        if measured is None and timings.per_arm:  # an arm not timed yet: the median of its own kind
+            kind = [v for arm, v in timings.per_arm.items() if arm in ARMS and ARMS[arm].uses_vlm == job.arm.uses_vlm]
+            guessed |= job.arm.uses_vlm and not kind
+            measured = (statistics.median(s for s, _ in kind or timings.per_arm.values()), 1)
+        s_per_step, measured_at = measured or (unmeasured(job), cores)
         seconds += job.timesteps * s_per_step * contention(workers, cores) / contention(measured_at, cores)
     total = seconds / min(workers, max(1, len(pending))) / timings.utilisation
     if timings.per_arm:
         how = (f"per-step wall time of {timings.runs} finished run(s) of {len(timings.per_arm)} arm(s) in this "
-               f"experiment, {cores} core(s), sweep utilisation {timings.utilisation:.0%}")
+               f"experiment, {cores} core(s), sweep utilisation {timings.utilisation:.0%}"
+               + ("; no arm that asks the VLM is timed yet, so those runs count at the other arms' rate: a lower "
+                  "bound" if guessed else ""))
     else:
         by_task = {job.task_plugin.name: unmeasured(job) for job in pending}
         figures = ", ".join(f"{t} {s * 1e3:.2f} ms" for t, s in sorted(by_task.items())) or \
