@@ -53,7 +53,7 @@ def calibrate(
     from vlmrl_cli.calibration.regimes import build_regimes, calibrate_config, calibrate_section, grid_flags
     from vlmrl_cli.core.paths import check_out_folder
     from vlmrl_cli.tasks.registry import command_tasks
-    from vlmrl_cli.tracking.store import check_store
+    from vlmrl_cli.tracking.access import check_store
 
     console = Console()
     with exit_codes():

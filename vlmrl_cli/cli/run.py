@@ -63,7 +63,7 @@ def run(
 
     Settings resolve in layers: the --preset < --config FILE < --set KEY=VALUE < other flags.
     """
-    from vlmrl_cli.tracking.store import check_store
+    from vlmrl_cli.tracking.access import check_store
 
     console = Console(stderr=False)
     with exit_codes():

@@ -100,7 +100,7 @@ def study(
     MLflow sweep; write the regime map, the VLM-quality figure and a report generated from the numbers."""
     from vlmrl_cli.core.paths import check_out_folder
     from vlmrl_cli.study.config import StudyConfig
-    from vlmrl_cli.tracking.store import check_store
+    from vlmrl_cli.tracking.access import check_store
 
     console = Console()
     with exit_codes():

@@ -61,7 +61,7 @@ def taxonomy(
     from vlmrl_cli.probe.table1 import with_ci
     from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
     from vlmrl_cli.tasks.registry import command_tasks
-    from vlmrl_cli.tracking.store import check_store
+    from vlmrl_cli.tracking.access import check_store
 
     console = Console(stderr=True)
     if task is not None and not _is_papers_task(task):  # the paper's Table 1 is MountainCar's probe
@@ -110,7 +110,7 @@ def _check_flags(vlm_cfg: VLMConfig, states: int | None, out: Path | None, track
     from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
     from vlmrl_cli.core.paths import check_out_folder
     from vlmrl_cli.probe.states import states_problem
-    from vlmrl_cli.tracking.store import check_store
+    from vlmrl_cli.tracking.access import check_store
     from vlmrl_cli.vlm.preflight import check_vlm
 
     problem = (states_problem(states) if states is not None else None) or experiment_problem(experiment) or \
@@ -129,7 +129,7 @@ def _other_task(name: str, vlm_cfg: VLMConfig, states: int | None, out: Path | N
     from vlmrl_cli.probe.milestones import run_milestone_taxonomy
     from vlmrl_cli.probe.states import DEFAULT_STATES
     from vlmrl_cli.tasks.registry import command_tasks
-    from vlmrl_cli.tracking.store import check_store
+    from vlmrl_cli.tracking.access import check_store
 
     with exit_codes():
         task = command_tasks([name])(name)

@@ -161,12 +161,12 @@ def recorded_runs(source: Path | None, experiment: str, tracking_uri: str | None
     if source is not None:
         return runs_of_export(source), str(source)
     from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
-    from vlmrl_cli.tracking import store
+    from vlmrl_cli.tracking import access, store
 
     problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
     if problem:
         raise BadInput(problem + ".")
-    store.check_store(tracking_uri, write=False, existing=True)  # before MLflow loads (a second)
+    access.check_store(tracking_uri, write=False, existing=True)  # before MLflow loads (a second)
     return runs_of_store(store.connect_existing(tracking_uri), experiment), f"experiment '{experiment}'"
 
 
