@@ -203,14 +203,9 @@ def _record(client: Any, run: Any, models: bool, workdir: Path) -> dict[str, Any
     wanted = [n for n in (*TEXT_ARTIFACTS, *(model_files if models else ())) if n in present]
     store.download_artifacts(client, run_id, wanted, workdir)
     return {
-        "format": FORMAT,
-        "source_run_id": run_id,
-        "run_name": run.info.run_name,
-        "start_time": run.info.start_time,
-        "end_time": run.info.end_time,
-        "tags": dict(run.data.tags),
-        "params": dict(run.data.params),
-        "latest": latest,
+        "format": FORMAT, "source_run_id": run_id, "run_name": run.info.run_name,
+        "start_time": run.info.start_time, "end_time": run.info.end_time,
+        "tags": dict(run.data.tags), "params": dict(run.data.params), "latest": latest,
         "histories": {key: _history(client, run_id, key) for key in HISTORY_KEYS if key in run.data.metrics},
         "artifacts": {n: (workdir / n).read_text(encoding="utf-8") for n in wanted if n in TEXT_ARTIFACTS},
         "binary": {n: base64.b64encode(blob).decode("ascii")
@@ -229,17 +224,12 @@ def export_runs(client: Any, experiment: str, path: Path, models: bool = False,
     (written to a temporary name first, so a failed export leaves no partial file), but those whose
     run id is in ``skip`` (exported before: ``skipped`` counts them), and the digest line.
     ``progress(done, total)`` is called after each run. ``BadInput`` when there is nothing to export."""
-    exp = client.get_experiment_by_name(experiment)
-    if exp is None or exp.lifecycle_stage == "deleted":
-        raise BadInput(f"MLflow experiment '{experiment}' does not exist in this store; pass --experiment NAME.")
-    runs = schema.search_all(client, exp.experiment_id,
-                             schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN}, finished=True))
+    runs = schema.finished_train_runs(client, experiment)
     before = len(runs)
     runs = [r for r in runs if r.info.run_id not in (skip or set())]
     if not runs:
         raise BadInput(f"MLflow experiment '{experiment}' has no FINISHED training run to export"
                        + (f" that is not in the earlier exports ({before} are)." if before else "."))
-    runs.sort(key=lambda r: (r.info.start_time or 0, r.info.run_id))
 
     def records() -> Iterator[dict[str, Any]]:
         for i, run in enumerate(runs, start=1):

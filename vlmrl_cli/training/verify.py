@@ -133,13 +133,8 @@ def runs_of_store(client: Any, experiment: str) -> list[RecordedRun]:
 
     from vlmrl_cli.tracking import store
 
-    exp = client.get_experiment_by_name(experiment)
-    if exp is None or exp.lifecycle_stage == "deleted":
-        raise BadInput(f"MLflow experiment '{experiment}' does not exist in this store; pass --experiment NAME.")
-    found = schema.search_all(client, exp.experiment_id,
-                              schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN}, finished=True))
     runs = []
-    for run in sorted(found, key=lambda r: (r.info.start_time or 0, r.info.run_id)):
+    for run in schema.finished_train_runs(client, experiment):
         run_id = run.info.run_id
         with tempfile.TemporaryDirectory(prefix="vlmrl-verify-") as tmp:
             if "config.json" not in {a.path for a in client.list_artifacts(run_id)}:
