@@ -1,16 +1,10 @@
 """Move finished training runs between MLflow stores as one compact file (export / import).
 
-A study trained on a cluster, or over several sessions on machines that do not keep their
-store, must be readable and resumable elsewhere. ``export_runs`` writes every FINISHED training
-run of an experiment (``vlmrl.kind=train``) as one JSON line of a gzip file: its name, times,
-tags and params, the last value of every metric, the full histories that the analysis reads
-(the per-episode ``episode/*`` metrics and the detached evaluation's ``eval/episode_*``, with
-their steps and timestamps, so points logged at one step keep their order), ``config.json``,
-and the policy's weights and observation statistics when asked. ``import_runs`` recreates them in
-another store as FINISHED runs with the same tags, so a sweep's resume rule (a FINISHED run with
-the same arm, seed and config hash) finds them and never trains them again, and ``vlmrl report``
-reads them as it reads runs trained there. A run already present (same arm, seed and config hash
-FINISHED, or imported from the same source run) is skipped, so importing twice changes nothing.
+A study trained on a cluster, or over sessions on machines that do not keep their store, is read
+and resumed elsewhere: ``export_runs`` writes each FINISHED training run as one JSON line of a gzip
+file (the histories the analysis reads, with steps and timestamps; the last value of every other
+metric; ``config.json``; the model when asked), and ``import_runs`` recreates them as FINISHED runs
+with the same tags, which a sweep's resume rule and ``vlmrl report`` take for runs trained there.
 
 An export file is untrusted input. ``read_records`` checks every line against ``Record`` (types,
 lengths, the tags a training run has, MLflow's limits) and the file against its digest before a
