@@ -92,9 +92,9 @@ def _no_problem(problem: Callable[[Any], str | None]) -> Callable[[Any], Any]:
     return check
 
 
-def _known_preset(value: str) -> str:
-    """A preset of some built-in task this machine can run; the run's own task's presets are checked
-    against its plug-in when the layers are resolved (training/overrides.py) and in ``validate``."""
+def _builtin_presets() -> list[str]:
+    """The presets of the built-in tasks this machine can run: those ``preset`` takes (the run's own
+    task's are checked against its plug-in in training/overrides.py and ``RunConfig.validate``)."""
     from vlmrl_cli.tasks.registry import BUILTIN
 
     known: list[str] = []
@@ -104,7 +104,7 @@ def _known_preset(value: str) -> str:
         except BadInput:  # an optional extra missing (Pusher without MuJoCo): naming the task says why
             continue
         known += [name for name in preset_names(task) if name not in known]
-    return value if value in known else one_of(known, "preset")(value)
+    return known
 
 
 def _default_plugin() -> Task:
@@ -122,8 +122,9 @@ class RunConfig:
                                                                             "help": "arms to train (shaping/arms.py)"})
     seeds: tuple[int, ...] = field(default=(0, 1, 2, 3, 4), metadata={"rules": (AfterValidator(_distinct_seeds),),
                                                                       "help": "training seeds, each a run per arm"})
-    preset: str = field(default=DEFAULT_PRESET, metadata={"rules": (AfterValidator(_known_preset),),
-                                                          "help": "named PPO preset: the bottom layer of [ppo]"})
+    preset: str = field(default=DEFAULT_PRESET, metadata={
+        "rules": (AfterValidator(one_of(_builtin_presets, "preset")),),
+        "help": "named PPO preset: the bottom layer of [ppo]"})
     task: str = field(default=DEFAULT_TASK, metadata={
         "help": "the environment: a built-in task (tasks/registry.py) or package.module:NAME"})
     workers: int = field(default_factory=lambda: os.cpu_count() or 1, metadata={"rules": (Ge(1),),
@@ -376,10 +377,8 @@ def source_layers(file: Path | None, flags: Mapping[str, Any], sets: Iterable[st
 
 
 def to_toml(cfg: RunConfig) -> str:
-    """``cfg`` as a complete TOML config file that ``--config`` reads back to the same ``cfg``.
-
-    Keys whose value is None are left out (TOML has no null; every such key defaults to None).
-    """
+    """``cfg`` as a complete TOML config file that ``--config`` reads back to the same ``cfg``; keys
+    whose value is None are left out (TOML has no null; every such key defaults to None)."""
     raw = to_jsonable(dataclasses.replace(cfg, ppo=cfg.ppo_config, shaping=cfg.task_shaping))
     raw["shaping"]["label_potentials"] = dict(raw["shaping"]["label_potentials"])
     return tomli_w.dumps(_drop_none(raw))
