@@ -38,7 +38,7 @@ def test_a_window_taken_from_the_task_caps_min_episodes_and_a_given_one_does_not
 
 
 def test_a_disagreement_states_the_papers_figure_without_our_seed_count() -> None:
-    from vlmrl_cli.report.writer import paper_disagreement
+    from vlmrl_cli.report.markdown import paper_disagreement
 
     cell = {"metric": "reliability", "arm": "hybrid", "value": 0.0, "ci_low": 0.0, "ci_high": 0.66, "n": 2,
             "n_reached": 0, "paper": 1.0, "note": ""}

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import functools
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -12,7 +13,7 @@ from rich.console import Console
 
 from vlmrl_cli.cli import options as opt
 from vlmrl_cli.cli.exit_codes import exit_codes
-from vlmrl_cli.cli.progress import RichSweepReporter
+from vlmrl_cli.cli.progress import exit_if_failed, regime_reporter
 
 Grid = Annotated[
     list[str] | None,
@@ -49,10 +50,10 @@ def calibrate(
 ) -> None:
     """Train the baseline arm under each PPO regime of a grid (resumable MLflow runs tagged vlmrl.regime)
     and rank the regimes by their distance to the paper's baseline learning profile."""
-    from vlmrl_cli.calibration.regimes import Regime, build_regimes, calibrate_config, calibrate_section, grid_flags
+    from vlmrl_cli.calibration.regimes import build_regimes, calibrate_config, calibrate_section, grid_flags
     from vlmrl_cli.core.paths import check_out_folder
     from vlmrl_cli.tasks.registry import command_tasks
-    from vlmrl_cli.tracking.store import check_store
+    from vlmrl_cli.tracking.access import check_store
 
     console = Console()
     with exit_codes():
@@ -69,11 +70,9 @@ def calibrate(
         from vlmrl_cli.calibration.pipeline import calibrate as run_calibration
         from vlmrl_cli.sweep.cost import estimate_sweeps
 
-        console.print(
-            f"[bold]vlmrl calibrate[/]: {len(cfg.regimes)} regime(s) x seeds {list(base.seeds)} of the "
-            f"baseline, task {base.task}, preset {base.preset}, {base.budget:,} steps each, experiment "
-            f"'{base.experiment}'"
-        )
+        console.print(f"[bold]vlmrl calibrate[/]: {len(cfg.regimes)} regime(s) x seeds {list(base.seeds)} of the "
+                      f"baseline, task {base.task}, preset {base.preset}, {base.budget:,} steps each, experiment "
+                      f"'{base.experiment}'")
         console.print(f"target: {cfg.target.source}", markup=False)
         console.print(f"cost estimate: {estimate_sweeps([r.run for r in cfg.regimes]).line()}", markup=False)
         if dry_run:
@@ -81,25 +80,12 @@ def calibrate(
                 console.print(f"  {regime.id}: {regime.label}", markup=False)
             console.print("dry run: nothing was trained.")
             return
-
-        def reporter_for(regime: Regime) -> RichSweepReporter:
-            console.print(f"[bold]{regime.id}[/]: {regime.label}")
-            return RichSweepReporter(console)
-
-        result = run_calibration(cfg, reporter_for, command=" ".join(["vlmrl", *sys.argv[1:]]))
-        if result.failed:
-            for r in result.failed:
-                console.print(f"[red]{r.job}: {r.status} {r.error or ''}[/]")
-            console.print("Some runs failed; nothing was scored. Rerun the same command to retry them.")
-            raise typer.Exit(1)
+        result = run_calibration(cfg, functools.partial(regime_reporter, console),
+                                 command=" ".join(["vlmrl", *sys.argv[1:]]))
+        exit_if_failed(console, result.failed, "scored")
         best = result.table.iloc[0]
-        console.print(
-            f"closest regime: {best['id']} ({best['regime']}), distance {best['distance']:.3f} "
-            f"[{best['distance_low']:.3f}, {best['distance_high']:.3f}]",
-            markup=False,
-        )
-        console.print(
-            f"cost: {result.wall_s:,.0f} s wall time now ({result.trained} run(s) trained); the runs' own "
-            f"wall times sum to {result.train_wall_s:,.0f} s"
-        )
+        console.print(f"closest regime: {best['id']} ({best['regime']}), distance {best['distance']:.3f} "
+                      f"[{best['distance_low']:.3f}, {best['distance_high']:.3f}]", markup=False)
+        console.print(f"cost: {result.wall_s:,.0f} s wall time now ({result.trained} run(s) trained); the runs' own "
+                      f"wall times sum to {result.train_wall_s:,.0f} s")
         console.print(f"wrote {', '.join(p.name for p in result.files)} to {out}; MLflow run {result.run_id}")

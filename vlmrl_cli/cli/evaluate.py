@@ -62,9 +62,9 @@ def resolve_child(run_id: str, tracking_uri: str | None, arm: str | None, seed: 
     """``run_id`` itself for a training run; for a sweep's parent run, its child of ``--arm``/``--seed``
     (``pick_child``)."""
     from vlmrl_cli.core.errors import BadInput
-    from vlmrl_cli.tracking import schema, store
+    from vlmrl_cli.tracking import access, schema, store
 
-    store.check_store(tracking_uri, write=False, existing=True)  # before MLflow loads (a second)
+    access.check_store(tracking_uri, write=False, existing=True)  # before MLflow loads (a second)
     from mlflow.exceptions import MlflowException
 
     from vlmrl_cli.report.children import children_of

@@ -4,10 +4,13 @@ plain lines for a log or a pipe."""
 from __future__ import annotations
 
 import math
+import sys
 import time
+from collections.abc import Sequence
 from types import TracebackType
-from typing import TextIO
+from typing import TYPE_CHECKING
 
+import typer
 from rich.console import Console
 from rich.progress import (
     BarColumn,
@@ -21,6 +24,9 @@ from rich.progress import (
 
 from vlmrl_cli.training.config import TrainJob
 from vlmrl_cli.training.events import JobResult, ProgressEvent
+
+if TYPE_CHECKING:
+    from vlmrl_cli.calibration.regimes import Regime
 
 
 class RichSweepReporter:
@@ -93,6 +99,23 @@ class RichSweepReporter:
             self.console.print(f"{self._finished}/{len(self._tasks)} {result.job}: {status} ({result.wall_s:.0f} s)")
 
 
+def regime_reporter(console: Console, regime: Regime) -> RichSweepReporter:
+    """The progress of one regime's sweep, under a line naming it."""
+    console.print(f"[bold]{regime.id}[/]: {regime.label}", highlight=False)
+    return RichSweepReporter(console)
+
+
+def exit_if_failed(console: Console, failed: Sequence[JobResult], skipped: str = "") -> None:
+    """Each failed run in red (then that nothing was ``skipped``) and exit 1; nothing when no run failed."""
+    if not failed:
+        return
+    for r in failed:
+        console.print(f"[red]{r.job}: {r.status} {r.error or ''}[/]")
+    if skipped:
+        console.print(f"Some runs failed; nothing was {skipped}. Rerun the same command to retry them.")
+    raise typer.Exit(1)
+
+
 def progress_line(runs_done: int, runs: int, steps_done: int, steps: int, elapsed_s: float) -> str:
     """One plain line of progress for a log: runs and steps done, the time spent, and the time left
     at the pace so far (steps, so that a long run weighs as long).
@@ -107,19 +130,32 @@ def progress_line(runs_done: int, runs: int, steps_done: int, steps: int, elapse
             f"elapsed{tail}")
 
 
-class PlainProgress:
-    """Plain progress lines on ``out`` (a log's stream), one per finished run; silent when ``out``
-    is None (a terminal, where a rich bar shows progress instead)."""
+class RetrainProgress:
+    """Retraining's progress on stderr, in steps so that a long run weighs as long: a bar on a
+    terminal; in a log or a pipe, a plain line per finished run."""
 
-    def __init__(self, runs: int, steps: int, out: TextIO | None) -> None:
-        self.runs, self.steps, self.out = runs, steps, out
+    def __init__(self, runs: int, steps: int) -> None:
+        err = Console(stderr=True, highlight=False, soft_wrap=True)
+        self.runs, self.steps, self.out = runs, steps, None if err.is_terminal else sys.stderr
         self.runs_done = self.steps_done = 0
         self.started = time.monotonic()
-        if out is not None:
-            print(f"progress: retraining {runs} run(s), {steps:,} steps; a line as each run finishes", file=out,
+        self._bar = Progress(TextColumn("{task.description}"), BarColumn(),
+                             TextColumn("{task.completed:,.0f}/{task.total:,.0f} steps"), TimeElapsedColumn(),
+                             TimeRemainingColumn(), console=err, transient=True, disable=not err.is_terminal)
+        self._task = self._bar.add_task(f"retraining {runs} run(s)", total=steps)
+        if self.out is not None:
+            print(f"progress: retraining {runs} run(s), {steps:,} steps; a line as each run finishes", file=self.out,
                   flush=True)
 
+    def __enter__(self) -> RetrainProgress:
+        self._bar.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._bar.stop()
+
     def advance(self, steps: int) -> None:
+        self._bar.advance(self._task, steps)
         self.runs_done += 1
         self.steps_done += steps
         if self.out is not None:

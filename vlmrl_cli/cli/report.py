@@ -74,7 +74,7 @@ def report(
     from vlmrl_cli.core.paths import check_out_folder
     from vlmrl_cli.report.config import ReportConfig, check_report
     from vlmrl_cli.tasks.registry import command_tasks
-    from vlmrl_cli.tracking.store import check_store
+    from vlmrl_cli.tracking.access import check_store
 
     with exit_codes():
         tasks = command_tasks(user_task or ())

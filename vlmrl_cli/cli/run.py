@@ -26,7 +26,7 @@ from vlmrl_cli.cli.options import (
     check_sim_flags,
     typed_flags,
 )
-from vlmrl_cli.cli.progress import RichSweepReporter
+from vlmrl_cli.cli.progress import RichSweepReporter, exit_if_failed
 from vlmrl_cli.tasks.registry import command_tasks
 from vlmrl_cli.training.config import DEFAULT_EXPERIMENT, RunConfig, to_toml
 from vlmrl_cli.training.events import SweepSummary
@@ -63,7 +63,7 @@ def run(
 
     Settings resolve in layers: the --preset < --config FILE < --set KEY=VALUE < other flags.
     """
-    from vlmrl_cli.tracking.store import check_store
+    from vlmrl_cli.tracking.access import check_store
 
     console = Console(stderr=False)
     with exit_codes():
@@ -78,18 +78,7 @@ def run(
             typer.echo(dry_run_text(cfg, vlm_qps), nl=False)
             return
         preflight(cfg)  # refuse before the header; run_sweep(checked=True) then does not check again
-        console.print(f"[bold]vlmrl run[/]: task {cfg.task}, arms {', '.join(cfg.arms)} x seeds "
-                      f"{list(cfg.seeds)}, preset {cfg.preset}, {cfg.budget:,} steps each, {cfg.workers} "
-                      f"worker(s) ({cfg.executor}), experiment '{cfg.experiment}'")
-        overrides = cfg.jobs()[0].overrides()
-        if overrides:
-            console.print("overrides: " + " ".join(f"{k}={v}" for k, v in overrides.items()), markup=False)
-        scales = cfg.task_plugin.scales_note(cfg.task_shaping)
-        if scales and any(job.arm.kinematic or job.arm.uses_vlm for job in cfg.jobs()):
-            console.print(f"scales: {scales} (set them with --set shaping.alpha=A --set shaping.kin_scale=K)",
-                          markup=False)
-        if cfg.vlm.backend == "sim":
-            console.print("[yellow]VLM: the SIMULATED VLM (a pixel-reading stand-in), not a real model.[/]")
+        print_header(console, cfg)
         with RichSweepReporter(console) as reporter:
             summary = run_sweep(cfg, reporter, checked=True)
         if summary.elsewhere:
@@ -101,10 +90,23 @@ def run(
             return
         console.print(sweep_summary_line(summary))
         print_children(console, cfg, summary.experiment_id)
-        if summary.failed:
-            for r in summary.failed:
-                console.print(f"[red]{r.job}: {r.status} {r.error or ''}[/]")
-            raise typer.Exit(1)
+        exit_if_failed(console, summary.failed)
+
+
+def print_header(console: Console, cfg: RunConfig) -> None:
+    """What the sweep trains, before it starts: the grid, the overrides, the shaping scales, the VLM."""
+    console.print(f"[bold]vlmrl run[/]: task {cfg.task}, arms {', '.join(cfg.arms)} x seeds "
+                  f"{list(cfg.seeds)}, preset {cfg.preset}, {cfg.budget:,} steps each, {cfg.workers} "
+                  f"worker(s) ({cfg.executor}), experiment '{cfg.experiment}'")
+    overrides = cfg.jobs()[0].overrides()
+    if overrides:
+        console.print("overrides: " + " ".join(f"{k}={v}" for k, v in overrides.items()), markup=False)
+    scales = cfg.task_plugin.scales_note(cfg.task_shaping)
+    if scales and any(job.arm.kinematic or job.arm.uses_vlm for job in cfg.jobs()):
+        console.print(f"scales: {scales} (set them with --set shaping.alpha=A --set shaping.kin_scale=K)",
+                      markup=False)
+    if cfg.vlm.backend == "sim":
+        console.print("[yellow]VLM: the SIMULATED VLM (a pixel-reading stand-in), not a real model.[/]")
 
 
 def sweep_summary_line(summary: SweepSummary) -> str:

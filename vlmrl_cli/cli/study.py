@@ -19,13 +19,12 @@ from rich.console import Console
 
 from vlmrl_cli.cli import options as opt
 from vlmrl_cli.cli.exit_codes import exit_codes
-from vlmrl_cli.cli.progress import RichSweepReporter
+from vlmrl_cli.cli.progress import exit_if_failed, regime_reporter
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.study.settings import DEFAULT_ARMS, DEFAULT_EXPERIMENT, DEFAULT_SEEDS, Regimes, StudySettings
 from vlmrl_cli.tasks.registry import command_tasks
 
 if TYPE_CHECKING:
-    from vlmrl_cli.calibration.regimes import Regime
     from vlmrl_cli.study.config import StudyConfig
     from vlmrl_cli.study.pipeline import StudyResult
 
@@ -101,7 +100,7 @@ def study(
     MLflow sweep; write the regime map, the VLM-quality figure and a report generated from the numbers."""
     from vlmrl_cli.core.paths import check_out_folder
     from vlmrl_cli.study.config import StudyConfig
-    from vlmrl_cli.tracking.store import check_store
+    from vlmrl_cli.tracking.access import check_store
 
     console = Console()
     with exit_codes():
@@ -119,7 +118,7 @@ def study(
             for line in power_lines(cfg, finished_per_seed(cfg)):
                 console.print(line, markup=False)
             return
-        result = run_study(cfg, functools.partial(_regime_reporter, console),
+        result = run_study(cfg, functools.partial(regime_reporter, console),
                            command=" ".join(["vlmrl", *sys.argv[1:]]), cost=cost, train=not no_train)
         print_result(console, result, cfg.out)
 
@@ -141,20 +140,10 @@ def print_grid(console: Console, cfg: StudyConfig) -> None:
         console.print("[yellow]VLM: the SIMULATED VLM (a pixel-reading stand-in), not a real model.[/]")
 
 
-def _regime_reporter(console: Console, regime: Regime) -> RichSweepReporter:
-    """The progress of one sweep of the study, under a line naming it."""
-    console.print(f"[bold]{regime.id}[/]: {regime.label}", highlight=False)
-    return RichSweepReporter(console)
-
-
 def print_result(console: Console, result: StudyResult, out: Path) -> None:
     """What the study did: the failed runs (then exit 1: nothing was analysed), else its summary,
     wall time and files."""
-    if result.failed:
-        for f in result.failed:
-            console.print(f"[red]{f.job}: {f.status} {f.error or ''}[/]")
-        console.print("Some runs failed; nothing was analysed. Rerun the same command to retry them.")
-        raise typer.Exit(1)
+    exit_if_failed(console, result.failed, "analysed")
     for line in result.summary:
         console.print(line, markup=False)
     stages = ", ".join(f"{s['stage']} {s['wall_s']:.0f} s" for s in result.stages)

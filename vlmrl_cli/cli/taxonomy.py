@@ -56,7 +56,7 @@ def taxonomy(
     from vlmrl_cli.probe.states import DEFAULT_STATES
     from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
     from vlmrl_cli.tasks.registry import command_tasks, paper_task
-    from vlmrl_cli.tracking.store import check_store
+    from vlmrl_cli.tracking.access import check_store
 
     with exit_codes():
         chosen = paper_task() if task is None else command_tasks([task])(task)
@@ -122,7 +122,7 @@ def _check_flags(vlm_cfg: VLMConfig, states: int | None, out: Path | None, track
     from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
     from vlmrl_cli.core.paths import check_out_folder
     from vlmrl_cli.probe.states import states_problem
-    from vlmrl_cli.tracking.store import check_store
+    from vlmrl_cli.tracking.access import check_store
     from vlmrl_cli.vlm.preflight import check_vlm
 
     problem = (states_problem(states) if states is not None else None) or experiment_problem(experiment) or \

@@ -31,7 +31,7 @@ def export(
     histories, config; models with --models) to one file that `vlmrl import` reads into another store."""
     from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
     from vlmrl_cli.core.paths import file_problem
-    from vlmrl_cli.tracking import store
+    from vlmrl_cli.tracking import access, store
     from vlmrl_cli.tracking.transfer import export_runs, exported_ids
 
     with exit_codes():
@@ -50,7 +50,7 @@ def export(
         if missing:
             raise BadInput(f"--skip-exported {missing[0]}: no such export file.")
         skip = exported_ids(skip_exported or [])
-        store.check_store(tracking_uri, write=False, existing=True)
+        access.check_store(tracking_uri, write=False, existing=True)
         client = store.connect_existing(tracking_uri)
         summary = export_runs(client, experiment, out, models=models, skip=skip)
         typer.echo(f"exported {summary.written} FINISHED training run(s) of '{experiment}' to {out} "
@@ -67,14 +67,14 @@ def import_(
     already there (same arm, seed and config hash) are skipped, so a resumed sweep never retrains them.
     Every file is checked whole before the store is touched; a file imports entirely or not at all."""
     from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
-    from vlmrl_cli.tracking import store
+    from vlmrl_cli.tracking import access, store
     from vlmrl_cli.tracking.transfer import import_runs, read_export, refuse_pickles
 
     with exit_codes():
         problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
         if problem:
             raise BadInput(problem + ".")
-        store.check_store(tracking_uri)  # before MLflow or any file
+        access.check_store(tracking_uri)  # before MLflow or any file
         for path in paths:
             if not path.is_file():
                 raise BadInput(f"there is no export file {path}; write one with `vlmrl export --out FILE`.")

@@ -10,7 +10,7 @@ import typer
 
 from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import Experiment, TrackingUri, UserTasks, given
-from vlmrl_cli.cli.progress import PlainProgress
+from vlmrl_cli.cli.progress import RetrainProgress
 from vlmrl_cli.core.errors import BadInput
 
 #: Exit code when a retrained run differs from its record.
@@ -46,12 +46,9 @@ def verify(
     their per-episode native returns bit for bit: prints `identical` or `differs from episode k` per
     run, with both sides' CPU and pin tags, and exits 1 when any run differs."""
     from rich.console import Console
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-    from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
     from vlmrl_cli.sweep.cost import retrain_estimate
     from vlmrl_cli.tasks.registry import command_tasks
-    from vlmrl_cli.tracking import schema
     from vlmrl_cli.training import verify as lib
 
     console = Console(highlight=False, soft_wrap=True)
@@ -64,18 +61,7 @@ def verify(
                            f"reads one or the other; drop {' and '.join(store_flags)} to verify the file, or the file "
                            "to verify the store's runs.")
         tasks = command_tasks(user_task or ())
-        if source is None:
-            problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
-            if problem:
-                raise BadInput(problem + ".")
-            from vlmrl_cli.tracking import store
-
-            store.check_store(tracking_uri, write=False, existing=True)  # before MLflow loads (a second)
-            runs = lib.runs_of_store(store.connect_existing(tracking_uri), experiment)
-            where = f"experiment '{experiment}'"
-        else:
-            runs = lib.runs_of_export(source)
-            where = str(source)
+        runs, where = lib.recorded_runs(source, experiment, tracking_uri)
         chosen = lib.choose(runs, run_ids=run_id or (), seeds=seed or (), arms=arm or (), sample=sample,
                             sample_seed=sample_seed, source=where)
         jobs = [lib.rebuild_job(run, tasks) for run in chosen]  # every config is rebuilt before anything trains
@@ -83,8 +69,7 @@ def verify(
         console.print(f"verifying {len(chosen)} of {len(runs)} run(s) of {where}: {cost.minutes_range()} on "
                       f"{cost.workers} worker(s) ({cost.how})")
         here_tags = lib.here_paths()  # once: this process's path does not change while it runs
-        here = lib.describe_paths(here_tags)
-        console.print(f"here: {here}")
+        console.print(f"here: {lib.describe_paths(here_tags)}")
         for run, job in zip(chosen, jobs, strict=True):
             console.print(f"  {run.run_id[:12]}  {run.name:<28} {len(run.native_returns)} episodes, "
                           f"{job.timesteps:,} steps")
@@ -92,23 +77,12 @@ def verify(
             return
         differ = 0
         steps = {run.run_id: job.timesteps for run, job in zip(chosen, jobs, strict=True)}
-        # progress on stderr: a bar on a terminal; in a log or a pipe, one plain line per finished run
-        err = Console(stderr=True, highlight=False, soft_wrap=True)
-        lines = PlainProgress(len(chosen), sum(steps.values()), None if err.is_terminal else sys.stderr)
-        # the bar counts steps, not runs, so that its time remaining weighs a long run as long
-        with Progress(TextColumn("{task.description}"), BarColumn(),
-                      TextColumn("{task.completed:,.0f}/{task.total:,.0f} steps"), TimeElapsedColumn(),
-                      TimeRemainingColumn(), console=err, transient=True, disable=not err.is_terminal) as bar:
-            task = bar.add_task(f"retraining {len(chosen)} run(s)", total=sum(steps.values()))
+        with RetrainProgress(len(chosen), sum(steps.values())) as progress:
             for outcome in lib.verify_many(chosen, tasks, workers=workers):
-                bar.advance(task, steps[outcome.run.run_id])
-                lines.advance(steps[outcome.run.run_id])
-                run = outcome.run
+                progress.advance(steps[outcome.run.run_id])
                 differ += not outcome.identical
-                console.print(f"{run.run_id[:12]}  {run.name}: {outcome.verdict()} in {outcome.wall_s:.0f} s")
-                console.print(f"    recorded: {lib.describe_paths(run.tags)}")  # both sides, run by run
-                if not outcome.identical or run.tags.get(schema.TAG_PIN) != here_tags[schema.TAG_PIN]:
-                    console.print(f"    here:     {here}")
+                for line in outcome.lines(here_tags):  # both sides' paths, run by run
+                    console.print(line)
         console.print(f"{len(chosen) - differ} identical, {differ} differ")
     if differ:
         print(f"error: {differ} of {len(chosen)} run(s) did not reproduce here; the paths above say where each "

@@ -64,16 +64,9 @@ VERDICT_RULE = (
 )
 
 
-def verdict(
-    estimate: stats.Estimate,
-    paper: float | None,
-    null: float | None = None,
-    direction: str = ">",
-    approximate: bool = False,
-    n_seeds: int | None = None,
-    p_value: float | None = None,
-    alpha: float = 0.05,
-) -> tuple[str, str]:
+def verdict(estimate: stats.Estimate, paper: float | None, null: float | None = None, direction: str = ">",
+            approximate: bool = False, n_seeds: int | None = None, p_value: float | None = None,
+            alpha: float = 0.05) -> tuple[str, str]:
     """The verdict and its reason for one claim (see ``VERDICT_RULE``).
 
     Args:
@@ -99,19 +92,10 @@ def verdict(
         return INCONCLUSIVE, f"only {n} seed(s) behind the estimate (need >= {MIN_SEEDS})"
     if not estimate.has_ci:
         return INCONCLUSIVE, "no CI: " + (estimate.note or "not computable")
+    if null is None:
+        return _absolute_verdict(estimate, paper, approximate)
     lo, hi = estimate.low, estimate.high
     ci_text = f"CI [{lo:.3g}, {hi:.3g}]"
-    if null is None:
-        if paper is None:
-            return INCONCLUSIVE, "the paper gives no value"
-        tol = abs(paper) * APPROX_TOLERANCE if approximate else 0.0
-        shown = f"{paper:g}" + (f" +-{tol:g}" if tol else "")
-        if not (lo <= paper + tol and hi >= paper - tol):
-            return NOT_REPRODUCED, f"{ci_text} excludes the paper value {shown}"
-        if abs(estimate.value - paper) <= max(tol, abs(paper) * APPROX_TOLERANCE):
-            return REPRODUCED, f"{ci_text} holds the paper value {shown}; our estimate {estimate.value:.3g} is close"
-        return INCONCLUSIVE, (f"{ci_text} holds the paper value {shown}, but our estimate {estimate.value:.3g} is far "
-                              "from it: too few seeds to tell")
     above = direction == ">"
     on_side = lo > null if above else hi < null
     against = hi <= null if above else lo >= null
@@ -131,6 +115,22 @@ def verdict(
         return NOT_REPRODUCED, f"{ci_text} contains {null:g} and excludes the paper value {paper:g}{p_text}"
     return INCONCLUSIVE, (f"{ci_text} contains the null {null:g}" + ("" if paper is None else f" and {paper:g}")
                           + p_text)
+
+
+
+def _absolute_verdict(estimate: stats.Estimate, paper: float | None, approximate: bool) -> tuple[str, str]:
+    """``verdict`` of an absolute claim: does our CI hold the paper's value, and our estimate lie near it?"""
+    if paper is None:
+        return INCONCLUSIVE, "the paper gives no value"
+    ci_text = f"CI [{estimate.low:.3g}, {estimate.high:.3g}]"
+    tol = abs(paper) * APPROX_TOLERANCE if approximate else 0.0
+    shown = f"{paper:g}" + (f" +-{tol:g}" if tol else "")
+    if not (estimate.low <= paper + tol and estimate.high >= paper - tol):
+        return NOT_REPRODUCED, f"{ci_text} excludes the paper value {shown}"
+    if abs(estimate.value - paper) <= max(tol, abs(paper) * APPROX_TOLERANCE):
+        return REPRODUCED, f"{ci_text} holds the paper value {shown}; our estimate {estimate.value:.3g} is close"
+    return INCONCLUSIVE, (f"{ci_text} holds the paper value {shown}, but our estimate {estimate.value:.3g} is far "
+                          "from it: too few seeds to tell")
 
 
 @dataclass(frozen=True)

@@ -211,15 +211,7 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
     # leave the parent RUNNING; it marks the parent KILLED and the sweep exits 130.
     with _stop_on_sigint() as interrupted:
         try:
-            parent = client.create_run(experiment_id, tags={
-                **store.provenance_tags(vlm_label, simulated),
-                schema.MLFLOW_RUN_NAME: f"sweep-{time.strftime('%Y%m%d-%H%M%S')}",
-                schema.TAG_KIND: schema.KIND_SWEEP,
-                schema.TAG_CONFIG_HASH: config_hash(cfg),
-                schema.TAG_EXECUTOR: cfg.executor,
-                schema.TAG_TASK: cfg.task,
-                **({schema.TAG_REGIME: cfg.regime} if cfg.regime is not None else {}),
-            })
+            parent = client.create_run(experiment_id, tags=_parent_tags(cfg, vlm_label, simulated))
         except BaseException:
             release(executor)
             raise
@@ -231,16 +223,7 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
                                  heartbeat_s=cfg.heartbeat_s, stale_after_s=cfg.stale_after_s)
                 if not interrupted.is_set():  # a Ctrl-C during start-up: nothing is submitted
                     executor.submit(pending, job_fn, ctx)
-                while executor.outstanding:
-                    polled = executor.poll(0.2)
-                    for event in polled.events:
-                        reporter.progress(event)
-                    for result in polled.results:
-                        summary.results.append(result)
-                        reporter.finished(result)
-                    if interrupted.is_set() and run.status != RunStatus.KILLED:
-                        run.status = RunStatus.KILLED
-                        executor.stop()
+                _follow(executor, reporter, summary, run, interrupted)
                 if summary.failed and run.status != RunStatus.KILLED:
                     run.status = RunStatus.FAILED
             finally:
@@ -253,6 +236,31 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
     if run.status == RunStatus.KILLED:
         raise KeyboardInterrupt
     return summary
+
+
+def _parent_tags(cfg: RunConfig, vlm_label: str, simulated: bool) -> dict[str, str]:
+    """The tags of a sweep's parent run."""
+    return {**store.provenance_tags(vlm_label, simulated),
+            schema.MLFLOW_RUN_NAME: f"sweep-{time.strftime('%Y%m%d-%H%M%S')}",
+            schema.TAG_KIND: schema.KIND_SWEEP, schema.TAG_CONFIG_HASH: config_hash(cfg),
+            schema.TAG_EXECUTOR: cfg.executor, schema.TAG_TASK: cfg.task,
+            **({schema.TAG_REGIME: cfg.regime} if cfg.regime is not None else {})}
+
+
+def _follow(executor: Executor, reporter: SweepReporter, summary: SweepSummary, run: Any,
+            interrupted: threading.Event) -> None:
+    """Report the jobs' progress and results until none is outstanding; after a Ctrl-C, stop the
+    executor and mark the parent ``run`` KILLED."""
+    while executor.outstanding:
+        polled = executor.poll(0.2)
+        for event in polled.events:
+            reporter.progress(event)
+        for result in polled.results:
+            summary.results.append(result)
+            reporter.finished(result)
+        if interrupted.is_set() and run.status != RunStatus.KILLED:
+            run.status = RunStatus.KILLED
+            executor.stop()
 
 
 @contextmanager

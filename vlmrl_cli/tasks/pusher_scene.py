@@ -23,11 +23,8 @@ goal.
 Frames are 80 x 80 px: the prototype features average 20 x 20 blocks, so sides are multiples of
 20 (the nearest to 84 px).
 
-**Headless GL.** MuJoCo picks its GL back end from ``MUJOCO_GL`` when ``mujoco`` is first
-imported. ``use_headless_gl()`` sets it to ``egl`` (Mesa's llvmpipe through libEGL) only when the
-user has not set it (``osmesa`` also works, with ``libosmesa6``); the task module calls it before
-it imports gymnasium's MuJoCo env. That is the one process-wide setting the task makes, and only
-where nothing was chosen.
+**Headless GL.** ``use_headless_gl()`` sets ``MUJOCO_GL`` to ``egl`` (Mesa's llvmpipe) where the
+user set nothing (``osmesa`` also works): the one process-wide setting the task makes.
 
 **Reader** (the simulated VLM's): finds the puck (white), the goal (red) and the fingertip marker
 (blue) by colour in the frame's pixels, maps the blobs' centres back onto the table's plane with
@@ -43,7 +40,6 @@ the pose of the cell's first visit, the puck and goal at the cell's centre (the 
 
 from __future__ import annotations
 
-import functools
 import math
 import os
 from dataclasses import dataclass
@@ -177,8 +173,7 @@ class TableCamera:
         position = np.asarray(LOOKAT) - DISTANCE * forward
         up = np.array([-math.sin(el) * math.cos(az), -math.sin(el) * math.sin(az), math.cos(el)])
         focal = (side / 2) / math.tan(math.radians(fovy_deg) / 2)
-        as_tuple = functools.partial(_triple)
-        return cls(as_tuple(position), as_tuple(forward), as_tuple(up), focal, side)
+        return cls(_triple(position), _triple(forward), _triple(up), focal, side)
 
     def _axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         forward, up = np.asarray(self.forward), np.asarray(self.up)
@@ -199,9 +194,7 @@ class TableCamera:
         row0, col0 = self.pixel_of(c)
         along_x = self.pixel_of(c + np.array([radius, 0.0, 0.0]))
         along_y = self.pixel_of(c + np.array([0.0, radius, 0.0]))
-        rows = max(abs(along_x[0] - row0), abs(along_y[0] - row0))
-        cols = max(abs(along_x[1] - col0), abs(along_y[1] - col0))
-        return rows, cols
+        return max(abs(along_x[0] - row0), abs(along_y[0] - row0)), max(abs(along_x[1] - col0), abs(along_y[1] - col0))
 
     def on_plane(self, row: float, col: float, z: float) -> np.ndarray:
         """The world point at height ``z`` that shows at (row, col)."""
@@ -329,9 +322,7 @@ class PusherRenderer:
         import mujoco
 
         self.model = copy.deepcopy(model)
-        # llvmpipe draws an 80 px frame in about 0.6 ms instead of 4.6 ms without multisampling
-        # and with coarser round shapes (measured on the 2-core Zen 3; the reader needs neither)
-        self.model.vis.quality.offsamples = 0
+        self.model.vis.quality.offsamples = 0  # cheap frames: see the module's docstring
         self.model.vis.quality.numslices = QUALITY_SLICES
         self.model.vis.quality.numstacks = QUALITY_STACKS
         marker = self.model.geom(TIP_MARKER_GEOM)  # drawn at the fingertip's point (the body's origin)

@@ -15,6 +15,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from vlmrl_cli.core.errors import BadInput
+
 TAG_PREFIX = "vlmrl."
 #: The per-episode table a training run writes at its end (one row per episode, ``EPISODE_TABLE_COLUMNS``).
 EPISODES_TABLE = "episodes.csv"
@@ -157,6 +159,15 @@ def train_runs_by_job(client: Any, experiment_id: str) -> dict[tuple[str, str, s
     for run in search_all(client, experiment_id, runs_filter({TAG_KIND: KIND_TRAIN})):
         by_key.setdefault(job_key(run.data.tags), []).append(run)
     return by_key
+
+
+def finished_train_runs(client: Any, experiment: str) -> list[Any]:
+    """The FINISHED training runs of ``experiment``, oldest first; ``BadInput`` when it does not exist."""
+    exp = client.get_experiment_by_name(experiment)
+    if exp is None or exp.lifecycle_stage == "deleted":
+        raise BadInput(f"MLflow experiment '{experiment}' does not exist in this store; pass --experiment NAME.")
+    runs = search_all(client, exp.experiment_id, runs_filter({TAG_KIND: KIND_TRAIN}, finished=True))
+    return sorted(runs, key=lambda r: (r.info.start_time or 0, r.info.run_id))
 
 
 def search_all(client: Any, experiment_id: str, filter_string: str, page_size: int = PAGE_SIZE) -> list[Any]:

@@ -1,16 +1,10 @@
 """Move finished training runs between MLflow stores as one compact file (export / import).
 
-A study trained on a cluster, or over several sessions on machines that do not keep their
-store, must be readable and resumable elsewhere. ``export_runs`` writes every FINISHED training
-run of an experiment (``vlmrl.kind=train``) as one JSON line of a gzip file: its name, times,
-tags and params, the last value of every metric, the full histories that the analysis reads
-(the per-episode ``episode/*`` metrics and the detached evaluation's ``eval/episode_*``, with
-their steps and timestamps, so points logged at one step keep their order), ``config.json``,
-and the policy's weights and observation statistics when asked. ``import_runs`` recreates them in
-another store as FINISHED runs with the same tags, so a sweep's resume rule (a FINISHED run with
-the same arm, seed and config hash) finds them and never trains them again, and ``vlmrl report``
-reads them as it reads runs trained there. A run already present (same arm, seed and config hash
-FINISHED, or imported from the same source run) is skipped, so importing twice changes nothing.
+A study trained on a cluster, or over sessions on machines that do not keep their store, is read
+and resumed elsewhere: ``export_runs`` writes each FINISHED training run as one JSON line of a gzip
+file (the histories the analysis reads, with steps and timestamps; the last value of every other
+metric; ``config.json``; the model when asked), and ``import_runs`` recreates them as FINISHED runs
+with the same tags, which a sweep's resume rule and ``vlmrl report`` take for runs trained there.
 
 An export file is untrusted input. ``read_records`` checks every line against ``Record`` (types,
 lengths, the tags a training run has, MLflow's limits) and the file against its digest before a
@@ -203,14 +197,9 @@ def _record(client: Any, run: Any, models: bool, workdir: Path) -> dict[str, Any
     wanted = [n for n in (*TEXT_ARTIFACTS, *(model_files if models else ())) if n in present]
     store.download_artifacts(client, run_id, wanted, workdir)
     return {
-        "format": FORMAT,
-        "source_run_id": run_id,
-        "run_name": run.info.run_name,
-        "start_time": run.info.start_time,
-        "end_time": run.info.end_time,
-        "tags": dict(run.data.tags),
-        "params": dict(run.data.params),
-        "latest": latest,
+        "format": FORMAT, "source_run_id": run_id, "run_name": run.info.run_name,
+        "start_time": run.info.start_time, "end_time": run.info.end_time,
+        "tags": dict(run.data.tags), "params": dict(run.data.params), "latest": latest,
         "histories": {key: _history(client, run_id, key) for key in HISTORY_KEYS if key in run.data.metrics},
         "artifacts": {n: (workdir / n).read_text(encoding="utf-8") for n in wanted if n in TEXT_ARTIFACTS},
         "binary": {n: base64.b64encode(blob).decode("ascii")
@@ -229,17 +218,12 @@ def export_runs(client: Any, experiment: str, path: Path, models: bool = False,
     (written to a temporary name first, so a failed export leaves no partial file), but those whose
     run id is in ``skip`` (exported before: ``skipped`` counts them), and the digest line.
     ``progress(done, total)`` is called after each run. ``BadInput`` when there is nothing to export."""
-    exp = client.get_experiment_by_name(experiment)
-    if exp is None or exp.lifecycle_stage == "deleted":
-        raise BadInput(f"MLflow experiment '{experiment}' does not exist in this store; pass --experiment NAME.")
-    runs = schema.search_all(client, exp.experiment_id,
-                             schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN}, finished=True))
+    runs = schema.finished_train_runs(client, experiment)
     before = len(runs)
     runs = [r for r in runs if r.info.run_id not in (skip or set())]
     if not runs:
         raise BadInput(f"MLflow experiment '{experiment}' has no FINISHED training run to export"
                        + (f" that is not in the earlier exports ({before} are)." if before else "."))
-    runs.sort(key=lambda r: (r.info.start_time or 0, r.info.run_id))
 
     def records() -> Iterator[dict[str, Any]]:
         for i, run in enumerate(runs, start=1):

@@ -1,34 +1,9 @@
 """The configuration of `vlmrl run`: one frozen object, checked whole by ``training/validation.py``.
 
 It is resolved in layers, each overriding the one before: the PPO preset < a TOML config file <
-``--set KEY=VALUE`` < flags typed on the command line (``RunConfig.from_sources``). The layers
-are merged by ``training/overrides.py`` and the result checked here, whole. Example
-file (every key optional; ``vlmrl run --dry-run`` prints a complete one)::
-
-    arms = ["baseline", "hybrid"]
-    seeds = [0, 1, 2]
-    preset = "paper"
-    workers = 2
-    experiment = "vlmrl"
-
-    [ppo]
-    n_envs = 1
-    normalize_reward = false
-    timesteps = 300000
-
-    [vlm]
-    backend = "sim"
-
-    [vlm.sim]
-    profile = "llava-table1"   # a named set of knobs (vlm/config.py, and the task's own) ...
-    flicker = 0.1              # ... under the knobs set explicitly, which win
-
-    [shaping]
-    alpha = 5.0
-    query_every = 10
-
-    [shaping.label_potentials]
-    LEFT_PEAK = 0.3
+``--set KEY=VALUE`` < flags typed on the command line (``RunConfig.from_sources``), merged by
+``training/overrides.py``. Every key of a file is optional; ``vlmrl run --dry-run`` prints a
+complete one (``to_toml``), sections ``[ppo]``, ``[vlm]``, ``[vlm.sim]``, ``[shaping]`` included.
 """
 
 from __future__ import annotations
@@ -74,8 +49,7 @@ def _known_arms(arms: tuple[str, ...]) -> tuple[str, ...]:
     return arms
 
 
-#: The most seeds of one configuration: each trains a run per arm, and 1,000 are past any power a
-#: study here needs (the committed ones use at most 20).
+#: The most seeds of one configuration: past any power a study here needs (the committed use 20).
 MAX_SEEDS = 1_000
 #: The largest seed: numpy takes 32-bit seeds, and env i of a run is seeded with seed + i.
 MAX_SEED = 2**31 - 1
@@ -109,43 +83,28 @@ def _distinct_seeds(seeds: tuple[int, ...]) -> tuple[int, ...]:
     return seeds
 
 
-def _name(value: str) -> str:
-    problem = experiment_problem(value)
-    if problem:
-        raise ValueError(problem)
-    return value
-
-
-def _uri(value: str | None) -> str | None:
-    problem = tracking_uri_problem(value)
-    if problem:
-        raise ValueError(problem)
-    return value
-
-
-def _known_preset(value: str) -> str:
-    # a preset of some built-in task; the run's own task's presets are checked against its
-    # plug-in when the layers are resolved (training/overrides.py) and in ``RunConfig.validate``
-    known = _builtin_presets()
-    if value in known:
+def _no_problem(problem: Callable[[Any], str | None]) -> Callable[[Any], Any]:
+    """A field rule: the value, or a ValueError saying ``problem``'s sentence."""
+    def check(value: Any) -> Any:
+        if why := problem(value):
+            raise ValueError(why)
         return value
-    return one_of(known, "preset")(value)
+    return check
 
 
 def _builtin_presets() -> list[str]:
+    """The presets of the built-in tasks this machine can run: those ``preset`` takes (the run's own
+    task's are checked against its plug-in in training/overrides.py and ``RunConfig.validate``)."""
     from vlmrl_cli.tasks.registry import BUILTIN
 
-    tasks = (task for task in map(_loaded, BUILTIN.values()) if task is not None)
-    return list(dict.fromkeys(name for task in tasks for name in preset_names(task)))
-
-
-def _loaded(load: Callable[[], Task]) -> Task | None:
-    """A built-in task, or None where this machine cannot run it (an optional extra missing:
-    Pusher without MuJoCo or OpenGL); asking for that task by name says why."""
-    try:
-        return load()
-    except BadInput:
-        return None
+    known: list[str] = []
+    for load in BUILTIN.values():
+        try:
+            task = load()
+        except BadInput:  # an optional extra missing (Pusher without MuJoCo): naming the task says why
+            continue
+        known += [name for name in preset_names(task) if name not in known]
+    return known
 
 
 def _default_plugin() -> Task:
@@ -153,11 +112,6 @@ def _default_plugin() -> Task:
     from vlmrl_cli.tasks.registry import builtin_task
 
     return builtin_task(DEFAULT_TASK)
-
-
-def _unresolved(job: str) -> RuntimeError:
-    return RuntimeError(f"{job}'s task was not resolved here: a config is built by resolve(), and a sweep "
-                        "worker resolves a job's task at its entry (sweep.worker.with_task)")
 
 
 @dataclass(frozen=True)
@@ -168,15 +122,17 @@ class RunConfig:
                                                                             "help": "arms to train (shaping/arms.py)"})
     seeds: tuple[int, ...] = field(default=(0, 1, 2, 3, 4), metadata={"rules": (AfterValidator(_distinct_seeds),),
                                                                       "help": "training seeds, each a run per arm"})
-    preset: str = field(default=DEFAULT_PRESET, metadata={"rules": (AfterValidator(_known_preset),),
-                                                          "help": "named PPO preset: the bottom layer of [ppo]"})
+    preset: str = field(default=DEFAULT_PRESET, metadata={
+        "rules": (AfterValidator(one_of(_builtin_presets, "preset")),),
+        "help": "named PPO preset: the bottom layer of [ppo]"})
     task: str = field(default=DEFAULT_TASK, metadata={
         "help": "the environment: a built-in task (tasks/registry.py) or package.module:NAME"})
     workers: int = field(default_factory=lambda: os.cpu_count() or 1, metadata={"rules": (Ge(1),),
         "help": "worker processes (one torch thread each); default: the cores"})
-    experiment: str = field(default=DEFAULT_EXPERIMENT, metadata={"rules": (AfterValidator(_name),),
-                                                                  "help": "MLflow experiment of the runs"})
-    tracking_uri: str | None = field(default=None, metadata={"rules": (AfterValidator(_uri),),
+    experiment: str = field(default=DEFAULT_EXPERIMENT, metadata={
+        "rules": (AfterValidator(_no_problem(experiment_problem)),), "help": "MLflow experiment of the runs"})
+    tracking_uri: str | None = field(default=None, metadata={
+        "rules": (AfterValidator(_no_problem(tracking_uri_problem)),),
         "help": "MLflow store; None: $MLFLOW_TRACKING_URI or sqlite:///mlflow.db"})
     ppo: PPOConfig | None = field(default=None, metadata={"help": "None = the preset's values"})
     vlm: VLMConfig = field(default_factory=VLMConfig)
@@ -204,16 +160,13 @@ class RunConfig:
                            f"({self.heartbeat_s:g}), or live runs would be taken for dead ones.")
 
     @classmethod
-    def from_sources(
-        cls, file: Path | None, flags: Mapping[str, Any] | None = None, overrides: Iterable[str] = (),
-        tasks: TaskLookup | None = None,
-    ) -> RunConfig:
+    def from_sources(cls, file: Path | None, flags: Mapping[str, Any] | None = None, overrides: Iterable[str] = (),
+                     tasks: TaskLookup | None = None) -> RunConfig:
         """The validated config of a TOML ``file`` (or None), ``overrides`` (``--set`` strings,
         ``"ppo.n_envs=4"``) and ``flags`` typed on the command line (dotted keys, ``{"arms":
         ["baseline"], "ppo.timesteps": 512}``), in the order preset < file < overrides < flags; the
         task they name is looked up by ``tasks`` (the command's registry; None: the built-in tasks).
-
-        Raises ``BadInput`` for an unreadable file, a malformed assignment or an invalid value.
+        ``BadInput`` for an unreadable file, a malformed assignment or an invalid value.
 
         Example:
             >>> cfg = RunConfig.from_sources(None, {"seeds": [0]}, ["preset=smoke", "seeds=[1, 2]"])
@@ -268,12 +221,9 @@ class RunConfig:
     def jobs(self) -> list[TrainJob]:
         """One job per (arm, seed), arms in the given order, seeds inner."""
         ppo, shaping = self.ppo_config, self.task_shaping
-        return [
-            TrainJob(arm=ARMS[arm], seed=seed, preset=self.preset, ppo=ppo, vlm=self.vlm, shaping=shaping,
-                     regime=self.regime, task=self.task, plugin=self.plugin)
-            for arm in self.arms
-            for seed in self.seeds
-        ]
+        return [TrainJob(arm=ARMS[arm], seed=seed, preset=self.preset, ppo=ppo, vlm=self.vlm, shaping=shaping,
+                         regime=self.regime, task=self.task, plugin=self.plugin)
+                for arm in self.arms for seed in self.seeds]
 
 
 @dataclass(frozen=True)
@@ -307,7 +257,8 @@ class TrainJob:
     def task_plugin(self) -> Task:
         """The Task object this job trains on (``plugin``)."""
         if self.plugin is None:
-            raise _unresolved(f"job {self.name}")
+            raise RuntimeError(f"job {self.name}'s task was not resolved here: a config is built by resolve(), "
+                               "and a sweep worker resolves a job's task at its entry (sweep.worker.with_task)")
         return self.plugin
 
     @property
@@ -323,11 +274,7 @@ class TrainJob:
         the preset's name, so two routes to the same knobs share runs and any changed knob is a
         new cell. The VLM and the shaping knobs count only for arms that use them, so tuning the
         VLM does not redo the baseline. Cache settings never count: they change speed, not answers."""
-        ident: dict[str, Any] = {
-            "arm": self.arm.identity(),
-            "ppo": ppo_identity(self.ppo),
-            "eval_seed": EVAL_SEED,
-        }
+        ident: dict[str, Any] = {"arm": self.arm.identity(), "ppo": ppo_identity(self.ppo), "eval_seed": EVAL_SEED}
         if self.task_plugin.name_in_identity:  # False for MountainCar-v0: its runs predate tasks
             ident["task"] = self.task
         if self.arm.kinematic or self.arm.uses_vlm:
@@ -430,10 +377,8 @@ def source_layers(file: Path | None, flags: Mapping[str, Any], sets: Iterable[st
 
 
 def to_toml(cfg: RunConfig) -> str:
-    """``cfg`` as a complete TOML config file that ``--config`` reads back to the same ``cfg``.
-
-    Keys whose value is None are left out (TOML has no null; every such key defaults to None).
-    """
+    """``cfg`` as a complete TOML config file that ``--config`` reads back to the same ``cfg``; keys
+    whose value is None are left out (TOML has no null; every such key defaults to None)."""
     raw = to_jsonable(dataclasses.replace(cfg, ppo=cfg.ppo_config, shaping=cfg.task_shaping))
     raw["shaping"]["label_potentials"] = dict(raw["shaping"]["label_potentials"])
     return tomli_w.dumps(_drop_none(raw))

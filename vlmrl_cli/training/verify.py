@@ -76,6 +76,16 @@ class Outcome:
             f"recorded {len(recorded)} episodes, here {len(here)}")
         return f"differs from episode {k} ({both})"
 
+    def lines(self, here_tags: dict[str, str]) -> list[str]:
+        """The verdict and the run's recorded numeric path; this process's too where the run differs
+        or was pinned otherwise."""
+        run = self.run
+        lines = [f"{run.run_id[:12]}  {run.name}: {self.verdict()} in {self.wall_s:.0f} s",
+                 f"    recorded: {describe_paths(run.tags)}"]
+        if not self.identical or run.tags.get(schema.TAG_PIN) != here_tags[schema.TAG_PIN]:
+            lines.append(f"    here:     {describe_paths(here_tags)}")
+        return lines
+
 
 def first_difference(recorded: Sequence[float], here: Sequence[float]) -> int | None:
     """The first index where two learning curves differ (a missing episode counts), or None.
@@ -123,13 +133,8 @@ def runs_of_store(client: Any, experiment: str) -> list[RecordedRun]:
 
     from vlmrl_cli.tracking import store
 
-    exp = client.get_experiment_by_name(experiment)
-    if exp is None or exp.lifecycle_stage == "deleted":
-        raise BadInput(f"MLflow experiment '{experiment}' does not exist in this store; pass --experiment NAME.")
-    found = schema.search_all(client, exp.experiment_id,
-                              schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN}, finished=True))
     runs = []
-    for run in sorted(found, key=lambda r: (r.info.start_time or 0, r.info.run_id)):
+    for run in schema.finished_train_runs(client, experiment):
         run_id = run.info.run_id
         with tempfile.TemporaryDirectory(prefix="vlmrl-verify-") as tmp:
             if "config.json" not in {a.path for a in client.list_artifacts(run_id)}:
@@ -144,6 +149,20 @@ def runs_of_store(client: Any, experiment: str) -> list[RecordedRun]:
     if not runs:
         raise BadInput(f"MLflow experiment '{experiment}' has no FINISHED training run to verify.")
     return runs
+
+
+def recorded_runs(source: Path | None, experiment: str, tracking_uri: str | None) -> tuple[list[RecordedRun], str]:
+    """The runs of the export file ``source``, else of ``experiment`` in the store, and where they are."""
+    if source is not None:
+        return runs_of_export(source), str(source)
+    from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
+    from vlmrl_cli.tracking import access, store
+
+    problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
+    if problem:
+        raise BadInput(problem + ".")
+    access.check_store(tracking_uri, write=False, existing=True)  # before MLflow loads (a second)
+    return runs_of_store(store.connect_existing(tracking_uri), experiment), f"experiment '{experiment}'"
 
 
 def choose(runs: Sequence[RecordedRun], *, run_ids: Iterable[str] = (), seeds: Iterable[int] = (),

@@ -105,16 +105,8 @@ class VLMClient:
             if self.stochastic or keys[i] not in first:
                 first.setdefault(keys[i], i)
                 send.append(i)
-        start = time.perf_counter()
-        fresh = self._fresh(prompt, [frames[i] for i in send], scored) if send else []
-        elapsed = time.perf_counter() - start
-        latency = elapsed / len(send) if send else 0.0
+        fresh, latency = self._fresh(prompt, [frames[i] for i in send], scored) if send else ([], 0.0)
         answered = dict(zip(send, fresh, strict=True))
-        if send:
-            self.stats.backend_calls += 1
-            self.stats.backend_frames += len(send)
-            self.stats.largest_batch = max(self.stats.largest_batch, len(send))
-            self.stats.backend_seconds += elapsed
         answers = []
         for i, frame in enumerate(frames):
             self.stats.queries += 1
@@ -131,14 +123,10 @@ class VLMClient:
                 if self.cache is not None and i in answered:
                     self.cache.put(key, b.name, b.model, text, took)
             if self.transcript is not None:
-                self.transcript.write(
-                    TranscriptRecord(
-                        backend=b.name, model=b.model, prompt_kind=prompt.kind.value,
-                        prompt=prompt.text, image_sha256=frame.sha256, answer=text,
-                        latency_s=took, simulated=b.simulated, cached=cached,
-                        frame_id=frame.frame_id, confidence=confidence,
-                    )
-                )
+                self.transcript.write(TranscriptRecord(
+                    backend=b.name, model=b.model, prompt_kind=prompt.kind.value, prompt=prompt.text,
+                    image_sha256=frame.sha256, answer=text, latency_s=took, simulated=b.simulated, cached=cached,
+                    frame_id=frame.frame_id, confidence=confidence))
             answers.append(Answer(text=text, latency_s=took, backend=b.name, model=b.model,
                                   simulated=b.simulated, cached=cached, confidence=confidence))
         return answers
@@ -160,9 +148,12 @@ class VLMClient:
         b = self.backend
         return cache_key(b.name, b.model + (SCORED_KEY if scored else ""), prompt.text, frame.sha256)
 
-    def _fresh(self, prompt: Prompt, frames: list[Frame], scored: bool) -> list[tuple[str, float | None, str]]:
-        """(text, confidence, cache key) of each of ``frames`` from the backend: scored where it
-        can (``scores``), generated for the rest (``BackendUnavailable`` in ``logprob`` mode)."""
+    def _fresh(self, prompt: Prompt, frames: list[Frame], scored: bool
+               ) -> tuple[list[tuple[str, float | None, str]], float]:
+        """(text, confidence, cache key) of each of ``frames`` from ONE backend call, and its seconds
+        per frame: scored where it can (``scores``), generated for the rest (``BackendUnavailable``
+        in ``logprob`` mode)."""
+        start = time.perf_counter()
         results: list[OptionScores | None] = [None] * len(frames)
         if scored:
             assert isinstance(self.backend, ScoringBackend)
@@ -184,7 +175,12 @@ class VLMClient:
                 out.append((texts[j], None, self._key(prompt, frame, False)))
             else:
                 out.append((r.label, r.margin, self._key(prompt, frame, True)))
-        return out
+        elapsed = time.perf_counter() - start
+        self.stats.backend_calls += 1
+        self.stats.backend_frames += len(frames)
+        self.stats.largest_batch = max(self.stats.largest_batch, len(frames))
+        self.stats.backend_seconds += elapsed
+        return out, elapsed / len(frames)
 
     def close(self) -> None:
         if self.transcript is not None:
