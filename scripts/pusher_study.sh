@@ -1,16 +1,17 @@
 #!/usr/bin/env bash
-# Pusher-v5's study (issue 54), resumable: run it from a worktree at the commit the study started
-# from (d0221fd); it trains what its store lacks, a wave of 3 seeds per arm, then 10, one job per
-# worker. Rerunning it resumes. A new session imports the committed partial export first:
+# Pusher-v5's study (issue 54), resumable: it trains, with the code of the worktree ROOT (one at the
+# commit the study started from, d0221fd, which predates this script), what its store lacks: a wave
+# of 3 seeds per arm, then 10, one job per worker. Rerunning it resumes. A new session imports the
+# committed partial export first:
 #
 #   git worktree add ../bg-pstudy d0221fd && cd ../bg-pstudy
-#   IMPORTS=/path/to/main/results/tasks/pusher/runs-study-partial.jsonl.gz V=/path/to/venv/bin/vlmrl \
-#       nohup bash scripts/pusher_study.sh > results/_scratch/study.log 2>&1 &
+#   ROOT=$PWD IMPORTS=/path/to/main/results/tasks/pusher/runs-study-partial.jsonl.gz V=/path/to/venv/bin/vlmrl \
+#       nohup bash /path/to/main/scripts/pusher_study.sh > study.log 2>&1 &
 #
 # Before a session ends: vlmrl export --experiment tasks-pusher-study --tracking-uri "sqlite:///$PWD/results/_scratch/pusher-study.db" \
 #     --out .../results/tasks/pusher/runs-study-partial.jsonl.gz
 set -u
-cd "$(dirname "$0")/.."
+cd "${ROOT:-$(dirname "$0")/..}"
 mkdir -p results/_scratch
 export PYTHONPATH=$PWD OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 V=${V:-vlmrl}
