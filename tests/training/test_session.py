@@ -59,3 +59,21 @@ def test_a_round_of_eight_in_flight_takes_a_fraction_of_the_vlm_time_and_gives_t
     # one at a time would give about 1x; an idle 2-core machine measures about 5x, a loaded one 4x: the
     # bar asks that the requests overlap, not for a figure (benchmarks/bench_vlm.py measures that)
     assert speedup >= 2.5
+
+
+def test_the_block_closes_the_env_stack_and_with_it_a_cameras_renderer() -> None:
+    """A Pusher hybrid's MuJoCo renderer is closed when the session ends, not at the interpreter's exit
+    (where it outlived its EGL display and printed two tracebacks after `vlmrl verify`)."""
+    from vlmrl_cli.tasks import pusher
+
+    if pusher.gl_problem() is not None:
+        pytest.skip(pusher.gl_problem() or "")
+    ppo = dataclasses.replace(preset_of(get_task("pusher"), "smoke"), timesteps=64, n_envs=2, n_steps=32,
+                              batch_size=64)
+    job = RunConfig(task="pusher", plugin=get_task("pusher"), arms=("hybrid",), seeds=(0,), preset="smoke",
+                    ppo=ppo, workers=1).jobs()[0]
+    with session(job) as built:
+        built.model.learn(total_timesteps=job.timesteps)
+        cameras = built.env.get_attr("camera")
+        assert any(c._renderer is not None for c in cameras)  # it drew frames
+    assert all(c._renderer is None for c in cameras)

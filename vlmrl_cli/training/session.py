@@ -28,8 +28,10 @@ class Session:
 
 @contextmanager
 def session(job: TrainJob, transcript: Path | None = None) -> Iterator[Session]:
-    """``job``'s learner, env stack and oracle; its VLM client (writing ``transcript`` when given,
-    its simulated draws seeded by the job's seed) is closed when the block ends."""
+    """``job``'s learner, env stack and oracle; the env stack (and with it a camera's renderer) and
+    the VLM client (writing ``transcript`` when given, its simulated draws seeded by the job's
+    seed) are closed when the block ends, not left to the interpreter's exit, where a MuJoCo
+    renderer outliving its EGL display prints errors."""
     from vlmrl_cli.training.envs import make_train_env
     from vlmrl_cli.training.model import make_model
     from vlmrl_cli.vlm.registry import build_client
@@ -37,9 +39,12 @@ def session(job: TrainJob, transcript: Path | None = None) -> Iterator[Session]:
     task = job.task_plugin
     client = (build_client(job.vlm, transcript=transcript, stream=job.seed, reader=task.reader)
               if job.arm.uses_vlm else None)
+    env = None
     try:
         env, oracle = make_train_env(job.arm, job.ppo, job.shaping, client, job.seed, task, job.vlm.max_queries)
         yield Session(make_model(job.ppo, env, job.seed), env, oracle)
     finally:
+        if env is not None:
+            env.close()
         if client is not None:
             client.close()
