@@ -10,6 +10,9 @@
 #
 # Before a session ends: vlmrl export --experiment tasks-pusher-study --tracking-uri "sqlite:///$PWD/results/_scratch/pusher-study.db" \
 #     --out .../results/tasks/pusher/runs-study-partial.jsonl.gz
+# and, since its hybrid runs change Pusher's measured VLM hit rate, update ``VLM_HIT_RATES`` in
+# vlmrl_cli/sweep/cost.py to what ``measure_hit_rates(committed_exports())`` prints
+# (tests/sweep/test_cost.py checks that the table is what the committed exports measure).
 set -u
 cd "${ROOT:-$(dirname "$0")/..}"
 mkdir -p results/_scratch
