@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import time
+from contextlib import closing
 from typing import Any
 
 import pytest
@@ -68,12 +69,8 @@ def test_answers_come_back_in_the_order_asked(frames: list[Frame]) -> None:
         return mcq_by_image(LABELS)(request, index)
 
     frames_by_url = {image_data_url(f): i for i, f in enumerate(frames)}
-    with FakeServer(chat=slower_first) as server:
-        backend = connect(server.url, max_concurrency=4)
-        try:
-            answers = backend.answer_many(MCQ, frames)
-        finally:
-            backend.close()
+    with FakeServer(chat=slower_first) as server, closing(connect(server.url, max_concurrency=4)) as backend:
+        answers = backend.answer_many(MCQ, frames)
     assert answers == [frame_label_of(f) for f in frames]
 
 
@@ -131,35 +128,25 @@ def test_a_server_error_in_a_round_is_one_line(frames: list[Frame]) -> None:
     def fails_third(request: Any, index: int) -> tuple[int, Any]:
         return (500, {"error": {"message": "boom"}}) if index == 2 else (200, completion("BOTTOM"))
 
-    with FakeServer(chat=fails_third) as server:
-        backend = connect(server.url, max_concurrency=4)
-        try:
-            with pytest.raises(BackendUnavailable, match=r"kept failing \(HTTP 500, 1 attempt\(s\)\)") as exc:
-                backend.answer_many(MCQ, frames[:6])
-        finally:
-            backend.close()
+    with FakeServer(chat=fails_third) as server, closing(connect(server.url, max_concurrency=4)) as backend, \
+            pytest.raises(BackendUnavailable, match=r"kept failing \(HTTP 500, 1 attempt\(s\)\)") as exc:
+        backend.answer_many(MCQ, frames[:6])
     assert "\n" not in str(exc.value)
 
 
 def test_a_transient_error_is_retried_within_the_round(frames: list[Frame]) -> None:
-    with FakeServer(chat=fail_then(2, 503, mcq_by_image(LABELS))) as server:
-        backend = connect(server.url, max_concurrency=4, retries=3)
-        try:
-            answers = backend.answer_many(MCQ, frames[:4])
-        finally:
-            backend.close()
+    with FakeServer(chat=fail_then(2, 503, mcq_by_image(LABELS))) as server, \
+            closing(connect(server.url, max_concurrency=4, retries=3)) as backend:
+        answers = backend.answer_many(MCQ, frames[:4])
     assert answers == [frame_label_of(f) for f in frames[:4]]
 
 
 def test_a_timeout_in_a_round_is_one_line_and_bounded(frames: list[Frame]) -> None:
-    with FakeServer(chat=mcq_by_image(LABELS, latency_s=1.0)) as server:
-        backend = connect(server.url, max_concurrency=4, timeout_s=0.2)
+    with FakeServer(chat=mcq_by_image(LABELS, latency_s=1.0)) as server, \
+            closing(connect(server.url, max_concurrency=4, timeout_s=0.2)) as backend:
         start = time.perf_counter()
-        try:
-            with pytest.raises(BackendUnavailable, match=r"unreachable \(ReadTimeout") as exc:
-                backend.score_many(MCQ, frames[:4])
-        finally:
-            backend.close()
+        with pytest.raises(BackendUnavailable, match=r"unreachable \(ReadTimeout") as exc:
+            backend.score_many(MCQ, frames[:4])
     assert "\n" not in str(exc.value)
     assert time.perf_counter() - start < 3.0
 
@@ -167,12 +154,8 @@ def test_a_timeout_in_a_round_is_one_line_and_bounded(frames: list[Frame]) -> No
 def test_malformed_logprobs_count_as_none(frames: list[Frame]) -> None:
     body = completion("BOTTOM")
     body["choices"][0]["logprobs"] = {"content": [{"token": 3}]}
-    with FakeServer(chat=status_only(200, body)) as server:
-        backend = connect(server.url)
-        try:
-            assert backend.score_many(MCQ, frames[:1]) == [None] and not backend.can_score
-        finally:
-            backend.close()
+    with FakeServer(chat=status_only(200, body)) as server, closing(connect(server.url)) as backend:
+        assert backend.score_many(MCQ, frames[:1]) == [None] and not backend.can_score
 
 
 def test_concurrency_below_one_is_refused() -> None:
