@@ -97,7 +97,7 @@ SHARED_STORE_NEEDED = (
 
 
 def is_server_uri(uri: str | None) -> bool:
-    from vlmrl_cli.tracking.store import resolve_tracking_uri
+    from vlmrl_cli.tracking.access import resolve_tracking_uri
 
     return resolve_tracking_uri(uri).startswith(("http://", "https://", "databricks"))
 
