@@ -10,11 +10,7 @@ T = TypeVar("T")
 
 
 class BadInput(Exception):
-    """A problem the user can fix: bad option, unreachable server, unreadable file.
-
-    The message is one sentence that says what is wrong and how to fix it; the CLI
-    prints it alone (no traceback) and exits with code 2.
-    """
+    """A problem the user can fix, in one sentence saying how; the CLI prints it alone and exits 2."""
 
 
 class BackendUnavailable(BadInput):
@@ -39,8 +35,7 @@ def did_you_mean(word: str, choices: Iterable[str]) -> str:
 
 
 def first_repeated(values: Sequence[T]) -> T | None:
-    """The first of ``values`` that an earlier one equals (the second 5 of ``5, 5``), or None: a
-    list of choices where a repeat would count one choice twice.
+    """The first of ``values`` that an earlier one equals (the second 5 of ``5, 5``), or None.
 
     Example:
         >>> first_repeated([5.0, 25.0, 5]), first_repeated(["a", "b"])

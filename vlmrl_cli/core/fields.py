@@ -1,13 +1,6 @@
-"""How a configuration field declares itself once: its type (the annotation), its help text and
-its rules (``annotated_types`` ranges, pydantic validators) in the field's metadata::
-
-    n_envs: int = field(default=16, metadata={"rules": (Ge(1), AtMost(256, "...")), "help": "parallel envs"})
-
-The input schema (``training/validation.py``) applies ``rules_of`` to every field; the docs'
-configuration reference prints both; a command's option of the field (``cli/options.field_option``)
-takes its help and range from them, and its flag from ``"flag"`` where it is not ``--NAME``. A
-renamed field keeps its rules.
-"""
+"""How a configuration field declares itself once: its type, help text and rules in its metadata
+(``metadata={"rules": (Ge(1),), "help": "parallel envs"}``), read by the input schema, the docs'
+configuration reference and the commands' options (``cli/options.field_option``)."""
 
 from __future__ import annotations
 
@@ -50,9 +43,7 @@ def number(value: float) -> str:
 
 @dataclass(frozen=True)
 class AtMost:
-    """A field's upper bound and the reason for it, declared with its other rules: a value above
-    ``le`` is refused with the reason (``le`` is ``annotated_types.Le``'s name, which the docs'
-    configuration reference reads).
+    """An upper bound ``le`` (``annotated_types.Le``'s name, read by the docs) refused with its reason.
 
     Example:
         >>> AtMost(256, "each env is stepped in turn").check(300)
@@ -76,8 +67,7 @@ class AtMost:
 
 
 def one_of(choices: Collection[str] | Callable[[], Collection[str]], what: str) -> Callable[[str], str]:
-    """A validator accepting only ``choices`` (or what the callable returns when it runs, for a
-    table defined after the field), with a did-you-mean hint.
+    """A validator accepting only ``choices`` (or what a callable returns), with a did-you-mean hint.
 
     Example:
         >>> one_of(("sim", "hf"), "backend")("sim")

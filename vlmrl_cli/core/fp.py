@@ -1,16 +1,5 @@
-"""Floating-point kernels that give the same bits on every x86-64 CPU.
-
-numpy picks SIMD code at run time (AVX2 or AVX-512) and OpenBLAS picks a kernel per CPU
-(Haswell, SkylakeX, ...). Several of those paths round differently: numpy's AVX-512 float64
-``exp`` differs from the scalar libm one in the last bit on about 5% of inputs, and OpenBLAS's
-SkylakeX ``sgemv`` sums in another order than its Haswell kernel. Whatever feeds a reward must
-not go through them, or the same command trains another agent on another CPU.
-
-``exp`` here is built only from IEEE-754 basic operations (``*``, ``+``, ``-``, ``rint``,
-``ldexp`` on normal numbers), each correctly rounded whatever the SIMD width, so every CPU
-computes the same bits. It is accurate to about 1 ulp (checked against ``math.exp`` in the
-tests); results below the smallest normal float64 (``x < -708``) are flushed to 0.0.
-"""
+"""A float64 ``exp`` that gives the same bits on every x86-64 CPU, for whatever feeds a reward
+(numpy's SIMD ``exp`` rounds differently per CPU). See docs/development.md, "History"."""
 
 from __future__ import annotations
 
@@ -29,10 +18,7 @@ _COEFFS = tuple(1.0 / math.factorial(n) for n in range(13, 1, -1))
 
 
 def exp(x: np.ndarray) -> np.ndarray:
-    """``e ** x`` elementwise, float64, bit-identical on every CPU (see the module docstring).
-
-    ``x`` is any float array (dimensionless); values above 709 raise ``ValueError`` (they would
-    overflow), values below -708 give 0.0.
+    """``e ** x`` elementwise, float64, bit-identical on every CPU: above 709 a ``ValueError``, below -708 0.0.
 
     Example:
         >>> float(exp(np.array([0.0]))[0]), float(exp(np.array([-1000.0]))[0])

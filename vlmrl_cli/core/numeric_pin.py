@@ -1,33 +1,6 @@
-"""One numeric path on every x86-64-v3 CPU: the kernel choices vlmrl pins before torch loads.
-
-Torch's BLAS (Intel MKL) picks its sgemm kernels by CPU model, so plain PPO trained other
-agents on a Sapphire Rapids machine than on AMD EPYC and Ice Lake ones (docs/development.md,
-"Same numbers on every x86-64 CPU"). The variables below fix each library's choice to one that
-every CPU from x86-64-v3 (AVX2 + FMA) up runs the same way:
-
-* ``MKL_CBWR=COMPATIBLE``: MKL's conditional-numerical-reproducibility branch built on SSE2
-  without the CPU-specific ``rcpps``/``rsqrtps``. Intel documents its other branches (``AVX2``,
-  ``AVX512``) as reproducible across *Intel* CPUs only: on other CPUs they fall back to ``AUTO``,
-  which picks by CPU again (on an AMD EPYC, ``AVX2``, ``AVX512`` and ``AVX512_E1`` trained one
-  agent and ``COMPATIBLE`` another).
-* ``ATEN_CPU_CAPABILITY=avx2``: torch's own vectorised kernels (reductions, ``exp``, ``tanh``,
-  Adam's updates) at one vector width, whether or not the CPU has AVX-512.
-* ``ONEDNN_MAX_CPU_ISA=AVX2``: oneDNN's JIT kernels at that width too (not on PPO's path as
-  measured, pinned so that a torch that routes an op through it cannot pick by CPU).
-
-numpy's SIMD dispatch and OpenBLAS are not pinned: measured, neither is on a training path
-(``NPY_DISABLE_CPU_FEATURES`` and ``OPENBLAS_CORETYPE`` leave every pinned digest unchanged,
-``tests/training/test_cpu_paths.py``), and a disabled feature that a numpy build does not
-dispatch stops numpy from importing at all.
-
-The pin only works in a process whose libraries have not loaded yet, so it is applied at the
-edges, never on import: the ``vlmrl`` command, ``python -m vlmrl_cli``, the test suite's
-conftest, the scripts and benchmarks call ``apply()`` first; sweep workers inherit it (local
-workers fork from a fork server that the pinned process starts, and take over its environment;
-``vlmrl verify``'s spawned processes copy it; Ray workers get it through their ``runtime_env``). A variable
-the user set wins, is warned about once (``VLMRL_PIN_USER`` tells child processes which ones
-were the user's), and every run records the values in force (``pin_record``).
-"""
+"""The numeric pin: the kernel choices vlmrl fixes before torch loads, so that every x86-64-v3 CPU
+computes the same numbers. Applied at the edges (``apply()``), never on import; a variable the user
+set wins and is warned about once. See docs/development.md, "Same numbers on every x86-64 CPU"."""
 
 from __future__ import annotations
 
@@ -35,13 +8,11 @@ import os
 import platform
 import sys
 from collections.abc import Mapping, MutableMapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 #: The name of the numeric path, recorded with every run (bump it when ``PIN`` changes).
 PIN_ID = "x86-64-v3/1"
-#: The oldest CPU on which the pin gives the committed numbers.
-OLDEST_CPU = "x86-64-v3 (AVX2 + FMA: Intel Haswell, AMD Zen and later)"
 PIN: Mapping[str, str] = {
     "MKL_CBWR": "COMPATIBLE",
     "ATEN_CPU_CAPABILITY": "avx2",
@@ -76,8 +47,7 @@ _NUMERIC_MODULES = ("torch",)
 
 @dataclass(frozen=True)
 class PinState:
-    """What ``apply`` did: the values in force for each pin variable, the ones the user set
-    (name -> their value, which wins), and the numeric libraries already loaded before it."""
+    """What ``apply`` did: the values in force, the user's own (which win), libraries loaded before it."""
 
     values: Mapping[str, str]
     user: Mapping[str, str]
@@ -85,8 +55,7 @@ class PinState:
 
     @property
     def pinned(self) -> bool:
-        """Whether this process computes on the pinned path: every variable at the pin's value
-        and none of the libraries loaded before it was set."""
+        """Whether every variable is at the pin's value and no library loaded before it was set."""
         return not self.loaded_before and all(self.values.get(k) == v for k, v in PIN.items())
 
     def warning(self) -> str | None:
@@ -110,20 +79,13 @@ class PinState:
 
 
 def mkl_knows(value: str) -> bool:
-    """Whether ``value`` is an ``MKL_CBWR`` setting Intel documents: a branch of
-    ``MKL_CBWR_BRANCHES``, optionally followed by ``,STRICT`` (case aside).
-
-    Example:
-        >>> mkl_knows("AVX2"), mkl_knows("avx512_e1,STRICT"), mkl_knows("garbage"), mkl_knows("AVX2,FAST")
-        (True, True, False, False)
-    """
+    """Whether ``value`` is a documented ``MKL_CBWR`` setting (a branch, optionally ``,STRICT``)."""
     branch, comma, rest = value.partition(",")
     return branch.strip().upper() in MKL_CBWR_BRANCHES and (not comma or rest.strip().upper() == "STRICT")
 
 
 def unknown_value(key: str, value: str) -> str | None:
-    """Why ``value`` of pin variable ``key`` is not one its library knows (it would ignore it and
-    pick kernels by CPU), or None when it knows it.
+    """Why ``value`` of pin variable ``key`` is one its library ignores (picking by CPU), or None.
 
     Example:
         >>> unknown_value("ATEN_CPU_CAPABILITY", "avx512") is None, unknown_value("ONEDNN_MAX_CPU_ISA", "avx2") is None
@@ -143,13 +105,7 @@ def unknown_value(key: str, value: str) -> str | None:
 
 
 def pinned_environ(environ: Mapping[str, str]) -> dict[str, str]:
-    """``environ`` with every pin variable the user left unset at the pin's value (pure).
-
-    Example:
-        >>> env = pinned_environ({"MKL_CBWR": "AVX2"})
-        >>> env["MKL_CBWR"], env["ATEN_CPU_CAPABILITY"], env[USER_MARK]
-        ('AVX2', 'avx2', 'MKL_CBWR')
-    """
+    """``environ`` with every pin variable the user left unset at the pin's value (pure)."""
     out = dict(environ)
     already = APPLIED_MARK in environ  # a parent applied it: its user list stands
     user = user_set(environ) if already else [k for k in PIN if k in environ]
@@ -161,14 +117,7 @@ def pinned_environ(environ: Mapping[str, str]) -> dict[str, str]:
 
 
 def unpinned_environ(environ: Mapping[str, str]) -> dict[str, str]:
-    """``environ`` without the pin: none of its variables or marks, as if ``apply`` had never run
-    and the user had set none of them (pure; a fresh process started with it computes on whatever
-    path its libraries pick for the CPU).
-
-    Example:
-        >>> unpinned_environ(pinned_environ({"HOME": "/root", "MKL_CBWR": "AVX2"}))
-        {'HOME': '/root'}
-    """
+    """``environ`` without any pin variable or mark, as if ``apply`` had never run (pure)."""
     return {k: v for k, v in environ.items() if k not in PIN_VARIABLES}
 
 
@@ -188,18 +137,15 @@ def pin_state(environ: Mapping[str, str] | None = None) -> PinState:
 
 
 def apply(environ: MutableMapping[str, str] | None = None, *, warn: bool = True) -> PinState:
-    """Pin the kernels of this process and of every process it starts (call it before anything
-    imports torch or numpy). Keeps a variable the user set, and prints one warning line to
-    stderr when that moves the process off the pin (not again in child processes: ``warn``
-    is only honoured where the pin is applied first)."""
+    """Pin the kernels of this process and its children (call it before torch or numpy load); warns
+    once on stderr, where the pin is first applied, when a user's variable moves it off the pin."""
     env = os.environ if environ is None else environ
     first = APPLIED_MARK not in env
     loaded = tuple(m for m in _NUMERIC_MODULES if m in sys.modules) if environ is None else ()
     new = pinned_environ(env)
     for key in PIN_VARIABLES:
         env[key] = new[key]
-    state = pin_state(env)
-    state = PinState(values=state.values, user=state.user, loaded_before=loaded if first else ())
+    state = replace(pin_state(env), loaded_before=loaded if first else ())
     message = state.warning()
     if warn and first and message is not None:
         print(message, file=sys.stderr)
@@ -207,9 +153,8 @@ def apply(environ: MutableMapping[str, str] | None = None, *, warn: bool = True)
 
 
 def cpu_model() -> str:
-    """The CPU's model name with its vendor, family, model and stepping (``/proc/cpuinfo``), or
-    the platform's processor string: a hypervisor may show only ``AMD EPYC`` as the name, which
-    the family tells apart (25 is Zen 3/4, 26 is Zen 5)."""
+    """The CPU's model name with vendor, family, model and stepping (a hypervisor may show only
+    ``AMD EPYC``; the family tells Zen 3/4 from Zen 5), else the platform's processor string."""
     return describe_cpuinfo(read_cpuinfo()) or platform.processor() or platform.machine() or "unknown"
 
 
@@ -237,15 +182,7 @@ def cpuinfo_fields(text: str) -> dict[str, str]:
 
 
 def describe_cpuinfo(text: str) -> str | None:
-    r"""The first processor of a ``/proc/cpuinfo`` text in one line, or None when it names no model (pure).
-
-    Example:
-        >>> describe_cpuinfo("vendor_id\t: AuthenticAMD\ncpu family\t: 26\nmodel\t\t: 2\n"
-        ...                  "model name\t: AMD EPYC\nstepping\t: 1\n\nvendor_id\t: AuthenticAMD\n")
-        'AMD EPYC (AuthenticAMD family 26 model 2 stepping 1)'
-        >>> describe_cpuinfo("model name : Intel Xeon"), describe_cpuinfo("flags : avx2")
-        ('Intel Xeon', None)
-    """
+    r"""The first processor of a ``/proc/cpuinfo`` text in one line, or None when it names no model (pure)."""
     fields = cpuinfo_fields(text)
     name = fields.get("model name")
     if not name:
@@ -257,19 +194,12 @@ def describe_cpuinfo(text: str) -> str | None:
 
 
 def pin_record(environ: Mapping[str, str] | None = None) -> dict[str, str]:
-    """What names the numeric path of a run (the tracking layer tags it as ``vlmrl.<key>``):
-    ``pin``, the pin's id (``unpinned`` when a pin variable is off its value); ``pin.env``, the
-    values in force; ``pin.user``, the user's settings; ``cpu.model``, the CPU.
-
-    Example:
-        >>> record = pin_record(pinned_environ({}))
-        >>> record["pin"], record["pin.env"], record["pin.user"]
-        ('x86-64-v3/1', 'ATEN_CPU_CAPABILITY=avx2 MKL_CBWR=COMPATIBLE ONEDNN_MAX_CPU_ISA=AVX2', 'none')
+    """The numeric path of a run, tagged ``vlmrl.<key>``: ``pin`` (id, or ``unpinned``), ``pin.env``,
+    ``pin.user`` and ``cpu.model``.
     """
     state = pin_state(environ)
-    on_pin = all(state.values.get(k) == v for k, v in PIN.items())
     return {
-        "pin": PIN_ID if on_pin else "unpinned",
+        "pin": PIN_ID if state.pinned else "unpinned",
         "pin.env": " ".join(f"{k}={state.values[k]}" for k in sorted(PIN)),
         "pin.user": ",".join(f"{k}={v}" for k, v in sorted(state.user.items())) or "none",
         "cpu.model": cpu_model(),

@@ -11,39 +11,19 @@ from pathlib import Path
 from vlmrl_cli.core.errors import BadInput
 
 
-def _nearest_existing(path: Path) -> Path:
-    current = path.absolute()
-    while not current.exists() and current != current.parent:
-        current = current.parent
-    return current
-
-
-def _probe(folder: Path) -> str | None:
-    """Why nothing can be created in the existing ``folder``, or None (a folder made and removed
-    at once: permissions, read-only mounts and pseudo file systems such as /proc all answer)."""
-    try:
-        os.rmdir(tempfile.mkdtemp(prefix=".vlmrl-probe-", dir=folder))
-    except OSError as exc:
-        return f"nothing can be created in {folder} ({exc.strerror or exc})"
-    return None
-
-
 def folder_problem(path: Path) -> str | None:
-    """Why ``path`` cannot be used as an output folder (made if missing), or None.
-
-    Example:
-        >>> import tempfile, pathlib
-        >>> root = pathlib.Path(tempfile.mkdtemp())
-        >>> folder_problem(root / "new" / "out") is None, (root / "new").exists()
-        (True, False)
-        >>> _ = (root / "f").write_text("x")
-        >>> folder_problem(root / "f" / "out").endswith("is a file, not a folder")
-        True
-    """
-    existing = _nearest_existing(path)
+    """Why ``path`` cannot be used as an output folder (made if missing), or None; probed by making and
+    removing a folder in its nearest existing parent (read-only mounts and /proc answer too)."""
+    existing = path.absolute()
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
     if not existing.is_dir():
         return f"{existing} is a file, not a folder"
-    return _probe(existing)
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".vlmrl-probe-", dir=existing))
+    except OSError as exc:
+        return f"nothing can be created in {existing} ({exc.strerror or exc})"
+    return None
 
 
 def file_problem(path: Path) -> str | None:
@@ -56,8 +36,7 @@ def file_problem(path: Path) -> str | None:
 
 
 def out_folder_problem(out: Path) -> str | None:
-    """Why ``out`` cannot be a command's output folder (an existing folder written into, or one
-    made with its parents), or None; nothing is created.
+    """Why ``out`` cannot be a command's output folder (written into, or made), or None; nothing is created.
 
     Example:
         >>> import tempfile, pathlib
@@ -72,8 +51,7 @@ def out_folder_problem(out: Path) -> str | None:
 
 
 def check_out_folder(out: Path, flag: str = "--out") -> None:
-    """``BadInput`` (one line, naming ``flag``) unless ``out`` can be the output folder; the one
-    check every command runs on its output folder before it creates anything."""
+    """``BadInput`` naming ``flag`` unless ``out`` can be the output folder (checked before anything is made)."""
     problem = out_folder_problem(out)
     if problem:
         raise BadInput(f"cannot write to the output folder {out} ({problem}); pass {flag} to a writable folder.")
@@ -85,8 +63,7 @@ SCRATCH = Path("results") / "_scratch"
 
 
 def fresh_scratch_folder(command: str, now: datetime | None = None) -> Path:
-    """A folder under ``SCRATCH`` that does not exist yet: ``results/_scratch/COMMAND/YYYYMMDD-HHMMSS``
-    (UTC), with ``-2``, ``-3``, ... when one of that second exists; nothing is created.
+    """A new folder name ``results/_scratch/COMMAND/YYYYMMDD-HHMMSS`` (UTC; ``-2``, ... if taken).
 
     Example:
         >>> from datetime import datetime, UTC

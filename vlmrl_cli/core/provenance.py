@@ -36,23 +36,13 @@ def to_jsonable(obj: Any) -> Any:
 
 
 def config_hash(obj: Any) -> str:
-    """A short stable hash of a config object's JSON form (12 hex digits).
-
-    Example:
-        >>> config_hash({"a": 1}) == config_hash({"a": 1}) != config_hash({"a": 2})
-        True
-    """
+    """A short stable hash of a config object's JSON form (12 hex digits)."""
     blob = json.dumps(to_jsonable(obj), sort_keys=True).encode()
     return hashlib.sha256(blob).hexdigest()[:12]
 
 
 def flatten(obj: Any, prefix: str = "") -> dict[str, str]:
-    """Nested config as dotted keys -> strings (MLflow params).
-
-    Example:
-        >>> flatten({"a": {"b": 1}, "c": [1, 2]})
-        {'a.b': '1', 'c': '[1, 2]'}
-    """
+    """Nested config as dotted keys -> strings (MLflow params)."""
     out: dict[str, str] = {}
     data = to_jsonable(obj)
     if isinstance(data, dict):
@@ -71,14 +61,8 @@ _WHOLE_TREE_BUT_OUTPUTS = (":/", ":(top,exclude)results")
 
 
 def git_commit(cwd: Path | None = None) -> str:
-    """The git commit of vlmrl's source (``-dirty`` if tracked code changed), or ``unknown``.
-
-    ``cwd`` defaults to the package's own folder, not the caller's working directory, so a
-    run started from elsewhere still names the code that produced it; a copy that git does not
-    track there (outside a checkout, or installed into a venv inside someone's repository)
-    gives ``unknown``. Changes under ``results/`` (the outputs a repro rewrites) do not count
-    as dirty.
-    """
+    """The git commit of vlmrl's own source (``cwd``: the package's folder), ``-dirty`` if tracked code
+    outside ``results/`` changed, or ``unknown`` where git does not track this very file."""
     where = _SOURCE.parent if cwd is None else cwd
     try:
         if cwd is None:  # raises unless this very file is tracked by the repository around it
@@ -112,8 +96,7 @@ def _package_versions() -> dict[str, str]:
 
 
 def mesa_version() -> str:
-    """The installed Mesa (the OpenGL that MuJoCo's offscreen frames are drawn with on a CPU), from
-    the Debian package database ("unknown" elsewhere or when none is installed).
+    """The installed Mesa (MuJoCo's offscreen OpenGL), from the Debian package database, or "unknown".
 
     Example:
         >>> isinstance(mesa_version(), str)
@@ -131,15 +114,9 @@ def mesa_version() -> str:
 
 
 def cpu_paths() -> dict[str, str]:
-    """The CPU code paths this process computes with: what a result may depend on.
-
-    ``numpy_simd``: numpy's active run-time dispatch targets (``numpy.show_runtime``'s "found",
-    after ``NPY_DISABLE_CPU_FEATURES``), e.g. ``X86_V3,X86_V4,AVX512_ICL``; ``blas``: the BLAS
-    library and the kernel it chose (``OPENBLAS_CORETYPE`` forces another), e.g.
-    ``openblas SkylakeX``; ``torch``: ATen's CPU capability (``ATEN_CPU_CAPABILITY``).
-    The VLM arms' shaping does not depend on the first two (exact integer features, portable
-    ``exp``); the PPO network runs on torch's kernels, the same for every arm.
-    """
+    """The CPU code paths this process computes with: ``numpy_simd`` (numpy's active dispatch targets,
+    e.g. ``X86_V3,X86_V4,AVX512_ICL``), ``blas`` (library and kernel, e.g. ``openblas SkylakeX``) and
+    ``torch`` (ATen's CPU capability)."""
     paths: dict[str, str] = {}
     try:
         from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__

@@ -1,10 +1,6 @@
-"""The one table renderer: GitHub Markdown and LaTeX from string cells, with one escape map.
-
-Every table vlmrl writes (Table 1, Table 2, the claims, attribution, hacking, calibration and
-study tables, the report's run list) goes through here, so a cell that holds a ``|``, a newline,
-a control character or a LaTeX special never breaks its table. Written by hand: pandas'
-``to_markdown`` needs ``tabulate``, and its ``to_latex`` escapes less than we need.
-"""
+"""The one table renderer: GitHub Markdown and LaTeX from string cells, with one escape map, so a
+cell holding ``|``, a newline or a LaTeX special never breaks its table (pandas' ``to_latex``
+escapes less, and its ``to_markdown`` needs ``tabulate``)."""
 
 from __future__ import annotations
 
@@ -24,25 +20,13 @@ HLINES = (r"\hline", r"\hline", r"\hline")
 
 
 def printable(text: str) -> str:
-    """Text made safe to show on one line: whitespace runs (newlines included) folded to one
-    space, control and other unprintable characters (a random model's garbage) spelled as
-    escapes such as ``\\x08``.
-
-    Example:
-        >>> printable("BOTTOM\\n\\x08ok")
-        'BOTTOM \\\\x08ok'
-    """
+    """``text`` on one line: whitespace runs folded to one space, unprintables spelled as escapes."""
     flat = " ".join(text.split())
     return "".join(ch if ch.isprintable() else ch.encode("unicode_escape").decode("ascii") for ch in flat)
 
 
 def markdown_cell(value: object) -> str:
-    """One Markdown table cell: ``printable`` with ``|`` escaped.
-
-    Example:
-        >>> markdown_cell("a|b\\nc")
-        'a\\\\|b c'
-    """
+    """One Markdown table cell: ``printable`` with ``|`` escaped."""
     return printable(str(value)).replace("|", "\\|")
 
 
@@ -67,12 +51,7 @@ def markdown(df: pd.DataFrame) -> str:
 
 
 def latex_escape(text: str) -> str:
-    """``printable`` text with every character of ``LATEX_ESCAPES`` replaced.
-
-    Example:
-        >>> latex_escape("ΔΦ = 0.0 (LEFT_SLOPE)")
-        '$\\\\Delta$$\\\\Phi$ = 0.0 (LEFT\\\\_SLOPE)'
-    """
+    """``printable`` text with every character of ``LATEX_ESCAPES`` replaced."""
     return "".join(LATEX_ESCAPES.get(ch, ch) for ch in printable(text))
 
 
@@ -85,27 +64,8 @@ def latex(
     setup: Sequence[str] = (r"\centering", r"\small"),
     rules: tuple[str, str, str] = BOOKTABS,
 ) -> str:
-    """``df`` as a ``table`` float holding a ``tabular`` (no final newline); every cell and the
-    caption escaped with ``latex_escape``.
-
-    ``colspec``: the tabular's column spec (default: the first column left-aligned, the others
-    right-aligned); ``setup``: the lines before the caption; ``rules``: the top, header and bottom
-    rules (``BOOKTABS`` needs ``\\usepackage{booktabs}``; ``HLINES`` needs nothing).
-
-    Example:
-        >>> print(latex(pd.DataFrame({"arm": ["a_1"], "steps": ["50%"]}), "Steps & more"))
-        \\begin{table}[t]
-        \\centering
-        \\small
-        \\caption{Steps \\& more}
-        \\begin{tabular}{lr}
-        \\toprule
-        arm & steps \\\\
-        \\midrule
-        a\\_1 & 50\\% \\\\
-        \\bottomrule
-        \\end{tabular}
-        \\end{table}
+    """``df`` as a ``table`` float holding a ``tabular``, every cell and the caption escaped;
+    ``colspec`` defaults to ``l`` then ``r``s, ``rules`` (top, header, bottom) to ``BOOKTABS``.
     """
     top, mid, bottom = rules
     spec = colspec if colspec is not None else "l" + "r" * (len(df.columns) - 1)

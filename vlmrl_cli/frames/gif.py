@@ -14,8 +14,7 @@ ALERT_RGB = (200, 0, 0)
 
 
 def captioned(pixels: np.ndarray, lines: Sequence[str], width: int = 300, alert: str | None = None) -> Image.Image:
-    """The RGB frame ``pixels`` (H, W, 3) uint8 scaled to ``width`` pixels wide, above a white
-    banner holding ``lines`` in black and, if given, ``alert`` in red on the banner's last line.
+    """``pixels`` (H, W, 3) scaled to ``width`` px, above a white banner of ``lines`` (and ``alert`` in red).
 
     Example:
         >>> img = captioned(np.zeros((400, 600, 3), np.uint8), ["step 0"], width=300, alert="SIMULATED VLM")
@@ -39,11 +38,8 @@ def captioned(pixels: np.ndarray, lines: Sequence[str], width: int = 300, alert:
 
 
 def write_gif(images: Sequence[Image.Image], path: Path, frame_ms: int = 80, hold_ms: int = 1500) -> None:
-    """Write ``images`` as a looping GIF, ``frame_ms`` per frame and ``hold_ms`` on the last.
-
-    Each frame gets its own adaptive palette of at most 64 colours (the frames are flat
-    drawings), which keeps a 100-frame, 300-pixel-wide episode well under 1 MB.
-    """
+    """Write ``images`` as a looping GIF, ``frame_ms`` per frame and ``hold_ms`` on the last; 64-colour
+    palettes keep a 100-frame, 300 px episode well under 1 MB."""
     if not images:
         raise ValueError("a GIF needs at least one image")
     frames = [im.convert("RGB").quantize(colors=64) for im in images]

@@ -1,10 +1,6 @@
-"""The paper's own data, shipped inside the package (read through ``importlib.resources``).
-
-``REPORTED``: the numbers the paper reports (Table 2, claims, Table 1), the one source the
-report compares against. ``TABLE1_TRANSCRIPT``: the raw VLM outputs the paper prints in
-Table 1, replayed by ``--vlm replay``. The paper itself is summarised, with its citation, in
-the repository's ``paper/README.md``.
-"""
+"""The paper's own data, shipped in the package: ``REPORTED``, the numbers it reports (Table 2,
+claims, Table 1), and ``TABLE1_TRANSCRIPT``, its Table 1 VLM outputs replayed by ``--vlm replay``
+(the paper is summarised in the repository's ``paper/README.md``)."""
 
 from __future__ import annotations
 
