@@ -1,23 +1,6 @@
-"""The pure scene pieces of the Acrobot-v1 task: labels, ground truth, renderer, pixel reader, camera.
-
-Everything here mirrors ``gymnasium.envs.classic_control.acrobot.AcrobotEnv.render``: a 500x500
-RGB frame, white background, both links drawn as (0, 204, 204) rectangles one link length long
-(``SCALE`` = 500 / 4.4 px) and 0.2 link lengths wide, a (204, 204, 0) joint circle of radius
-``int(0.1 * SCALE)`` = 11 px at the pivot (drawn after link 1) and at the elbow (drawn last, so
-always whole), a black one-pixel bar at tip height 1.0 (drawn first, under the links), and the
-drawing flipped vertically. The pivot is at the screen centre, image (row, col) ``PIVOT_PIXEL``;
-a state ``[theta1, theta2, ...]`` puts the elbow at ``(sin t1, -cos t1)`` and the tip at
-``(sin t1 + sin(t1 + t2), -cos t1 - cos(t1 + t2))`` (x right, height up, link lengths).
-
-The milestone of a frame is the height of the free end of link 2, ``tip_height`` in
-``[-2, 2]``: ``HANGING`` up to -1, ``LOW_SWING`` up to 0, ``HIGH_SWING`` up to 1 (the bar:
-gymnasium terminates the episode once the tip is strictly above it) and ``ABOVE_BAR`` beyond.
-
-``AcrobotReader`` (the simulated VLM's reader) finds the tip from the pixels only; the ground
-truth functions (``label_of_state``) are the answer key, never its input. ``AcrobotCamera`` is
-the one component that reads the simulator's state: it snaps both angles to a grid, so a run
-shows at most ``bins_per_joint ** 2`` distinct frames.
-"""
+"""Acrobot-v1's scene: labels of the tip height, ground truth, renderer, pixel reader and camera.
+The constants mirror ``AcrobotEnv.render`` (500x500, pivot at the centre, y flipped). The reader
+sees pixels only; the camera, the one part that reads the state, snaps both angles to a grid."""
 
 from __future__ import annotations
 
@@ -28,7 +11,7 @@ from typing import Any
 import numpy as np
 from gymnasium.envs.classic_control.acrobot import AcrobotEnv
 
-from vlmrl_cli.frames.render import Frame
+from vlmrl_cli.frames.render import EnvRenderer, Frame
 from vlmrl_cli.shaping.camera import CellCamera, FrameView
 from vlmrl_cli.vlm.prompts import Milestones, mcq_prompt
 
@@ -56,97 +39,46 @@ MILESTONES = Milestones(LABELS, mcq_prompt(
 
 
 def tip_height(theta1: float, theta2: float) -> float:
-    """Height of the free end of link 2 above the pivot, in link lengths: ``-cos t1 - cos(t1 + t2)``.
-
-    In ``[-2, 2]``; gymnasium's episode ends when it exceeds 1.0. Computed as gymnasium computes
-    it (numpy's cosine, same order), so that the comparison with the bar agrees to the last bit.
-
-    Example:
-        >>> tip_height(0.0, 0.0), tip_height(math.pi, 0.0), round(tip_height(math.pi / 2, 0.0), 12)
-        (-2.0, 2.0, -0.0)
-    """
+    """Height of the tip above the pivot, in link lengths, in [-2, 2], as gymnasium computes it."""
     return float(-np.cos(theta1) - np.cos(theta2 + theta1))
 
 
 def label_of_height(h: float) -> str:
-    """The label whose height interval ``(lower, upper]`` holds ``h`` (see ``HEIGHT_EDGES``).
-
-    Example:
-        >>> label_of_height(-2.0), label_of_height(-1.0), label_of_height(0.5), label_of_height(1.0)
-        ('HANGING', 'HANGING', 'HIGH_SWING', 'HIGH_SWING')
-        >>> label_of_height(1.0000001)
-        'ABOVE_BAR'
-    """
+    """The label whose height interval ``(lower, upper]`` holds ``h`` (see ``HEIGHT_EDGES``)."""
     if math.isnan(h):
         raise ValueError("tip height must not be NaN")
     return LABELS[bisect.bisect_left(HEIGHT_EDGES, h)]
 
 
 def label_of_state(state: np.ndarray) -> str:
-    """Ground truth: the label of a simulator state ``[theta1, theta2, dtheta1, dtheta2]``.
-
-    The height is computed in the state's own dtype, exactly as ``AcrobotEnv._terminal`` does
-    (``reset`` leaves a float32 state), so ``ABOVE_BAR`` is gymnasium's terminal test bit for bit.
-
-    Example:
-        >>> label_of_state(np.array([0.0, 0.0, 0.0, 0.0])), label_of_state(np.array([3.0, 0.1, 0.0, 0.0]))
-        ('HANGING', 'ABOVE_BAR')
+    """The label of a state ``[theta1, theta2, ...]``, in the state's own dtype as ``AcrobotEnv._terminal``
+    computes it (``ABOVE_BAR`` is its terminal test bit for bit).
     """
     return label_of_height(float(-np.cos(state[0]) - np.cos(state[1] + state[0])))
 
 
-class AcrobotRenderer:
-    """Renders Acrobot-v1 at arbitrary angles with ``render_mode="rgb_array"``.
-
-    Holds one unwrapped gymnasium env; no display is needed. The velocities do not change the
-    picture, so only the two angles are taken. A render costs about 3 ms (the first one ~0.2 s:
-    pygame starts).
-
-    Example:
-        >>> with AcrobotRenderer() as renderer:
-        ...     frame = renderer.render(0.0, 0.0)
-        >>> frame.pixels.shape, len(frame.sha256)
-        ((500, 500, 3), 64)
-    """
+class AcrobotRenderer(EnvRenderer):
+    """Renders Acrobot-v1 at arbitrary angles, headless (about 3 ms a frame)."""
 
     def __init__(self) -> None:
-        import gymnasium as gym
-
-        self._env: Any = gym.make("Acrobot-v1", render_mode="rgb_array").unwrapped
-        self._env.reset(seed=0)
+        super().__init__("Acrobot-v1")
 
     def render(self, theta1: float, theta2: float, frame_id: str | None = None,
                sha256: str | None = None) -> Frame:
-        """Render the frame of joint angles ``theta1`` (link 1 from straight down) and ``theta2``
-        (link 2 relative to link 1), radians.
-
-        ``sha256``: the digest of this very frame, known from an earlier render of the same
-        angles (gymnasium draws it identically), so it is not hashed again.
-        """
+        """The frame of joint angles (radians) ``theta1`` (from straight down) and ``theta2`` (relative to
+        link 1); ``sha256``: its digest, when known."""
         if not (math.isfinite(theta1) and math.isfinite(theta2)):
             raise ValueError(f"angles must be finite, got theta1={theta1}, theta2={theta2}")
-        self._env.state = np.array([theta1, theta2, 0.0, 0.0], dtype=np.float64)
-        return Frame.drawn(self._env.render(), frame_id, sha256)
-
-    def close(self) -> None:
-        self._env.close()
-
-    def __enter__(self) -> AcrobotRenderer:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+        return self.draw(np.array([theta1, theta2, 0.0, 0.0], dtype=np.float64), frame_id, sha256)
 
 
 # --- the pixel reader ------------------------------------------------------------------------
-# At least this many exact joint-colour pixels farther than half a link from the pivot make the
-# elbow circle (a whole one has ~380; anti-aliasing strays are single pixels).
+# At least this many exact joint-colour pixels half a link from the pivot make the elbow (a whole one: ~380).
 _MIN_ELBOW_PIXELS = 100
 # gymnasium centres a joint circle at int() of its surface coordinates (positive, so floor): the
 # drawn centre is on average half a pixel below (image rows grow downwards) and left of the true one.
 _ELBOW_CORRECTION = (-0.5, 0.5)
-# A pixel within this much of the link colour in every channel is link (interior pixels are exact;
-# this admits only the strongest anti-aliasing). Joint yellow, white and their blends are not link.
+# A pixel within this much of the link colour in every channel is link (admits only strong anti-aliasing).
 _LINK_TOLERANCE = 24
 # Rays from the elbow, every half degree, sampled every pixel from just outside the elbow circle
 # to nearly a link length: a ray counts as "arm" when every sample is link colour.
@@ -157,8 +89,7 @@ _ANGLES = np.arange(_RAY_ANGLES) * (2 * math.pi / _RAY_ANGLES)
 _RADII = np.arange(_RAY_START_PX, _RAY_END_PX + 1.0)
 _RAY_ROWS = np.sin(_ANGLES)[:, None] * _RADII[None, :]
 _RAY_COLS = np.cos(_ANGLES)[:, None] * _RADII[None, :]
-# Link 2's rays form a run of ~2 asin(half width / ray end) = 11.8 degrees (22-28 rays measured);
-# link 1 leaves runs of at most 3 straggler rays beside the pivot circle: shorter runs are no arm.
+# Link 2's rays form a run of 22-28 (11.8 degrees); link 1 leaves runs of at most 3 beside the pivot.
 _MIN_ARM_RAYS = 8
 
 
@@ -185,25 +116,9 @@ def _arm_runs(arm: np.ndarray) -> list[tuple[int, int]]:
 
 
 def tip_pixel(pixels: np.ndarray) -> tuple[float, float] | None:
-    """Image (row, col) of the free end of link 2, read from an RGB frame's pixels only, or None
-    when no pendulum is visible.
-
-    Both links have the same colour and length, so the farthest link pixel from the pivot is not
-    the tip when link 2 folds back. Instead: the elbow is the centre of the joint circle a link
-    length from the pivot (the pivot's own circle sits at the screen centre); link 2 is the
-    bundle of rays from the elbow that stay in link colour for almost a link length. Link 1's
-    rays run into the pivot's yellow circle before that, unless link 2 is drawn over it, i.e.
-    unless they are link 2's rays too; so the bundle is link 2's alone even when it lies along
-    link 1 (folded: tip near the pivot). The tip is one link length from the elbow along the
-    bundle's centre.
-
-    Example:
-        >>> with AcrobotRenderer() as renderer:
-        ...     row, col = tip_pixel(renderer.render(0.0, 0.0).pixels)  # hanging straight down
-        >>> round(height_from_tip_pixel(row, col), 1), round(col)
-        (-2.0, 250)
-        >>> tip_pixel(np.full(FRAME_SHAPE, 255, dtype=np.uint8)) is None
-        True
+    """Image (row, col) of the tip, from an RGB frame's pixels only, or None when no pendulum shows:
+    one link length from the elbow (the joint circle a link from the pivot) along the bundle of
+    rays that stay in link colour for almost a link (link 1's run into the pivot's circle first).
     """
     if pixels.ndim != 3 or pixels.shape[2] != 3:
         raise ValueError(f"expected an RGB frame (H, W, 3), got {pixels.shape}")
@@ -230,28 +145,12 @@ def tip_pixel(pixels: np.ndarray) -> tuple[float, float] | None:
 
 
 def height_from_tip_pixel(row: float, col: float) -> float:
-    """Tip height (link lengths above the pivot) of an image position (row, col) in px.
-
-    Only the row matters: ``(PIVOT_PIXEL[0] - row) / SCALE``; ``col`` is taken so that the
-    result of ``tip_pixel`` can be passed as it comes.
-
-    Example:
-        >>> height_from_tip_pixel(PIVOT_PIXEL[0], 250.0), height_from_tip_pixel(PIVOT_PIXEL[0] - SCALE, 0.0)
-        (0.0, 1.0)
-    """
+    """Tip height (link lengths) of an image position (row, col); only the row matters."""
     return (PIVOT_PIXEL[0] - row) / SCALE
 
 
 class AcrobotReader:
-    """The simulated VLM's pixel reader for Acrobot (a ``vlmrl_cli.vlm.sim.MilestoneReader``):
-    the label of the tip height read by ``tip_pixel``, None when no pendulum is visible.
-
-    Example:
-        >>> with AcrobotRenderer() as renderer:
-        ...     frame = renderer.render(math.pi, 0.0)  # straight up
-        >>> AcrobotReader().read(frame.pixels)
-        'ABOVE_BAR'
-    """
+    """The simulated VLM's reader for Acrobot: the label of the height of ``tip_pixel``."""
 
     name: str = "acrobot"
     milestones: Milestones = MILESTONES
@@ -264,21 +163,8 @@ class AcrobotReader:
 
 
 class AcrobotCamera(CellCamera[tuple[int, int]]):
-    """Renders Acrobot with both angles snapped to ``bins_per_joint`` equal bins; memoises per cell.
-
-    An angle is wrapped into [-pi, pi) and shown at the centre of its bin, so a run shows at most
-    ``bins_per_joint ** 2`` distinct frames (48 bins: 7.5 degrees, at most 2304 frames). As with
-    ``shaping.camera.Camera``, ``renders`` counts calls to gymnasium's renderer and ``pixel_cache``
-    is how many frames' pixels are kept (0.75 MB each); a dropped frame is drawn again on demand.
-
-    Example:
-        >>> cam = AcrobotCamera(bins_per_joint=48)
-        >>> a, b = cam.view(0.01, 0.02), cam.view(0.02, 0.01)  # the same cell
-        >>> a.key == b.key, cam.renders, a.features.shape
-        (True, 1, (625,))
-        >>> cam.cell_angles(0.01, 0.02) == cam.cell_angles(0.01 + 2 * math.pi, 0.02)
-        True
-        >>> cam.close()
+    """Renders Acrobot with both angles wrapped into [-pi, pi) and shown at the centre of one of
+    ``bins_per_joint`` bins (at most ``bins_per_joint ** 2`` frames); memoises per cell.
     """
 
     def __init__(self, bins_per_joint: int = 48, pixel_cache: int = 256) -> None:
@@ -307,8 +193,7 @@ class AcrobotCamera(CellCamera[tuple[int, int]]):
         return self._centre(i), self._centre(j)
 
     def grid_states(self) -> list[tuple[float, float]]:
-        """Every (theta1, theta2) the camera can show: ``bins_per_joint ** 2`` of them, the bound on
-        distinct frames (so on a real VLM's queries per run)."""
+        """Every (theta1, theta2) the camera can show: ``bins_per_joint ** 2`` of them."""
         centres = [self._centre(i) for i in range(self.bins_per_joint)]
         return [(a, b) for a in centres for b in centres]
 
