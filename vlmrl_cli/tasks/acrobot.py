@@ -1,12 +1,5 @@
 """Acrobot-v1 as a task: -1 per step until the tip of the lower link swings above the bar.
-
-Milestones come from the tip's height (``acrobot_scene``: HANGING, LOW_SWING, HIGH_SWING,
-ABOVE_BAR); the simulated VLM reads the tip from the rendered pixels. The dense term is paper
-Eq. 1 on the tip height from the joint angles of the observation, rescaled to [-1, 1]:
-``max(0, scale (h / 2 + offset))`` (with the defaults 2.0 and 0.4 it pays from h = -0.8 on, up
-to 2.8 per step with the tip straight up). The camera snaps both angles to 48 bins each, so a
-run shows at most 2,304 distinct frames (a real VLM's queries per run are bounded by that).
-"""
+Milestones, camera and reader: ``acrobot_scene``. See docs/tasks.md."""
 
 from __future__ import annotations
 
@@ -37,28 +30,18 @@ BINS_PER_JOINT = 48
 def tip_height_of_obs(obs: np.ndarray) -> float:
     """The tip height (link lengths, [-2, 2]) from Acrobot's observation
     ``[cos t1, sin t1, cos t2, sin t2, dt1, dt2]``: ``-cos t1 - cos(t1 + t2)``.
-
-    Example:
-        >>> round(tip_height_of_obs(np.array([1.0, 0.0, 1.0, 0.0, 0.0, 0.0])), 6)  # hanging down
-        -2.0
     """
     c1, s1, c2, s2 = (float(v) for v in obs[:4])
     return -c1 - (c1 * c2 - s1 * s2)
 
 
 def acrobot_dense(obs: np.ndarray, scale: float, offset: float) -> float:
-    """Eq. 1 on the rescaled tip height: ``max(0, scale (h / 2 + offset))``.
-
-    Example:
-        >>> acrobot_dense(np.array([-1.0, 0.0, 1.0, 0.0, 0.0, 0.0]), 2.0, 0.4)  # straight up, h = 2
-        2.8
-    """
+    """Eq. 1 on the rescaled tip height: ``max(0, scale (h / 2 + offset))``."""
     return max(0.0, scale * (tip_height_of_obs(obs) / 2.0 + offset))
 
 
 def probe_states(n: int) -> list[np.ndarray]:
-    """About ``n`` states for the taxonomy: a k x k grid of camera cells (k = ceil(sqrt(n)), evenly
-    spread over the 48 angle bins of each joint), at the cells' centres, velocities 0.
+    """About ``n`` states: a k x k grid of camera cell centres, k = ceil(sqrt(n)), velocities 0.
 
     Example:
         >>> len(probe_states(101)), probe_states(4)[0].shape
@@ -102,9 +85,7 @@ ACROBOT = Task(
         "zoo": _ZOO,
         # zoo's knobs at a fifth of its budget: what two CPU cores can train for a 10-seed study
         "zoo-200k": {**_ZOO, "timesteps": 200_000},
-        # The candidates of `vlmrl calibrate --task acrobot` (Task.calibration), 100,000 steps each:
-        # zoo's knobs, then ways to slow them down (a third of the step size; no VecNormalize),
-        # then SB3's PPO defaults on one env (no normalisation, 2,048-step rollouts, 10 epochs).
+        # the candidates of `vlmrl calibrate --task acrobot`: zoo's knobs, then ways to slow them down
         "zoo-100k": {**_ZOO, "timesteps": 100_000},
         "zoo-100k-lr1e-4": {**_ZOO, "timesteps": 100_000, "learning_rate": 1e-4},
         "zoo-100k-raw": {**_ZOO, "timesteps": 100_000, "normalize_obs": False, "normalize_reward": False},
@@ -121,9 +102,6 @@ ACROBOT = Task(
     step_seconds=0.61e-3,
     # goal: zoo's -73.5 over a failure's -500; Eq. 1 pays at most 1.4 per step at scale 1 (h = 2)
     scales=task_scales(goal_return=500 - 73.5, potential_span=1.0, dense_peak=1.4, horizon=500),
-    # The closest regime of `vlmrl calibrate --task acrobot --seeds 5` (results/tasks/acrobot/
-    # calibration/, 2026-12-02): distance 0.889 [0.831, 0.985]. Its baseline is slow (-100 at
-    # 73,130 steps on average against the target's 90,816) but reaches -100 on 5/5 seeds: no
-    # candidate made plain PPO fail on Acrobot.
+    # the closest calibrated regime (results/tasks/acrobot/calibration/): slow, but 5/5 seeds reach -100
     study_preset="zoo-100k-lr1e-4",
 )

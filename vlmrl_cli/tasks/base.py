@@ -1,14 +1,6 @@
-"""A ``Task``: everything the harness knows about one environment, in one object.
-
-Training builds its envs with ``Task.make_env``, the reward wrapper reads the task's ``Scene``
-(observation, dense term, simulator type), the camera comes from ``Task.make_camera``, the
-simulated VLM reads milestones with ``Task.reader``, and reports take their thresholds and
-success rule from here. MountainCar-v0, the paper's task, is one of them (``tasks/mountain_car``):
-no layer below this one knows it.
-
-A user's own task is a ``Task`` value in the user's code, loaded by ``--task package.module:NAME``
-(see ``tasks/registry.py`` and the docs' "Add a task" page).
-"""
+"""A ``Task``: everything the harness knows about one environment, in one object; no layer below
+this one names an environment. A user's own task is loaded by ``--task package.module:NAME``
+(``tasks/registry.py``). See docs/tasks.md."""
 
 from __future__ import annotations
 
@@ -28,18 +20,15 @@ from vlmrl_cli.vlm.prompts import Milestones, NumberProbe
 from vlmrl_cli.vlm.sim import MilestoneReader, NumberReader
 
 LabelMap = tuple[tuple[str, float], ...]
-#: How a command turns a task's name into its ``Task`` (``tasks.registry.get_task``, or a test's
-#: own table): passed down to where a config is built, so nothing below looks a task up itself.
+#: How a command turns a task's name into its ``Task``, passed down to where a config is built.
 TaskLookup = Callable[[str], "Task"]
 
-#: A preset that only checks the plumbing (seconds per run), as MountainCar's ``smoke``: a task's
-#: ``presets["smoke"]`` may take it whole.
+#: A preset that only checks the plumbing (seconds per run), for a task's ``presets["smoke"]``.
 SMOKE: Mapping[str, Any] = {"n_envs": 2, "n_steps": 64, "batch_size": 64, "gae_lambda": 0.95, "gamma": 0.99,
                             "n_epochs": 1, "normalize_obs": True, "normalize_reward": True, "timesteps": 1_024,
                             "eval_episodes": 3}
 
-#: SB3's PPO defaults (n_steps 2048, batch 64, 10 epochs, gae 0.95, lr 3e-4) on one env, without
-#: normalisation, at 100,000 steps: a calibration candidate any task may take whole.
+#: SB3's PPO defaults on one env, without normalisation, at 100,000 steps: a calibration candidate.
 SB3_DEFAULT_100K: Mapping[str, Any] = {
     "n_envs": 1, "n_steps": 2048, "batch_size": 64, "gae_lambda": 0.95, "gamma": 0.99, "n_epochs": 10,
     "ent_coef": 0.0, "learning_rate": 3e-4, "normalize_obs": False, "normalize_reward": False, "timesteps": 100_000,
@@ -52,9 +41,8 @@ RANDOM_SCORE_COMMAND = "python scripts/random_scores.py"
 
 @dataclass(frozen=True)
 class RandomScore:
-    """A uniformly random policy's mean detached evaluation return on a task, and how it was
-    measured: ``episodes`` episodes from ``seed`` (episode ``i`` resets with ``seed + i``, the
-    action space seeded with ``seed``), printed by ``command``. The fixed 0 of ``vlmrl compare``."""
+    """A uniformly random policy's mean evaluation return (``vlmrl compare``'s 0): ``episodes`` episodes,
+    episode ``i`` reset with ``seed + i``, printed by ``command``."""
 
     mean: float
     episodes: int = 200
@@ -64,66 +52,30 @@ class RandomScore:
 
 @dataclass(frozen=True)
 class Task:
-    """One environment as the experiment sees it.
+    """One environment as the experiment sees it (docs/tasks.md, "Add a task").
 
     Attributes:
-        name: the ``--task`` name (``mountain-car``); runs are tagged ``vlmrl.task`` with it.
-        env_id: the gymnasium id ``make_env`` builds (``MountainCar-v0``).
-        summary: one line for ``--help`` and reports.
+        name, summary: the ``--task`` name (runs are tagged ``vlmrl.task``) and one line for ``--help``.
+        env_id, env_kwargs: what ``make_env`` passes to ``gym.make``.
         scene: the observation shape, the dense "proprioceptive" term and the simulator type.
-        milestones: the MCQ vocabulary (labels in order) and its prompt.
-        label_potentials: the default raw potential of every label.
+        milestones, label_potentials: the MCQ vocabulary (low to high), its prompt, each label's potential.
         truth: the true label of a simulator (the unwrapped env), for probes and diagnostics.
-        camera: the run's camera (``TaskCamera``: its maker for a shaping config, the size of its
-            frames' features, and optionally every frame it can show, for replay checks).
-        reader: the simulated VLM's pixel reader (a ``NumberReader`` also answers ``numbers``).
-        thresholds: reward thresholds of reports (rolling mean native return), lowest first.
-        max_steps: the time limit; by default an episode succeeds when it terminates within it
-            (``success``).
-        presets: PPO presets as ``PPOConfig`` keyword arguments; at least ``zoo`` and ``smoke``.
-        default_preset: the preset a run takes when none is named (``zoo``).
-        zoo_reference: rl-baselines3-zoo's published PPO result for the env, cited (empty: none).
-        random_score: a uniformly random policy's measured score (``RandomScore``; None: not
-            measured): with the zoo's score, the fixed pair ``vlmrl compare`` normalises by.
-        hover: the hovering diagnostic (``Hover``: the coordinate read from an observation, and
-            where hovering starts); None: no diagnostic.
-        numbers: the float and box questions of Table 1's rows I and II and of the
-            ``vision-float`` arm, with what Table 1 needs to ask them of any reading (``NumberProbe``:
-            a renderer, the answer key, Figure 1's frames; None: the picture has no number to ask
-            for; its reader must be a ``NumberReader`` to answer them).
-        probe_states: about ``n`` simulator states for ``vlmrl taxonomy``'s milestone table of
-            this task, each drawn by the task's camera: state vectors (the probe sets them as
-            ``sim.state``) or simulators themselves, for a task whose state is no vector (None:
-            no such table).
-        env_kwargs: keyword arguments of ``gym.make``.
-        window: episodes in the rolling mean return that thresholds are read on (100, as SB3's
-            ``ep_rew_mean``; fewer for a task whose episodes are long next to its budgets).
-        calibration: the default grid of ``vlmrl calibrate --task``: overrides (``--set`` keys)
-            over the task's default preset, one mapping per regime (empty: that preset alone).
-        study_preset: the preset of ``vlmrl study --task``'s default regime, one calibrated so that
-            the baseline is slow or unreliable (None: the default preset).
-        area_margin: the equivalence margin of a learning-curve area difference, in return units
-            (None: ``auc_margin``'s default, scaled to the task's return range).
-        paper: the paper's own task (``PaperTask``: its reported figures and budget; MountainCar-v0
-            alone): calibration aims at the paper's baseline itself, reports set their numbers
-            beside the paper's, and its runs' config hashes name no task (they predate tasks).
-        hacking_note: the report's reward-hacking heading and the sentence saying how the task's
-            dense term can pay more than finishing (None: a generic one).
-        caption: a played step's observation and action as named fields (``vlmrl evaluate``'s
-            JSON) and one caption line of its GIF (``StepCaption``; None: the raw observation and
-            action).
-        scales: the task's alpha and kin_scale (``shaping.scales``: set by the stated rule from its
-            return range), the bottom layer of a run's ``[shaping]``; None: the paper's MountainCar-v0
-            scales (``ShapingConfig``'s defaults, alpha 5 and kin_scale 2).
-        wrap: observation wrappers ``make_env`` puts around ``gym.make(env_id)`` (a grid world's
-            Dict observation flattened for an MLP policy); None: the env as gymnasium makes it.
-        success_rule: ``rule(terminated, length)``, whether an episode that ended after ``length``
-            steps (``terminated``: the env ended it, not the time limit) succeeded; the one rule of
-            training's ``is_success`` and episode records and of every evaluation (``success``).
-            None: it terminated within ``max_steps`` (every built-in task).
-        sim_profiles: the simulated-VLM profiles the task offers beside the generic ``ideal`` and
-            ``default`` (``SimProfile``: a name and ``SimKnobs`` values in its reader's units;
-            MountainCar's ``llava-table1``); a run may name only these (``vlm.sim.profile``).
+        camera: the run's camera (``TaskCamera``); reader: the simulated VLM's pixel reader.
+        thresholds: report thresholds on the rolling mean of ``window`` episodes' native return,
+            lowest first.
+        max_steps: the time limit; ``success_rule(terminated, length)`` (default: terminated within
+            it) is the one success rule of training and every evaluation.
+        presets: PPO presets as ``PPOConfig`` keyword arguments, at least ``zoo`` and ``smoke``;
+            ``default_preset``, ``study_preset`` (``vlmrl study``'s regime) and ``calibration``
+            (``vlmrl calibrate``'s grid: ``--set`` overrides, one mapping per regime) name them.
+        zoo_reference, random_score: rl-baselines3-zoo's cited result and a random policy's measured
+            score, the fixed pair ``vlmrl compare`` normalises by.
+        area_margin: the equivalence margin of a learning-curve area (None: ``auc_margin``'s rule).
+        scales: the task's alpha and kin_scale (None: the paper's MountainCar-v0 scales).
+        wrap: observation wrappers ``make_env`` puts around the env (None: none).
+        sim_profiles: simulated-VLM profiles beside the generic ``ideal`` and ``default``.
+        hover, numbers, probe_states, paper, hacking_note, caption: optional capabilities
+            (``tasks/capabilities.py``); None turns the feature off.
     """
 
     name: str
@@ -153,8 +105,7 @@ class Task:
     hacking_note: tuple[str, str] | None = None
     caption: StepCaption | None = None
     wrap: Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None = None
-    # Seconds per environment step and worker (2 workers on 2 cores) of the task's committed runs: the
-    # cost estimate's figure before a store has timed any run of it (None: MountainCar-v0's repro).
+    # seconds per env step and worker of the committed runs, for cost estimates (None: MountainCar-v0's)
     step_seconds: float | None = None
     scales: TaskScales | None = None
     success_rule: SuccessRule | None = None
@@ -163,8 +114,7 @@ class Task:
     @property
     def auc_margin(self) -> float:
         """The equivalence margin of a learning-curve area difference (return points): the task's
-        own, else a twelfth of the span of its thresholds, which is MountainCar-v0's +-5 return
-        points (-190 to -130); a task with one threshold takes a fortieth of its time limit.
+        own, else a twelfth of its thresholds' span (MountainCar-v0: 5), else max_steps / 40.
 
         Example:
             >>> from vlmrl_cli.tasks.registry import get_task
@@ -196,11 +146,7 @@ class Task:
             raise ValueError(f"task '{self.name}': its study preset '{self.study_preset}' is not one of its presets")
 
     def make_env(self, render_mode: str | None = None) -> gym.Env[Any, Any]:
-        """A fresh env of this task (``gym.make(env_id)``, the time limit included).
-
-        ``render_mode="rgb_array"`` draws off screen and needs no display; the process chooses its
-        video driver where it starts (``vlmrl``'s entry point and the sweep's workers set SDL's
-        dummy one), never here."""
+        """A fresh env of this task, the time limit included (the process chooses its video driver)."""
         env = gym.make(self.env_id, render_mode=render_mode, **dict(self.env_kwargs))
         return env if self.wrap is None else self.wrap(env)
 
@@ -221,22 +167,11 @@ class Task:
 
     @property
     def name_in_identity(self) -> bool:
-        """Whether the task's name enters its runs' config hashes: not for the paper's task, whose
-        runs predate tasks and keep their hashes."""
+        """Whether the name enters config hashes: not for the paper's task, whose runs predate tasks."""
         return self.paper is None
 
     def success(self, terminated: bool, length: int) -> bool:
-        """The one success rule of this task: its ``success_rule``, by default the episode
-        terminated (goal reached) within the time limit.
-
-        Example:
-            >>> from vlmrl_cli.tasks.registry import get_task
-            >>> car = get_task("mountain-car")
-            >>> car.success(True, 120), car.success(True, 201), car.success(False, 200)
-            (True, False, False)
-            >>> dataclasses.replace(car, success_rule=lambda terminated, length: length >= 150).success(False, 200)
-            True
-        """
+        """Whether an episode succeeded: ``success_rule``, by default terminated within the time limit."""
         if self.success_rule is not None:
             return bool(self.success_rule(bool(terminated), int(length)))
         return bool(terminated) and length <= self.max_steps
@@ -256,8 +191,7 @@ class Task:
         return dataclasses.replace(shaping, **knobs)
 
     def scales_note(self, shaping: ShapingConfig) -> str | None:
-        """One line saying which of ``shaping``'s scales are this task's own (``scales``) in place of
-        the paper's defaults (``ShapingConfig``'s alpha 5, kin_scale 2); None when none is.
+        """One line naming ``shaping``'s scales that are the task's own, not the paper's; None when none is.
 
         Example:
             >>> from vlmrl_cli.tasks.registry import get_task

@@ -1,33 +1,6 @@
 """MiniGrid DoorKey-5x5 as a task: pick up the key, open the locked door, reach the green goal.
-
-Nothing like a car: a 5 x 5 grid world, 7 discrete actions, reward ``1 - 0.9 t / 250`` at the goal
-and 0 otherwise, 250 steps. The policy sees MiniGrid's egocentric 7 x 7 x 3 view, flattened to 147
-float32 numbers (``FlatImage``; rl-baselines3-zoo uses ``FlatObsWrapper``,
-which adds an encoding of the mission text, a constant here).
-
-Milestones, low to high: NO_KEY, HAS_KEY, DOOR_OPEN, AT_GOAL. The camera draws the whole grid from
-above (32 px tiles: 160 x 160); the simulated VLM's reader finds them in those pixels only: the
-locked door's dark-yellow fill, an open door's yellow strip along its tile's right edge, the key's
-yellow glyph inside its tile, the agent's red triangle, the goal's green. The picture never shows
-what the agent carries, so HAS_KEY is read as "no key on the floor, the door still shut".
-
-The dense term is Eq. 1 on a stage coordinate read from the observation: ``u = 2 p - 1`` with
-``p`` = (carries the key + an open door in view) / 2, so ``max(0, scale (u + offset)) / 250``:
-with the defaults 2.0 and 0.4 it pays 0 before the key, 0.8 / 250 per step holding it and
-2.8 / 250 per step with the door open in view. Over a whole episode it pays at most 2.8, more
-than the goal's reward: lingering can pay (the hacking the paper's Eq. 1 has on MountainCar); this
-task has no position, so no hovering diagnostic measures it.
-
-The observation is float32 (``FlatImage``). Until issue 41 it was MiniGrid's ``uint8``, which
-SB3's rollout buffer kept under ``VecNormalize``: every normalised observation was truncated to an
-integer, so every run with ``normalize_obs`` (zoo's knobs among them) learnt from garbage.
-Retrained on the float observation (``vlmrl calibrate --task minigrid-doorkey --seeds 5``,
-2026-12-06, results/tasks/minigrid-doorkey/calibration): every candidate solves 5/5 seeds by 100,000
-steps, and zoo's knobs give a detached mean return of 0.964 on each of the 5 seeds, zoo's published
-0.964 +/- 0.006. The closest to the paper's (slow, unreliable) baseline is ``sb3-default-100k``
-(D 1.21), and no candidate is slow or unreliable. The study's regime stays ``zoo``: the zoo's own
-recipe, the reference every other verdict rests on.
-"""
+The policy sees the egocentric view as 147 float32 numbers; the camera draws the whole grid from
+above, and the reader finds the milestones in those pixels only. See docs/tasks.md."""
 
 from __future__ import annotations
 
@@ -36,10 +9,16 @@ from typing import Any
 import gymnasium as gym
 import minigrid  # noqa: F401  (registers the MiniGrid envs with gymnasium)
 import numpy as np
+from minigrid.envs import DoorKeyEnv
 
 from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.shaping.camera import CellCamera, FrameView
 from vlmrl_cli.shaping.config import ShapingConfig
+from vlmrl_cli.shaping.features import feature_dim
+from vlmrl_cli.shaping.scales import task_scales
+from vlmrl_cli.shaping.scene import Scene
+from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, RandomScore, Task
+from vlmrl_cli.tasks.capabilities import TaskCamera
 from vlmrl_cli.vlm.prompts import Milestones, mcq_prompt
 
 ENV_ID = "MiniGrid-DoorKey-5x5-v0"
@@ -66,12 +45,8 @@ def _count(tile: np.ndarray, colour: tuple[int, int, int]) -> np.ndarray:
 
 
 def read_stage(pixels: np.ndarray, tile: int = TILE) -> str | None:
-    """The stage a top-down DoorKey frame shows, from its pixels only (None: no agent drawn).
-
-    Example:
-        >>> frame = render_state(reset_state(0))
-        >>> read_stage(frame.pixels)
-        'NO_KEY'
+    """The stage a top-down DoorKey frame shows, from its pixels only (None: no agent drawn); the
+    picture never shows what the agent carries, so HAS_KEY is "no key on the floor, the door shut".
     """
     rows, cols = pixels.shape[0] // tile, pixels.shape[1] // tile
     agent_on_goal = agent_seen = key_seen = door_open = False
@@ -145,22 +120,18 @@ def render_cell(cell: Cell, sha256: str | None = None) -> Frame:
 
 
 class DoorKeyCamera(CellCamera[Cell]):
-    """The top-down camera: one frame per (grid, agent pose); a 5 x 5 DoorKey layout has at most
-    9 floor cells x 4 directions x (key on the floor or not) x 3 door states per layout."""
+    """The top-down camera: one frame per (grid, agent pose)."""
 
     def _draw(self, cell: Cell, sha256: str | None) -> Frame:
         return render_cell(cell, sha256)
 
     def look(self, sim: Any) -> FrameView:
-        cell = cell_of(sim)
-        view = self._views.get(cell)
-        return view if view is not None else self._view_of(cell)
+        return self._view_of(cell_of(sim))
 
 
 def stage_of_obs(obs: np.ndarray) -> float:
-    """``p`` in [0, 1] from the flattened egocentric view (7 x 7 x 3, object/colour/state): half for
-    carrying the key (MiniGrid draws a carried object in the agent's own cell, (3, 6)), half for
-    an open door (object 4, state 0) anywhere in view.
+    """``p`` in [0, 1] from the flattened egocentric view: half for carrying the key, half for an open
+    door in view.
 
     Example:
         >>> view = np.zeros((7, 7, 3)); view[3, 6] = (5, 4, 0)
@@ -180,13 +151,7 @@ def key_and_door(obs: Any) -> tuple[bool, bool]:
 
 
 def doorkey_dense(obs: np.ndarray, scale: float, offset: float) -> float:
-    """Eq. 1 on the stage coordinate ``u = 2 p - 1``, per step of the 250-step limit.
-
-    Example:
-        >>> view = np.zeros((7, 7, 3)); view[3, 6] = (5, 4, 0)
-        >>> round(doorkey_dense(view.reshape(-1), 2.0, 0.4) * MAX_STEPS, 6)
-        0.8
-    """
+    """Eq. 1 on the stage coordinate ``u = 2 p - 1``, per step of the 250-step limit."""
     return max(0.0, scale * (2.0 * stage_of_obs(obs) - 1.0 + offset)) / MAX_STEPS
 
 
@@ -195,9 +160,7 @@ ACTIONS = ("turn left", "turn right", "forward", "pick up", "drop", "toggle", "d
 
 
 def describe_step(obs: tuple[float, ...], action: Any) -> tuple[dict[str, Any], str]:
-    """A played step of DoorKey, read from the egocentric view as ``stage_of_obs`` reads it: whether
-    the agent carries the key, whether an open door is in view, and the action's name (the
-    caption ``vlmrl evaluate`` draws under its frame).
+    """A played step of DoorKey as named fields (key carried, open door in view) and a caption.
 
     Example:
         >>> view = np.zeros((7, 7, 3)); view[3, 6] = (5, 4, 0)
@@ -212,11 +175,15 @@ def describe_step(obs: tuple[float, ...], action: Any) -> tuple[dict[str, Any], 
 
 
 class FlatImage(gym.ObservationWrapper[np.ndarray, Any, Any], gym.utils.RecordConstructorArgs):
-    """MiniGrid's Dict observation as its egocentric image, flattened to 147 float32 numbers
-    (MiniGrid's object, colour and state codes, 0 to 10). Float, because SB3's rollout buffer keeps
-    the observation space's dtype and ``VecNormalize`` would truncate a ``uint8`` one; recorded
-    (``RecordConstructorArgs``), so that ``env.spec.make()`` and gymnasium's env checker can build
-    the env again, as minigrid's ``ImgObsWrapper`` cannot."""
+    """``Task.wrap``: MiniGrid's Dict observation as its egocentric image, 147 float32 numbers (a
+    ``uint8`` one would be truncated under ``VecNormalize``); recorded, so ``env.spec.make()`` works.
+
+    Example:
+        >>> env = FlatImage(gym.make(ENV_ID))
+        >>> space = env.observation_space
+        >>> space.shape, space.dtype, env.spec.make().observation_space == space
+        ((147,), dtype('float32'), True)
+    """
 
     def __init__(self, env: gym.Env[Any, Any]) -> None:
         gym.utils.RecordConstructorArgs.__init__(self)
@@ -230,21 +197,9 @@ class FlatImage(gym.ObservationWrapper[np.ndarray, Any, Any], gym.utils.RecordCo
         return np.asarray(observation["image"], dtype=np.float32).reshape(-1)
 
 
-def flat_image(env: gym.Env[Any, Any]) -> gym.Env[Any, Any]:
-    """MiniGrid's Dict observation as the flattened egocentric image (147 float32 numbers).
-
-    Example:
-        >>> env = flat_image(gym.make(ENV_ID))
-        >>> space = env.observation_space
-        >>> space.shape, space.dtype, env.spec.make().observation_space == space
-        ((147,), dtype('float32'), True)
-    """
-    return FlatImage(env)
-
-
 def make_doorkey_env(render_mode: str | None = None) -> gym.Env[Any, Any]:
     """DoorKey-5x5 with the flattened egocentric image as its observation."""
-    return flat_image(gym.make(ENV_ID, render_mode=render_mode))
+    return FlatImage(gym.make(ENV_ID, render_mode=render_mode))
 
 
 def reset_state(seed: int) -> Any:
@@ -260,14 +215,8 @@ def render_state(sim: Any) -> Frame:
 
 
 def probe_states(n: int) -> list[Any]:
-    """About ``n`` DoorKey simulators, a quarter at each stage, for ``vlmrl taxonomy``: the layouts
-    of seeds 0, 1, ... staged (key taken, door opened, agent on the goal) with the agent on each
-    free cell it could reach at that stage, facing each way in turn.
-
-    Example:
-        >>> sims = probe_states(8)
-        >>> len(sims), sorted({label_of_sim(s) for s in sims}) == sorted(LABELS)
-        (8, True)
+    """About ``n`` DoorKey simulators, a quarter at each stage: seeds 0, 1, ...'s layouts staged, the
+    agent on each free cell it could reach there, facing each way in turn.
     """
     import copy
 
@@ -307,10 +256,7 @@ def _camera(shaping: ShapingConfig) -> DoorKeyCamera:
     return DoorKeyCamera()
 
 
-# rl-baselines3-zoo, hyperparams/ppo.yml, the MiniGrid defaults (MiniGrid-DoorKey-5x5-v0 among them;
-# "Following https://github.com/lcswillems/rl-starter-files"): normalize true, 8 envs, n_timesteps
-# 1e5, n_steps 128, batch 64, gae 0.95, gamma 0.99, 10 epochs, ent_coef 0, lr 2.5e-4, clip 0.2, with
-# FlatObsWrapper (here the image only, see the module's docstring).
+# rl-baselines3-zoo, hyperparams/ppo.yml, the MiniGrid defaults (with FlatObsWrapper; here the image only)
 _ZOO: dict[str, Any] = {
     "n_envs": 8, "n_steps": 128, "batch_size": 64, "gae_lambda": 0.95, "gamma": 0.99, "n_epochs": 10,
     "ent_coef": 0.0, "learning_rate": 2.5e-4, "clip_range": 0.2, "normalize_obs": True, "normalize_reward": True,
@@ -318,52 +264,38 @@ _ZOO: dict[str, Any] = {
 }
 
 
-def _task() -> Any:
-    from minigrid.envs import DoorKeyEnv  # the unwrapped env's class, without building an env at import
-
-    from vlmrl_cli.shaping.features import feature_dim
-    from vlmrl_cli.shaping.scales import task_scales
-    from vlmrl_cli.shaping.scene import Scene
-    from vlmrl_cli.tasks.base import SB3_DEFAULT_100K, SMOKE, RandomScore, Task
-    from vlmrl_cli.tasks.capabilities import TaskCamera
-
-    return Task(
-        name="minigrid-doorkey",
-        env_id=ENV_ID,
-        summary="MiniGrid-DoorKey-5x5-v0: key, locked door, goal (7 actions, 1 - 0.9 t/250 at the goal, 250 steps)",
-        scene=Scene("minigrid-doorkey", (147,), doorkey_dense, DoorKeyEnv),
-        milestones=MILESTONES,
-        label_potentials=POTENTIALS,
-        truth=label_of_sim,
-        camera=TaskCamera(_camera, feature_dim((5 * TILE, 5 * TILE, 3))),
-        reader=StageReader(),
-        thresholds=(0.5, 0.8, 0.9),
-        max_steps=MAX_STEPS,
-        presets={
-            "zoo": _ZOO,
-            # The candidates of `vlmrl calibrate --task minigrid-doorkey` (Task.calibration), 100,000
-            # steps each: zoo's knobs; the same without VecNormalize; SB3's PPO defaults on one env;
-            # the same with VecNormalize (which of the two differences matters).
-            "zoo-100k-raw": {**_ZOO, "normalize_obs": False, "normalize_reward": False},
-            "sb3-default-100k": SB3_DEFAULT_100K,
-            "sb3-default-100k-norm": {**SB3_DEFAULT_100K, "normalize_obs": True, "normalize_reward": True},
-            "smoke": SMOKE,
-        },
-        calibration=tuple({"preset": p} for p in ("zoo", "zoo-100k-raw", "sb3-default-100k", "sb3-default-100k-norm")),
-        # the median of its 120 committed runs (calibration and study exports; quartiles 0.83-1.29 ms),
-        # five times MountainCar-v0's repro figure
-        step_seconds=1.1e-3,
-        zoo_reference="rl-baselines3-zoo benchmark.md (at 22e3ff2), PPO MiniGrid-DoorKey-5x5-v0: "
-                      "0.964 +/- 0.006 (100k steps); hyperparams/ppo.yml's MiniGrid defaults",
-        random_score=RandomScore(0.029474),  # measured by RANDOM_SCORE_COMMAND on 2026-12-07
-        study_preset="zoo",
-        window=50,
-        wrap=flat_image,
-        # goal: zoo's 0.964 over a failure's 0; Eq. 1 pays at most 1.4 / 250 per step at scale 1
-        scales=task_scales(goal_return=0.964, potential_span=1.0, dense_peak=1.4 / MAX_STEPS, horizon=MAX_STEPS),
-        probe_states=probe_states,
-        caption=describe_step,
-    )
-
-
-DOORKEY = _task()
+DOORKEY = Task(
+    name="minigrid-doorkey",
+    env_id=ENV_ID,
+    summary="MiniGrid-DoorKey-5x5-v0: key, locked door, goal (7 actions, 1 - 0.9 t/250 at the goal, 250 steps)",
+    scene=Scene("minigrid-doorkey", (147,), doorkey_dense, DoorKeyEnv),
+    milestones=MILESTONES,
+    label_potentials=POTENTIALS,
+    truth=label_of_sim,
+    camera=TaskCamera(_camera, feature_dim((5 * TILE, 5 * TILE, 3))),
+    reader=StageReader(),
+    thresholds=(0.5, 0.8, 0.9),
+    max_steps=MAX_STEPS,
+    presets={
+        "zoo": _ZOO,
+        # the candidates of `vlmrl calibrate --task minigrid-doorkey`, 100,000 steps each
+        "zoo-100k-raw": {**_ZOO, "normalize_obs": False, "normalize_reward": False},
+        "sb3-default-100k": SB3_DEFAULT_100K,
+        "sb3-default-100k-norm": {**SB3_DEFAULT_100K, "normalize_obs": True, "normalize_reward": True},
+        "smoke": SMOKE,
+    },
+    calibration=tuple({"preset": p} for p in ("zoo", "zoo-100k-raw", "sb3-default-100k", "sb3-default-100k-norm")),
+    # the median of its 120 committed runs (calibration and study exports; quartiles 0.83-1.29 ms),
+    # five times MountainCar-v0's repro figure
+    step_seconds=1.1e-3,
+    zoo_reference="rl-baselines3-zoo benchmark.md (at 22e3ff2), PPO MiniGrid-DoorKey-5x5-v0: "
+                  "0.964 +/- 0.006 (100k steps); hyperparams/ppo.yml's MiniGrid defaults",
+    random_score=RandomScore(0.029474),  # measured by RANDOM_SCORE_COMMAND on 2026-12-07
+    study_preset="zoo",
+    window=50,
+    wrap=FlatImage,
+    # goal: zoo's 0.964 over a failure's 0; Eq. 1 pays at most 1.4 / 250 per step at scale 1
+    scales=task_scales(goal_return=0.964, potential_span=1.0, dense_peak=1.4 / MAX_STEPS, horizon=MAX_STEPS),
+    probe_states=probe_states,
+    caption=describe_step,
+)

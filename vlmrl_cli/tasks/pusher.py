@@ -1,33 +1,6 @@
-"""Pusher-v5 as a task: a 7-DoF MuJoCo arm pushes a puck onto a goal, with a sparse success reward.
-
-Needs the ``pusher`` extra (``pip install -e ".[pusher]"``: gymnasium's MuJoCo envs on a pinned
-``mujoco``) and a headless OpenGL (Mesa's EGL or OSMesa). ``pusher_task()`` checks both once per
-process and refuses the task in one line when either is missing; it sets ``MUJOCO_GL=egl`` only
-where the user set nothing (``pusher_scene.use_headless_gl``).
-
-**Actions**: the 7 torques, rescaled from Pusher's [-2, 2] to [-1, 1] (``sparse_push``).
-
-**Reward.** -1 per step until the puck's centre is within 5 cm of the goal's in the plane, which
-ends the episode (``terminated``); 100 steps (Pusher-v5's limit) otherwise. -1 per step, like
-MountainCar-v0, rather than 0/1: the return is then minus the steps to success (-100 for a
-failure), so reward thresholds read as in the paper's task, a failure's return is one number, and
-with the step cost no dense or potential term below 1 per step can make lingering out-earn
-finishing. The env's own terms (``reward_near``, ``reward_dist``, ``reward_ctrl``) stay in
-``info``. Success (``Task.success``) is the default rule: the episode terminated (reached the
-goal) within the time limit.
-
-**Dense term** (the ``kinematic`` arm's, from the observation only: fingertip ``obs[14:17]``, puck
-``obs[17:20]``, goal ``obs[20:23]``): Eq. 1 on the negated distance the env's reward pays for,
-``c = d_pg + 0.5 d_tp`` (puck-goal in the plane, plus half the fingertip-puck distance, the env's
-own weights): ``max(0, scale (offset - c))``. The task's offset is 1 m (``Task.scales.kin_offset``;
-Eq. 1's default 0.4 paid nothing at a typical start, c about 0.5 m, so it gave PPO no gradient there:
-the pilot's dense arm learned nothing in 300,000 steps), so the term pays everywhere on the table, as
-the env's own reward does, at most ``scale`` per step (c = 0); at the task's kin_scale that is far
-below the step cost, so hovering never pays. Its potential form is the
-harness's (``dense-potential`` arms: ``Phi_kin = 100 x R_kin``).
-
-Milestones, camera and reader: ``pusher_scene``.
-"""
+"""Pusher-v5 as a task: a 7-DoF MuJoCo arm pushes a puck onto a goal; -1 per step until the puck is
+within 5 cm of it. Needs the ``pusher`` extra and a headless OpenGL, checked once per process
+(``pusher_task``). Milestones, camera and reader: ``pusher_scene``. See docs/tasks.md."""
 
 from __future__ import annotations
 
@@ -59,40 +32,19 @@ GL_HELP = ("install Mesa's EGL (Debian: apt-get install libegl1 libegl-mesa0 lib
 
 
 def puck_goal_distance(obs: np.ndarray) -> float:
-    """The puck's distance to the goal in the plane, from Pusher's observation.
-
-    Example:
-        >>> obs = np.zeros(OBS_DIM); obs[17:19] = (0.3, 0.4)
-        >>> puck_goal_distance(obs)
-        0.5
-    """
+    """The puck's distance to the goal in the plane, from Pusher's observation."""
     return float(np.hypot(obs[17] - obs[20], obs[18] - obs[21]))
 
 
 def pusher_dense(obs: np.ndarray, scale: float, offset: float) -> float:
-    """Eq. 1 on ``-(d_pg + 0.5 d_tp)``, metres: ``max(0, scale (offset - d_pg - 0.5 d_tp))``.
-
-    Example:
-        >>> obs = np.zeros(OBS_DIM); obs[14:17] = (0.1, 0.0, 0.0)  # puck on the goal, fingertip 0.1 away
-        >>> round(pusher_dense(obs, 2.0, 0.4), 6)
-        0.7
-    """
+    """Eq. 1 on ``-(d_pg + 0.5 d_tp)``, metres (the env's own weights), from the observation only."""
     d_tp = float(np.sqrt((obs[14] - obs[17]) ** 2 + (obs[15] - obs[18]) ** 2 + (obs[16] - obs[19]) ** 2))
     return max(0.0, scale * (offset - puck_goal_distance(obs) - 0.5 * d_tp))
 
 
 class SparsePush(gym.Wrapper[np.ndarray, np.ndarray, np.ndarray, np.ndarray], gym.utils.RecordConstructorArgs):
-    """Pusher-v5 with the task's sparse reward: -1 per step, the episode ends (``terminated``) when
-    the puck is within ``SUCCESS_M`` of the goal in the plane; the env's own reward and its terms
-    stay in ``info`` (``dense_reward``, ``reward_near``, ...).
-
-    Example:
-        >>> env = SparsePush(gym.make(ENV_ID))
-        >>> obs, _ = env.reset(seed=0)
-        >>> _, reward, terminated, truncated, info = env.step(np.zeros(7, dtype=np.float32))
-        >>> reward, terminated, "dense_reward" in info
-        (-1.0, False, True)
-        >>> env.close()
+    """Pusher-v5 with the sparse reward: -1 per step, ``terminated`` once the puck is within
+    ``SUCCESS_M`` of the goal in the plane; the env's own reward stays in ``info``.
     """
 
     def __init__(self, env: gym.Env[np.ndarray, np.ndarray]) -> None:
@@ -110,8 +62,8 @@ class SparsePush(gym.Wrapper[np.ndarray, np.ndarray, np.ndarray, np.ndarray], gy
 
 
 def sparse_push(env: gym.Env[Any, Any]) -> gym.Env[Any, Any]:
-    """``Task.wrap``: around ``gym.make(ENV_ID)``, its torques rescaled from [-2, 2] to [-1, 1] (what
-    SB3's checker asks for: PPO's Gaussian policy starts at std 1), then the sparse success reward.
+    """``Task.wrap``: torques rescaled from [-2, 2] to [-1, 1] (PPO's policy starts at std 1), then
+    the sparse reward.
 
     Example:
         >>> env = sparse_push(gym.make(ENV_ID))
@@ -123,14 +75,7 @@ def sparse_push(env: gym.Env[Any, Any]) -> gym.Env[Any, Any]:
 
 
 class PusherState:
-    """A Pusher pose without an env: what the camera and the truth read of a simulator (``model``,
-    ``data``, ``get_body_com``), for probes and tests.
-
-    Example:
-        >>> state = PusherState.at(np.zeros(11))  # the puck's slides at 0: its centre over the goal's
-        >>> label_of_sim(state)
-        'ON_TARGET'
-    """
+    """A Pusher pose without an env, read as a simulator by the camera and the truth."""
 
     def __init__(self, model: Any, qpos: np.ndarray) -> None:
         import mujoco
@@ -158,14 +103,8 @@ def _model() -> Any:
 
 
 def random_states(n: int, seed: int = 0) -> list[PusherState]:
-    """``n`` random Pusher poses, a quarter of each true milestone in turn: arm joints uniform in
-    their ranges (rejected until the fingertip is over the table, and for ``AT_PUCK`` at the
-    puck's height), the puck placed by the label: on the goal (within 5 cm), near it (5-12 cm),
-    at the fingertip (within 10 cm) or anywhere a reset could put it, away from the fingertip.
-
-    Example:
-        >>> [label_of_sim(s) for s in random_states(4)]
-        ['FAR_FROM_PUCK', 'AT_PUCK', 'NEAR_TARGET', 'ON_TARGET']
+    """``n`` random Pusher poses, a quarter of each true milestone in turn (arm joints uniform in
+    their ranges with the fingertip over the table, the puck placed by the label).
     """
     import mujoco
 
@@ -208,19 +147,13 @@ def random_states(n: int, seed: int = 0) -> list[PusherState]:
     return states
 
 
-def probe_states(n: int) -> list[PusherState]:
-    """``vlmrl taxonomy``'s states: ``random_states(n)``."""
-    return random_states(n)
-
-
 def _camera(shaping: Any) -> PusherCamera:
     return PusherCamera()
 
 
 @functools.cache
 def gl_problem() -> str | None:
-    """Why this process cannot draw Pusher's frames (None: it can): MuJoCo missing, or no working
-    OpenGL for its ``MUJOCO_GL`` back end. Tried once per process (a 1 x 1 px context)."""
+    """Why this process cannot draw Pusher's frames (MuJoCo or a working OpenGL missing), or None."""
     backend = use_headless_gl()
     try:
         import mujoco
@@ -287,7 +220,7 @@ def pusher_task() -> Any:
         },
         zoo_reference="rl-baselines3-zoo has no PPO row for Pusher-v5 in benchmark.md; its zoo preset is the "
                       "field notes' PPO settings (8 envs, n_steps 256, batch 64, 10 epochs, VecNormalize)",
-        probe_states=probe_states,
+        probe_states=random_states,
         wrap=sparse_push,
         window=50,
         random_score=RandomScore(-100.0),  # measured by RANDOM_SCORE_COMMAND on 2026-12-07 (0/200 successes)

@@ -1,42 +1,7 @@
-"""The scene pieces of the Pusher-v5 task: labels, ground truth, renderer, camera, pixel reader.
-
-Pusher-v5 (gymnasium, MuJoCo): a 7-DoF arm pushes a white puck (a cylinder of radius 0.05 m) on a
-table towards a red goal disc fixed at world (0.45, -0.05). Positions below are world metres.
-
-**Milestones** (low to high), from the planar puck-goal distance ``d_pg`` and the 3D
-fingertip-puck distance ``d_tp`` (centre to centre, as the env's ``reward_near``):
-``ON_TARGET`` when ``d_pg < 0.05`` (the task's success rule), else ``NEAR_TARGET`` when
-``d_pg < 0.12`` (a puck starts at least 0.17 from the goal: pushed most of the way), else
-``AT_PUCK`` when ``d_tp < 0.10`` (the fingertip touches the puck: 0.05 puck radius, 0.01
-fingertip radius, some slack), else ``FAR_FROM_PUCK``.
-
-**Renderer.** MuJoCo's own offscreen ``mujoco.Renderer`` on a copy of the env's model, so that
-nothing the env draws or simulates changes: the copy moves one of the two small finger spheres to
-the fingertip's point (the ``tips_arm`` body's origin, which the observation and ``reward_near``
-use; the visible fingers reach about 0.1 m beyond it), paints it blue and draws it at radius
-0.04 m (a marker a VLM can be told about; physics runs on the env's model). The scene's shadow,
-reflection and skybox flags are off, multisampling too, and round shapes have 12 slices instead
-of 28: on Mesa's llvmpipe an 80 px frame then costs about 0.7 ms of CPU (45 ms with the default
-flags, 4.6 ms with only the flags off; measured on the 2-core Zen 3). A fixed free camera looks
-from the +x side of the table (azimuth 180), 55 degrees down, 1.6 m from a point between puck and
-goal.
-Frames are 80 x 80 px: the prototype features average 20 x 20 blocks, so sides are multiples of
-20 (the nearest to 84 px).
-
-**Headless GL.** ``use_headless_gl()`` sets ``MUJOCO_GL`` to ``egl`` (Mesa's llvmpipe) where the
-user set nothing (``osmesa`` also works): the one process-wide setting the task makes.
-
-**Reader** (the simulated VLM's): finds the puck (white), the goal (red) and the fingertip marker
-(blue) by colour in the frame's pixels, maps the blobs' centres back onto the table's plane with
-the camera's own projection (``TableCamera``), and labels the distances. The fingertip is taken
-at the puck's height (one camera cannot see depth), so a raised fingertip above the puck reads as
-``AT_PUCK``. It never sees the state; the truth functions are the answer key only.
-
-**Camera** (``PusherCamera``, the only part that reads the simulator): a 7-DoF arm's frames never
-repeat, so the camera snaps what the milestones depend on to a grid, the fingertip's position to
-``TIP_CELL_M`` and the puck's and goal's to ``PUCK_CELL_M``, and draws each cell once: the arm in
-the pose of the cell's first visit, the puck and goal at the cell's centre (the nearest grid point).
-"""
+"""Pusher-v5's scene: milestones of the puck-goal and fingertip-puck distances, ground truth,
+MuJoCo's offscreen renderer (cheap flags, 80 x 80 px), the pixel reader (colour blobs mapped back
+onto the table) and the camera, which snaps the fingertip and puck to a grid. Positions are world
+metres. See docs/tasks.md, "Pusher-v5"."""
 
 from __future__ import annotations
 
@@ -56,9 +21,7 @@ FRAME_SHAPE = (SIDE, SIDE, 3)
 SUCCESS_M = 0.05  # puck within this of the goal in the plane: success (and ON_TARGET)
 NEAR_TARGET_M = 0.12
 AT_PUCK_M = 0.10
-# The reader's own edge for AT_PUCK: a fingertip at the puck hides part of it, which moves the
-# puck's visible centre away by about 1.5 cm (measured on random_states(400, seed=1); the tests
-# use seed 0)
+# The reader's edge for AT_PUCK: a fingertip at the puck hides part of it, moving its visible centre ~1.5 cm
 READ_AT_PUCK_M = 0.115
 GOAL_XY = (0.45, -0.05)  # Pusher-v5's goal body (its slide joints stay at 0)
 PUCK_Z = -0.275  # the puck's centre height (its body sits on the table)
@@ -91,19 +54,12 @@ QUALITY_STACKS = 8  # default 16
 
 
 def use_headless_gl() -> str:
-    """``MUJOCO_GL`` for this process: the user's value when set, else ``egl`` (set here, before
-    ``mujoco`` is imported; it has no effect once it is). Returns the back end in force.
-
-    Example:
-        >>> use_headless_gl() == os.environ["MUJOCO_GL"]
-        True
-    """
+    """``MUJOCO_GL`` for this process: the user's value, else ``egl`` (set before ``mujoco`` loads)."""
     return os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 def label_of(d_tp: float, d_pg: float, at_puck: float = AT_PUCK_M) -> str:
-    """The milestone of a fingertip-puck distance ``d_tp`` (3D) and a puck-goal distance ``d_pg``
-    (in the plane), metres.
+    """The milestone of a fingertip-puck distance ``d_tp`` (3D) and a puck-goal distance ``d_pg`` (2D), metres.
 
     Example:
         >>> label_of(0.5, 0.3), label_of(0.08, 0.3), label_of(0.5, 0.1), label_of(0.5, 0.049)
@@ -131,8 +87,7 @@ def distances(tip: np.ndarray, puck: np.ndarray, goal: np.ndarray) -> tuple[floa
 
 
 def positions(sim: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The fingertip's, puck's and goal's world positions of a Pusher simulator (the unwrapped env),
-    as its observation gives them (``get_body_com``)."""
+    """The fingertip's, puck's and goal's world positions of a simulator, as its observation gives them."""
     return (np.array(sim.get_body_com("tips_arm")), np.array(sim.get_body_com("object")),
             np.array(sim.get_body_com("goal")))
 
@@ -144,10 +99,7 @@ def label_of_sim(sim: Any) -> str:
 
 @dataclass(frozen=True)
 class TableCamera:
-    """The fixed camera's pinhole projection, from MuJoCo's free camera: world point <-> pixel.
-
-    Pixel coordinates are (row, col) of the picture as rendered (row 0 at the top), continuous, the
-    centre of pixel (i, j) at (i + 0.5, j + 0.5).
+    """The fixed camera's pinhole projection: world point <-> continuous pixel (row, col), row 0 at the top.
 
     Example:
         >>> cam = TableCamera.fixed()
@@ -166,8 +118,7 @@ class TableCamera:
 
     @classmethod
     def fixed(cls, side: int = SIDE, fovy_deg: float = 45.0) -> TableCamera:
-        """The task's camera (MuJoCo's free camera at ``LOOKAT``, ``DISTANCE``, ``AZIMUTH``,
-        ``ELEVATION``; ``fovy_deg``: the model's ``vis.global.fovy``)."""
+        """The task's camera (``fovy_deg``: the model's ``vis.global.fovy``)."""
         az, el = math.radians(AZIMUTH), math.radians(ELEVATION)
         forward = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
         position = np.asarray(LOOKAT) - DISTANCE * forward
@@ -239,10 +190,8 @@ _OFFSETS = np.arange(-3.0, 3.01, 0.5)  # px: where a disc's outline is tried aro
 
 
 def _disc_centre(target: np.ndarray, neutral: np.ndarray, axes: tuple[float, float]) -> tuple[float, float]:
-    """The centre (row, col) of a disc whose visible pixels are ``target``: its outline (an ellipse
-    of half axes ``axes`` px) placed where it covers the most of them and the least of anything
-    else, ``neutral`` pixels (what may lie in front of it) counting for neither. Another object
-    hiding part of the disc would pull a plain centroid away from it."""
+    """The centre (row, col) of a disc whose visible pixels are ``target``: its outline (half axes
+    ``axes`` px) placed to cover the most of them and the least else (``neutral`` pixels: neither)."""
     rows, cols = np.nonzero(target)
     r0, c0 = float(rows.mean()) + 0.5, float(cols.mean()) + 0.5
     a_row, a_col = axes
@@ -262,9 +211,8 @@ def _disc_centre(target: np.ndarray, neutral: np.ndarray, axes: tuple[float, flo
 
 
 def read_distances(pixels: np.ndarray, camera: TableCamera = CAMERA) -> tuple[float | None, float | None]:
-    """``(d_tp, d_pg)`` read from the pixels (None where an object is not in sight): the blobs'
-    centres put back on the table plane (the puck's visible top at its top face's height, the
-    fingertip at the puck's centre height: one camera sees no depth), the goal's by its outline."""
+    """``(d_tp, d_pg)`` read from the pixels (None where an object is not in sight), the fingertip taken
+    at the puck's centre height (one camera sees no depth)."""
     masks = colour_masks(pixels)
     puck_px = _blob(masks["puck"])
     if puck_px is None:
@@ -285,10 +233,8 @@ def read_distances(pixels: np.ndarray, camera: TableCamera = CAMERA) -> tuple[fl
 
 
 def read_label(pixels: np.ndarray) -> str | None:
-    """The milestone a frame shows, from its pixels only (None: neither puck nor target in sight).
-
-    A hidden goal (under the arm) reads as far from the puck's target; a hidden fingertip (behind
-    the arm) as away from the puck; a hidden puck (under the arm) as the fingertip at it."""
+    """The milestone a frame shows, from its pixels only (None: neither puck nor target in sight); a
+    hidden goal reads as far, a hidden fingertip as away, a hidden puck as the fingertip at it."""
     d_tp, d_pg = read_distances(pixels)
     if d_tp is None and d_pg is None:  # no puck in sight: the arm hides it, so the hand is over it
         return "AT_PUCK" if _blob(colour_masks(pixels)["goal"]) is not None else None
@@ -309,11 +255,7 @@ class PusherReader:
 
 
 class PusherRenderer:
-    """Draws Pusher-v5 states (``qpos``) with the task's camera, off screen, into ``Frame``s.
-
-    Holds a copy of the model (the fingertip marker painted on it) and its own ``MjData``, so the
-    simulator it draws for is never touched.
-    """
+    """Draws Pusher-v5 states (``qpos``) off screen, on a copy of the model with the fingertip marker."""
 
     def __init__(self, model: Any) -> None:
         import copy
@@ -322,7 +264,7 @@ class PusherRenderer:
         import mujoco
 
         self.model = copy.deepcopy(model)
-        self.model.vis.quality.offsamples = 0  # cheap frames: see the module's docstring
+        self.model.vis.quality.offsamples = 0  # cheap frames: see docs/tasks.md
         self.model.vis.quality.numslices = QUALITY_SLICES
         self.model.vis.quality.numstacks = QUALITY_STACKS
         marker = self.model.geom(TIP_MARKER_GEOM)  # drawn at the fingertip's point (the body's origin)
@@ -356,8 +298,7 @@ Cell = tuple[int, ...]  # the fingertip's 3 grid indices, then the puck's 2 and 
 
 
 def cell_of(sim: Any) -> Cell:
-    """The grid cell of a Pusher simulator: fingertip (``TIP_CELL_M``), puck and goal slide
-    positions (``PUCK_CELL_M``)."""
+    """The grid cell of a simulator: fingertip (``TIP_CELL_M``), puck and goal slides (``PUCK_CELL_M``)."""
     tip = sim.data.body("tips_arm").xpos
     qpos = sim.data.qpos
     return (*(math.floor(float(v) / TIP_CELL_M) for v in tip),
@@ -365,9 +306,8 @@ def cell_of(sim: Any) -> Cell:
 
 
 class PusherCamera(CellCamera[Cell]):
-    """The task's camera: one frame per grid cell (see the module's docstring), drawn with the arm
-    in the pose of the cell's first visit and the puck and goal at the cell's centre; the pose is
-    kept, so a frame dropped from the pixel cache is drawn again identically."""
+    """The task's camera: one frame per grid cell, the arm in the pose of the cell's first visit (kept,
+    so a dropped frame is drawn again identically), the puck and goal at the cell's centre."""
 
     def __init__(self, pixel_cache: int = 256) -> None:
         super().__init__(pixel_cache)

@@ -1,15 +1,6 @@
-"""Find a task by name: a built-in one, an entry point of the ``vlmrl.tasks`` group (a package
-declaring ``[project.entry-points."vlmrl.tasks"]``), or ``package.module:NAME`` in the user's code.
-
-A name read from a file (a config file, an export, a store's tags) resolves through the registry
-alone (``get_task``: built-in and installed tasks); a module is imported only when the user names
-it with ``--task`` on the command line (``import_task``, through ``command_tasks``), and only a
-module whose source, read first without running it, imports ``vlmrl_cli`` and binds ``NAME``
-(``--task this:x`` prints no Zen of Python; ``--task mlflow.__main__:x`` runs no MLflow).
-
-What ``NAME`` (or an entry point) names must be a ``Task``, or a plain function marked with
-``@task_factory`` that returns one. The object is checked before anything is called: vlmrl calls
-no other object it is pointed at.
+"""Find a task by name: built in, an entry point of the ``vlmrl.tasks`` group, or (named on the
+command line only) ``package.module:NAME``, whose source is read before it is imported. What a name
+points at must be a ``Task`` or a function marked ``@task_factory``. See docs/tasks.md, "Add a task".
 
 Example:
     >>> get_task("mountain-car").env_id
@@ -36,8 +27,7 @@ from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.tasks.base import Task, TaskLookup
 
 ENTRY_POINT_GROUP = "vlmrl.tasks"
-#: The attribute ``task_factory`` sets on a function: the one mark that lets vlmrl call what a
-#: ``--task`` string or an entry point names.
+#: The attribute ``task_factory`` sets: the one mark that lets vlmrl call what a ``--task`` names.
 FACTORY_MARK = "__vlmrl_task_factory__"
 #: What a ``--task package.module:NAME`` or an entry point may name, said in every refusal.
 _ACCEPTED = ("give a Task, or a function marked @task_factory (vlmrl_cli.tasks.registry) that returns one; "
@@ -47,68 +37,33 @@ _Factory = TypeVar("_Factory", bound=Callable[[], Task])
 
 
 def task_factory(fn: _Factory) -> _Factory:
-    """Mark ``fn``, a function of no arguments that returns a ``Task``, as a task factory: a
-    ``--task package.module:fn`` or an entry point naming it calls it. Nothing unmarked is called.
-
-    Example:
-        >>> @task_factory
-        ... def acrobot_again() -> Task:
-        ...     return get_task("acrobot")
-        >>> _resolved(acrobot_again, "'doc:acrobot_again'").env_id
-        'Acrobot-v1'
-    """
+    """Mark ``fn``, a function of no arguments returning a ``Task``, as one that ``--task`` may call."""
     if not inspect.isfunction(fn):
         raise TypeError(f"@task_factory marks a function (def), not a {type(fn).__name__}")
     setattr(fn, FACTORY_MARK, True)
     return fn
 
 
-def _mountain_car() -> Task:
-    from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR
+def _builtin(module: str, name: str) -> Callable[[], Task]:
+    """A loader of the task ``name`` of ``module`` (called, for a factory), imported when first asked for."""
+    def load() -> Task:
+        value = getattr(importlib.import_module(f"vlmrl_cli.tasks.{module}"), name)
+        return value if isinstance(value, Task) else value()
 
-    return MOUNTAIN_CAR
-
-
-def _mountain_car_continuous() -> Task:
-    from vlmrl_cli.tasks.mountain_car import MOUNTAIN_CAR_CONTINUOUS
-
-    return MOUNTAIN_CAR_CONTINUOUS
-
-
-def _acrobot() -> Task:
-    from vlmrl_cli.tasks.acrobot import ACROBOT
-
-    return ACROBOT
-
-
-def _minigrid_doorkey() -> Task:
-    from vlmrl_cli.tasks.minigrid_doorkey import DOORKEY
-
-    return DOORKEY
-
-
-def _pusher() -> Task:
-    """Pusher-v5 (the ``pusher`` extra: MuJoCo): a ``BadInput`` in one line where MuJoCo or a
-    headless OpenGL is missing."""
-    from vlmrl_cli.tasks.pusher import pusher_task
-
-    task: Task = pusher_task()
-    return task
+    return load
 
 
 BUILTIN: dict[str, Callable[[], Task]] = {
-    "mountain-car": _mountain_car,
-    "mountain-car-continuous": _mountain_car_continuous,
-    "acrobot": _acrobot,
-    "minigrid-doorkey": _minigrid_doorkey,
-    "pusher": _pusher,
+    "mountain-car": _builtin("mountain_car", "MOUNTAIN_CAR"),
+    "mountain-car-continuous": _builtin("mountain_car", "MOUNTAIN_CAR_CONTINUOUS"),
+    "acrobot": _builtin("acrobot", "ACROBOT"),
+    "minigrid-doorkey": _builtin("minigrid_doorkey", "DOORKEY"),
+    "pusher": _builtin("pusher", "pusher_task"),  # MuJoCo and a headless GL, checked: else BadInput
 }
 
 
 def recorded_task(name: object) -> str:
-    """The task a run recorded (its ``vlmrl.task`` tag, its config's ``task``): runs from before
-    tasks existed record none; they are the built-in task that keeps its name out of its config
-    hashes for them (the paper's task, ``paper_task``).
+    """The task a run recorded (``vlmrl.task``); runs from before tasks record none: the paper's task.
 
     Example:
         >>> recorded_task("acrobot"), recorded_task(None)
@@ -120,8 +75,7 @@ def recorded_task(name: object) -> str:
 
 
 def builtin_task(name: str) -> Task:
-    """The built-in task ``name`` (no module or entry point is loaded): the lookup of a config
-    built without the command's registry; anything else is a ``BadInput`` saying so.
+    """The built-in task ``name`` (the lookup of a config built without the command's); else ``BadInput``.
 
     Example:
         >>> builtin_task("acrobot").env_id
@@ -152,8 +106,7 @@ def task_names() -> list[str]:
 
 
 def get_task(name: str) -> Task:
-    """The built-in or installed task called ``name``; anything unknown or broken is a ``BadInput``
-    saying why. A ``module:NAME`` is refused here: this is the lookup of names read from files.
+    """The built-in or installed task ``name``, else ``BadInput``; a ``module:NAME`` (read from a file) is refused.
 
     Example:
         >>> try:
@@ -177,22 +130,14 @@ def get_task(name: str) -> Task:
 
 
 def command_tasks(specs: Iterable[str | None] = ()) -> TaskLookup:
-    """The task lookup of a command: the ``module:NAME`` tasks the user named on its command line
-    (``specs``; other names and None are skipped) imported once, now (``import_task``), and every
-    other name through the registry (``get_task``). A file that names the same ``module:NAME``
-    gets the task the command line already loaded; one that names another module is refused.
-
-    Example:
-        >>> lookup = command_tasks(["acrobot", None])
-        >>> lookup("acrobot").env_id
-        'Acrobot-v1'
+    """A command's task lookup: the ``module:NAME`` tasks among ``specs`` (its command line) imported
+    once, now; every other name through ``get_task`` (a file naming another module is refused).
     """
     return CommandTasks(tuple(spec for spec in specs if spec is not None and ":" in spec))
 
 
 class CommandTasks:
-    """``command_tasks``' lookup; it crosses to a spawned worker as its specs, which the worker
-    imports again (the command line named them)."""
+    """``command_tasks``' lookup; a spawned worker gets its specs and imports them again."""
 
     def __init__(self, specs: tuple[str, ...]) -> None:
         self.specs = specs
@@ -206,17 +151,13 @@ class CommandTasks:
 
 
 def job_task(ref: str) -> Task:
-    """The task of a job this machine's command built (a sweep's or verify's worker resolves it at
-    the job's entry): the command already loaded ``ref`` through ``command_tasks``, so a
-    ``module:NAME`` is imported here as it was there."""
+    """The task of a job this machine's command built; a ``module:NAME`` is imported as it was there."""
     return import_task(ref) if ":" in ref else get_task(ref)
 
 
 def import_task(spec: str) -> Task:
-    """The task ``package.module:NAME`` of the user's own code. The module's source is found on
-    ``sys.path`` and read before anything runs: a module that does not import ``vlmrl_cli`` or does
-    not bind ``NAME`` at its top level is refused unimported; then the module (and its packages)
-    is imported and ``NAME`` checked (``_resolved``)."""
+    """The task ``package.module:NAME`` of the user's code; a module whose source does not import
+    ``vlmrl_cli`` and bind ``NAME`` at its top level is refused unimported."""
     module_name, _, attr = spec.partition(":")
     if not module_name or not attr or not all(part.isidentifier() for part in (*module_name.split("."), attr)):
         raise BadInput(f"task '{spec}': give package.module:NAME, e.g. mytasks.pendulum:TASK")
@@ -237,10 +178,8 @@ def import_task(spec: str) -> Task:
 
 
 def module_source(module_name: str, path: Iterable[str] | None = None) -> Path | None:
-    """The source file of ``module_name`` (``a.b`` -> ``a/b.py`` or ``a/b/__init__.py``) in the first
-    folder of ``path`` (``sys.path``; '' is the current folder) that has it, found without importing
-    anything (``importlib.util.find_spec`` imports a dotted name's packages); None for a module with
-    no source file (built in, compiled, zipped)."""
+    """The source file of ``module_name`` on ``path`` (``sys.path``), found without importing anything
+    (``find_spec`` imports a dotted name's packages); None where it has none."""
     parts = module_name.split(".")
     for entry in sys.path if path is None else path:
         base = Path(entry or ".").joinpath(*parts)
@@ -251,8 +190,7 @@ def module_source(module_name: str, path: Iterable[str] | None = None) -> Path |
 
 
 def _source_problem(source: Path, name: str) -> str | None:
-    """Why the module source ``source`` is not a task module offering ``name``, or None: it must
-    import ``vlmrl_cli`` and bind ``name`` at its top level. Read as text and parsed, never run."""
+    """Why ``source`` (parsed, never run) does not import ``vlmrl_cli`` and bind ``name``, or None."""
     try:
         tree = ast.parse(source.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, SyntaxError, ValueError) as exc:
@@ -284,8 +222,7 @@ def _load(get: Callable[[], object], where: str) -> object:
 
 
 def is_task_factory(value: object) -> bool:
-    """Whether ``value`` is a plain function marked with ``@task_factory``; read from the
-    function's own ``__dict__``, so that checking runs none of the object's code.
+    """Whether ``value`` is a function marked ``@task_factory`` (read from its ``__dict__``: no code runs).
 
     Example:
         >>> import os
@@ -296,8 +233,7 @@ def is_task_factory(value: object) -> bool:
 
 
 def _resolved(value: object, where: str) -> Task:
-    """``value`` if it is a ``Task``, the ``Task`` a marked factory returns, else ``BadInput``:
-    the type is checked before anything is called."""
+    """``value`` if a ``Task``, what a marked factory returns, else ``BadInput`` (checked before any call)."""
     if isinstance(value, Task):
         return value
     if not is_task_factory(value):

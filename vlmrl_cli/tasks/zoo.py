@@ -1,10 +1,6 @@
-"""rl-baselines3-zoo's published PPO scores, by gymnasium id: the top of the ``--normalise zoo``
-range of ``vlmrl compare``.
-
-Copied from the zoo's ``benchmark.md`` (DLR-RM/rl-baselines3-zoo at commit 22e3ff2; the first three
-rows are the same at 02a1a90), its ``ppo`` rows: mean and std of the episode return of the trained
-agent, and its training budget. Each task's ``zoo_reference`` cites the same numbers in words;
-a test keeps the two in step.
+"""rl-baselines3-zoo's published PPO scores by gymnasium id (its ``benchmark.md`` at 22e3ff2, ``ppo``
+rows): the top of ``vlmrl compare --normalise zoo``'s range. A test keeps each task's
+``zoo_reference`` in step.
 
 Example:
     >>> ZOO_PPO["MountainCar-v0"].mean

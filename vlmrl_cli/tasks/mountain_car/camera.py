@@ -1,7 +1,5 @@
-"""MountainCar's camera: its picture depends on the position ``x`` alone, so the camera snaps
-``x`` to a grid of ``render_quantum`` (0.003 x units, one pixel, by default), renders each grid
-cell once with gymnasium's own renderer and memoises the cell's SHA-256 and features (a render
-costs about 2 ms)."""
+"""MountainCar's camera: the picture depends on ``x`` alone, so ``x`` is snapped to a grid of
+``render_quantum`` (0.003, one pixel) and each cell rendered once (about 2 ms)."""
 
 from __future__ import annotations
 
@@ -15,20 +13,8 @@ from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 
 
 class Camera(CellCamera[int]):
-    """Renders MountainCar at a position snapped to ``render_quantum``; memoises per grid cell.
-
-    ``renders`` counts calls to gymnasium's renderer; ``pixel_cache`` is how many frames'
-    pixels are kept (about 0.7 MB each; frames a deterministic VLM has labelled leave first, so
-    the cache mostly holds frames still waiting for their first label).
-
-    Example:
-        >>> cam = Camera(render_quantum=0.001)
-        >>> a, b = cam.view(-0.5), cam.view(-0.50001)  # the same grid cell
-        >>> a.key == b.key, cam.renders, a.features.shape
-        (True, 1, (600,))
-        >>> a.frame().pixels.shape
-        (400, 600, 3)
-        >>> cam.close()
+    """Renders MountainCar at a position snapped to ``render_quantum``; memoises per grid cell
+    (``pixel_cache``: frames whose pixels are kept, about 0.7 MB each).
     """
 
     def __init__(self, render_quantum: float = 0.003, pixel_cache: int = 384, env_id: str = "MountainCar-v0") -> None:

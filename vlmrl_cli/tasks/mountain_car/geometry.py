@@ -1,14 +1,6 @@
-"""Ground truth for MountainCar-v0 frames, computed from gymnasium's renderer geometry.
-
-Everything here mirrors ``gymnasium.envs.classic_control.mountain_car.MountainCarEnv.render``:
-a 600x400 RGB frame, world x in [-1.2, 0.6] scaled to the frame width, the track height
-``0.45 sin(3x) + 0.55`` scaled by the same factor, a 40x20 px car body raised 10 px above the
-track and rotated by ``cos(3x)`` radians, two wheels of radius 8 px, the drawing flipped
-vertically at the end. Image coordinates are (column, row) with the origin at the top left.
-
-These are pure functions of the position ``x``; they are the *answer key* for the probe,
-never an input of a VLM.
-"""
+"""The answer key of MountainCar-v0 frames, pure functions of the position ``x`` that mirror
+``MountainCarEnv.render`` (600x400, y flipped); never an input of a VLM. Image coordinates are
+(column, row) from the top left."""
 
 from __future__ import annotations
 
@@ -44,18 +36,13 @@ class Zone(StrEnum):
 
 
 ZONES: tuple[Zone, ...] = tuple(Zone)
-# Upper edges (exclusive) of every zone but the last, in units of x. BOTTOM is centred on the
-# valley (-0.52), so the paper's "absolute valley" x=-0.50 is BOTTOM and its "lower left slope"
-# x=-0.69 is LEFT_SLOPE; -0.40 is where the kinematic reward (Eq. 1) starts paying; 0.50 is
-# the goal flag.
+# Upper edges (exclusive) of every zone but the last, in units of x (docs/method.md).
 ZONE_EDGES: tuple[float, ...] = (-0.90, -0.60, -0.40, 0.0, GOAL_POSITION)
 
 
-def track_height(x: float | np.ndarray) -> float | np.ndarray:
+def track_height(x: float) -> float:
     """Track height (world units) at position ``x``: ``0.45 sin(3x) + 0.55``."""
-    return np.sin(3 * np.asarray(x)) * 0.45 + 0.55 if isinstance(x, np.ndarray) else (
-        math.sin(3 * x) * 0.45 + 0.55
-    )
+    return math.sin(3 * x) * 0.45 + 0.55
 
 
 def zone_of(x: float, edges: tuple[float, ...] = ZONE_EDGES) -> Zone:
@@ -77,11 +64,14 @@ def _to_image(px: float, py: float) -> tuple[float, float]:
     return px, SCREEN_HEIGHT - 1 - py
 
 
+def _pose(x: float) -> tuple[float, float, float]:
+    """The car's angle (radians) and base point in drawing coordinates."""
+    return math.cos(3 * x), (x - MIN_POSITION) * SCALE, CLEARANCE + track_height(x) * SCALE
+
+
 def car_body_corners_px(x: float) -> np.ndarray:
     """The car body's four corners in image coordinates, shape (4, 2) as (column, row)."""
-    angle = math.cos(3 * x)
-    base_x = (x - MIN_POSITION) * SCALE
-    base_y = CLEARANCE + float(track_height(x)) * SCALE
+    angle, base_x, base_y = _pose(x)
     left, right, top, bottom = -CAR_WIDTH / 2, CAR_WIDTH / 2, CAR_HEIGHT, 0
     corners = []
     for cx, cy in ((left, bottom), (left, top), (right, top), (right, bottom)):
@@ -92,9 +82,7 @@ def car_body_corners_px(x: float) -> np.ndarray:
 
 def wheel_centres_px(x: float) -> np.ndarray:
     """The two wheel centres in image coordinates, shape (2, 2); gymnasium truncates to int."""
-    angle = math.cos(3 * x)
-    base_x = (x - MIN_POSITION) * SCALE
-    base_y = CLEARANCE + float(track_height(x)) * SCALE
+    angle, base_x, base_y = _pose(x)
     centres = []
     for cx in (CAR_WIDTH / 4, -CAR_WIDTH / 4):
         rx, ry = _rotate(cx, 0.0, angle)
@@ -103,10 +91,7 @@ def wheel_centres_px(x: float) -> np.ndarray:
 
 
 def car_box_px(x: float) -> tuple[float, float, float, float]:
-    """Axis-aligned box (x0, y0, x1, y1) in image pixels around the car body and wheels.
-
-    Clipped to the frame: at the track's ends part of the car is drawn off-screen.
-    """
+    """Axis-aligned box (x0, y0, x1, y1) in image pixels around the car body and wheels, clipped to the frame."""
     corners = car_body_corners_px(x)
     wheels = wheel_centres_px(x)
     x0 = min(corners[:, 0].min(), (wheels[:, 0] - WHEEL_RADIUS).min())
@@ -131,8 +116,7 @@ def x_from_column(column: float) -> float:
 
 @dataclass(frozen=True)
 class GroundTruth:
-    """The answer key for one frame, in the units a VLM is asked for (a ``NumberTruth`` of
-    MountainCar's ``NumberProbe``: ``label`` is the zone's name)."""
+    """The answer key for one frame, in the units a VLM is asked for (a ``NumberTruth``)."""
 
     x: float
     velocity: float
@@ -147,14 +131,7 @@ class GroundTruth:
 
     @classmethod
     def of(cls, x: float, velocity: float = 0.0) -> GroundTruth:
-        """Ground truth of the frame rendered at position ``x`` and ``velocity``.
-
-        Example:
-            >>> GroundTruth.of(-0.5).zone
-            <Zone.BOTTOM: 'BOTTOM'>
-            >>> GroundTruth.of(-0.69).zone
-            <Zone.LEFT_SLOPE: 'LEFT_SLOPE'>
-        """
+        """Ground truth of the frame rendered at position ``x`` and ``velocity``."""
         return cls(
             x=float(x),
             velocity=float(velocity),

@@ -1,7 +1,5 @@
-"""Table 1 on MountainCar-v0 (``Task.numbers``): its float and box questions with the renderer
-that draws the car at any position, the answer key there (``geometry.GroundTruth``), the paper's
-Figure 1 pair and what Table 1 says of the paper's own truths. The probe (probe/scoring.py) asks
-the task for these; it imports nothing from here."""
+"""Table 1 on MountainCar-v0 (``Task.numbers``): its float and box questions, renderer, answer key
+and the paper's Figure 1 pair; the probe asks the task for these and imports nothing from here."""
 
 from __future__ import annotations
 

@@ -1,13 +1,5 @@
-"""MountainCar-v0's own simulated-VLM profile (``Task.sim_profiles``), beside the generic ``ideal``
-and ``default`` (vlm/config.py).
-
-Its knobs are generic ``SimKnobs`` fields; what they mean here is the wheel reader's
-(``reader.WheelReader``), whose reading is the car's position x on the track [-1.2, 0.6]:
-``float_anchor`` and ``box_anchor_x`` are positions (x units), and ``mcq_bottom_halfwidth``
-widens BOTTOM to every reading within that many x units of the valley (x = -pi/6, about -0.52).
-The names and values are the ones the profile had in vlm/config.py: they enter the runs' config
-hashes (tests/training/test_pinned_hashes.py) and the simulated VLM's cache key.
-"""
+"""MountainCar-v0's own simulated-VLM profile (``Task.sim_profiles``), in the wheel reader's units
+(positions in x units). Its names and values enter config hashes and the simulated VLM's cache key."""
 
 from __future__ import annotations
 

@@ -1,10 +1,5 @@
-"""The simulated VLM's eyes on MountainCar: the car's wheels in the pixels, never the state.
-
-gymnasium draws both wheels in exactly (128, 128, 128), so the wheels' centre column locates the
-car. Limited spatial resolution is modelled by snapping that column to a grid of ``patch_px``
-pixels, as a ViT sees the image through patches; the column maps back to a position, which
-answers the float prompt, places the box and gives the zone of the MCQ.
-"""
+"""The simulated VLM's eyes on MountainCar: the wheels' exact (128, 128, 128) grey locates the car;
+its column, snapped to ``patch_px`` patches as a ViT sees them, maps back to a position."""
 
 from __future__ import annotations
 
@@ -26,11 +21,8 @@ MCQ_FORMATS: tuple[str, ...] = ("{label}", "Choice = {label}", "{label}.", "The 
 
 
 def wheel_column(pixels: np.ndarray) -> float | None:
-    """Centre column (image px) of the car's wheels in an RGB frame of shape (H, W, 3), or None.
-
-    Only exact (128, 128, 128) pixels count, and only in columns holding several of them:
-    anti-aliasing of the track and the flag leaves single stray pixels of that grey.
-    """
+    """Centre column (image px) of the car's wheels in an RGB frame (H, W, 3), or None; only columns
+    holding several wheel-grey pixels count (anti-aliasing leaves single strays)."""
     flat = np.ascontiguousarray(pixels).reshape(-1, 3)
     # one channel first (~4x faster than all three), on a contiguous copy of it
     (hits,) = np.nonzero(np.ascontiguousarray(flat[:, 0]) == WHEEL_GREY)
@@ -54,18 +46,8 @@ def snap_to_patch(column: float, patch_px: int) -> float:
 
 
 class WheelReader:
-    """MountainCar-v0's reader (a ``NumberReader``): the position from the wheels' column, the
-    zone of that position, the car's box there. Pixels only, never the state. Its answers keep
-    the model name (``pixel-reader-v1``), refusal and formats they were cached and transcribed
-    under before tasks existed.
-
-    Example:
-        >>> from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
-        >>> with FrameRenderer() as renderer:
-        ...     pixels = renderer.render(-0.5).pixels
-        >>> reader = WheelReader()
-        >>> reader.read(pixels), round(reader.estimate(pixels, 1), 3)
-        ('BOTTOM', -0.501)
+    """MountainCar-v0's reader (a ``NumberReader``): position, zone and box from the wheels' column;
+    its model name, refusal and formats are the ones answers were cached under before tasks.
     """
 
     name = "mountain-car"
@@ -83,9 +65,7 @@ class WheelReader:
         return float(np.clip(x, geometry.MIN_POSITION, geometry.MAX_POSITION))
 
     def label_at(self, estimate: float, knobs: SimKnobs) -> str:
-        """The zone of a reading before flicker: its true zone, or BOTTOM anywhere within
-        ``knobs.mcq_bottom_halfwidth`` x units of the valley (a profile's widened dead zone:
-        ``llava-table1``'s 0.45 reaches past x = -0.69, profiles.py)."""
+        """The zone of a reading before flicker, BOTTOM within ``knobs.mcq_bottom_halfwidth`` of the valley."""
         width = knobs.mcq_bottom_halfwidth
         if width is not None and abs(estimate - geometry.VALLEY_X) <= width:
             return str(geometry.Zone.BOTTOM)

@@ -1,17 +1,10 @@
-"""The paper's task, MountainCar-v0, and its continuous-action twin MountainCarContinuous-v0.
-
-Both share the track, the car and the camera (the picture depends on the position only, so at
-most 601 distinct frames at the default 0.003 grid): ``geometry``, ``render``, ``camera`` and
-``reader`` in this package. MountainCar-v0's runs predate the task plug-ins and keep their
-config hashes (tests/training/test_pinned_hashes.py).
-
-MountainCarContinuous-v0: force in [-1, 1], reward +100 at the flag (x >= 0.45) minus
-``0.1 a^2`` per step, 999 steps. Plain PPO often settles on standing still (the action cost
-punishes exploration): the paper's "exploration deadlock" in its clearest form.
-"""
+"""The paper's task, MountainCar-v0, and its continuous-action twin MountainCarContinuous-v0, which
+share the track, car and camera. MountainCar-v0's runs predate the task plug-ins and keep their
+config hashes (tests/training/test_pinned_hashes.py). See docs/tasks.md."""
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -33,9 +26,7 @@ from vlmrl_cli.tasks.mountain_car.prompts import ZONE_MILESTONES
 from vlmrl_cli.tasks.mountain_car.reader import WheelReader, wheel_column
 from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 
-# Raw potential of each MCQ label (Phi_raw). The paper fixes only "0 -> 0.3 by reaching the
-# left peak"; the rest is our choice, documented in README: the two slopes are a small first
-# step, the left peak the paper's 0.3, the right hill before the flag 0.6, the goal 1.0.
+# Raw potential of each MCQ label (Phi_raw): the paper fixes only the left peak's 0.3 (docs/method.md).
 ZONE_POTENTIALS: tuple[tuple[str, float], ...] = (
     ("LEFT_PEAK", 0.3),
     ("LEFT_SLOPE", 0.1),
@@ -51,14 +42,7 @@ CONTINUOUS_EDGES: tuple[float, ...] = (*geometry.ZONE_EDGES[:-1], CONTINUOUS_GOA
 
 
 def kinematic_dense(obs: np.ndarray, scale: float, offset: float) -> float:
-    """Paper Eq. 1 on the position ``obs[0]``: ``R_kin = max(0, scale (x + offset))``, reward units
-    per step. With the paper's 2.0 and 0.4 it is zero left of -0.4 and grows linearly to the
-    right (2.0 at MountainCar-v0's flag, x = 0.5).
-
-    Example:
-        >>> kinematic_dense(np.array([0.1, 0.0]), 2.0, 0.4), kinematic_dense(np.array([-0.5, 0.0]), 2.0, 0.4)
-        (1.0, 0.0)
-    """
+    """Paper Eq. 1 on the position ``obs[0]``: ``R_kin = max(0, scale (x + offset))`` per step."""
     return max(0.0, scale * (float(obs[0]) + offset))  # every env step: kept to one expression
 
 
@@ -69,8 +53,7 @@ ACTIONS = {0: "push left", 1: "no push", 2: "push right"}
 
 
 def describe_step(obs: tuple[float, ...], action: Any) -> tuple[dict[str, Any], str]:
-    """A played step of MountainCar-v0: position and velocity, and the caption ``vlmrl evaluate``
-    draws under its frame.
+    """A played step of MountainCar-v0 as named fields and ``vlmrl evaluate``'s caption.
 
     Example:
         >>> describe_step((-0.5, 0.01), 2)
@@ -85,25 +68,12 @@ def _position(obs: np.ndarray) -> float:
     return float(obs[0])
 
 
-def _zone_of_sim(sim: Any) -> str:
-    return str(geometry.zone_of(float(sim.state[0])))
-
-
-def _continuous_zone_of_sim(sim: Any) -> str:
-    return str(geometry.zone_of(float(sim.state[0]), CONTINUOUS_EDGES))
+def _zone_of_sim(sim: Any, edges: tuple[float, ...] = geometry.ZONE_EDGES) -> str:
+    return str(geometry.zone_of(float(sim.state[0]), edges))
 
 
 class ContinuousZoneReader:
-    """The simulated VLM's reader for MountainCarContinuous-v0: the car's wheels in the pixels
-    (``wheel_column``, as MountainCar's built-in reader), their column mapped back to a position,
-    the zone of that position with GOAL from the flag at 0.45. Pixels only, never the state.
-
-    Example:
-        >>> from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
-        >>> with FrameRenderer(CONTINUOUS_ENV_ID) as renderer:
-        ...     ContinuousZoneReader().read(renderer.render(0.47).pixels)
-        'GOAL'
-    """
+    """MountainCarContinuous-v0's reader: the zone of the wheels' column (pixels only), GOAL from 0.45."""
 
     name = "mountain-car-continuous"
     milestones = ZONE_MILESTONES
@@ -117,7 +87,7 @@ class ContinuousZoneReader:
 
 
 def continuous_probe_states(n: int) -> list[np.ndarray]:
-    """``n`` positions evenly spaced over the track (velocity 0), for the taxonomy.
+    """``n`` positions evenly spaced over the track (velocity 0).
 
     Example:
         >>> [round(float(s[0]), 2) for s in continuous_probe_states(3)]
@@ -148,30 +118,13 @@ ZOO: dict[str, Any] = {
 
 PRESETS: dict[str, dict[str, Any]] = {
     "zoo": ZOO,
-    "sb3-default": {"n_envs": 1, "n_steps": 2048, "batch_size": 64, "gae_lambda": 0.95, "gamma": 0.99,
-                    "n_epochs": 10, "ent_coef": 0.0, "learning_rate": 3e-4, "normalize_obs": False,
-                    "normalize_reward": False, "timesteps": 300_000},
-    "smoke": {"n_envs": 2, "n_steps": 64, "batch_size": 64, "gae_lambda": 0.95, "gamma": 0.99, "n_epochs": 1,
-              "ent_coef": 0.0, "learning_rate": 3e-4, "normalize_obs": True, "normalize_reward": True,
-              "timesteps": 1_024, "eval_episodes": 5},
-    # The paper names no PPO hyperparameters. This is the public tuned configuration for this
-    # environment (zoo) with a 300,000-step budget, just above the largest threshold step the
-    # paper reports (272,448). Plain PPO solves every seed with it; `vlmrl calibrate` searches
-    # for a regime whose baseline learns like the paper's.
+    "sb3-default": {**SB3_DEFAULT_100K, "timesteps": 300_000},
+    "smoke": {**SMOKE, "eval_episodes": 5},
+    # the paper names no PPO knobs: zoo's, with a budget just above its largest threshold step (272,448)
     "paper": {**ZOO, "timesteps": 300_000},
-    # The closest regime of the committed calibrations (results/calibration/calibration.md, the
-    # default 8-regime grid, and results/calibration/grid-2x2/, `--grid ppo.normalize_reward=true,false
-    # --grid ppo.learning_rate=0.0003,0.0001`; 10 seeds per regime, 2026-11-29): the paper preset
-    # without reward normalisation. Its baseline reached -130 on 9/10 seeds (90% [60%, 98%]) in
-    # 177,331 steps on average, against the paper's 60% and 272,448: slower and less reliable than
-    # `paper`, but not the paper's baseline (distance 0.795 [0.321, 1.129]; no regime of either grid
-    # fell between 40% and 80%).
+    # the closest regime of the committed calibrations (results/calibration/calibration.md)
     "paper-calibrated": {**ZOO, "timesteps": 300_000, "normalize_reward": False},
-    # A regime whose baseline fails on some seeds, so that reliability can be compared at all
-    # (issue 18): `paper-calibrated` at half the step size's way down to 1e-4. In the refined
-    # calibration (results/calibration/refine-lr/, `--set ppo.normalize_reward=false --grid
-    # ppo.learning_rate=0.00015,0.0002`, 20 seeds, 2026-12-01) its baseline reached -130 on 8/20
-    # seeds (40% [22%, 61%]), against 17/20 at lr 2e-4, 9/10 at 3e-4 and 0/10 at 1e-4.
+    # a baseline that fails on some seeds (issue 18; 8/20 seeds, results/calibration/refine-lr/)
     "paper-unreliable": {**ZOO, "timesteps": 300_000, "normalize_reward": False, "learning_rate": 1.5e-4},
 }
 
@@ -230,11 +183,8 @@ _CONTINUOUS_ZOO: dict[str, Any] = {
     "timesteps": 20_000,
 }
 
-# MountainCar-v0's zoo knobs (ZOO above) at 100,000 steps, for the continuous car
-_MC_KNOBS: dict[str, Any] = {
-    "n_envs": 16, "n_steps": 16, "batch_size": 64, "gae_lambda": 0.98, "gamma": 0.99, "n_epochs": 4,
-    "ent_coef": 0.0, "learning_rate": 3e-4, "normalize_obs": True, "normalize_reward": True, "timesteps": 100_000,
-}
+# MountainCar-v0's zoo knobs at 100,000 steps, for the continuous car
+_MC_KNOBS: dict[str, Any] = {**ZOO, "timesteps": 100_000}
 
 _SPAN = max(p for _, p in ZONE_POTENTIALS) - min(p for _, p in ZONE_POTENTIALS)
 
@@ -245,7 +195,7 @@ MOUNTAIN_CAR_CONTINUOUS = Task(
     scene=Scene("mountain-car-continuous", (2,), kinematic_dense, Continuous_MountainCarEnv),
     milestones=ZONE_MILESTONES,
     label_potentials=ZONE_POTENTIALS,
-    truth=_continuous_zone_of_sim,
+    truth=functools.partial(_zone_of_sim, edges=CONTINUOUS_EDGES),
     camera=TaskCamera(_continuous_camera, FEATURE_DIM),
     reader=ContinuousZoneReader(),
     thresholds=(0.0, 50.0, 90.0),  # 90: gymnasium's "solved"; below 0 the car never reached the flag
@@ -254,11 +204,7 @@ MOUNTAIN_CAR_CONTINUOUS = Task(
         "zoo": _CONTINUOUS_ZOO,
         # zoo's tuned knobs, a budget ten times zoo's: room to see a slow or stuck baseline
         "zoo-200k": {**_CONTINUOUS_ZOO, "timesteps": 200_000},
-        # The candidates of `vlmrl calibrate --task mountain-car-continuous` (Task.calibration),
-        # 100,000 steps each, all cheap to train on CPUs (zoo's tuned 8-step rollouts with 10
-        # epochs cost about ten times as much per step): MountainCar-v0's zoo knobs (16 envs x
-        # 16 steps, VecNormalize), the same without reward normalisation, and SB3's PPO defaults
-        # on one env (no normalisation). Untuned PPO is known to settle on standing still here.
+        # the candidates of `vlmrl calibrate --task mountain-car-continuous`, cheap on CPUs
         "mc-zoo-100k": _MC_KNOBS,
         "mc-zoo-100k-raw-reward": {**_MC_KNOBS, "normalize_reward": False},
         "sb3-default-100k": SB3_DEFAULT_100K,
@@ -276,8 +222,6 @@ MOUNTAIN_CAR_CONTINUOUS = Task(
     # goal: zoo's 88.3 over a failure's 0 (standing still); Eq. 1 pays at most 1.0 per step at scale 1
     # (x = 0.6); the label map spans 0 to 1
     scales=task_scales(goal_return=88.3, potential_span=_SPAN, dense_peak=1.0, horizon=999),
-    # The closest regime of `vlmrl calibrate --task mountain-car-continuous --seeds 5` (results/tasks/
-    # mountain-car-continuous/calibration/, 2026-12-02): distance 0.877. Its baseline never reached
-    # the flag (0/5 seeds, detached success 0%): the "exploration deadlock" of the paper.
+    # the closest calibrated regime (results/tasks/mountain-car-continuous/calibration/): 0/5 seeds
     study_preset="sb3-default-100k",
 )
