@@ -1,6 +1,5 @@
-"""Checks of the names and URIs every command takes, in one place (each returns why a value is
-wrong, or None): the run schema turns them into validation errors, the other configs into
-``BadInput``, before any store, folder or cache exists."""
+"""Checks of the names and URIs every command takes (each returns why a value is wrong, or None),
+run before any store, folder or cache exists."""
 
 from __future__ import annotations
 

@@ -206,9 +206,7 @@ def pusher_task() -> Any:
         truth=label_of_sim,
         camera=TaskCamera(_camera, feature_dim(FRAME_SHAPE)),
         reader=PusherReader(),
-        # calibrated (results/tasks/pusher/calibration.md): a failure returns -100, so the rolling
-        # mean of 50 episodes passes -99.8 with one success in the window, -99 with about 2%; at the
-        # rule's scales the dense arm's first successes come at 350k-500k steps
+        # calibrated (results/tasks/pusher/calibration.md): -99.8 is one success in the 50-episode window
         thresholds=(-99.8, -99.5, -99.0),
         max_steps=MAX_STEPS,
         presets={
@@ -224,8 +222,7 @@ def pusher_task() -> Any:
         wrap=sparse_push,
         window=50,
         random_score=RandomScore(-100.0),  # measured by RANDOM_SCORE_COMMAND on 2026-12-07 (0/200 successes)
-        # goal: finishing in about 50 steps (-50) over a failure's -100; Eq. 1 pays at most 1 per
-        # step at scale 1 and the task's offset 1 m
+        # goal: about 50 steps (-50) over a failure's -100; Eq. 1 pays at most 1 per step at scale 1
         scales=task_scales(goal_return=50.0, potential_span=1.0, dense_peak=1.0, horizon=MAX_STEPS, kin_offset=1.0),
     )
 
