@@ -1,8 +1,4 @@
-"""Figure 1 of the paper, redrawn: the two frames, the true box and the VLM's box and answers.
-
-Uses matplotlib's object API only (``Figure`` + the Agg canvas): no pyplot state, no style
-set at import.
-"""
+"""Figure 1 of the paper, redrawn: the two frames, the true box and the VLM's box and answers."""
 
 from __future__ import annotations
 
@@ -27,7 +23,7 @@ def _short(text: str | None, limit: int = 34) -> str:
 
 
 def draw_panel(ax: Any, probe: FrameProbe) -> Any:
-    """Draw one frame with its true box (green) and the parsed VLM box (red) on ``ax``; return ``ax``."""
+    """Draw one frame with its true box (green) and the parsed VLM box (red) on ``ax``."""
     from matplotlib.patches import Rectangle
 
     if probe.frame is None:
@@ -61,7 +57,6 @@ def _parsed(status: ParseStatus) -> str:
 
 
 def _float_verdict(probe: FrameProbe) -> str:
-    """Whether the float answer parsed and, if so, how far it is from the true x."""
     r = probe.float_result
     if not r.ok or r.value is None:
         return _parsed(r.status)
@@ -69,7 +64,6 @@ def _float_verdict(probe: FrameProbe) -> str:
 
 
 def _box_verdict(probe: FrameProbe) -> str:
-    """Whether the box parsed and, if so, whether it holds the agent's true centre."""
     r = probe.box_result
     if not r.ok or r.box is None:
         return _parsed(r.status)
@@ -80,7 +74,6 @@ def _box_verdict(probe: FrameProbe) -> str:
 
 
 def _mcq_verdict(probe: FrameProbe) -> str:
-    """Whether the label parsed and, if so, whether it is the true label."""
     r = probe.mcq_result
     if not r.ok or r.label is None:
         return _parsed(r.status)
@@ -89,11 +82,7 @@ def _mcq_verdict(probe: FrameProbe) -> str:
 
 
 def figure1(probes: Sequence[FrameProbe], *, label: str, simulated: bool, note: str = "") -> Any:
-    """A ``matplotlib.figure.Figure`` with the task's panel frames (MountainCar: the paper's a
-    and b) side by side.
-
-    ``label`` names the backend (``name:model``); ``note`` is appended to the suptitle.
-    """
+    """A ``matplotlib.figure.Figure`` of the task's panel frames side by side; ``label``: the backend."""
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 

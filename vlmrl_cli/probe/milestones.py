@@ -1,11 +1,5 @@
-"""The milestone MCQ of the taxonomy probe, and Table 1 of a task that asks for no number.
-
-Every task's probe asks its milestone MCQ; the float and box prompts of the paper's Table 1 need a
-number answer key (``Task.numbers``, MountainCar's position and car box), so a task without one
-has the MCQ row alone (and says so). Each probed state is drawn by the task's training camera (the
-frames a run's VLM sees), its true label comes from the task (``Task.truth``), the VLM's answer is
-parsed in the task's vocabulary, and the potential error ``|dPhi|`` uses the task's label map.
-"""
+"""The milestone MCQ of the taxonomy probe, and Table 1 of a task without ``Task.numbers`` (the MCQ
+row alone), on frames drawn by the task's training camera. See docs/commands/taxonomy.md."""
 
 from __future__ import annotations
 
@@ -58,9 +52,8 @@ class MilestoneSummary:
 
 
 def summarize(probes: list[MilestoneProbe], potentials: dict[str, float], ci: float = 0.95) -> MilestoneSummary:
-    """The MCQ row of Table 1: accuracy (unparsed answers count wrong), its Wilson interval, the
-    format failure rate and the mean ``|Phi(answer) - Phi(truth)|`` over parsed answers; accuracy
-    and format failures by MountainCar's Table 1 rules (``probe.metrics``).
+    """The MCQ row of Table 1: accuracy (unparsed is wrong) with its Wilson interval, the format failure
+    rate and the mean ``|Phi(answer) - Phi(truth)|`` over parsed answers.
 
     Example:
         >>> ok = MilestoneProbe("a", "HIGH", "HIGH", "HIGH", ParseStatus.OK)
@@ -96,8 +89,7 @@ def potentials_of(task: Task) -> dict[str, float]:
 
 def probe_milestones(client: VLMClient, task: Task, states: int, progress: ProgressFn | None
                      ) -> tuple[list[MilestoneProbe], list[Frame]]:
-    """Ask ``task``'s MCQ of about ``states`` states (``Task.probe_states``), each drawn by the
-    task's training camera: the probes and the frames shown."""
+    """The probes of ``task``'s MCQ on about ``states`` states (``Task.probe_states``), and the frames."""
     camera = task.camera.make(ShapingConfig(label_potentials=task.label_potentials))
     probes, shown = [], []
     try:
@@ -120,8 +112,8 @@ def probe_milestones(client: VLMClient, task: Task, states: int, progress: Progr
 
 def write_milestones(out: Path, task: Task, client: VLMClient, probes: list[MilestoneProbe], frames: list[Frame]
                      ) -> tuple[dict[str, Any], dict[str, float]]:
-    """Write ``table1.md``/``.csv``, ``probes.csv``, ``figure1.png`` and ``metrics.json`` into
-    ``out``: the metrics, and those logged to MLflow."""
+    """Write table1.md, .csv, probes.csv, figure1.png and metrics.json into ``out``; the metrics, and
+    those logged to MLflow."""
     summary = summarize(probes, potentials_of(task))
     both = generated_too(client, task, probes, frames)
     backend = client.backend
@@ -142,9 +134,8 @@ def write_milestones(out: Path, task: Task, client: VLMClient, probes: list[Mile
 
 def generated_too(client: VLMClient, task: Task, probes: list[MilestoneProbe], frames: Sequence[Frame]
                   ) -> dict[str, float]:
-    """Where the MCQ was scored by option log-probability, the same frames answered by generation
-    as well (one round), summarised under ``mcq.generate.*``, with the share of frames on which
-    the two modes agree; nothing where the MCQ was generated anyway."""
+    """Where the MCQ was scored, the same frames answered by generation too (``mcq.generate.*``) and
+    the share on which the modes agree; empty where it was generated anyway."""
     prompt = task.milestones.prompt
     if not client.scores(prompt) or not frames:
         return {}
@@ -197,7 +188,7 @@ def _write(out: Path, task: Task, probes: list[MilestoneProbe], s: MilestoneSumm
 
 def _figure(path: Path, task: Task, probes: list[MilestoneProbe], frames: list[Any], label: str,
             simulated: bool) -> None:
-    """Figure 1 of a task: one probed frame per true label (the first of each), with its answer."""
+    """Figure 1 of a task: the first probed frame of each true label, with its answer."""
     from matplotlib.figure import Figure
 
     picks = [next(i for i, p in enumerate(probes) if p.truth == lab) for lab in task.milestones.labels

@@ -1,11 +1,5 @@
-"""Table 1 of the paper, recomputed: raw outputs, ground truth and the consequence on dPhi.
-
-One row per error taxonomy (I float regression, II box grounding, III semantic MCQ) for the
-task's frame pair (a) -> (b) (its ``NumberProbe.panels``; MountainCar's are the paper's
-x=-0.50 -> x=-0.69), with the dPhi each kind of answer would give PBRS computed from the parsed
-answers, and a second table of the same statistics over the whole sweep. Written as Markdown,
-CSV and LaTeX (``core.tables``).
-"""
+"""Table 1 of the paper, recomputed for the task's pair (a) -> (b) and over the sweep: raw outputs,
+ground truth and the dPhi each kind of answer gives PBRS, as Markdown, CSV and LaTeX."""
 
 from __future__ import annotations
 
@@ -111,8 +105,7 @@ def _raw(probe: FrameProbe, kind: PromptKind) -> str:
 
 
 def taxonomy_frame(a: FrameProbe, b: FrameProbe, numbers: NumberProbe) -> pd.DataFrame:
-    """Table 1's rows for the pair (a) -> (b) of a task's ``numbers``: one row per error
-    taxonomy, cells as strings."""
+    """Table 1's rows (one per error taxonomy) for the pair (a) -> (b), cells as strings."""
     label_a = f"VLM raw output (a) {a.caption or ''} ({a.frame_id})".replace("  ", " ")
     label_b = f"VLM raw output (b) {b.caption or ''} ({b.frame_id})".replace("  ", " ")
     rows = []
@@ -149,6 +142,7 @@ def with_ci(stats: Mapping[str, float], key: str, digits: int = 3) -> str:
 
 def sweep_frame(sweep: Mapping[str, float]) -> pd.DataFrame:
     """Sweep statistics per prompt kind (n/a where no sweep was probed), cells as strings."""
+
     def get(key: str) -> float:
         return sweep.get(key, math.nan)
 
@@ -177,23 +171,11 @@ def sweep_frame(sweep: Mapping[str, float]) -> pd.DataFrame:
 
 
 def latex_table(df: pd.DataFrame, caption: str, label: str) -> str:
-    """A ``table`` float with a ``tabular`` of ragged-right paragraph columns (the cells are long text)."""
+    """A ``table`` float of ragged-right paragraph columns (the cells are long text)."""
     width = f"{0.95 / max(1, len(df.columns)):.3f}"
     spec = "".join(f">{{\\raggedright\\arraybackslash}}p{{{width}\\linewidth}}" for _ in df.columns)
     return tables.latex(df, caption, label=label, colspec=spec, setup=(r"\centering\scriptsize",),
                         rules=tables.HLINES)
-
-
-def captions(label: str, provenance: str, simulated: bool, pair: tuple[FrameProbe, FrameProbe]) -> tuple[str, str]:
-    """(Table 1 caption, sweep table caption) for the frame ``pair`` (a), (b); ``provenance``
-    says plainly when the VLM is simulated."""
-    a, b = pair
-    table = (f"Table 1 (recomputed). Taxonomy of pure vision failures on the consecutive micro-states "
-             f"(a) x = {a.truth.x:.2f} -> (b) x = {b.truth.x:.2f}. Backend {label}. {provenance}")
-    flag = " SIMULATED VLM (not a real model)." if simulated else ""
-    sweep = (f"Table 1b. The same statistics over a sweep of readings sorted along the task's range "
-             f"(consecutive pairs). Backend {label}.{flag}")
-    return table, sweep
 
 
 def write_tables(
@@ -206,8 +188,8 @@ def write_tables(
     provenance: str,
     simulated: bool,
 ) -> list[Path]:
-    """Write table1.md, table1.csv, table1.tex, table1_sweep.csv and probes.csv into ``folder``;
-    ``numbers``: the task's number probe the probes were scored with (its pair, frame and notes)."""
+    """Write table1.md, .csv, .tex, table1_sweep.csv and probes.csv into ``folder``; the captions
+    say SIMULATED when ``simulated`` (``provenance`` says where the answers came from)."""
     (first, _, _), (second, _, _) = numbers.panels[:2]
     a = next((p for p in probes if p.panel == first), None)
     b = next((p for p in probes if p.panel == second), None)
@@ -215,7 +197,11 @@ def write_tables(
         raise ValueError(f"Table 1 needs the task's frames ({first}) and ({second}) (NumberProbe.panels) among "
                          "the probes.")
     main, stats = taxonomy_frame(a, b, numbers), sweep_frame(sweep)
-    cap_main, cap_sweep = captions(label, provenance, simulated, (a, b))
+    cap_main = (f"Table 1 (recomputed). Taxonomy of pure vision failures on the consecutive micro-states "
+                f"(a) x = {a.truth.x:.2f} -> (b) x = {b.truth.x:.2f}. Backend {label}. {provenance}")
+    flag = " SIMULATED VLM (not a real model)." if simulated else ""
+    cap_sweep = (f"Table 1b. The same statistics over a sweep of readings sorted along the task's range "
+                 f"(consecutive pairs). Backend {label}.{flag}")
     notes = [*numbers.notes,
              f"Φ mappings: MCQ label -> raw potential (the task's label_potentials); float: x "
              f"normalised to [0, 1] over [{numbers.low:g}, {numbers.high:g}]; box: box centre column / "
@@ -239,7 +225,6 @@ def write_tables(
 
 
 def probes_frame(probes: Sequence[FrameProbe]) -> pd.DataFrame:
-    """One row per probed frame: truth, raw answers, parse statuses and parsed values."""
     rows = []
     for p in sorted(probes, key=lambda q: q.truth.x):
         rows.append({

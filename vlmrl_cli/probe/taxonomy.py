@@ -1,17 +1,5 @@
-"""The taxonomy probe (paper Section 2, Table 1, Figure 1): ask a VLM about frames, score it.
-
-Every probed frame gets the task's questions: its milestone MCQ always, and where the task has a
-number answer key (``Task.numbers``, a ``NumberProbe``; MountainCar-v0's, the paper's) the float
-regression and box grounding prompts too. The answers are parsed, compared with the ground truth,
-and turned into the potential Phi each answer would give PBRS, so that the paper's consequences
-(noise, ROI instability, the MCQ dead zone) are computed rather than asserted.
-
-``run_taxonomy`` is the one entry point. It validates everything the user can get wrong (the
-task, the simulated VLM's profile, output folder, backend, transcript, tracking store) before
-probing, writes its files into a temporary sibling folder that is moved into place only when
-everything succeeded, and logs exactly one MLflow run, marked FAILED if the probe fails after it
-was created.
-"""
+"""The taxonomy probe (paper Section 2, Table 1, Figure 1): ask a VLM about a task's frames, score
+the answers and the potentials they give PBRS. See docs/commands/taxonomy.md."""
 
 from __future__ import annotations
 
@@ -78,9 +66,8 @@ class TaxonomyConfig:
 
 @dataclass(frozen=True)
 class TaxonomyResult:
-    """What a finished probe produced and where it went: ``probes`` are ``FrameProbe``s where the
-    task has number questions (``sweep`` their statistics), else ``milestones.MilestoneProbe``s
-    (``sweep`` empty); ``metrics`` is what ``metrics.json`` holds."""
+    """What a finished probe produced: ``FrameProbe``s and their ``sweep`` statistics where the task
+    has number questions, else ``MilestoneProbe``s; ``metrics`` as in ``metrics.json``."""
 
     out: Path
     run_id: str
@@ -99,33 +86,25 @@ class TaxonomyResult:
         return next((p for p in self.probes if p.panel == name), None)
 
 
-# --- provenance wording ----------------------------------------------------------------------
-
 def provenance_line(backend: Backend) -> str:
     """One sentence saying where the answers came from (shown in captions and tables)."""
     if backend.simulated:
         return ("SIMULATED VLM (not a real model): answers come from a pixel reader with a coarse patch "
                 "grid and injected noise, not from a vision-language model.")
-    records = getattr(backend, "records", ())
-    if backend.name == "replay" and any(r.backend == "paper" for r in records):
+    if _replays_paper(backend):
         return ("The VLM outputs are the paper's reported raw outputs (its Table 1), replayed from a "
                 "transcript transcribed from the paper, not produced here; truths and dPhi are computed here.")
     if backend.name == "replay":
-        source = getattr(backend, "source", None)
-        return f"Answers replayed from the transcript {source}."
+        return f"Answers replayed from the transcript {getattr(backend, 'source', None)}."
     return "Live answers of a real VLM."
 
 
-def _figure_note(backend: Backend) -> str:
-    if backend.name == "replay" and any(r.backend == "paper" for r in getattr(backend, "records", ())):
-        return "the paper's reported raw outputs, replayed"
-    return ""
+def _replays_paper(backend: Backend) -> bool:
+    return backend.name == "replay" and any(r.backend == "paper" for r in getattr(backend, "records", ()))
 
-
-# --- output folder ---------------------------------------------------------------------------
 
 def _staging_folder(out: Path) -> Path:
-    """Check ``out`` can be written and make the temporary sibling the results are staged in."""
+    """The temporary sibling of ``out`` the results are staged in, moved into place on success."""
     check_out_folder(out)
     parent = out.resolve().parent
     try:
@@ -152,20 +131,9 @@ def _jsonable(values: Mapping[str, float]) -> dict[str, float | None]:
     return {k: (v if math.isfinite(v) else None) for k, v in values.items()}
 
 
-# --- the probe -------------------------------------------------------------------------------
-
-def _default_task() -> Task:
-    """The task of a taxonomy that names none: the paper's (a ``TaxonomyConfig`` records no task,
-    as the runs from before tasks did, so its hash is unchanged)."""
-    from vlmrl_cli.tasks.registry import paper_task
-
-    return paper_task()
-
-
 @dataclass
 class _Outcome:
-    """What one kind of probe found, wrote into its folder and logs: its probes, sweep statistics
-    (number questions only), ``metrics.json`` and the MLflow metrics."""
+    """What one kind of probe found: probes, sweep statistics, ``metrics.json`` and MLflow metrics."""
 
     probes: tuple[Any, ...]
     sweep: Mapping[str, float]
@@ -174,8 +142,7 @@ class _Outcome:
 
 
 class _NumberTable:
-    """Table 1 of a task with number questions (MountainCar's, the paper's): the float, box and MCQ
-    prompts on a sweep of readings; its run is named and hashed by the ``TaxonomyConfig`` alone."""
+    """Table 1 of a task with number questions on a sweep; its run is hashed by the config alone."""
 
     def __init__(self, cfg: TaxonomyConfig, task: Task, backend: Backend) -> None:
         self.task = task
@@ -197,7 +164,7 @@ class _NumberTable:
         write_tables(probes, sweep, staging, number_probe(self.task), label=plain, provenance=provenance,
                      simulated=backend.simulated)
         save_figure1(probes, staging / "figure1.png", label=plain, simulated=backend.simulated,
-                     note=_figure_note(backend))
+                     note="the paper's reported raw outputs, replayed" if _replays_paper(backend) else "")
         summary: dict[str, Any] = {
             "backend": backend.name, "model": backend.model, "simulated": backend.simulated,
             "label": client.label, "provenance": provenance, "sweep": self.is_sweep,
@@ -213,8 +180,7 @@ class _NumberTable:
 
 
 class _MilestoneTable:
-    """Table 1 of a task that asks for no number: its milestone MCQ on ``Task.probe_states``; its
-    run is named after and tagged with the task, hashed by the task, the states and the VLM."""
+    """Table 1 of a task without numbers: its MCQ; its run is hashed by the task, states and VLM."""
 
     def __init__(self, cfg: TaxonomyConfig, task: Task, backend: Backend) -> None:
         self.task, self.states = task, cfg.states or DEFAULT_STATES
@@ -230,9 +196,7 @@ class _MilestoneTable:
 
 
 def _check(cfg: TaxonomyConfig, task: Task) -> None:
-    """``BadInput`` for what can be wrong before anything exists: a task with neither number
-    questions nor probe states, a simulated-VLM profile the task does not offer, the output
-    folder, the VLM (cache path, model, server, transcript)."""
+    """``BadInput`` for what can be wrong before anything exists (task, profile, folder, VLM)."""
     if task.numbers is None and task.probe_states is None:
         raise BadInput(f"task '{task.name}' names no probe states; give its Task a probe_states function.")
     problem = profile_problem(cfg.vlm.sim.profile, task) if cfg.vlm.backend == "sim" else None
@@ -243,14 +207,13 @@ def _check(cfg: TaxonomyConfig, task: Task) -> None:
 
 
 def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None, task: Task | None = None) -> TaxonomyResult:
-    """Probe ``task``'s frames (None: the paper's task) with its questions (the MCQ; the float and
-    box prompts where it has ``numbers``), score, write Table 1 and Figure 1 into ``cfg.out`` and
-    log one MLflow run.
+    """Probe ``task``'s frames (None: the paper's, as a config records no task), write Table 1 and
+    Figure 1 into ``cfg.out`` and log one MLflow run; ``progress(done, total)`` after each frame.
+    User errors are ``BadInput``, raised before any result file exists."""
+    if task is None:
+        from vlmrl_cli.tasks.registry import paper_task
 
-    ``progress(done, total)`` is called after each frame. User errors are ``BadInput``, raised
-    before any result file exists in ``cfg.out`` (``_check``).
-    """
-    task = _default_task() if task is None else task
+        task = paper_task()
     _check(cfg, task)
     tracker = store.connect(cfg.tracking_uri)
     staging = _staging_folder(cfg.out)
@@ -300,8 +263,7 @@ def _probe_all(client: VLMClient, task: Task, planned: list[_Planned], progress:
 
 def _generated_too(client: VLMClient, task: Task, planned: list[_Planned], probes: list[FrameProbe]
                    ) -> dict[str, float]:
-    """The MCQ answered by generation too where it was scored (``milestones.generated_too``), on
-    the same frames, drawn again."""
+    """``milestones.generated_too`` on the same frames, drawn again."""
     if not client.scores(task.milestones.prompt) or not planned:
         return {}
     with closing(number_probe(task).renderer()) as renderer:

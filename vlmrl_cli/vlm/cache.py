@@ -54,8 +54,7 @@ class ResponseCache:
             path.parent.mkdir(parents=True, exist_ok=True)
             self._db = sqlite3.connect(str(path), timeout=30.0)
             self._db.execute("PRAGMA journal_mode=WAL")
-            # WAL without an fsync per commit: a crash can lose the last batches of answers (they
-            # are asked again), never corrupt the file. A commit cost ~190 ms on a busy disk.
+            # no fsync per commit (~190 ms on a busy disk): a crash loses answers, never the file
             self._db.execute("PRAGMA synchronous=NORMAL")
             self._db.execute(_SCHEMA)
             self._db.commit()
@@ -75,14 +74,9 @@ class ResponseCache:
         return str(row[0]), float(row[1])
 
     def put(self, key: str, backend: str, model: str, answer: str, latency_s: float) -> None:
-        """Store an answer; written to disk in batches (``batch`` answers, or the first one
-        pending for ``max_age_s``, so a slow backend's answers are not held long), and by
-        ``flush``/``close``.
+        """Store an answer; written in batches (``batch`` answers or ``max_age_s``; a commit costs ~3 ms).
 
-        One commit per answer cost about 3 ms, a fifth of a simulated query. Pending answers
-        are served from memory, so batching changes no answer, only when other processes
-        sharing the file see it. No write transaction stays open between batches.
-        """
+        Pending answers are served from memory, so batching changes only when other processes see them."""
         now = time.monotonic()
         if not self._pending:
             self._oldest = now
@@ -91,7 +85,6 @@ class ResponseCache:
             self.flush()
 
     def flush(self) -> None:
-        """Write the pending answers in one transaction."""
         if not self._pending:
             return
         rows = [(key, *value) for key, value in self._pending.items()]

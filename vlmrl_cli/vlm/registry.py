@@ -16,9 +16,8 @@ if TYPE_CHECKING:
 
 
 def build_backend(cfg: VLMConfig, stream: int = 0, reader: MilestoneReader | None = None) -> Backend:
-    """Instantiate the backend ``cfg.backend``; unknown names are a ``BadInput``. ``stream`` seeds a
-    stochastic simulated VLM's per-query draws (the training run's seed); ``reader`` is the task's
-    pixel reader (``Task.reader``), which the simulated VLM needs. Real backends ignore both."""
+    """The backend ``cfg.backend``; ``stream`` (the run's seed) and ``reader`` (``Task.reader``) are the
+    simulated VLM's."""
     if cfg.backend == "sim":
         from vlmrl_cli.vlm.sim import SimulatedVLM
 
