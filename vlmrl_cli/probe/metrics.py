@@ -24,12 +24,7 @@ def finite_pairs(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarra
 
 
 def spearman(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> float:
-    """Spearman rank correlation over the pairs where both are finite; NaN: < 2 pairs or a constant side.
-
-    Example:
-        >>> spearman([1, 2, 3], [10, 20, 30]), math.isnan(spearman([1, 1, 1], [1, 2, 3]))
-        (1.0, True)
-    """
+    """Spearman rank correlation over the pairs where both are finite; NaN: < 2 pairs or a constant side."""
     x, y = finite_pairs(a, b)
     if x.size < 2 or np.all(x == x[0]) or np.all(y == y[0]):
         return math.nan
@@ -38,13 +33,7 @@ def spearman(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -
 
 def spearman_ci(rho: float, n: int, level: float = 0.95) -> tuple[float, float]:
     """Confidence interval of a Spearman ``rho`` over ``n`` pairs: Fisher z with Bonett & Wright's
-    (2000) variance (1 + rho^2 / 2) / (n - 3); (NaN, NaN) for rho NaN, n < 4 or |rho| = 1.
-
-    Example:
-        >>> lo, hi = spearman_ci(0.0, 103)
-        >>> round(lo, 3), round(hi, 3)
-        (-0.194, 0.194)
-    """
+    (2000) variance (1 + rho^2 / 2) / (n - 3); (NaN, NaN) for rho NaN, n < 4 or |rho| = 1."""
     if not 0 < level < 1:
         raise ValueError(f"level must be in (0, 1), got {level}")
     if not math.isfinite(rho) or n < 4 or abs(rho) >= 1:
@@ -55,12 +44,7 @@ def spearman_ci(rho: float, n: int, level: float = 0.95) -> tuple[float, float]:
 
 
 def iou(a: Box, b: Box) -> float:
-    """Intersection over union of two boxes, in [0, 1]; 0 if either is empty.
-
-    Example:
-        >>> iou((0, 0, 10, 10), (5, 0, 15, 10))
-        0.3333333333333333
-    """
+    """Intersection over union of two boxes, in [0, 1]; 0 if either is empty."""
     ix = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
     iy = max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
     inter = ix * iy
@@ -102,13 +86,7 @@ def delta_phi_stats(phi_vlm: Sequence[float] | np.ndarray, phi_true: Sequence[fl
     """dPhi = Phi(s_{i+1}) - Phi(s_i) of the VLM against the truth over (n,) states sorted along the task's
     range: ``phi_unavailable`` over the states (NaN: unparsed), the rest over the ``n_pairs`` usable pairs
     (all NaN when none): ``dead_zone`` (dPhi == 0), ``dead_zone_while_truth_moves``,
-    ``sign_disagreement`` and ``mean_abs_dphi_error``.
-
-    Example:
-        >>> s = delta_phi_stats([0.0, 0.0, 0.1], [0.0, 0.1, 0.1])
-        >>> s["dead_zone"], s["sign_disagreement"]
-        (0.5, 1.0)
-    """
+    ``sign_disagreement`` and ``mean_abs_dphi_error``."""
     vlm = np.asarray(phi_vlm, dtype=float)
     true = np.asarray(phi_true, dtype=float)
     if vlm.shape != true.shape or vlm.ndim != 1:

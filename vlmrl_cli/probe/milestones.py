@@ -53,15 +53,7 @@ class MilestoneSummary:
 
 def summarize(probes: list[MilestoneProbe], potentials: dict[str, float], ci: float = 0.95) -> MilestoneSummary:
     """The MCQ row of Table 1: accuracy (unparsed is wrong) with its Wilson interval, the format failure
-    rate and the mean ``|Phi(answer) - Phi(truth)|`` over parsed answers.
-
-    Example:
-        >>> ok = MilestoneProbe("a", "HIGH", "HIGH", "HIGH", ParseStatus.OK)
-        >>> bad = MilestoneProbe("b", "LOW", "?", None, ParseStatus.FORMAT_COLLAPSE)
-        >>> s = summarize([ok, bad], {"LOW": 0.0, "HIGH": 1.0})
-        >>> s.accuracy, s.format_failure_rate, s.mean_abs_dphi
-        (0.5, 0.5, 0.0)
-    """
+    rate and the mean ``|Phi(answer) - Phi(truth)|`` over parsed answers."""
     n = len(probes)
     correct = sum(p.label == p.truth for p in probes)
     accuracy = metrics.mcq_accuracy([p.label for p in probes], [p.truth for p in probes])

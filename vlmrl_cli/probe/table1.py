@@ -127,12 +127,7 @@ def _fmt(value: float, digits: int = 3) -> str:
 
 
 def with_ci(stats: Mapping[str, float], key: str, digits: int = 3) -> str:
-    """``stats[key]`` with its 95% interval from ``key_low`` / ``key_high`` when both are defined.
-
-    Example:
-        >>> with_ci({"r": -0.14, "r_low": -0.33, "r_high": 0.06}, "r", 2), with_ci({"r": 1.0}, "r", 2)
-        ('-0.14 [95% CI -0.33, 0.06]', '1.00')
-    """
+    """``stats[key]`` with its 95% interval from ``key_low`` / ``key_high`` when both are defined."""
     value = _fmt(stats.get(key, math.nan), digits)
     low, high = stats.get(f"{key}_low", math.nan), stats.get(f"{key}_high", math.nan)
     if not (math.isfinite(low) and math.isfinite(high)):

@@ -27,18 +27,7 @@ def cache_key(backend: str, model: str, prompt: str, image_sha256: str) -> str:
 
 
 class ResponseCache:
-    """sqlite-backed map from ``cache_key`` to (answer, original latency); counts hits/misses.
-
-    Example:
-        >>> import tempfile, pathlib
-        >>> c = ResponseCache(pathlib.Path(tempfile.mkdtemp()) / "r.sqlite")
-        >>> k = cache_key("sim", "m", "p", "abc")
-        >>> c.get(k) is None, c.put(k, "sim", "m", "BOTTOM", 0.1), c.get(k)
-        (True, None, ('BOTTOM', 0.1))
-        >>> c.hits, c.misses
-        (1, 1)
-        >>> c.close()
-    """
+    """sqlite-backed map from ``cache_key`` to (answer, original latency); counts hits/misses."""
 
     def __init__(self, path: Path, batch: int = 64, max_age_s: float = 5.0) -> None:
         if batch < 1 or not max_age_s >= 0:

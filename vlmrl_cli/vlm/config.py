@@ -81,15 +81,7 @@ class SimKnobs:
 
     @classmethod
     def of_profile(cls, name: str, task: ProfileOwner | None = None, **overrides: Any) -> SimKnobs:
-        """The knobs of profile ``name`` (generic or ``task``'s) with ``overrides`` laid over them.
-
-        Example:
-            >>> k = SimKnobs.of_profile("ideal", flicker=0.3)
-            >>> k.profile, k.flicker, k.float_noise
-            ('ideal', 0.3, 0.0)
-            >>> SimKnobs.of_profile("default") == SimKnobs()
-            True
-        """
+        """The knobs of profile ``name`` (generic or ``task``'s) with ``overrides`` laid over them."""
         problem = profile_problem(name, task)
         if problem:
             raise ValueError(problem + ".")
@@ -107,17 +99,7 @@ _PROFILE_KNOBS = tuple(f.name for f in dataclasses.fields(SimKnobs) if f.name !=
 
 @dataclass(frozen=True)
 class SimProfile:
-    """A task's named set of ``SimKnobs`` values (``Task.sim_profiles``); others keep their default.
-
-    Example:
-        >>> stuck = SimProfile("stuck", {"flicker": 0.0, "float_anchor": 0.5})
-        >>> SimKnobs(**stuck.knobs, profile=stuck.name).float_anchor
-        0.5
-        >>> SimProfile("ideal", {})
-        Traceback (most recent call last):
-        ...
-        ValueError: simulated-VLM profile 'ideal' is a generic one; give the task's profile another name
-    """
+    """A task's named set of ``SimKnobs`` values (``Task.sim_profiles``); others keep their default."""
 
     name: str
     knobs: Mapping[str, Any]
@@ -161,14 +143,7 @@ def sim_profiles(task: ProfileOwner | None = None) -> dict[str, Mapping[str, Any
 
 
 def profile_problem(name: str, task: ProfileOwner | None = None) -> str | None:
-    """Why a run of ``task`` may not name profile ``name`` (None: it may).
-
-    Example:
-        >>> profile_problem("ideal") is None
-        True
-        >>> profile_problem("idael")
-        "unknown simulated-VLM profile 'idael' (did you mean 'ideal'?); choose from ideal, default"
-    """
+    """Why a run of ``task`` may not name profile ``name`` (None: it may)."""
     offered = sim_profiles(task)
     if name in offered:
         return None
@@ -185,12 +160,7 @@ NEUTRAL_SIM_KNOBS: dict[str, Any] = {
 
 
 def sim_identity(knobs: SimKnobs) -> dict[str, Any]:
-    """The knobs as they enter hashes: ``NEUTRAL_SIM_KNOBS`` at their neutral value left out.
-
-    Example:
-        >>> "profile" in sim_identity(SimKnobs()), sim_identity(SimKnobs.of_profile("ideal"))["profile"]
-        (False, 'ideal')
-    """
+    """The knobs as they enter hashes: ``NEUTRAL_SIM_KNOBS`` at their neutral value left out."""
     values = {f.name: getattr(knobs, f.name) for f in dataclasses.fields(knobs)}
     return {k: v for k, v in values.items() if k not in NEUTRAL_SIM_KNOBS or NEUTRAL_SIM_KNOBS[k] != v}
 
@@ -199,14 +169,7 @@ def resolve_sim_profile(sim: Mapping[str, Any], task: ProfileOwner | None = None
     """A raw ``[vlm.sim]`` table with its profile's values beneath the keys set explicitly.
 
     A profile ``task`` does not offer is a ``BadInput``; without a task, or a profile, the table
-    comes back unchanged (the schema or the task's own check says what is wrong).
-
-    Example:
-        >>> resolve_sim_profile({"profile": "ideal", "flicker": 0.3})["flicker"]
-        0.3
-        >>> resolve_sim_profile({"profile": "ideal"})["patch_px"]
-        1
-    """
+    comes back unchanged (the schema or the task's own check says what is wrong)."""
     name = sim.get("profile")
     offered = sim_profiles(task)
     if not isinstance(name, str) or (name not in offered and task is None):

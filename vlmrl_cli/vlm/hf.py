@@ -21,14 +21,7 @@ DTYPES: tuple[str, ...] = ("auto", "float32", "float16", "bfloat16")
 
 
 def resolve_dtype(name: str, device: str) -> Any:
-    """The ``torch.dtype`` named ``name``; ``auto`` is float16 on CUDA and float32 elsewhere.
-
-    Example:
-        >>> resolve_dtype("auto", "cpu")
-        torch.float32
-        >>> resolve_dtype("bfloat16", "cuda")
-        torch.bfloat16
-    """
+    """The ``torch.dtype`` named ``name``; ``auto`` is float16 on CUDA and float32 elsewhere."""
     import torch
 
     if name not in DTYPES:

@@ -116,14 +116,7 @@ def _to_float(token: str) -> float | None:
 def parse_float(text: str, low: float, high: float) -> FloatResult:
     """The number in a float answer; outside ``[low, high]`` (the task's range) it is OUT_OF_RANGE.
 
-    An explicit ``x = ...`` wins; otherwise the text must hold exactly one distinct number.
-
-    Example:
-        >>> parse_float("The car is at approximately -0.52.", -1.2, 0.6)
-        FloatResult(status=<ParseStatus.OK: 'ok'>, value=-0.52)
-        >>> parse_float("7", -1.2, 0.6).status, parse_float("no idea", -1.2, 0.6).status
-        (<ParseStatus.OUT_OF_RANGE: 'out_of_range'>, <ParseStatus.FORMAT_COLLAPSE: 'format_collapse'>)
-    """
+    An explicit ``x = ...`` wins; otherwise the text must hold exactly one distinct number."""
     assigned = [v for v in (_to_float(m) for m in _ASSIGNED.findall(text)) if v is not None]
     candidates = assigned or [v for v in (_to_float(m) for m in _NUMBER.findall(text)) if v is not None]
     distinct = list(dict.fromkeys(candidates))
@@ -174,16 +167,7 @@ def _validate_box(raw: tuple[float, ...], width: int, height: int) -> BoxResult:
 @_guarded(BoxResult)
 def parse_box(text: str, width: int, height: int) -> BoxResult:
     """The box (x0, y0, x1, y1, pixels) in an answer about a ``width`` x ``height`` frame: a list,
-    a tuple, JSON or four bare numbers; all four in [0, 1] are fractions of the frame (``normalised``).
-
-    Example:
-        >>> parse_box("Box [450, 210, 480, 230]", 600, 400).box
-        (450.0, 210.0, 480.0, 230.0)
-        >>> parse_box("Error [0, 0, 0, 0]", 600, 400).status
-        <ParseStatus.FORMAT_COLLAPSE: 'format_collapse'>
-        >>> parse_box('{"x_min": 0.5, "y_min": 0.5, "x_max": 0.75, "y_max": 1.0}', 600, 400).box
-        (300.0, 200.0, 450.0, 400.0)
-    """
+    a tuple, JSON or four bare numbers; all four in [0, 1] are fractions of the frame (``normalised``)."""
     boxes: list[tuple[float, ...]] = _json_boxes(text)
     if not boxes:
         for match in _BOX.finditer(text):
@@ -217,17 +201,7 @@ def _normalise_label_text(text: str) -> str:
 
 @_guarded(MCQResult)
 def parse_mcq(text: str, labels: Sequence[str]) -> MCQResult:
-    """The one label of ``labels`` in an MCQ answer, in any case and word separator; ``Choice = X`` wins.
-
-    Example:
-        >>> stages = ("LOW", "HALF_WAY", "NEAR_TOP", "TOP")
-        >>> parse_mcq("Choice = LOW", stages).label, parse_mcq("near-top.", stages).label
-        ('LOW', 'NEAR_TOP')
-        >>> parse_mcq("LOW or HALF_WAY", stages).status
-        <ParseStatus.AMBIGUOUS: 'ambiguous'>
-        >>> parse_mcq("Answer: above bar", ("HANGING", "ABOVE_BAR")).label
-        'ABOVE_BAR'
-    """
+    """The one label of ``labels`` in an MCQ answer, in any case and word separator; ``Choice = X`` wins."""
     norm = _normalise_label_text(text)
     choice, label = _label_patterns(tuple(labels))
     chosen = list(dict.fromkeys(choice.findall(norm))) or list(dict.fromkeys(label.findall(norm)))

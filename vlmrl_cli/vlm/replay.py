@@ -15,13 +15,7 @@ from vlmrl_cli.vlm.transcript import TranscriptRecord, read_transcript
 class ReplayBackend:
     """Answers from a transcript by (prompt kind, image SHA-256), else frame id; else ``MissingAnswer``.
 
-    ``simulated`` when any record was, so a replayed sim run is never mistaken for a real model.
-
-    Example:
-        >>> backend = ReplayBackend.from_config(VLMConfig(backend="replay"))
-        >>> backend.model, backend.simulated, backend.frame_ids()
-        ('llava-hf/llava-1.5-7b-hf', False, ['x=-0.50', 'x=-0.69'])
-    """
+    ``simulated`` when any record was, so a replayed sim run is never mistaken for a real model."""
 
     name = "replay"
 

@@ -61,14 +61,7 @@ TASK_REFUSAL = "I'm sorry, but I cannot find what the question is about in this 
 
 
 def knobs_digest(knobs: SimKnobs) -> str:
-    """8 hex digits naming the knobs that change answers; ``NEUTRAL_SIM_KNOBS`` count only off neutral.
-
-    Example:
-        >>> knobs_digest(SimKnobs()) == knobs_digest(SimKnobs(latency_s=1.0)) != knobs_digest(SimKnobs(seed=1))
-        True
-        >>> knobs_digest(SimKnobs()) != knobs_digest(SimKnobs(float_anchor=0.38))
-        True
-    """
+    """8 hex digits naming the knobs that change answers; ``NEUTRAL_SIM_KNOBS`` count only off neutral."""
     shaping: tuple[object, ...] = (knobs.flicker, knobs.float_noise, knobs.box_noise_px, knobs.box_failure,
                                    knobs.patch_px, knobs.seed)
     added = sorted((k, v) for k, v in sim_identity(knobs).items() if k in NEUTRAL_SIM_KNOBS)
@@ -91,21 +84,7 @@ class SimulatedVLM:
     MCQ: the label, a neighbour's with probability ``flicker``; FLOAT and BOX (``NumberReader``
     only): the patch-snapped reading with noise, a box that collapses with ``box_failure``. Answers
     are a pure function of (seed, prompt, image bytes), except with ``query_flicker > 0``: a fresh
-    draw per query from a stream seeded by (seed, ``stream``), never cached (``stochastic``).
-
-    Example:
-        >>> from vlmrl_cli.frames.render import Frame
-        >>> from vlmrl_cli.vlm.prompts import Milestones, mcq_prompt
-        >>> class Lit:  # a toy reader: is the picture bright?
-        ...     name, milestones = "lit", Milestones(("DARK", "LIT"), mcq_prompt("Lit?", ("DARK", "LIT")))
-        ...     def read(self, pixels): return "LIT" if pixels.mean() > 127 else "DARK"
-        >>> vlm = SimulatedVLM(Lit(), SimKnobs(flicker=0.0))
-        >>> frame = Frame.from_pixels(np.full((8, 8, 3), 255, np.uint8))
-        >>> vlm.answer(Lit.milestones.prompt, frame) in {"LIT", "Choice = LIT", "LIT.", "The image shows LIT."}
-        True
-        >>> vlm.model.startswith("pixel-reader-v1-lit/")
-        True
-    """
+    draw per query from a stream seeded by (seed, ``stream``), never cached (``stochastic``)."""
 
     name = "sim"
     simulated = True
