@@ -83,10 +83,8 @@ def mcq_accuracy(predicted: Sequence[str | None], truth: Sequence[str]) -> float
 
 
 def delta_phi_stats(phi_vlm: Sequence[float] | np.ndarray, phi_true: Sequence[float] | np.ndarray) -> dict[str, float]:
-    """dPhi = Phi(s_{i+1}) - Phi(s_i) of the VLM against the truth over (n,) states sorted along the task's
-    range: ``phi_unavailable`` over the states (NaN: unparsed), the rest over the ``n_pairs`` usable pairs
-    (all NaN when none): ``dead_zone`` (dPhi == 0), ``dead_zone_while_truth_moves``,
-    ``sign_disagreement`` and ``mean_abs_dphi_error``."""
+    """dPhi = Phi(s_{i+1}) - Phi(s_i) of the VLM against the truth over (n,) states sorted along the
+    range: ``phi_unavailable`` over the states (NaN), the fractions over the usable pairs (NaN: none)."""
     vlm = np.asarray(phi_vlm, dtype=float)
     true = np.asarray(phi_true, dtype=float)
     if vlm.shape != true.shape or vlm.ndim != 1:

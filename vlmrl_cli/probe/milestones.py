@@ -1,5 +1,4 @@
-"""The milestone MCQ of the taxonomy probe, and Table 1 of a task without ``Task.numbers`` (the MCQ
-row alone), on frames drawn by the task's training camera. See docs/commands/taxonomy.md."""
+"""The milestone MCQ of the taxonomy probe, and Table 1 of a task without ``Task.numbers``."""
 
 from __future__ import annotations
 
@@ -91,7 +90,9 @@ def probe_milestones(client: VLMClient, task: Task, states: int, progress: Progr
             sim = SimpleNamespace(state=np.asarray(state, dtype=float)) if vector else state
             view = camera.look(sim)
             frame = view.frame()
-            frame_id = _frame_id(state) if vector else f"{task.name}-{i:04d}-{view.key[:12]}"
+            values = np.asarray(state, dtype=float).reshape(-1) if vector else ()
+            frame_id = ("state=[" + ", ".join(f"{v:+.3f}" for v in values) + "]" if vector
+                        else f"{task.name}-{i:04d}-{view.key[:12]}")
             probes.append(mcq_probe(frame_id, task.truth(sim), client.ask(task.milestones.prompt, frame).text,
                                     task.milestones.labels))
             shown.append(frame)
@@ -104,8 +105,7 @@ def probe_milestones(client: VLMClient, task: Task, states: int, progress: Progr
 
 def write_milestones(out: Path, task: Task, client: VLMClient, probes: list[MilestoneProbe], frames: list[Frame]
                      ) -> tuple[dict[str, Any], dict[str, float]]:
-    """Write table1.md, .csv, probes.csv, figure1.png and metrics.json into ``out``; the metrics, and
-    those logged to MLflow."""
+    """Write Table 1, probes.csv, figure1.png and metrics.json into ``out``; (metrics, MLflow metrics)."""
     summary = summarize(probes, potentials_of(task))
     both = generated_too(client, task, probes, frames)
     backend = client.backend
@@ -126,8 +126,7 @@ def write_milestones(out: Path, task: Task, client: VLMClient, probes: list[Mile
 
 def generated_too(client: VLMClient, task: Task, probes: list[MilestoneProbe], frames: Sequence[Frame]
                   ) -> dict[str, float]:
-    """Where the MCQ was scored, the same frames answered by generation too (``mcq.generate.*``) and
-    the share on which the modes agree; empty where it was generated anyway."""
+    """Where the MCQ was scored, the same frames generated too (``mcq.generate.*``, ``mcq.modes_agree``)."""
     prompt = task.milestones.prompt
     if not client.scores(prompt) or not frames:
         return {}
@@ -139,14 +138,8 @@ def generated_too(client: VLMClient, task: Task, probes: list[MilestoneProbe], f
             "mcq.generate.mean_abs_dphi": s.mean_abs_dphi, "mcq.modes_agree": agree}
 
 
-def _frame_id(state: Any) -> str:
-    values = np.asarray(state, dtype=float).reshape(-1)
-    return "state=[" + ", ".join(f"{v:+.3f}" for v in values) + "]"
-
-
 def _write(out: Path, task: Task, probes: list[MilestoneProbe], s: MilestoneSummary, label: str,
            simulated: bool) -> None:
-    banner = "SIMULATED VLM (not a real model): answers from a pixel reader with noise." if simulated else ""
     rows = [
         {"prompt": "I float regression", "frames": 0, "result": NOT_DEFINED},
         {"prompt": "II box grounding", "frames": 0, "result": NOT_DEFINED},
@@ -154,12 +147,10 @@ def _write(out: Path, task: Task, probes: list[MilestoneProbe], s: MilestoneSumm
          "result": f"accuracy {s.accuracy:.2f} [{s.accuracy_low:.2f}, {s.accuracy_high:.2f}] ({s.correct}/{s.frames}); "
                    f"format failures {s.format_failure_rate:.2f}; mean |dPhi| {s.mean_abs_dphi:.3f}"},
     ]
-    frame = pd.DataFrame(rows).assign(task=task.name, vlm=label, simulated=simulated)
-    csv, md = out / "table1.csv", out / "table1.md"
-    frame.to_csv(csv, index=False)
+    pd.DataFrame(rows).assign(task=task.name, vlm=label, simulated=simulated).to_csv(out / "table1.csv", index=False)
     text = [f"# Table 1 for task {task.name}: the milestone MCQ of {label}", ""]
-    if banner:
-        text += [f"> **{banner}**", ""]
+    if simulated:
+        text += ["> **SIMULATED VLM (not a real model): answers from a pixel reader with noise.**", ""]
     text += [f"{task.summary}. Labels (low to high): {', '.join(task.milestones.labels)}; potentials "
              + ", ".join(f"{lab}={p:g}" for lab, p in task.label_potentials) + ".", "",
              f"Prompt: \"{task.milestones.prompt.text}\"", "",
@@ -172,10 +163,9 @@ def _write(out: Path, task: Task, probes: list[MilestoneProbe], s: MilestoneSumm
              *tables.markdown_rows(["truth", *confusion.columns],
                                    [[i, *r] for i, r in zip(confusion.index, confusion.to_numpy(), strict=True)]),
              ""]
-    md.write_text("\n".join(text), encoding="utf-8")
-    per_frame = out / "probes.csv"
+    (out / "table1.md").write_text("\n".join(text), encoding="utf-8")
     pd.DataFrame([{"frame_id": p.frame_id, "truth": p.truth, "answer": p.answer, "label": p.label,
-                   "status": p.status.value} for p in probes]).assign(vlm=label).to_csv(per_frame, index=False)
+                   "status": p.status.value} for p in probes]).assign(vlm=label).to_csv(out / "probes.csv", index=False)
 
 
 def _figure(path: Path, task: Task, probes: list[MilestoneProbe], frames: list[Any], label: str,

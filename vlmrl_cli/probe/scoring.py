@@ -1,6 +1,4 @@
-"""Scoring a VLM on a task's frames (paper Section 2): which frames, asking, parsing, statistics.
-
-Everything environment-specific comes from the task (``Task.numbers``, ``milestones``, ``label_potentials``)."""
+"""Scoring a VLM on a task's frames (paper Section 2): which frames, asking, parsing, statistics."""
 
 from __future__ import annotations
 
@@ -46,6 +44,12 @@ class FrameProbe:
     panel: str | None = None
     caption: str | None = None
     frame: Frame | None = None
+
+    def result(self, kind: PromptKind) -> FloatResult | BoxResult | MCQResult:
+        """The parse of the answer to prompt ``kind``."""
+        results: dict[PromptKind, FloatResult | BoxResult] = {PromptKind.FLOAT: self.float_result,
+                                                               PromptKind.BOX: self.box_result}
+        return results.get(kind, self.mcq_result)
 
 
 def number_probe(task: Task) -> NumberProbe:
@@ -132,8 +136,7 @@ def _phi(answer: Any, potential: Callable[[Any], float]) -> float:
 
 
 def probe_frame(client: VLMClient, task: Task, renderer: NumberRenderer, planned: _Planned) -> FrameProbe:
-    """Render, ask the three prompts, parse, and map answers and truth to potentials: the label's, the
-    reading's over the range (``NumberQuestions.potential``), the box centre's column over the width."""
+    """Render, ask the three prompts, parse, and map answers and truth to potentials (NaN: unparsed)."""
     numbers = number_probe(task)
     frame = renderer.render(planned.x, frame_id=planned.frame_id)
     answers = {kind: _ask(client, prompt, frame) for kind, prompt in table1_prompts(task).items()}

@@ -1,5 +1,4 @@
-"""Table 1 of the paper, recomputed for the task's pair (a) -> (b) and over the sweep: raw outputs,
-ground truth and the dPhi each kind of answer gives PBRS, as Markdown, CSV and LaTeX."""
+"""Table 1 of the paper, recomputed: raw outputs, ground truth and the dPhi each answer gives PBRS."""
 
 from __future__ import annotations
 
@@ -60,16 +59,14 @@ def pair_consequence(kind: PromptKind, a: FrameProbe, b: FrameProbe) -> PairCons
 
 
 def _parsed(probe: FrameProbe, kind: PromptKind) -> str:
+    f, b, m = probe.float_result, probe.box_result, probe.mcq_result
     if kind is PromptKind.FLOAT:
-        f = probe.float_result
-        value, status = (f"{f.value:.3f}" if f.value is not None else "-"), f.status
+        value = f"{f.value:.3f}" if f.value is not None else "-"
     elif kind is PromptKind.BOX:
-        b = probe.box_result
         value = "(" + ", ".join(f"{v:.0f}" for v in b.box) + ")" if b.box is not None else "-"
-        status = b.status
     else:
-        m = probe.mcq_result
-        value, status = (str(m.label) if m.label is not None else "-"), m.status
+        value = str(m.label) if m.label is not None else "-"
+    status = probe.result(kind).status
     return f"{value} [{'parsed' if status is ParseStatus.OK else 'not parsed: ' + status.value}]"
 
 
@@ -183,8 +180,7 @@ def write_tables(
     provenance: str,
     simulated: bool,
 ) -> list[Path]:
-    """Write table1.md, .csv, .tex, table1_sweep.csv and probes.csv into ``folder``; the captions
-    say SIMULATED when ``simulated`` (``provenance`` says where the answers came from)."""
+    """Write table1.md, .csv, .tex, table1_sweep.csv and probes.csv into ``folder``."""
     (first, _, _), (second, _, _) = numbers.panels[:2]
     a = next((p for p in probes if p.panel == first), None)
     b = next((p for p in probes if p.panel == second), None)

@@ -1,5 +1,4 @@
-"""The taxonomy probe (paper Section 2, Table 1, Figure 1): ask a VLM about a task's frames, score
-the answers and the potentials they give PBRS. See docs/commands/taxonomy.md."""
+"""The taxonomy probe (paper Section 2, Table 1, Figure 1). See docs/commands/taxonomy.md."""
 
 from __future__ import annotations
 
@@ -8,7 +7,7 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,7 +17,7 @@ from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, flatten
-from vlmrl_cli.probe.milestones import generated_too, mcq_probe, probe_milestones, write_milestones
+from vlmrl_cli.probe.milestones import ProgressFn, generated_too, mcq_probe, probe_milestones, write_milestones
 from vlmrl_cli.probe.scoring import (
     DEFAULT_STATES,
     FrameProbe,
@@ -40,8 +39,6 @@ from vlmrl_cli.vlm.config import VLMConfig, profile_problem
 from vlmrl_cli.vlm.preflight import check_vlm
 from vlmrl_cli.vlm.prompts import PromptKind
 from vlmrl_cli.vlm.registry import build_client
-
-ProgressFn = Callable[[int, int], None]
 
 
 @dataclass(frozen=True)
@@ -66,14 +63,12 @@ class TaxonomyConfig:
 
 @dataclass(frozen=True)
 class TaxonomyResult:
-    """What a finished probe produced: ``FrameProbe``s and their ``sweep`` statistics where the task
-    has number questions, else ``MilestoneProbe``s; ``metrics`` as in ``metrics.json``."""
+    """What a finished probe produced: ``FrameProbe``s (``sweep``) or else ``MilestoneProbe``s."""
 
     out: Path
     run_id: str
     backend_label: str
     simulated: bool
-    provenance: str
     probes: tuple[Any, ...]
     sweep: Mapping[str, float]
     files: tuple[Path, ...]
@@ -127,10 +122,6 @@ def _move_into_place(staging: Path, out: Path) -> tuple[Path, ...]:
     return tuple(moved)
 
 
-def _jsonable(values: Mapping[str, float]) -> dict[str, float | None]:
-    return {k: (v if math.isfinite(v) else None) for k, v in values.items()}
-
-
 @dataclass
 class _Outcome:
     """What one kind of probe found: probes, sweep statistics, ``metrics.json`` and MLflow metrics."""
@@ -150,7 +141,10 @@ class _NumberTable:
         key = config_hash(cfg)
         self.run_name = f"taxonomy-{backend.name}-{cfg.states if self.is_sweep else 'transcript'}-{key[:6]}"
         self.tags = {schema.TAG_CONFIG_HASH: key}
-        self.params = _params(cfg, task, backend, len(self.planned), self.is_sweep)
+        self.params = {**flatten(cfg), "backend": backend.name, "model": backend.model,
+                       "simulated": str(backend.simulated).lower(), "frames": str(len(self.planned)),
+                       "sweep": str(self.is_sweep).lower(),
+                       **{f"prompt.{kind.value}": prompt.text for kind, prompt in table1_prompts(task).items()}}
 
     def probe(self, client: VLMClient, staging: Path, progress: ProgressFn | None) -> _Outcome:
         from vlmrl_cli.probe.figure1 import save_figure1
@@ -169,7 +163,8 @@ class _NumberTable:
             "backend": backend.name, "model": backend.model, "simulated": backend.simulated,
             "label": client.label, "provenance": provenance, "sweep": self.is_sweep,
             "queries": stats.queries, "cache_hits": stats.cache_hits, "cache_misses": stats.cache_misses,
-            "metrics": _jsonable(sweep), **client.mcq_mode_entry(self.task.milestones.prompt), **both,
+            "metrics": {k: (v if math.isfinite(v) else None) for k, v in sweep.items()},
+            **client.mcq_mode_entry(self.task.milestones.prompt), **both,
         }
         (staging / "metrics.json").write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n", encoding="utf-8")
         logged = {f"taxonomy.{k}": v for k, v in sweep.items() if math.isfinite(v)}
@@ -240,7 +235,7 @@ def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None, task: 
             files = _move_into_place(staging, cfg.out)
         return TaxonomyResult(
             out=cfg.out, run_id=run_id, backend_label=label, simulated=backend.simulated,
-            provenance=provenance_line(backend), probes=outcome.probes, sweep=outcome.sweep, files=files,
+            probes=outcome.probes, sweep=outcome.sweep, files=files,
             queries=stats.queries, cache_hits=stats.cache_hits, cache_misses=stats.cache_misses,
             metrics=outcome.metrics,
         )
@@ -271,17 +266,3 @@ def _generated_too(client: VLMClient, task: Task, planned: list[_Planned], probe
     scored = [mcq_probe(p.frame_id, str(p.truth.label), p.answers[PromptKind.MCQ], task.milestones.labels)
               for p in probes]
     return generated_too(client, task, scored, frames)
-
-
-def _params(cfg: TaxonomyConfig, task: Task, backend: Backend, frames: int, is_sweep: bool) -> dict[str, str]:
-    params = flatten(cfg)
-    params.update({
-        "backend": backend.name,
-        "model": backend.model,
-        "simulated": str(backend.simulated).lower(),
-        "frames": str(frames),
-        "sweep": str(is_sweep).lower(),
-    })
-    for kind, prompt in table1_prompts(task).items():
-        params[f"prompt.{kind.value}"] = prompt.text
-    return params

@@ -26,9 +26,7 @@ class Answer:
 @runtime_checkable
 class Backend(Protocol):
     """A VLM: ``answer`` maps (prompt, frame) to raw text; ``simulated``: no real VLM wrote it.
-
-    Raises ``BackendUnavailable`` when it cannot answer at all, ``MissingAnswer`` (replay only)
-    for an unknown query."""
+    Raises ``BackendUnavailable``, or ``MissingAnswer`` (replay) for an unknown query."""
 
     name: str
     model: str
@@ -85,16 +83,7 @@ class ScoringBackend(Backend, Protocol):
 
 
 def answer_all(backend: Backend, prompt: Prompt, frames: Sequence[Frame]) -> list[str]:
-    """The answers about ``frames``, in order: one ``answer_many`` call, else ``answer`` per frame.
-
-    Example:
-        >>> class Echo:
-        ...     name, model, simulated = "echo", "e", True
-        ...     def answer(self, prompt, frame): return frame
-        ...     def close(self): pass
-        >>> answer_all(Echo(), None, ["a", "b"])
-        ['a', 'b']
-    """
+    """The answers about ``frames``, in order: one ``answer_many`` call, else ``answer`` per frame."""
     if not frames:
         return []
     if isinstance(backend, BatchBackend):

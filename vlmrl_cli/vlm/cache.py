@@ -27,7 +27,7 @@ def cache_key(backend: str, model: str, prompt: str, image_sha256: str) -> str:
 
 
 class ResponseCache:
-    """sqlite-backed map from ``cache_key`` to (answer, original latency); counts hits/misses."""
+    """sqlite-backed map from ``cache_key`` to (answer, original latency)."""
 
     def __init__(self, path: Path, batch: int = 64, max_age_s: float = 5.0) -> None:
         if batch < 1 or not max_age_s >= 0:
@@ -36,8 +36,6 @@ class ResponseCache:
         self.batch = int(batch)
         self.max_age_s = float(max_age_s)
         self._oldest = 0.0  # time.monotonic() of the oldest pending answer
-        self.hits = 0
-        self.misses = 0
         self._pending: dict[str, tuple[str, str, str, float]] = {}
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -51,21 +49,13 @@ class ResponseCache:
             raise BadInput(f"cannot open the response cache {path}; pass --no-cache or a writable path.") from exc
 
     def get(self, key: str) -> tuple[str, float] | None:
-        pending = self._pending.get(key)
-        if pending is not None:
-            self.hits += 1
-            return pending[2], pending[3]
+        if key in self._pending:
+            return self._pending[key][2], self._pending[key][3]
         row = self._db.execute("SELECT answer, latency_s FROM responses WHERE key = ?", (key,)).fetchone()
-        if row is None:
-            self.misses += 1
-            return None
-        self.hits += 1
-        return str(row[0]), float(row[1])
+        return None if row is None else (str(row[0]), float(row[1]))
 
     def put(self, key: str, backend: str, model: str, answer: str, latency_s: float) -> None:
-        """Store an answer; written in batches (``batch`` answers or ``max_age_s``; a commit costs ~3 ms).
-
-        Pending answers are served from memory, so batching changes only when other processes see them."""
+        """Store an answer; written in batches of ``batch`` or after ``max_age_s`` (served from memory till then)."""
         now = time.monotonic()
         if not self._pending:
             self._oldest = now

@@ -35,9 +35,7 @@ class ClientStats:
 
 
 class VLMClient:
-    """Ask a backend about frames through the cache, writing every query to the transcript.
-
-    Backend errors propagate; replay (a cache itself) and a ``stochastic`` backend are never cached."""
+    """Ask a backend through the cache (never for replay or a ``stochastic`` one), writing a transcript."""
 
     def __init__(
         self,
@@ -144,12 +142,10 @@ class VLMClient:
         texts = dict(zip(fallback, answer_all(self.backend, prompt, [frames[j] for j in fallback]), strict=True))
         self.stats.scored += len(frames) - len(fallback)
         self.stats.generated += len(fallback)
-        out: list[tuple[str, float | None, str]] = []
-        for j, (frame, r) in enumerate(zip(frames, results, strict=True)):
-            if r is None:
-                out.append((texts[j], None, self._key(prompt, frame, False)))
-            else:
-                out.append((r.label, r.margin, self._key(prompt, frame, True)))
+        out: list[tuple[str, float | None, str]] = [
+            (texts[j], None, self._key(prompt, frame, False)) if r is None else
+            (r.label, r.margin, self._key(prompt, frame, True))
+            for j, (frame, r) in enumerate(zip(frames, results, strict=True))]
         elapsed = time.perf_counter() - start
         self.stats.backend_calls += 1
         self.stats.backend_frames += len(frames)

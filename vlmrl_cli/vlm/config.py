@@ -34,10 +34,8 @@ def _profile_name(value: str) -> str:
 
 @dataclass(frozen=True)
 class SimKnobs:
-    """Knobs of the SIMULATED VLM (``sim``, vlm/sim.py); the defaults are the ``default`` profile.
-
-    ``profile`` names the knob set the others came from (``of_profile``), checked against the task
-    where one is known. The anchors are in a ``NumberReader``'s units; their names enter hashes."""
+    """Knobs of the SIMULATED VLM (vlm/sim.py); the defaults are the ``default`` profile (``of_profile``).
+    The anchors are in a ``NumberReader``'s units; the names enter hashes."""
 
     flicker: float = field(default=0.1, metadata={"rules": (Interval(ge=0, le=1),),
                                                   "help": "P(answer a neighbouring MCQ label)"})
@@ -166,10 +164,8 @@ def sim_identity(knobs: SimKnobs) -> dict[str, Any]:
 
 
 def resolve_sim_profile(sim: Mapping[str, Any], task: ProfileOwner | None = None) -> dict[str, Any]:
-    """A raw ``[vlm.sim]`` table with its profile's values beneath the keys set explicitly.
-
-    A profile ``task`` does not offer is a ``BadInput``; without a task, or a profile, the table
-    comes back unchanged (the schema or the task's own check says what is wrong)."""
+    """A raw ``[vlm.sim]`` table with its profile's values beneath the keys set explicitly; a profile
+    ``task`` does not offer is a ``BadInput`` (no task: the table comes back unchanged)."""
     name = sim.get("profile")
     offered = sim_profiles(task)
     if not isinstance(name, str) or (name not in offered and task is None):

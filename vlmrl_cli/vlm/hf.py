@@ -154,9 +154,7 @@ class _Loaded:
 
 
 class HFBackend:
-    """A transformers image-text-to-text model, greedy, in batches; it scores MCQ options too.
-
-    A failed generation is logged and answered ``""`` (a failed parse), so a long probe carries on."""
+    """A transformers VLM, greedy, in batches; a failed generation is logged and answered ``""``."""
 
     name = "hf"
     simulated = False
@@ -175,10 +173,10 @@ class HFBackend:
     @classmethod
     def from_config(cls, cfg: VLMConfig) -> HFBackend:
         """Load ``cfg.model`` on ``cfg.device`` (None: cuda if present) in ``cfg.dtype``."""
+        model_id = cfg.model or ""
+        path, local = locate_model(cfg)  # before torch loads: a wrong path fails fast
         import torch
 
-        model_id = cfg.model or ""
-        path, local = locate_model(cfg)
         device = cfg.device or ("cuda" if torch.cuda.is_available() else "cpu")
         dtype = resolve_dtype(cfg.dtype, device)
         source = str(path) if local else model_id

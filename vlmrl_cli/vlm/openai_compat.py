@@ -5,7 +5,6 @@ from the environment per request, never stored or shown. See docs/real-vlm.md.""
 from __future__ import annotations
 
 import base64
-import json
 import logging
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -31,9 +30,7 @@ T = TypeVar("T")
 
 
 class _Transient(Exception):
-    def __init__(self, status: int) -> None:
-        super().__init__(f"HTTP {status}")
-        self.status = status
+    """An HTTP status worth retrying (429, 5xx): ``args[0]``."""
 
 
 class _KeptFailing(BackendUnavailable):
@@ -227,7 +224,7 @@ class OpenAIBackend:
             ) from None
         except _Transient as exc:
             raise _KeptFailing(
-                f"{self._where} kept failing (HTTP {exc.status}, {attempts} attempt(s)); "
+                f"{self._where} kept failing (HTTP {exc.args[0]}, {attempts} attempt(s)); "
                 "check the server's logs, or retry later with more --retries."
             ) from None
         raise AssertionError("unreachable: tenacity either returns or re-raises")  # pragma: no cover
@@ -288,7 +285,7 @@ class OpenAIBackend:
             raise self._refused(response)
         try:
             body = response.json()
-        except (ValueError, json.JSONDecodeError):
+        except ValueError:  # json.JSONDecodeError included
             body = None
         if _content(body) is None:
             raise BackendUnavailable(

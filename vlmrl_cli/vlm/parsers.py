@@ -47,10 +47,7 @@ class FloatResult(_Parsed):
 
 @dataclass(frozen=True)
 class BoxResult(_Parsed):
-    """A parsed box (x0, y0, x1, y1) in image pixels, set for OK and OUT_OF_RANGE, else None.
-
-    ``normalised`` is True when the text gave 0-1 coordinates, which were scaled to pixels.
-    """
+    """A parsed box (x0, y0, x1, y1, pixels) for OK and OUT_OF_RANGE; ``normalised``: given as 0-1."""
 
     box: Box | None = None
     normalised: bool = False
@@ -114,9 +111,7 @@ def _to_float(token: str) -> float | None:
 
 @_guarded(FloatResult)
 def parse_float(text: str, low: float, high: float) -> FloatResult:
-    """The number in a float answer; outside ``[low, high]`` (the task's range) it is OUT_OF_RANGE.
-
-    An explicit ``x = ...`` wins; otherwise the text must hold exactly one distinct number."""
+    """The one number in a float answer (``x = ...`` wins); outside ``[low, high]``: OUT_OF_RANGE."""
     assigned = [v for v in (_to_float(m) for m in _ASSIGNED.findall(text)) if v is not None]
     candidates = assigned or [v for v in (_to_float(m) for m in _NUMBER.findall(text)) if v is not None]
     distinct = list(dict.fromkeys(candidates))

@@ -79,7 +79,7 @@ class NumberQuestions:
 
     Example:
         >>> q = NumberQuestions(Prompt(PromptKind.FLOAT, "x?"), Prompt(PromptKind.BOX, "box?"), -1.0, 1.0, 64, 48)
-        >>> q.prompt(PromptKind.BOX).text, q.potential(0.0), q.potential(5.0)
+        >>> q.box_prompt.text, q.potential(0.0), q.potential(5.0)
         ('box?', 0.5, 1.0)
     """
 
@@ -95,11 +95,6 @@ class NumberQuestions:
             raise ValueError("NumberQuestions takes a FLOAT prompt and a BOX prompt")
         if not self.low < self.high or self.width < 1 or self.height < 1:
             raise ValueError("NumberQuestions needs low < high and a frame of at least 1 x 1 pixels")
-
-    def prompt(self, kind: PromptKind) -> Prompt:
-        if kind is PromptKind.MCQ:
-            raise ValueError("the MCQ prompt is the task's Milestones.prompt")
-        return self.float_prompt if kind is PromptKind.FLOAT else self.box_prompt
 
     def potential(self, value: float) -> float:
         """A float answer mapped linearly onto [0, 1] over ``[low, high]``, clipped."""
@@ -143,7 +138,7 @@ class NumberProbe(NumberQuestions):
         >>> q = NumberQuestions(Prompt(PromptKind.FLOAT, "x?"), Prompt(PromptKind.BOX, "box?"), -1.0, 1.0, 64, 48)
         >>> probe = NumberProbe.of(q, renderer=lambda: None, truth=lambda x: None,
         ...                        panels=(("a", 0.0, "centre"), ("b", 0.5, "right")))
-        >>> probe.low, probe.panels[1][1], probe.prompt(PromptKind.FLOAT).text
+        >>> probe.low, probe.panels[1][1], probe.float_prompt.text
         (-1.0, 0.5, 'x?')
     """
 

@@ -13,9 +13,7 @@ from vlmrl_cli.vlm.transcript import TranscriptRecord, read_transcript
 
 
 class ReplayBackend:
-    """Answers from a transcript by (prompt kind, image SHA-256), else frame id; else ``MissingAnswer``.
-
-    ``simulated`` when any record was, so a replayed sim run is never mistaken for a real model."""
+    """Answers from a transcript by (prompt kind, image SHA-256), else frame id; ``simulated`` if any was."""
 
     name = "replay"
 

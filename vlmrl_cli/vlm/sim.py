@@ -28,9 +28,7 @@ _TASK_MCQ_FORMATS: tuple[str, ...] = ("{label}", "Choice = {label}", "{label}.",
 
 
 class MilestoneReader(Protocol):
-    """A task's pixel reader (``Task.reader``): the label a frame's pixels show, None: no agent.
-
-    ``name`` enters the model name (caches of two tasks never mix); optional attributes:
+    """A task's pixel reader (``Task.reader``): the label a frame's pixels show, None: no agent; may set
     ``model_base``, ``refusal`` and ``mcq_formats`` (templates with ``{label}``)."""
 
     name: str
@@ -45,15 +43,12 @@ class NumberReader(MilestoneReader, Protocol):
 
     def estimate(self, pixels: np.ndarray, patch_px: int) -> float | None:
         """The noise-free reading, limited to a grid of ``patch_px`` pixels (None: no agent)."""
-        ...
 
     def label_at(self, estimate: float, knobs: SimKnobs) -> str:
         """The label of a reading before flicker (a profile's knobs may widen a label's zone)."""
-        ...
 
     def box_at(self, estimate: float) -> tuple[float, float, float, float]:
         """The agent's box (x0, y0, x1, y1, image pixels) where the reading puts it."""
-        ...
 
 
 NO_NUMBER = "I can only say which of the listed stages the image shows."
