@@ -39,8 +39,7 @@ def draw_panel(ax: Any, probe: FrameProbe) -> Any:
                                linestyle=style, label="VLM box"))
     ax.set_xticks([])
     ax.set_yticks([])
-    title = f"({probe.panel}) {probe.caption or ''} (x = {probe.truth.x:.2f})"
-    ax.set_title(title, fontsize=10)
+    ax.set_title(f"({probe.panel}) {probe.caption or ''} (x = {probe.truth.x:.2f})", fontsize=10)
     rows = ((PromptKind.FLOAT, "float"), (PromptKind.BOX, "box"), (PromptKind.MCQ, "MCQ"))
     ax.set_xlabel("\n".join(f"{name}: {_short(probe.answers.get(kind))} [{_verdict(probe, kind)}]"
                             for kind, name in rows), fontsize=8)

@@ -32,8 +32,7 @@ def spearman(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -
 
 
 def spearman_ci(rho: float, n: int, level: float = 0.95) -> tuple[float, float]:
-    """Confidence interval of a Spearman ``rho`` over ``n`` pairs: Fisher z with Bonett & Wright's
-    (2000) variance (1 + rho^2 / 2) / (n - 3); (NaN, NaN) for rho NaN, n < 4 or |rho| = 1."""
+    """Fisher-z interval of a Spearman ``rho`` over ``n`` pairs, Bonett & Wright's (2000) variance; NaN: n < 4."""
     if not 0 < level < 1:
         raise ValueError(f"level must be in (0, 1), got {level}")
     if not math.isfinite(rho) or n < 4 or abs(rho) >= 1:
@@ -68,9 +67,7 @@ def centre_error_px(a: Box, b: Box) -> float:
 def format_failure_rate(statuses: Iterable[ParseStatus]) -> float:
     """Fraction of answered queries (NO_ANSWER left out) whose text did not parse; NaN if none."""
     answered = [s for s in statuses if s is not ParseStatus.NO_ANSWER]
-    if not answered:
-        return math.nan
-    return sum(s in FORMAT_FAILURES for s in answered) / len(answered)
+    return sum(s in FORMAT_FAILURES for s in answered) / len(answered) if answered else math.nan
 
 
 def mcq_accuracy(predicted: Sequence[str | None], truth: Sequence[str]) -> float:

@@ -51,8 +51,7 @@ class MilestoneSummary:
 
 
 def summarize(probes: list[MilestoneProbe], potentials: dict[str, float], ci: float = 0.95) -> MilestoneSummary:
-    """The MCQ row of Table 1: accuracy (unparsed is wrong) with its Wilson interval, the format failure
-    rate and the mean ``|Phi(answer) - Phi(truth)|`` over parsed answers."""
+    """The MCQ row of Table 1: accuracy with its Wilson interval, format failures, mean ``|dPhi|``."""
     n = len(probes)
     correct = sum(p.label == p.truth for p in probes)
     accuracy = metrics.mcq_accuracy([p.label for p in probes], [p.truth for p in probes])

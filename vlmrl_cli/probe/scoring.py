@@ -31,8 +31,7 @@ from vlmrl_cli.vlm.prompts import NumberProbe, NumberQuestions, NumberRenderer, 
 
 @dataclass(frozen=True)
 class FrameProbe:
-    """One probed frame: truth, raw answers (None: none), parses, ``phi[kind] = (VLM's, truth's)``
-    potentials (NaN: unparsed); ``frame`` is kept for Figure 1's panels only."""
+    """One probed frame: truth, answers, parses, ``phi[kind] = (VLM's, truth's)``; ``frame``: panels only."""
 
     frame_id: str
     truth: NumberTruth
@@ -69,12 +68,7 @@ def table1_prompts(task: Task) -> dict[PromptKind, Prompt]:
 
 
 def frame_id_of(x: float) -> str:
-    """A readable id for reading ``x``: two decimals unless more are needed (``x=-0.50``).
-
-    Example:
-        >>> frame_id_of(-0.5), frame_id_of(-1.125)
-        ('x=-0.50', 'x=-1.125')
-    """
+    """A readable id for reading ``x``: two decimals unless more are needed (``x=-0.50``)."""
     for decimals in range(2, 10):
         if abs(round(x, decimals) - x) < 1e-9:
             return f"x={x:.{decimals}f}"
@@ -107,8 +101,7 @@ class _Planned:
 
 
 def plan_frames(states: int | None, backend: Backend, numbers: NumberProbe) -> tuple[list[_Planned], bool]:
-    """The frames to probe (the panels and a sweep of ``states``), sorted by reading, and whether they
-    form a sweep: without ``states`` a replay backend probes its transcript's frames instead."""
+    """The panels and a sweep of ``states`` (None: replay's own frames), by reading; and if a sweep."""
     planned: dict[float, _Planned] = {}
     for panel, x, caption in numbers.panels:
         planned[round(x, 9)] = _Planned(x, frame_id_of(x), panel, caption)
@@ -177,20 +170,27 @@ def phi_series(probes: list[FrameProbe] | tuple[FrameProbe, ...], kind: PromptKi
 
 
 def sweep_statistics(probes: list[FrameProbe] | tuple[FrameProbe, ...]) -> dict[str, float]:
-    """The sweep statistics, ``kind.metric`` -> value (NaN: not computable), over the probes sorted by
-    reading: ``float.mae_x`` in the task's units, ``box.centre_error_px`` in pixels, fractions."""
+    """The sweep statistics, ``kind.metric`` -> value (NaN: not computable), over probes sorted by reading."""
     ordered = sorted(probes, key=lambda p: p.truth.x)
     out: dict[str, float] = {"states": float(len(ordered))}
 
     def nanmean(values: list[float]) -> float:
         return float(np.mean(values)) if values else math.nan
 
+    for kind in PromptKind:
+        results = [p.result(kind) for p in ordered]
+        out[f"{kind}.ok_fraction"] = nanmean([float(r.ok) for r in results])
+        out[f"{kind}.format_failure_rate"] = metrics.format_failure_rate(r.status for r in results)
+        if kind is not PromptKind.MCQ:
+            out[f"{kind}.out_of_range_rate"] = nanmean([float(r.status is ParseStatus.OUT_OF_RANGE) for r in results])
+        vlm, true = phi_series(ordered, kind)
+        for name, value in metrics.delta_phi_stats(vlm, true).items():
+            if name != "n_states":
+                out[f"{kind}.dphi.{name}"] = value
+
     floats = [p.float_result for p in ordered]
     x_pred = [f.value if f.ok and f.value is not None else math.nan for f in floats]
     x_true = [p.truth.x for p in ordered]
-    out["float.ok_fraction"] = nanmean([float(f.ok) for f in floats])
-    out["float.format_failure_rate"] = metrics.format_failure_rate(f.status for f in floats)
-    out["float.out_of_range_rate"] = nanmean([float(f.status is ParseStatus.OUT_OF_RANGE) for f in floats])
     out["float.mae_x"] = float(np.nanmean(np.abs(np.asarray(x_pred) - np.asarray(x_true)))) if any(
         math.isfinite(v) for v in x_pred) else math.nan
     out["float.spearman"] = metrics.spearman(x_pred, x_true)
@@ -201,25 +201,14 @@ def sweep_statistics(probes: list[FrameProbe] | tuple[FrameProbe, ...]) -> dict[
     ious = [metrics.iou(b.box, p.truth.box_px) for b, p in zip(boxes, ordered, strict=True) if b.ok and b.box]
     centre = [metrics.centre_error_px(b.box, p.truth.box_px) for b, p in zip(boxes, ordered, strict=True)
               if b.ok and b.box]
-    out["box.ok_fraction"] = nanmean([float(b.ok) for b in boxes])
-    out["box.format_failure_rate"] = metrics.format_failure_rate(b.status for b in boxes)
-    out["box.out_of_range_rate"] = nanmean([float(b.status is ParseStatus.OUT_OF_RANGE) for b in boxes])
     out["box.mean_iou"] = nanmean(ious)
     # failures count as IoU 0: what a shaping signal built on the boxes would actually get
     out["box.mean_iou_all"] = sum(ious) / len(boxes) if boxes else math.nan
     out["box.centre_error_px"] = nanmean(centre)
 
     mcqs = [p.mcq_result for p in ordered]
-    out["mcq.ok_fraction"] = nanmean([float(m.ok) for m in mcqs])
-    out["mcq.format_failure_rate"] = metrics.format_failure_rate(m.status for m in mcqs)
     out["mcq.accuracy"] = metrics.mcq_accuracy([m.label if m.ok else None for m in mcqs],
                                                [p.truth.label for p in ordered])
-
-    for kind in PromptKind:
-        vlm, true = phi_series(ordered, kind)
-        for name, value in metrics.delta_phi_stats(vlm, true).items():
-            if name != "n_states":
-                out[f"{kind.value}.dphi.{name}"] = value
     return out
 
 

@@ -105,18 +105,15 @@ def taxonomy_frame(a: FrameProbe, b: FrameProbe, numbers: NumberProbe) -> pd.Dat
     """Table 1's rows (one per error taxonomy) for the pair (a) -> (b), cells as strings."""
     label_a = f"VLM raw output (a) {a.caption or ''} ({a.frame_id})".replace("  ", " ")
     label_b = f"VLM raw output (b) {b.caption or ''} ({b.frame_id})".replace("  ", " ")
-    rows = []
-    for kind, name in TAXONOMY_ROWS:
-        rows.append({
-            "Error taxonomy": name,
-            label_a: _raw(a, kind),
-            label_b: _raw(b, kind),
-            "Parsed (a) → (b)": f"{_parsed(a, kind)} → {_parsed(b, kind)}",
-            "Answer error (a); (b)": f"{_answer_error(a, kind)}; {_answer_error(b, kind)}",
-            "Kinematic truth / grounding": _truth(kind, a, b, numbers),
-            "Consequence on PBRS ΔΦ (computed, Φ(b) − Φ(a))": pair_consequence(kind, a, b).describe(),
-        })
-    return pd.DataFrame(rows)
+    return pd.DataFrame([{
+        "Error taxonomy": name,
+        label_a: _raw(a, kind),
+        label_b: _raw(b, kind),
+        "Parsed (a) → (b)": f"{_parsed(a, kind)} → {_parsed(b, kind)}",
+        "Answer error (a); (b)": f"{_answer_error(a, kind)}; {_answer_error(b, kind)}",
+        "Kinematic truth / grounding": _truth(kind, a, b, numbers),
+        "Consequence on PBRS ΔΦ (computed, Φ(b) − Φ(a))": pair_consequence(kind, a, b).describe(),
+    } for kind, name in TAXONOMY_ROWS])
 
 
 def _fmt(value: float, digits: int = 3) -> str:
@@ -144,22 +141,18 @@ def sweep_frame(sweep: Mapping[str, float]) -> pd.DataFrame:
                          f"centre error {_fmt(get('box.centre_error_px'), 1)} px"),
         PromptKind.MCQ: f"accuracy {_fmt(get('mcq.accuracy'))}",
     }
-    rows = []
-    for kind, name in TAXONOMY_ROWS:
-        k = kind.value
-        rows.append({
-            "Error taxonomy": name,
-            "States": _fmt(get("states"), 0) if math.isfinite(get(f"{k}.ok_fraction")) else "n/a",
-            "Parsed OK": _fmt(get(f"{k}.ok_fraction")),
-            "Format failures": _fmt(get(f"{k}.format_failure_rate")),
-            "Answer quality": quality[kind],
-            "ΔΦ dead zone": _fmt(get(f"{k}.dphi.dead_zone")),
-            "ΔΦ dead while truth moves": _fmt(get(f"{k}.dphi.dead_zone_while_truth_moves")),
-            "ΔΦ sign disagrees": _fmt(get(f"{k}.dphi.sign_disagreement")),
-            "mean |ΔΦ − ΔΦ_true|": _fmt(get(f"{k}.dphi.mean_abs_dphi_error"), 4),
-            "Φ unavailable": _fmt(get(f"{k}.dphi.phi_unavailable")),
-        })
-    return pd.DataFrame(rows)
+    return pd.DataFrame([{
+        "Error taxonomy": name,
+        "States": _fmt(get("states"), 0) if math.isfinite(get(f"{kind}.ok_fraction")) else "n/a",
+        "Parsed OK": _fmt(get(f"{kind}.ok_fraction")),
+        "Format failures": _fmt(get(f"{kind}.format_failure_rate")),
+        "Answer quality": quality[kind],
+        "ΔΦ dead zone": _fmt(get(f"{kind}.dphi.dead_zone")),
+        "ΔΦ dead while truth moves": _fmt(get(f"{kind}.dphi.dead_zone_while_truth_moves")),
+        "ΔΦ sign disagrees": _fmt(get(f"{kind}.dphi.sign_disagreement")),
+        "mean |ΔΦ − ΔΦ_true|": _fmt(get(f"{kind}.dphi.mean_abs_dphi_error"), 4),
+        "Φ unavailable": _fmt(get(f"{kind}.dphi.phi_unavailable")),
+    } for kind, name in TAXONOMY_ROWS])
 
 
 def latex_table(df: pd.DataFrame, caption: str, label: str) -> str:
@@ -182,8 +175,7 @@ def write_tables(
 ) -> list[Path]:
     """Write table1.md, .csv, .tex, table1_sweep.csv and probes.csv into ``folder``."""
     (first, _, _), (second, _, _) = numbers.panels[:2]
-    a = next((p for p in probes if p.panel == first), None)
-    b = next((p for p in probes if p.panel == second), None)
+    a, b = (next((p for p in probes if p.panel == panel), None) for panel in (first, second))
     if a is None or b is None:
         raise ValueError(f"Table 1 needs the task's frames ({first}) and ({second}) (NumberProbe.panels) among "
                          "the probes.")
@@ -216,16 +208,13 @@ def write_tables(
 
 
 def probes_frame(probes: Sequence[FrameProbe]) -> pd.DataFrame:
-    rows = []
-    for p in sorted(probes, key=lambda q: q.truth.x):
-        rows.append({
-            "frame_id": p.frame_id, "x": p.truth.x, "true_zone": p.truth.label,
-            "true_box": list(p.truth.box_px), "panel": p.panel or "",
-            "float_raw": p.answers.get(PromptKind.FLOAT), "float_status": p.float_result.status.value,
-            "float_value": p.float_result.value,
-            "box_raw": p.answers.get(PromptKind.BOX), "box_status": p.box_result.status.value,
-            "box_value": list(p.box_result.box) if p.box_result.box is not None else None,
-            "mcq_raw": p.answers.get(PromptKind.MCQ), "mcq_status": p.mcq_result.status.value,
-            "mcq_label": str(p.mcq_result.label) if p.mcq_result.label is not None else None,
-        })
-    return pd.DataFrame(rows)
+    return pd.DataFrame([{
+        "frame_id": p.frame_id, "x": p.truth.x, "true_zone": p.truth.label,
+        "true_box": list(p.truth.box_px), "panel": p.panel or "",
+        "float_raw": p.answers.get(PromptKind.FLOAT), "float_status": p.float_result.status.value,
+        "float_value": p.float_result.value,
+        "box_raw": p.answers.get(PromptKind.BOX), "box_status": p.box_result.status.value,
+        "box_value": list(p.box_result.box) if p.box_result.box is not None else None,
+        "mcq_raw": p.answers.get(PromptKind.MCQ), "mcq_status": p.mcq_result.status.value,
+        "mcq_label": str(p.mcq_result.label) if p.mcq_result.label is not None else None,
+    } for p in sorted(probes, key=lambda q: q.truth.x)])

@@ -112,24 +112,16 @@ def _staging_folder(out: Path) -> Path:
 def _move_into_place(staging: Path, out: Path) -> tuple[Path, ...]:
     try:
         out.mkdir(parents=True, exist_ok=True)
-        moved = []
-        for item in sorted(staging.iterdir()):
-            target = out / item.name
-            os.replace(item, target)
-            moved.append(target)
+        names = sorted(item.name for item in staging.iterdir())
+        for name in names:
+            os.replace(staging / name, out / name)
     except OSError as exc:
         raise BadInput(f"cannot move the results into {out} ({exc.strerror}); pass a writable --out.") from exc
-    return tuple(moved)
+    return tuple(out / name for name in names)
 
 
-@dataclass
-class _Outcome:
-    """What one kind of probe found: probes, sweep statistics, ``metrics.json`` and MLflow metrics."""
-
-    probes: tuple[Any, ...]
-    sweep: Mapping[str, float]
-    metrics: dict[str, Any]
-    logged: dict[str, float]
+#: What one kind of probe found: probes, sweep statistics, ``metrics.json`` and MLflow metrics.
+_Outcome = tuple[tuple[Any, ...], Mapping[str, float], dict[str, Any], dict[str, float]]
 
 
 class _NumberTable:
@@ -171,7 +163,7 @@ class _NumberTable:
         logged.update({"taxonomy.cache_hits": stats.cache_hits, "taxonomy.cache_misses": stats.cache_misses,
                        "taxonomy.frames": len(probes)})
         logged.update({f"taxonomy.{k}": v for k, v in both.items() if math.isfinite(v)})
-        return _Outcome(tuple(probes), sweep, summary, logged)
+        return tuple(probes), sweep, summary, logged
 
 
 class _MilestoneTable:
@@ -187,7 +179,7 @@ class _MilestoneTable:
     def probe(self, client: VLMClient, staging: Path, progress: ProgressFn | None) -> _Outcome:
         probes, frames = probe_milestones(client, self.task, self.states, progress)
         values, logged = write_milestones(staging, self.task, client, probes, frames)
-        return _Outcome(tuple(probes), {}, values, logged)
+        return tuple(probes), {}, values, logged
 
 
 def _check(cfg: TaxonomyConfig, task: Task) -> None:
@@ -202,9 +194,8 @@ def _check(cfg: TaxonomyConfig, task: Task) -> None:
 
 
 def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None, task: Task | None = None) -> TaxonomyResult:
-    """Probe ``task``'s frames (None: the paper's, as a config records no task), write Table 1 and
-    Figure 1 into ``cfg.out`` and log one MLflow run; ``progress(done, total)`` after each frame.
-    User errors are ``BadInput``, raised before any result file exists."""
+    """Probe ``task``'s frames (None: the paper's), write Table 1 and Figure 1 into ``cfg.out`` and log
+    one MLflow run; user errors are ``BadInput``, raised before any result file exists."""
     if task is None:
         from vlmrl_cli.tasks.registry import paper_task
 
@@ -224,20 +215,20 @@ def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None, task: 
             store.set_tags(tracker, run_id, {**store.provenance_tags(label, backend.simulated),
                                              schema.TAG_COMMAND: schema.COMMAND_TAXONOMY, **kind.tags})
             store.log_params(tracker, run_id, kind.params)
-            outcome = kind.probe(client, staging, progress)
+            probes, sweep, metrics, logged = kind.probe(client, staging, progress)
             stats = client.stats
             client.close()  # flushes the transcript before it is logged
             client = None
             batch = store.BatchLogger(tracker, run_id)
-            batch.log(outcome.logged, step=0)
+            batch.log(logged, step=0)
             batch.flush()
             store.log_artifacts(tracker, run_id, sorted(staging.iterdir()))
             files = _move_into_place(staging, cfg.out)
         return TaxonomyResult(
             out=cfg.out, run_id=run_id, backend_label=label, simulated=backend.simulated,
-            probes=outcome.probes, sweep=outcome.sweep, files=files,
+            probes=probes, sweep=sweep, files=files,
             queries=stats.queries, cache_hits=stats.cache_hits, cache_misses=stats.cache_misses,
-            metrics=outcome.metrics,
+            metrics=metrics,
         )
     finally:
         if client is not None:

@@ -46,13 +46,7 @@ class BatchBackend(Backend, Protocol):
 
 @dataclass(frozen=True)
 class OptionScores:
-    """An MCQ answered by scoring: each option's log-probability; the argmax is the ``label``.
-
-    Example:
-        >>> s = OptionScores(("LOW", "MID", "HIGH"), (-2.0, -0.25, -1.5))
-        >>> s.label, s.margin
-        ('MID', 1.25)
-    """
+    """An MCQ answered by scoring: each option's log-probability; the argmax is the ``label``."""
 
     options: tuple[str, ...]
     logprobs: tuple[float, ...]
@@ -74,8 +68,7 @@ class OptionScores:
 
 @runtime_checkable
 class ScoringBackend(Backend, Protocol):
-    """A backend that scores an MCQ's options (``score_many``; None where no log-probabilities came
-    back); ``can_score`` is False once it knows it cannot."""
+    """A backend that scores an MCQ's options (None: no log-probabilities came back)."""
 
     can_score: bool
 

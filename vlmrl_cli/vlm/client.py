@@ -72,9 +72,8 @@ class VLMClient:
         return self.ask_many(prompt, [frame])[0]
 
     def ask_many(self, prompt: Prompt, frames: Sequence[Frame], *, generate: bool = False) -> list[Answer]:
-        """The answers about ``frames``, in order: cache misses go to the backend in ONE call (scored
-        where ``scores``, a repeated frame sent once unless stochastic), whatever the split into
-        calls. Scored answers are cached apart (``SCORED_KEY``); ``generate`` decodes in any mode."""
+        """The answers about ``frames``: cache misses go to the backend in ONE call, a repeated frame once
+        unless stochastic; ``generate`` decodes whatever the mode."""
         b = self.backend
         scored = self.scores(prompt) and not generate
         keys = [self._key(prompt, frame, scored) for frame in frames]

@@ -17,7 +17,6 @@ from vlmrl_cli.core.fields import one_of
 from vlmrl_cli.core.provenance import to_jsonable
 
 BACKENDS: tuple[str, ...] = ("sim", "hf", "openai", "replay")
-#: How an MCQ with options is answered (docs/real-vlm.md, "MCQ by option log-probability").
 MCQ_MODES: tuple[str, ...] = ("auto", "logprob", "generate")
 PAPER_MODEL = "llava-hf/llava-1.5-7b-hf"
 PAPER_TRANSCRIPT = paper.TABLE1_TRANSCRIPT
@@ -34,8 +33,7 @@ def _profile_name(value: str) -> str:
 
 @dataclass(frozen=True)
 class SimKnobs:
-    """Knobs of the SIMULATED VLM (vlm/sim.py); the defaults are the ``default`` profile (``of_profile``).
-    The anchors are in a ``NumberReader``'s units; the names enter hashes."""
+    """Knobs of the SIMULATED VLM (vlm/sim.py); the defaults are the ``default`` profile (``of_profile``)."""
 
     flicker: float = field(default=0.1, metadata={"rules": (Interval(ge=0, le=1),),
                                                   "help": "P(answer a neighbouring MCQ label)"})
@@ -125,12 +123,7 @@ class ProfileOwner(Protocol):
 
 
 def sim_profiles(task: ProfileOwner | None = None) -> dict[str, Mapping[str, Any]]:
-    """The profiles a run of ``task`` may name: the generic ones, then the task's own.
-
-    Example:
-        >>> list(sim_profiles())
-        ['ideal', 'default']
-    """
+    """The profiles a run of ``task`` may name: the generic ones, then the task's own."""
     table = dict(SIM_PROFILES)
     if task is not None:
         for profile in task.sim_profiles:
@@ -164,8 +157,7 @@ def sim_identity(knobs: SimKnobs) -> dict[str, Any]:
 
 
 def resolve_sim_profile(sim: Mapping[str, Any], task: ProfileOwner | None = None) -> dict[str, Any]:
-    """A raw ``[vlm.sim]`` table with its profile's values beneath the keys set explicitly; a profile
-    ``task`` does not offer is a ``BadInput`` (no task: the table comes back unchanged)."""
+    """A raw ``[vlm.sim]`` table with its profile's values beneath the keys set explicitly."""
     name = sim.get("profile")
     offered = sim_profiles(task)
     if not isinstance(name, str) or (name not in offered and task is None):
@@ -214,14 +206,7 @@ NEUTRAL_VLM: dict[str, Any] = {"mcq_mode": "auto", "max_queries": None}
 
 
 def vlm_identity(cfg: VLMConfig) -> dict[str, Any]:
-    """``cfg`` as it enters a run's identity: what can change an answer (``sim`` knobs for ``sim`` only).
-
-    Example:
-        >>> sorted(vlm_identity(VLMConfig()))
-        ['backend', 'base_url', 'device', 'dtype', 'max_new_tokens', 'model', 'sim', 'transcript_in']
-        >>> vlm_identity(VLMConfig(mcq_mode="generate", max_concurrency=1))["mcq_mode"]
-        'generate'
-    """
+    """``cfg`` as it enters a run's identity: what can change an answer (``sim`` knobs for ``sim`` only)."""
     out: dict[str, Any] = {}
     for f in dataclasses.fields(cfg):
         value = getattr(cfg, f.name)

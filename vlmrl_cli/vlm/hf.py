@@ -1,5 +1,4 @@
-"""A local image-text-to-text model (LLaVA, Qwen-VL, ...) run in-process through transformers,
-imported only when a model loads. See docs/real-vlm.md."""
+"""A local image-text-to-text model run in-process through transformers. See docs/real-vlm.md."""
 
 from __future__ import annotations
 
@@ -251,8 +250,7 @@ class HFBackend:
         return answers
 
     def option_ids(self, prompt: Prompt) -> list[list[int]]:
-        """The token ids of each option as the model would write it after the prompt (after a space
-        unless the template ends in whitespace): the tail of tokenised (prompt + option)."""
+        """The token ids of each option as the model would write it after the prompt (and a space)."""
         if not prompt.options:
             raise ValueError("option log-probabilities need an MCQ prompt with options (mcq_prompt)")
         loaded = self._loaded_or_refuse()
@@ -271,16 +269,12 @@ class HFBackend:
         return ids
 
     def score_many(self, prompt: Prompt, frames: Sequence[Frame]) -> list[OptionScores | None]:
-        """Each option's log-probability about each frame: one batched prefill scores the first tokens;
-        later ones take one more pass from a copy of its KV cache."""
+        """Each option's log-probability about each frame: a prefill, then one pass over later tokens."""
         loaded = self._loaded_or_refuse()
         assert prompt.options is not None
         ids = self.option_ids(prompt)
-        out: list[OptionScores | None] = []
-        for chunk in _chunks(frames, self.batch_size):
-            rows = self._option_logprobs(loaded, prompt, chunk, ids)
-            out.extend(OptionScores(prompt.options, tuple(row)) for row in rows)
-        return out
+        return [OptionScores(prompt.options, tuple(row)) for chunk in _chunks(frames, self.batch_size)
+                for row in self._option_logprobs(loaded, prompt, chunk, ids)]
 
     def _option_logprobs(self, loaded: _Loaded, prompt: Prompt, frames: Sequence[Frame],
                          ids: list[list[int]]) -> list[list[float]]:
@@ -297,8 +291,7 @@ class HFBackend:
             longest = max(len(tok) for tok in ids)
             if longest > 1:  # the options' later tokens: one pass over (frame, option) rows
                 n_opt, batch = len(ids), len(frames)
-                pad = 0
-                cont = torch.tensor([tok[:-1] + [pad] * (longest - len(tok)) for tok in ids], device=mask.device)
+                cont = torch.tensor([tok[:-1] + [0] * (longest - len(tok)) for tok in ids], device=mask.device)
                 real = torch.tensor([[1] * (len(tok) - 1) + [0] * (longest - len(tok)) for tok in ids],
                                     device=mask.device, dtype=mask.dtype)
                 cache = _kv_cache(pre)

@@ -1,10 +1,10 @@
-"""Any OpenAI-compatible chat-completions server (Ollama, vLLM, llama.cpp, LM Studio); greedy, with
-transient failures (connection, timeout, HTTP 429/5xx) retried with backoff. The API key is read
-from the environment per request, never stored or shown. See docs/real-vlm.md."""
+"""Any OpenAI-compatible chat-completions server, greedy, transient failures retried with backoff; the
+API key is read from the environment per request, never stored or shown. See docs/real-vlm.md."""
 
 from __future__ import annotations
 
 import base64
+import contextlib
 import logging
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -73,11 +73,9 @@ def _content(payload: Any) -> str | None:
 def _logprob_steps(payload: Any) -> list[tuple[str, float, dict[str, float]]] | None:
     """(token, log-probability, top alternatives' log-probabilities) per generated token, or None."""
     try:
-        content = payload["choices"][0]["logprobs"]["content"]
-        steps = []
-        for item in content:
-            top = {str(t["token"]): float(t["logprob"]) for t in item.get("top_logprobs") or []}
-            steps.append((str(item["token"]), float(item["logprob"]), top))
+        steps = [(str(item["token"]), float(item["logprob"]),
+                  {str(t["token"]): float(t["logprob"]) for t in item.get("top_logprobs") or []})
+                 for item in payload["choices"][0]["logprobs"]["content"]]
     except (KeyError, IndexError, TypeError, ValueError):
         return None
     return steps or None
@@ -192,10 +190,6 @@ class OpenAIBackend:
     def _api_key(self) -> str | None:
         return (os.environ.get(self.api_key_env) or None) if self.api_key_env else None
 
-    def _scrub(self, text: str) -> str:
-        key = self._api_key()
-        return text.replace(key, "***") if key else text
-
     def _send(self, method: str, path: str, payload: dict[str, Any] | None = None) -> httpx.Response:
         """The response of one request, retried on transient failures (then ``BackendUnavailable``)."""
         headers = {"Accept": "application/json"}
@@ -232,11 +226,12 @@ class OpenAIBackend:
     def _refused(self, response: httpx.Response) -> BackendUnavailable:
         """The one-sentence error of a 4xx answer, with a hint per status."""
         status = response.status_code
-        said = self._scrub(_server_message(response))
-        said = f": {said}" if said else ""
+        key = self._api_key()
+        said = _server_message(response)
+        said = f": {said.replace(key, '***') if key else said}" if said else ""  # a server may echo the key
         if status in (401, 403):
             hint = (f"set the API key in the environment variable {self.api_key_env} (see --api-key-env)"
-                    if not self._api_key() else f"check the API key in {self.api_key_env}")
+                    if not key else f"check the API key in {self.api_key_env}")
         elif status == 404:
             served = f" (it serves: {', '.join(self.served_models[:8])})" if self.served_models else ""
             hint = f"check --model '{self.model}'{served} and --base-url (usually ending in /v1)"
@@ -245,8 +240,7 @@ class OpenAIBackend:
         return BackendUnavailable(f"{self._where} refused the request (HTTP {status}{said}); {hint}.")
 
     def check(self) -> None:
-        """``GET /models``: unreachable or 401/403 raise; other failures pass (no such route); the
-        served names feed later hints."""
+        """``GET /models``: unreachable or 401/403 raise; other failures pass (the route is optional)."""
         try:
             response = self._send("GET", "/models")
         except _KeptFailing:
@@ -254,11 +248,9 @@ class OpenAIBackend:
         if response.status_code in (401, 403):
             raise self._refused(response)
         if response.is_success:
-            try:
+            with contextlib.suppress(ValueError, AttributeError, TypeError):  # no list: no hints
                 data = response.json().get("data", [])
                 self.served_models = tuple(str(m["id"]) for m in data if isinstance(m, dict) and "id" in m)
-            except (ValueError, AttributeError, TypeError):
-                self.served_models = ()
 
     def _payload(self, prompt: Prompt, frame: Frame, *, logprobs: bool = False) -> dict[str, Any]:
         payload: dict[str, Any] = {
@@ -314,8 +306,7 @@ class OpenAIBackend:
         return self._in_flight(lambda frame: self.answer(prompt, frame), frames)
 
     def score(self, prompt: Prompt, frame: Frame) -> OptionScores | None:
-        """The options scored from a completion's log-probabilities; None (and ``can_score`` False
-        from then on) when the server returns none."""
+        """The options scored from a completion's log-probabilities; None (and no more tries) if none."""
         assert prompt.options is not None
         body = self._complete(self._payload(prompt, frame, logprobs=True))
         steps = _logprob_steps(body)

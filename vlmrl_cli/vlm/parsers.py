@@ -144,10 +144,8 @@ def _json_boxes(text: str) -> list[tuple[float, ...]]:
 
 
 def _validate_box(raw: tuple[float, ...], width: int, height: int) -> BoxResult:
-    if any(math.isnan(v) for v in raw):
+    if any(math.isnan(v) for v in raw) or all(v == 0 for v in raw):  # all 0: "Error [0, 0, 0, 0]", it gave up
         return BoxResult(ParseStatus.FORMAT_COLLAPSE)
-    if all(v == 0 for v in raw):
-        return BoxResult(ParseStatus.FORMAT_COLLAPSE)  # "Error [0, 0, 0, 0]": the model gave up
     normalised = all(0.0 <= v <= 1.0 for v in raw)
     if normalised:  # 0-1 coordinates (fractions of width and height) are scaled to pixels
         raw = (raw[0] * width, raw[1] * height, raw[2] * width, raw[3] * height)
@@ -161,8 +159,7 @@ def _validate_box(raw: tuple[float, ...], width: int, height: int) -> BoxResult:
 
 @_guarded(BoxResult)
 def parse_box(text: str, width: int, height: int) -> BoxResult:
-    """The box (x0, y0, x1, y1, pixels) in an answer about a ``width`` x ``height`` frame: a list,
-    a tuple, JSON or four bare numbers; all four in [0, 1] are fractions of the frame (``normalised``)."""
+    """The box (x0, y0, x1, y1, pixels) in an answer: a list, JSON or four numbers; 0-1 ones are fractions."""
     boxes: list[tuple[float, ...]] = _json_boxes(text)
     if not boxes:
         for match in _BOX.finditer(text):

@@ -1,5 +1,4 @@
-"""The prompt kinds of the taxonomy probe (paper Table 1) and what a task asks with them: its MCQ
-vocabulary (``Milestones``) and float and box questions (``NumberQuestions``, ``NumberProbe``)."""
+"""The prompt kinds of the taxonomy probe (paper Table 1) and a task's questions asked with them."""
 
 from __future__ import annotations
 
@@ -45,13 +44,7 @@ class Prompt:
 
 @dataclass(frozen=True)
 class Milestones:
-    """A task's MCQ vocabulary: its ``labels`` in order (flicker moves to a neighbour) and ``prompt``.
-
-    Example:
-        >>> m = Milestones(("LOW", "HIGH"), mcq_prompt("Is the arm low or high?", ("LOW", "HIGH")))
-        >>> m.labels, m.prompt.kind
-        (('LOW', 'HIGH'), <PromptKind.MCQ: 'mcq'>)
-    """
+    """A task's MCQ vocabulary: its ``labels`` in order (flicker moves to a neighbour) and ``prompt``."""
 
     labels: tuple[str, ...]
     prompt: Prompt
@@ -132,15 +125,7 @@ Panel = tuple[str, float, str]
 @dataclass(frozen=True)
 class NumberProbe(NumberQuestions):
     """``NumberQuestions`` with what Table 1 needs (``Task.numbers``): a ``renderer`` factory, the
-    ``truth`` at a reading, Figure 1's ``panels`` (the first two Table 1's pair) and ``notes``.
-
-    Example:
-        >>> q = NumberQuestions(Prompt(PromptKind.FLOAT, "x?"), Prompt(PromptKind.BOX, "box?"), -1.0, 1.0, 64, 48)
-        >>> probe = NumberProbe.of(q, renderer=lambda: None, truth=lambda x: None,
-        ...                        panels=(("a", 0.0, "centre"), ("b", 0.5, "right")))
-        >>> probe.low, probe.panels[1][1], probe.float_prompt.text
-        (-1.0, 0.5, 'x?')
-    """
+    ``truth`` at a reading, Figure 1's ``panels`` (the first two Table 1's pair) and ``notes``."""
 
     renderer: Callable[[], NumberRenderer]
     truth: Callable[[float], NumberTruth]

@@ -21,8 +21,7 @@ _REAL = {"hf": ("vlmrl_cli.vlm.hf", "HFBackend"), "openai": ("vlmrl_cli.vlm.open
 
 
 def build_backend(cfg: VLMConfig, stream: int = 0, reader: MilestoneReader | None = None) -> Backend:
-    """The backend ``cfg.backend``; ``stream`` (the run's seed) and ``reader`` (``Task.reader``) are the
-    simulated VLM's."""
+    """The backend ``cfg.backend``; ``stream`` (a run's seed) and ``reader`` are the simulated VLM's."""
     if cfg.backend == "sim":
         from vlmrl_cli.vlm.sim import SimulatedVLM
 

@@ -22,8 +22,7 @@ class ReplayBackend:
             raise BadInput("the replay transcript holds no records.")
         self.source = source
         self.records = tuple(records)
-        models = list(dict.fromkeys(r.model for r in records))
-        self.model = models[0] if len(models) == 1 else "+".join(models)
+        self.model = "+".join(dict.fromkeys(r.model for r in records))
         self.simulated = any(r.simulated for r in records)
         # the first record wins on duplicates: a transcript that re-asks a cached query repeats it
         self._by_sha: dict[tuple[str, str], str] = {}

@@ -1,5 +1,4 @@
-"""A SIMULATED stand-in for a small VLM (not a real model): a task's pixel reader, a coarse patch
-grid and noise, so that every command runs without a GPU. See docs/getting-started.md."""
+"""A SIMULATED stand-in for a small VLM (not a real model). See docs/getting-started.md."""
 
 from __future__ import annotations
 
@@ -28,8 +27,9 @@ _TASK_MCQ_FORMATS: tuple[str, ...] = ("{label}", "Choice = {label}", "{label}.",
 
 
 class MilestoneReader(Protocol):
-    """A task's pixel reader (``Task.reader``): the label a frame's pixels show, None: no agent; may set
-    ``model_base``, ``refusal`` and ``mcq_formats`` (templates with ``{label}``)."""
+    """A task's pixel reader: the label the pixels show (None: no agent).
+
+    Optional attributes: ``model_base``, ``refusal`` and ``mcq_formats`` (templates with ``{label}``)."""
 
     name: str
     milestones: Milestones
