@@ -35,7 +35,6 @@ def test_roundtrip_and_persistence(tmp_path: Path) -> None:
     reopened = ResponseCache(path)
     assert reopened.get(key) == ("BOTTOM", 0.25)
     assert reopened.get(cache_key("sim", "m", "p", "abd")) is None
-    assert (reopened.hits, reopened.misses) == (1, 1)
     reopened.close()
 
 

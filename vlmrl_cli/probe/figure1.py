@@ -1,8 +1,4 @@
-"""Figure 1 of the paper, redrawn: the two frames, the true box and the VLM's box and answers.
-
-Uses matplotlib's object API only (``Figure`` + the Agg canvas): no pyplot state, no style
-set at import.
-"""
+"""Figure 1 of the paper, redrawn: the two frames, the true box and the VLM's box and answers."""
 
 from __future__ import annotations
 
@@ -12,7 +8,6 @@ from typing import Any
 
 from vlmrl_cli.core.tables import printable
 from vlmrl_cli.probe.scoring import FrameProbe
-from vlmrl_cli.vlm.parsers import ParseStatus
 from vlmrl_cli.vlm.prompts import PromptKind
 
 TRUE_COLOUR = "tab:green"
@@ -27,7 +22,7 @@ def _short(text: str | None, limit: int = 34) -> str:
 
 
 def draw_panel(ax: Any, probe: FrameProbe) -> Any:
-    """Draw one frame with its true box (green) and the parsed VLM box (red) on ``ax``; return ``ax``."""
+    """Draw one frame with its true box (green) and the parsed VLM box (red) on ``ax``."""
     from matplotlib.patches import Rectangle
 
     if probe.frame is None:
@@ -44,56 +39,29 @@ def draw_panel(ax: Any, probe: FrameProbe) -> Any:
                                linestyle=style, label="VLM box"))
     ax.set_xticks([])
     ax.set_yticks([])
-    title = f"({probe.panel}) {probe.caption or ''} (x = {probe.truth.x:.2f})"
-    ax.set_title(title, fontsize=10)
-    answers = probe.answers
-    ax.set_xlabel(
-        f"float: {_short(answers.get(PromptKind.FLOAT))} [{_float_verdict(probe)}]\n"
-        f"box: {_short(answers.get(PromptKind.BOX))} [{_box_verdict(probe)}]\n"
-        f"MCQ: {_short(answers.get(PromptKind.MCQ))} [{_mcq_verdict(probe)}]",
-        fontsize=8,
-    )
+    ax.set_title(f"({probe.panel}) {probe.caption or ''} (x = {probe.truth.x:.2f})", fontsize=10)
+    rows = ((PromptKind.FLOAT, "float"), (PromptKind.BOX, "box"), (PromptKind.MCQ, "MCQ"))
+    ax.set_xlabel("\n".join(f"{name}: {_short(probe.answers.get(kind))} [{_verdict(probe, kind)}]"
+                            for kind, name in rows), fontsize=8)
     return ax
 
 
-def _parsed(status: ParseStatus) -> str:
-    return "parsed" if status is ParseStatus.OK else f"not parsed: {status.value}"
-
-
-def _float_verdict(probe: FrameProbe) -> str:
-    """Whether the float answer parsed and, if so, how far it is from the true x."""
-    r = probe.float_result
-    if not r.ok or r.value is None:
-        return _parsed(r.status)
-    return f"parsed; off by {abs(r.value - probe.truth.x):.2f} x units (true x {probe.truth.x:.2f})"
-
-
-def _box_verdict(probe: FrameProbe) -> str:
-    """Whether the box parsed and, if so, whether it holds the agent's true centre."""
-    r = probe.box_result
-    if not r.ok or r.box is None:
-        return _parsed(r.status)
-    cx, cy = probe.truth.centre_px
-    x0, y0, x1, y1 = r.box
-    inside = x0 <= cx <= x1 and y0 <= cy <= y1
-    return "parsed; " + ("holds the true centre" if inside else "misses the true centre")
-
-
-def _mcq_verdict(probe: FrameProbe) -> str:
-    """Whether the label parsed and, if so, whether it is the true label."""
-    r = probe.mcq_result
-    if not r.ok or r.label is None:
-        return _parsed(r.status)
-    correct = r.label == probe.truth.label
-    return f"parsed; {'correct' if correct else 'wrong'} (true {probe.truth.label})"
+def _verdict(probe: FrameProbe, kind: PromptKind) -> str:
+    """Whether the answer parsed and, if so, how it compares with the truth."""
+    f, b, truth = probe.float_result, probe.box_result, probe.truth
+    if not probe.result(kind).ok:
+        return f"not parsed: {probe.result(kind).status.value}"
+    if kind is PromptKind.FLOAT and f.value is not None:
+        return f"parsed; off by {abs(f.value - truth.x):.2f} x units (true x {truth.x:.2f})"
+    if kind is PromptKind.BOX and b.box is not None:
+        (x0, y0, x1, y1), (cx, cy) = b.box, truth.centre_px
+        return "parsed; " + ("holds" if x0 <= cx <= x1 and y0 <= cy <= y1 else "misses") + " the true centre"
+    correct = probe.mcq_result.label == truth.label
+    return f"parsed; {'correct' if correct else 'wrong'} (true {truth.label})"
 
 
 def figure1(probes: Sequence[FrameProbe], *, label: str, simulated: bool, note: str = "") -> Any:
-    """A ``matplotlib.figure.Figure`` with the task's panel frames (MountainCar: the paper's a
-    and b) side by side.
-
-    ``label`` names the backend (``name:model``); ``note`` is appended to the suptitle.
-    """
+    """A ``matplotlib.figure.Figure`` of the task's panel frames side by side; ``label``: the backend."""
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 

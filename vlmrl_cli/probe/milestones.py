@@ -1,11 +1,4 @@
-"""The milestone MCQ of the taxonomy probe, and Table 1 of a task that asks for no number.
-
-Every task's probe asks its milestone MCQ; the float and box prompts of the paper's Table 1 need a
-number answer key (``Task.numbers``, MountainCar's position and car box), so a task without one
-has the MCQ row alone (and says so). Each probed state is drawn by the task's training camera (the
-frames a run's VLM sees), its true label comes from the task (``Task.truth``), the VLM's answer is
-parsed in the task's vocabulary, and the potential error ``|dPhi|`` uses the task's label map.
-"""
+"""The milestone MCQ of the taxonomy probe, and Table 1 of a task without ``Task.numbers``."""
 
 from __future__ import annotations
 
@@ -58,17 +51,7 @@ class MilestoneSummary:
 
 
 def summarize(probes: list[MilestoneProbe], potentials: dict[str, float], ci: float = 0.95) -> MilestoneSummary:
-    """The MCQ row of Table 1: accuracy (unparsed answers count wrong), its Wilson interval, the
-    format failure rate and the mean ``|Phi(answer) - Phi(truth)|`` over parsed answers; accuracy
-    and format failures by MountainCar's Table 1 rules (``probe.metrics``).
-
-    Example:
-        >>> ok = MilestoneProbe("a", "HIGH", "HIGH", "HIGH", ParseStatus.OK)
-        >>> bad = MilestoneProbe("b", "LOW", "?", None, ParseStatus.FORMAT_COLLAPSE)
-        >>> s = summarize([ok, bad], {"LOW": 0.0, "HIGH": 1.0})
-        >>> s.accuracy, s.format_failure_rate, s.mean_abs_dphi
-        (0.5, 0.5, 0.0)
-    """
+    """The MCQ row of Table 1: accuracy with its Wilson interval, format failures, mean ``|dPhi|``."""
     n = len(probes)
     correct = sum(p.label == p.truth for p in probes)
     accuracy = metrics.mcq_accuracy([p.label for p in probes], [p.truth for p in probes])
@@ -96,8 +79,7 @@ def potentials_of(task: Task) -> dict[str, float]:
 
 def probe_milestones(client: VLMClient, task: Task, states: int, progress: ProgressFn | None
                      ) -> tuple[list[MilestoneProbe], list[Frame]]:
-    """Ask ``task``'s MCQ of about ``states`` states (``Task.probe_states``), each drawn by the
-    task's training camera: the probes and the frames shown."""
+    """The probes of ``task``'s MCQ on about ``states`` states (``Task.probe_states``), and the frames."""
     camera = task.camera.make(ShapingConfig(label_potentials=task.label_potentials))
     probes, shown = [], []
     try:
@@ -107,7 +89,9 @@ def probe_milestones(client: VLMClient, task: Task, states: int, progress: Progr
             sim = SimpleNamespace(state=np.asarray(state, dtype=float)) if vector else state
             view = camera.look(sim)
             frame = view.frame()
-            frame_id = _frame_id(state) if vector else f"{task.name}-{i:04d}-{view.key[:12]}"
+            values = np.asarray(state, dtype=float).reshape(-1) if vector else ()
+            frame_id = ("state=[" + ", ".join(f"{v:+.3f}" for v in values) + "]" if vector
+                        else f"{task.name}-{i:04d}-{view.key[:12]}")
             probes.append(mcq_probe(frame_id, task.truth(sim), client.ask(task.milestones.prompt, frame).text,
                                     task.milestones.labels))
             shown.append(frame)
@@ -120,8 +104,7 @@ def probe_milestones(client: VLMClient, task: Task, states: int, progress: Progr
 
 def write_milestones(out: Path, task: Task, client: VLMClient, probes: list[MilestoneProbe], frames: list[Frame]
                      ) -> tuple[dict[str, Any], dict[str, float]]:
-    """Write ``table1.md``/``.csv``, ``probes.csv``, ``figure1.png`` and ``metrics.json`` into
-    ``out``: the metrics, and those logged to MLflow."""
+    """Write Table 1, probes.csv, figure1.png and metrics.json into ``out``; (metrics, MLflow metrics)."""
     summary = summarize(probes, potentials_of(task))
     both = generated_too(client, task, probes, frames)
     backend = client.backend
@@ -142,9 +125,7 @@ def write_milestones(out: Path, task: Task, client: VLMClient, probes: list[Mile
 
 def generated_too(client: VLMClient, task: Task, probes: list[MilestoneProbe], frames: Sequence[Frame]
                   ) -> dict[str, float]:
-    """Where the MCQ was scored by option log-probability, the same frames answered by generation
-    as well (one round), summarised under ``mcq.generate.*``, with the share of frames on which
-    the two modes agree; nothing where the MCQ was generated anyway."""
+    """Where the MCQ was scored, the same frames generated too (``mcq.generate.*``, ``mcq.modes_agree``)."""
     prompt = task.milestones.prompt
     if not client.scores(prompt) or not frames:
         return {}
@@ -156,14 +137,8 @@ def generated_too(client: VLMClient, task: Task, probes: list[MilestoneProbe], f
             "mcq.generate.mean_abs_dphi": s.mean_abs_dphi, "mcq.modes_agree": agree}
 
 
-def _frame_id(state: Any) -> str:
-    values = np.asarray(state, dtype=float).reshape(-1)
-    return "state=[" + ", ".join(f"{v:+.3f}" for v in values) + "]"
-
-
 def _write(out: Path, task: Task, probes: list[MilestoneProbe], s: MilestoneSummary, label: str,
            simulated: bool) -> None:
-    banner = "SIMULATED VLM (not a real model): answers from a pixel reader with noise." if simulated else ""
     rows = [
         {"prompt": "I float regression", "frames": 0, "result": NOT_DEFINED},
         {"prompt": "II box grounding", "frames": 0, "result": NOT_DEFINED},
@@ -171,12 +146,10 @@ def _write(out: Path, task: Task, probes: list[MilestoneProbe], s: MilestoneSumm
          "result": f"accuracy {s.accuracy:.2f} [{s.accuracy_low:.2f}, {s.accuracy_high:.2f}] ({s.correct}/{s.frames}); "
                    f"format failures {s.format_failure_rate:.2f}; mean |dPhi| {s.mean_abs_dphi:.3f}"},
     ]
-    frame = pd.DataFrame(rows).assign(task=task.name, vlm=label, simulated=simulated)
-    csv, md = out / "table1.csv", out / "table1.md"
-    frame.to_csv(csv, index=False)
+    pd.DataFrame(rows).assign(task=task.name, vlm=label, simulated=simulated).to_csv(out / "table1.csv", index=False)
     text = [f"# Table 1 for task {task.name}: the milestone MCQ of {label}", ""]
-    if banner:
-        text += [f"> **{banner}**", ""]
+    if simulated:
+        text += ["> **SIMULATED VLM (not a real model): answers from a pixel reader with noise.**", ""]
     text += [f"{task.summary}. Labels (low to high): {', '.join(task.milestones.labels)}; potentials "
              + ", ".join(f"{lab}={p:g}" for lab, p in task.label_potentials) + ".", "",
              f"Prompt: \"{task.milestones.prompt.text}\"", "",
@@ -189,15 +162,14 @@ def _write(out: Path, task: Task, probes: list[MilestoneProbe], s: MilestoneSumm
              *tables.markdown_rows(["truth", *confusion.columns],
                                    [[i, *r] for i, r in zip(confusion.index, confusion.to_numpy(), strict=True)]),
              ""]
-    md.write_text("\n".join(text), encoding="utf-8")
-    per_frame = out / "probes.csv"
+    (out / "table1.md").write_text("\n".join(text), encoding="utf-8")
     pd.DataFrame([{"frame_id": p.frame_id, "truth": p.truth, "answer": p.answer, "label": p.label,
-                   "status": p.status.value} for p in probes]).assign(vlm=label).to_csv(per_frame, index=False)
+                   "status": p.status.value} for p in probes]).assign(vlm=label).to_csv(out / "probes.csv", index=False)
 
 
 def _figure(path: Path, task: Task, probes: list[MilestoneProbe], frames: list[Any], label: str,
             simulated: bool) -> None:
-    """Figure 1 of a task: one probed frame per true label (the first of each), with its answer."""
+    """Figure 1 of a task: the first probed frame of each true label, with its answer."""
     from matplotlib.figure import Figure
 
     picks = [next(i for i, p in enumerate(probes) if p.truth == lab) for lab in task.milestones.labels

@@ -1,17 +1,11 @@
-"""How many sweep positions a taxonomy probes by default and may probe, in a light module (no
-numpy or scipy) that `vlmrl taxonomy` and `vlmrl study` read their ``--states`` with before
-anything heavy loads."""
+"""How many sweep positions a taxonomy probes (a light module: read before anything heavy loads)."""
 
 from __future__ import annotations
 
-# 101 sweep positions (+ the paper's two frames): a rank correlation of 0 over 103 frames has a 95%
-# interval of about +-0.2 (25 positions gave +-0.4, too wide to tell "no rank signal" from a weak
-# one), and on MountainCar no position falls within 2 px of a zone edge, where a reader off by a
-# fraction of a pixel flips the label (25 positions put three frames exactly on edges).
+# 101 positions (+ the paper's two frames): a rank correlation of 0 has a 95% interval of about +-0.2,
+# and on MountainCar no position falls within 2 px of a zone edge (25 put three frames on edges)
 DEFAULT_STATES = 101
-
-#: The most positions: each is rendered and probed with three prompts (seconds each on a real VLM),
-#: and 10,000 already space the positions 0.0002 apart on MountainCar's track.
+#: The most positions: each is probed with three prompts (seconds each on a real VLM).
 MAX_STATES = 10_000
 
 

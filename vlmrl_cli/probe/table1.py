@@ -1,11 +1,4 @@
-"""Table 1 of the paper, recomputed: raw outputs, ground truth and the consequence on dPhi.
-
-One row per error taxonomy (I float regression, II box grounding, III semantic MCQ) for the
-task's frame pair (a) -> (b) (its ``NumberProbe.panels``; MountainCar's are the paper's
-x=-0.50 -> x=-0.69), with the dPhi each kind of answer would give PBRS computed from the parsed
-answers, and a second table of the same statistics over the whole sweep. Written as Markdown,
-CSV and LaTeX (``core.tables``).
-"""
+"""Table 1 of the paper, recomputed: raw outputs, ground truth and the dPhi each answer gives PBRS."""
 
 from __future__ import annotations
 
@@ -66,16 +59,14 @@ def pair_consequence(kind: PromptKind, a: FrameProbe, b: FrameProbe) -> PairCons
 
 
 def _parsed(probe: FrameProbe, kind: PromptKind) -> str:
+    f, b, m = probe.float_result, probe.box_result, probe.mcq_result
     if kind is PromptKind.FLOAT:
-        f = probe.float_result
-        value, status = (f"{f.value:.3f}" if f.value is not None else "-"), f.status
+        value = f"{f.value:.3f}" if f.value is not None else "-"
     elif kind is PromptKind.BOX:
-        b = probe.box_result
         value = "(" + ", ".join(f"{v:.0f}" for v in b.box) + ")" if b.box is not None else "-"
-        status = b.status
     else:
-        m = probe.mcq_result
-        value, status = (str(m.label) if m.label is not None else "-"), m.status
+        value = str(m.label) if m.label is not None else "-"
+    status = probe.result(kind).status
     return f"{value} [{'parsed' if status is ParseStatus.OK else 'not parsed: ' + status.value}]"
 
 
@@ -111,22 +102,18 @@ def _raw(probe: FrameProbe, kind: PromptKind) -> str:
 
 
 def taxonomy_frame(a: FrameProbe, b: FrameProbe, numbers: NumberProbe) -> pd.DataFrame:
-    """Table 1's rows for the pair (a) -> (b) of a task's ``numbers``: one row per error
-    taxonomy, cells as strings."""
+    """Table 1's rows (one per error taxonomy) for the pair (a) -> (b), cells as strings."""
     label_a = f"VLM raw output (a) {a.caption or ''} ({a.frame_id})".replace("  ", " ")
     label_b = f"VLM raw output (b) {b.caption or ''} ({b.frame_id})".replace("  ", " ")
-    rows = []
-    for kind, name in TAXONOMY_ROWS:
-        rows.append({
-            "Error taxonomy": name,
-            label_a: _raw(a, kind),
-            label_b: _raw(b, kind),
-            "Parsed (a) → (b)": f"{_parsed(a, kind)} → {_parsed(b, kind)}",
-            "Answer error (a); (b)": f"{_answer_error(a, kind)}; {_answer_error(b, kind)}",
-            "Kinematic truth / grounding": _truth(kind, a, b, numbers),
-            "Consequence on PBRS ΔΦ (computed, Φ(b) − Φ(a))": pair_consequence(kind, a, b).describe(),
-        })
-    return pd.DataFrame(rows)
+    return pd.DataFrame([{
+        "Error taxonomy": name,
+        label_a: _raw(a, kind),
+        label_b: _raw(b, kind),
+        "Parsed (a) → (b)": f"{_parsed(a, kind)} → {_parsed(b, kind)}",
+        "Answer error (a); (b)": f"{_answer_error(a, kind)}; {_answer_error(b, kind)}",
+        "Kinematic truth / grounding": _truth(kind, a, b, numbers),
+        "Consequence on PBRS ΔΦ (computed, Φ(b) − Φ(a))": pair_consequence(kind, a, b).describe(),
+    } for kind, name in TAXONOMY_ROWS])
 
 
 def _fmt(value: float, digits: int = 3) -> str:
@@ -134,12 +121,7 @@ def _fmt(value: float, digits: int = 3) -> str:
 
 
 def with_ci(stats: Mapping[str, float], key: str, digits: int = 3) -> str:
-    """``stats[key]`` with its 95% interval from ``key_low`` / ``key_high`` when both are defined.
-
-    Example:
-        >>> with_ci({"r": -0.14, "r_low": -0.33, "r_high": 0.06}, "r", 2), with_ci({"r": 1.0}, "r", 2)
-        ('-0.14 [95% CI -0.33, 0.06]', '1.00')
-    """
+    """``stats[key]`` with its 95% interval from ``key_low`` / ``key_high`` when both are defined."""
     value = _fmt(stats.get(key, math.nan), digits)
     low, high = stats.get(f"{key}_low", math.nan), stats.get(f"{key}_high", math.nan)
     if not (math.isfinite(low) and math.isfinite(high)):
@@ -149,6 +131,7 @@ def with_ci(stats: Mapping[str, float], key: str, digits: int = 3) -> str:
 
 def sweep_frame(sweep: Mapping[str, float]) -> pd.DataFrame:
     """Sweep statistics per prompt kind (n/a where no sweep was probed), cells as strings."""
+
     def get(key: str) -> float:
         return sweep.get(key, math.nan)
 
@@ -158,42 +141,26 @@ def sweep_frame(sweep: Mapping[str, float]) -> pd.DataFrame:
                          f"centre error {_fmt(get('box.centre_error_px'), 1)} px"),
         PromptKind.MCQ: f"accuracy {_fmt(get('mcq.accuracy'))}",
     }
-    rows = []
-    for kind, name in TAXONOMY_ROWS:
-        k = kind.value
-        rows.append({
-            "Error taxonomy": name,
-            "States": _fmt(get("states"), 0) if math.isfinite(get(f"{k}.ok_fraction")) else "n/a",
-            "Parsed OK": _fmt(get(f"{k}.ok_fraction")),
-            "Format failures": _fmt(get(f"{k}.format_failure_rate")),
-            "Answer quality": quality[kind],
-            "ΔΦ dead zone": _fmt(get(f"{k}.dphi.dead_zone")),
-            "ΔΦ dead while truth moves": _fmt(get(f"{k}.dphi.dead_zone_while_truth_moves")),
-            "ΔΦ sign disagrees": _fmt(get(f"{k}.dphi.sign_disagreement")),
-            "mean |ΔΦ − ΔΦ_true|": _fmt(get(f"{k}.dphi.mean_abs_dphi_error"), 4),
-            "Φ unavailable": _fmt(get(f"{k}.dphi.phi_unavailable")),
-        })
-    return pd.DataFrame(rows)
+    return pd.DataFrame([{
+        "Error taxonomy": name,
+        "States": _fmt(get("states"), 0) if math.isfinite(get(f"{kind}.ok_fraction")) else "n/a",
+        "Parsed OK": _fmt(get(f"{kind}.ok_fraction")),
+        "Format failures": _fmt(get(f"{kind}.format_failure_rate")),
+        "Answer quality": quality[kind],
+        "ΔΦ dead zone": _fmt(get(f"{kind}.dphi.dead_zone")),
+        "ΔΦ dead while truth moves": _fmt(get(f"{kind}.dphi.dead_zone_while_truth_moves")),
+        "ΔΦ sign disagrees": _fmt(get(f"{kind}.dphi.sign_disagreement")),
+        "mean |ΔΦ − ΔΦ_true|": _fmt(get(f"{kind}.dphi.mean_abs_dphi_error"), 4),
+        "Φ unavailable": _fmt(get(f"{kind}.dphi.phi_unavailable")),
+    } for kind, name in TAXONOMY_ROWS])
 
 
 def latex_table(df: pd.DataFrame, caption: str, label: str) -> str:
-    """A ``table`` float with a ``tabular`` of ragged-right paragraph columns (the cells are long text)."""
+    """A ``table`` float of ragged-right paragraph columns (the cells are long text)."""
     width = f"{0.95 / max(1, len(df.columns)):.3f}"
     spec = "".join(f">{{\\raggedright\\arraybackslash}}p{{{width}\\linewidth}}" for _ in df.columns)
     return tables.latex(df, caption, label=label, colspec=spec, setup=(r"\centering\scriptsize",),
                         rules=tables.HLINES)
-
-
-def captions(label: str, provenance: str, simulated: bool, pair: tuple[FrameProbe, FrameProbe]) -> tuple[str, str]:
-    """(Table 1 caption, sweep table caption) for the frame ``pair`` (a), (b); ``provenance``
-    says plainly when the VLM is simulated."""
-    a, b = pair
-    table = (f"Table 1 (recomputed). Taxonomy of pure vision failures on the consecutive micro-states "
-             f"(a) x = {a.truth.x:.2f} -> (b) x = {b.truth.x:.2f}. Backend {label}. {provenance}")
-    flag = " SIMULATED VLM (not a real model)." if simulated else ""
-    sweep = (f"Table 1b. The same statistics over a sweep of readings sorted along the task's range "
-             f"(consecutive pairs). Backend {label}.{flag}")
-    return table, sweep
 
 
 def write_tables(
@@ -206,16 +173,18 @@ def write_tables(
     provenance: str,
     simulated: bool,
 ) -> list[Path]:
-    """Write table1.md, table1.csv, table1.tex, table1_sweep.csv and probes.csv into ``folder``;
-    ``numbers``: the task's number probe the probes were scored with (its pair, frame and notes)."""
+    """Write table1.md, .csv, .tex, table1_sweep.csv and probes.csv into ``folder``."""
     (first, _, _), (second, _, _) = numbers.panels[:2]
-    a = next((p for p in probes if p.panel == first), None)
-    b = next((p for p in probes if p.panel == second), None)
+    a, b = (next((p for p in probes if p.panel == panel), None) for panel in (first, second))
     if a is None or b is None:
         raise ValueError(f"Table 1 needs the task's frames ({first}) and ({second}) (NumberProbe.panels) among "
                          "the probes.")
     main, stats = taxonomy_frame(a, b, numbers), sweep_frame(sweep)
-    cap_main, cap_sweep = captions(label, provenance, simulated, (a, b))
+    cap_main = (f"Table 1 (recomputed). Taxonomy of pure vision failures on the consecutive micro-states "
+                f"(a) x = {a.truth.x:.2f} -> (b) x = {b.truth.x:.2f}. Backend {label}. {provenance}")
+    flag = " SIMULATED VLM (not a real model)." if simulated else ""
+    cap_sweep = (f"Table 1b. The same statistics over a sweep of readings sorted along the task's range "
+                 f"(consecutive pairs). Backend {label}.{flag}")
     notes = [*numbers.notes,
              f"Φ mappings: MCQ label -> raw potential (the task's label_potentials); float: x "
              f"normalised to [0, 1] over [{numbers.low:g}, {numbers.high:g}]; box: box centre column / "
@@ -239,17 +208,13 @@ def write_tables(
 
 
 def probes_frame(probes: Sequence[FrameProbe]) -> pd.DataFrame:
-    """One row per probed frame: truth, raw answers, parse statuses and parsed values."""
-    rows = []
-    for p in sorted(probes, key=lambda q: q.truth.x):
-        rows.append({
-            "frame_id": p.frame_id, "x": p.truth.x, "true_zone": p.truth.label,
-            "true_box": list(p.truth.box_px), "panel": p.panel or "",
-            "float_raw": p.answers.get(PromptKind.FLOAT), "float_status": p.float_result.status.value,
-            "float_value": p.float_result.value,
-            "box_raw": p.answers.get(PromptKind.BOX), "box_status": p.box_result.status.value,
-            "box_value": list(p.box_result.box) if p.box_result.box is not None else None,
-            "mcq_raw": p.answers.get(PromptKind.MCQ), "mcq_status": p.mcq_result.status.value,
-            "mcq_label": str(p.mcq_result.label) if p.mcq_result.label is not None else None,
-        })
-    return pd.DataFrame(rows)
+    return pd.DataFrame([{
+        "frame_id": p.frame_id, "x": p.truth.x, "true_zone": p.truth.label,
+        "true_box": list(p.truth.box_px), "panel": p.panel or "",
+        "float_raw": p.answers.get(PromptKind.FLOAT), "float_status": p.float_result.status.value,
+        "float_value": p.float_result.value,
+        "box_raw": p.answers.get(PromptKind.BOX), "box_status": p.box_result.status.value,
+        "box_value": list(p.box_result.box) if p.box_result.box is not None else None,
+        "mcq_raw": p.answers.get(PromptKind.MCQ), "mcq_status": p.mcq_result.status.value,
+        "mcq_label": str(p.mcq_result.label) if p.mcq_result.label is not None else None,
+    } for p in sorted(probes, key=lambda q: q.truth.x)])

@@ -1,17 +1,4 @@
-"""The taxonomy probe (paper Section 2, Table 1, Figure 1): ask a VLM about frames, score it.
-
-Every probed frame gets the task's questions: its milestone MCQ always, and where the task has a
-number answer key (``Task.numbers``, a ``NumberProbe``; MountainCar-v0's, the paper's) the float
-regression and box grounding prompts too. The answers are parsed, compared with the ground truth,
-and turned into the potential Phi each answer would give PBRS, so that the paper's consequences
-(noise, ROI instability, the MCQ dead zone) are computed rather than asserted.
-
-``run_taxonomy`` is the one entry point. It validates everything the user can get wrong (the
-task, the simulated VLM's profile, output folder, backend, transcript, tracking store) before
-probing, writes its files into a temporary sibling folder that is moved into place only when
-everything succeeded, and logs exactly one MLflow run, marked FAILED if the probe fails after it
-was created.
-"""
+"""The taxonomy probe (paper Section 2, Table 1, Figure 1). See docs/commands/taxonomy.md."""
 
 from __future__ import annotations
 
@@ -20,7 +7,7 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +17,7 @@ from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
 from vlmrl_cli.core.paths import check_out_folder
 from vlmrl_cli.core.provenance import config_hash, flatten
-from vlmrl_cli.probe.milestones import generated_too, mcq_probe, probe_milestones, write_milestones
+from vlmrl_cli.probe.milestones import ProgressFn, generated_too, mcq_probe, probe_milestones, write_milestones
 from vlmrl_cli.probe.scoring import (
     DEFAULT_STATES,
     FrameProbe,
@@ -52,8 +39,6 @@ from vlmrl_cli.vlm.config import VLMConfig, profile_problem
 from vlmrl_cli.vlm.preflight import check_vlm
 from vlmrl_cli.vlm.prompts import PromptKind
 from vlmrl_cli.vlm.registry import build_client
-
-ProgressFn = Callable[[int, int], None]
 
 
 @dataclass(frozen=True)
@@ -78,15 +63,12 @@ class TaxonomyConfig:
 
 @dataclass(frozen=True)
 class TaxonomyResult:
-    """What a finished probe produced and where it went: ``probes`` are ``FrameProbe``s where the
-    task has number questions (``sweep`` their statistics), else ``milestones.MilestoneProbe``s
-    (``sweep`` empty); ``metrics`` is what ``metrics.json`` holds."""
+    """What a finished probe produced: ``FrameProbe``s (``sweep``) or else ``MilestoneProbe``s."""
 
     out: Path
     run_id: str
     backend_label: str
     simulated: bool
-    provenance: str
     probes: tuple[Any, ...]
     sweep: Mapping[str, float]
     files: tuple[Path, ...]
@@ -99,33 +81,25 @@ class TaxonomyResult:
         return next((p for p in self.probes if p.panel == name), None)
 
 
-# --- provenance wording ----------------------------------------------------------------------
-
 def provenance_line(backend: Backend) -> str:
     """One sentence saying where the answers came from (shown in captions and tables)."""
     if backend.simulated:
         return ("SIMULATED VLM (not a real model): answers come from a pixel reader with a coarse patch "
                 "grid and injected noise, not from a vision-language model.")
-    records = getattr(backend, "records", ())
-    if backend.name == "replay" and any(r.backend == "paper" for r in records):
+    if _replays_paper(backend):
         return ("The VLM outputs are the paper's reported raw outputs (its Table 1), replayed from a "
                 "transcript transcribed from the paper, not produced here; truths and dPhi are computed here.")
     if backend.name == "replay":
-        source = getattr(backend, "source", None)
-        return f"Answers replayed from the transcript {source}."
+        return f"Answers replayed from the transcript {getattr(backend, 'source', None)}."
     return "Live answers of a real VLM."
 
 
-def _figure_note(backend: Backend) -> str:
-    if backend.name == "replay" and any(r.backend == "paper" for r in getattr(backend, "records", ())):
-        return "the paper's reported raw outputs, replayed"
-    return ""
+def _replays_paper(backend: Backend) -> bool:
+    return backend.name == "replay" and any(r.backend == "paper" for r in getattr(backend, "records", ()))
 
-
-# --- output folder ---------------------------------------------------------------------------
 
 def _staging_folder(out: Path) -> Path:
-    """Check ``out`` can be written and make the temporary sibling the results are staged in."""
+    """The temporary sibling of ``out`` the results are staged in, moved into place on success."""
     check_out_folder(out)
     parent = out.resolve().parent
     try:
@@ -138,44 +112,20 @@ def _staging_folder(out: Path) -> Path:
 def _move_into_place(staging: Path, out: Path) -> tuple[Path, ...]:
     try:
         out.mkdir(parents=True, exist_ok=True)
-        moved = []
-        for item in sorted(staging.iterdir()):
-            target = out / item.name
-            os.replace(item, target)
-            moved.append(target)
+        names = sorted(item.name for item in staging.iterdir())
+        for name in names:
+            os.replace(staging / name, out / name)
     except OSError as exc:
         raise BadInput(f"cannot move the results into {out} ({exc.strerror}); pass a writable --out.") from exc
-    return tuple(moved)
+    return tuple(out / name for name in names)
 
 
-def _jsonable(values: Mapping[str, float]) -> dict[str, float | None]:
-    return {k: (v if math.isfinite(v) else None) for k, v in values.items()}
-
-
-# --- the probe -------------------------------------------------------------------------------
-
-def _default_task() -> Task:
-    """The task of a taxonomy that names none: the paper's (a ``TaxonomyConfig`` records no task,
-    as the runs from before tasks did, so its hash is unchanged)."""
-    from vlmrl_cli.tasks.registry import paper_task
-
-    return paper_task()
-
-
-@dataclass
-class _Outcome:
-    """What one kind of probe found, wrote into its folder and logs: its probes, sweep statistics
-    (number questions only), ``metrics.json`` and the MLflow metrics."""
-
-    probes: tuple[Any, ...]
-    sweep: Mapping[str, float]
-    metrics: dict[str, Any]
-    logged: dict[str, float]
+#: What one kind of probe found: probes, sweep statistics, ``metrics.json`` and MLflow metrics.
+_Outcome = tuple[tuple[Any, ...], Mapping[str, float], dict[str, Any], dict[str, float]]
 
 
 class _NumberTable:
-    """Table 1 of a task with number questions (MountainCar's, the paper's): the float, box and MCQ
-    prompts on a sweep of readings; its run is named and hashed by the ``TaxonomyConfig`` alone."""
+    """Table 1 of a task with number questions on a sweep; its run is hashed by the config alone."""
 
     def __init__(self, cfg: TaxonomyConfig, task: Task, backend: Backend) -> None:
         self.task = task
@@ -183,7 +133,10 @@ class _NumberTable:
         key = config_hash(cfg)
         self.run_name = f"taxonomy-{backend.name}-{cfg.states if self.is_sweep else 'transcript'}-{key[:6]}"
         self.tags = {schema.TAG_CONFIG_HASH: key}
-        self.params = _params(cfg, task, backend, len(self.planned), self.is_sweep)
+        self.params = {**flatten(cfg), "backend": backend.name, "model": backend.model,
+                       "simulated": str(backend.simulated).lower(), "frames": str(len(self.planned)),
+                       "sweep": str(self.is_sweep).lower(),
+                       **{f"prompt.{kind.value}": prompt.text for kind, prompt in table1_prompts(task).items()}}
 
     def probe(self, client: VLMClient, staging: Path, progress: ProgressFn | None) -> _Outcome:
         from vlmrl_cli.probe.figure1 import save_figure1
@@ -197,24 +150,24 @@ class _NumberTable:
         write_tables(probes, sweep, staging, number_probe(self.task), label=plain, provenance=provenance,
                      simulated=backend.simulated)
         save_figure1(probes, staging / "figure1.png", label=plain, simulated=backend.simulated,
-                     note=_figure_note(backend))
+                     note="the paper's reported raw outputs, replayed" if _replays_paper(backend) else "")
         summary: dict[str, Any] = {
             "backend": backend.name, "model": backend.model, "simulated": backend.simulated,
             "label": client.label, "provenance": provenance, "sweep": self.is_sweep,
             "queries": stats.queries, "cache_hits": stats.cache_hits, "cache_misses": stats.cache_misses,
-            "metrics": _jsonable(sweep), **client.mcq_mode_entry(self.task.milestones.prompt), **both,
+            "metrics": {k: (v if math.isfinite(v) else None) for k, v in sweep.items()},
+            **client.mcq_mode_entry(self.task.milestones.prompt), **both,
         }
         (staging / "metrics.json").write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n", encoding="utf-8")
         logged = {f"taxonomy.{k}": v for k, v in sweep.items() if math.isfinite(v)}
         logged.update({"taxonomy.cache_hits": stats.cache_hits, "taxonomy.cache_misses": stats.cache_misses,
                        "taxonomy.frames": len(probes)})
         logged.update({f"taxonomy.{k}": v for k, v in both.items() if math.isfinite(v)})
-        return _Outcome(tuple(probes), sweep, summary, logged)
+        return tuple(probes), sweep, summary, logged
 
 
 class _MilestoneTable:
-    """Table 1 of a task that asks for no number: its milestone MCQ on ``Task.probe_states``; its
-    run is named after and tagged with the task, hashed by the task, the states and the VLM."""
+    """Table 1 of a task without numbers: its MCQ; its run is hashed by the task, states and VLM."""
 
     def __init__(self, cfg: TaxonomyConfig, task: Task, backend: Backend) -> None:
         self.task, self.states = task, cfg.states or DEFAULT_STATES
@@ -226,13 +179,11 @@ class _MilestoneTable:
     def probe(self, client: VLMClient, staging: Path, progress: ProgressFn | None) -> _Outcome:
         probes, frames = probe_milestones(client, self.task, self.states, progress)
         values, logged = write_milestones(staging, self.task, client, probes, frames)
-        return _Outcome(tuple(probes), {}, values, logged)
+        return tuple(probes), {}, values, logged
 
 
 def _check(cfg: TaxonomyConfig, task: Task) -> None:
-    """``BadInput`` for what can be wrong before anything exists: a task with neither number
-    questions nor probe states, a simulated-VLM profile the task does not offer, the output
-    folder, the VLM (cache path, model, server, transcript)."""
+    """``BadInput`` for what can be wrong before anything exists (task, profile, folder, VLM)."""
     if task.numbers is None and task.probe_states is None:
         raise BadInput(f"task '{task.name}' names no probe states; give its Task a probe_states function.")
     problem = profile_problem(cfg.vlm.sim.profile, task) if cfg.vlm.backend == "sim" else None
@@ -243,14 +194,12 @@ def _check(cfg: TaxonomyConfig, task: Task) -> None:
 
 
 def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None, task: Task | None = None) -> TaxonomyResult:
-    """Probe ``task``'s frames (None: the paper's task) with its questions (the MCQ; the float and
-    box prompts where it has ``numbers``), score, write Table 1 and Figure 1 into ``cfg.out`` and
-    log one MLflow run.
+    """Probe ``task``'s frames (None: the paper's), write Table 1 and Figure 1 into ``cfg.out`` and log
+    one MLflow run; user errors are ``BadInput``, raised before any result file exists."""
+    if task is None:
+        from vlmrl_cli.tasks.registry import paper_task
 
-    ``progress(done, total)`` is called after each frame. User errors are ``BadInput``, raised
-    before any result file exists in ``cfg.out`` (``_check``).
-    """
-    task = _default_task() if task is None else task
+        task = paper_task()
     _check(cfg, task)
     tracker = store.connect(cfg.tracking_uri)
     staging = _staging_folder(cfg.out)
@@ -266,20 +215,20 @@ def run_taxonomy(cfg: TaxonomyConfig, progress: ProgressFn | None = None, task: 
             store.set_tags(tracker, run_id, {**store.provenance_tags(label, backend.simulated),
                                              schema.TAG_COMMAND: schema.COMMAND_TAXONOMY, **kind.tags})
             store.log_params(tracker, run_id, kind.params)
-            outcome = kind.probe(client, staging, progress)
+            probes, sweep, metrics, logged = kind.probe(client, staging, progress)
             stats = client.stats
             client.close()  # flushes the transcript before it is logged
             client = None
             batch = store.BatchLogger(tracker, run_id)
-            batch.log(outcome.logged, step=0)
+            batch.log(logged, step=0)
             batch.flush()
             store.log_artifacts(tracker, run_id, sorted(staging.iterdir()))
             files = _move_into_place(staging, cfg.out)
         return TaxonomyResult(
             out=cfg.out, run_id=run_id, backend_label=label, simulated=backend.simulated,
-            provenance=provenance_line(backend), probes=outcome.probes, sweep=outcome.sweep, files=files,
+            probes=probes, sweep=sweep, files=files,
             queries=stats.queries, cache_hits=stats.cache_hits, cache_misses=stats.cache_misses,
-            metrics=outcome.metrics,
+            metrics=metrics,
         )
     finally:
         if client is not None:
@@ -300,8 +249,7 @@ def _probe_all(client: VLMClient, task: Task, planned: list[_Planned], progress:
 
 def _generated_too(client: VLMClient, task: Task, planned: list[_Planned], probes: list[FrameProbe]
                    ) -> dict[str, float]:
-    """The MCQ answered by generation too where it was scored (``milestones.generated_too``), on
-    the same frames, drawn again."""
+    """``milestones.generated_too`` on the same frames, drawn again."""
     if not client.scores(task.milestones.prompt) or not planned:
         return {}
     with closing(number_probe(task).renderer()) as renderer:
@@ -309,17 +257,3 @@ def _generated_too(client: VLMClient, task: Task, planned: list[_Planned], probe
     scored = [mcq_probe(p.frame_id, str(p.truth.label), p.answers[PromptKind.MCQ], task.milestones.labels)
               for p in probes]
     return generated_too(client, task, scored, frames)
-
-
-def _params(cfg: TaxonomyConfig, task: Task, backend: Backend, frames: int, is_sweep: bool) -> dict[str, str]:
-    params = flatten(cfg)
-    params.update({
-        "backend": backend.name,
-        "model": backend.model,
-        "simulated": str(backend.simulated).lower(),
-        "frames": str(frames),
-        "sweep": str(is_sweep).lower(),
-    })
-    for kind, prompt in table1_prompts(task).items():
-        params[f"prompt.{kind.value}"] = prompt.text
-    return params

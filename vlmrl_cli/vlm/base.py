@@ -25,13 +25,8 @@ class Answer:
 
 @runtime_checkable
 class Backend(Protocol):
-    """A VLM: ``answer`` maps (prompt, frame) to raw text; nothing else is shared.
-
-    ``name`` is the backend kind (``sim``, ``hf``, ``openai``, ``replay``), ``model`` names the
-    model (hub id, path, server model), ``simulated`` is True when no real VLM produced the
-    text. Implementations raise ``BackendUnavailable`` when they cannot answer at all
-    (server down, malformed response) and ``MissingAnswer`` (replay only) for an unknown query.
-    """
+    """A VLM: ``answer`` maps (prompt, frame) to raw text; ``simulated``: no real VLM wrote it.
+    Raises ``BackendUnavailable``, or ``MissingAnswer`` (replay) for an unknown query."""
 
     name: str
     model: str
@@ -44,24 +39,14 @@ class Backend(Protocol):
 
 @runtime_checkable
 class BatchBackend(Backend, Protocol):
-    """A backend that answers several frames in one call (a batched forward pass, concurrent
-    requests): ``answer_many(prompt, frames)[i]`` is what ``answer(prompt, frames[i])`` would say,
-    whatever the split. A backend without it is asked one frame at a time (``answer_all``)."""
+    """A backend that answers several frames in one call: ``answer_many(p, fs)[i] == answer(p, fs[i])``."""
 
     def answer_many(self, prompt: Prompt, frames: Sequence[Frame]) -> list[str]: ...
 
 
 @dataclass(frozen=True)
 class OptionScores:
-    """An MCQ answered by scoring: the log-probability of each of ``options`` (summed over the
-    option's tokens, given the prompt and the image), the argmax as the ``label`` and the margin
-    (best minus second) as the answer's confidence.
-
-    Example:
-        >>> s = OptionScores(("LOW", "MID", "HIGH"), (-2.0, -0.25, -1.5))
-        >>> s.label, s.margin
-        ('MID', 1.25)
-    """
+    """An MCQ answered by scoring: each option's log-probability; the argmax is the ``label``."""
 
     options: tuple[str, ...]
     logprobs: tuple[float, ...]
@@ -72,23 +57,18 @@ class OptionScores:
 
     @property
     def label(self) -> str:
-        """The option with the highest log-probability (the first of equals)."""
         return self.options[max(range(len(self.options)), key=lambda i: (self.logprobs[i], -i))]
 
     @property
     def margin(self) -> float:
-        """The best log-probability minus the second best (>= 0)."""
+        """The best log-probability minus the second best: the answer's confidence."""
         best, second = sorted(self.logprobs, reverse=True)[:2]
         return best - second
 
 
 @runtime_checkable
 class ScoringBackend(Backend, Protocol):
-    """A backend that can answer an MCQ by its options' log-probabilities (one prefill, no
-    decoding): ``score_many(prompt, frames)[i]`` scores ``prompt.options`` about ``frames[i]``, or
-    is None where no log-probabilities came back (a server that returns none): that frame is
-    answered by generation instead, or refused in ``logprob`` mode. ``can_score`` is False where
-    the backend knows up front that it cannot (a server known to return none)."""
+    """A backend that scores an MCQ's options (None: no log-probabilities came back)."""
 
     can_score: bool
 
@@ -96,17 +76,7 @@ class ScoringBackend(Backend, Protocol):
 
 
 def answer_all(backend: Backend, prompt: Prompt, frames: Sequence[Frame]) -> list[str]:
-    """``backend``'s answers about ``frames``, in order: one ``answer_many`` call where the backend
-    has it, else one ``answer`` per frame, in order (a stochastic backend's draws follow that order).
-
-    Example:
-        >>> class Echo:
-        ...     name, model, simulated = "echo", "e", True
-        ...     def answer(self, prompt, frame): return frame
-        ...     def close(self): pass
-        >>> answer_all(Echo(), None, ["a", "b"])
-        ['a', 'b']
-    """
+    """The answers about ``frames``, in order: one ``answer_many`` call, else ``answer`` per frame."""
     if not frames:
         return []
     if isinstance(backend, BatchBackend):

@@ -27,18 +27,7 @@ def cache_key(backend: str, model: str, prompt: str, image_sha256: str) -> str:
 
 
 class ResponseCache:
-    """sqlite-backed map from ``cache_key`` to (answer, original latency); counts hits/misses.
-
-    Example:
-        >>> import tempfile, pathlib
-        >>> c = ResponseCache(pathlib.Path(tempfile.mkdtemp()) / "r.sqlite")
-        >>> k = cache_key("sim", "m", "p", "abc")
-        >>> c.get(k) is None, c.put(k, "sim", "m", "BOTTOM", 0.1), c.get(k)
-        (True, None, ('BOTTOM', 0.1))
-        >>> c.hits, c.misses
-        (1, 1)
-        >>> c.close()
-    """
+    """sqlite-backed map from ``cache_key`` to (answer, original latency)."""
 
     def __init__(self, path: Path, batch: int = 64, max_age_s: float = 5.0) -> None:
         if batch < 1 or not max_age_s >= 0:
@@ -47,15 +36,12 @@ class ResponseCache:
         self.batch = int(batch)
         self.max_age_s = float(max_age_s)
         self._oldest = 0.0  # time.monotonic() of the oldest pending answer
-        self.hits = 0
-        self.misses = 0
         self._pending: dict[str, tuple[str, str, str, float]] = {}
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             self._db = sqlite3.connect(str(path), timeout=30.0)
             self._db.execute("PRAGMA journal_mode=WAL")
-            # WAL without an fsync per commit: a crash can lose the last batches of answers (they
-            # are asked again), never corrupt the file. A commit cost ~190 ms on a busy disk.
+            # no fsync per commit (~190 ms on a busy disk): a crash loses answers, never the file
             self._db.execute("PRAGMA synchronous=NORMAL")
             self._db.execute(_SCHEMA)
             self._db.commit()
@@ -63,26 +49,13 @@ class ResponseCache:
             raise BadInput(f"cannot open the response cache {path}; pass --no-cache or a writable path.") from exc
 
     def get(self, key: str) -> tuple[str, float] | None:
-        pending = self._pending.get(key)
-        if pending is not None:
-            self.hits += 1
-            return pending[2], pending[3]
+        if key in self._pending:
+            return self._pending[key][2], self._pending[key][3]
         row = self._db.execute("SELECT answer, latency_s FROM responses WHERE key = ?", (key,)).fetchone()
-        if row is None:
-            self.misses += 1
-            return None
-        self.hits += 1
-        return str(row[0]), float(row[1])
+        return None if row is None else (str(row[0]), float(row[1]))
 
     def put(self, key: str, backend: str, model: str, answer: str, latency_s: float) -> None:
-        """Store an answer; written to disk in batches (``batch`` answers, or the first one
-        pending for ``max_age_s``, so a slow backend's answers are not held long), and by
-        ``flush``/``close``.
-
-        One commit per answer cost about 3 ms, a fifth of a simulated query. Pending answers
-        are served from memory, so batching changes no answer, only when other processes
-        sharing the file see it. No write transaction stays open between batches.
-        """
+        """Store an answer; written in batches of ``batch`` or after ``max_age_s`` (served from memory till then)."""
         now = time.monotonic()
         if not self._pending:
             self._oldest = now
@@ -91,7 +64,6 @@ class ResponseCache:
             self.flush()
 
     def flush(self) -> None:
-        """Write the pending answers in one transaction."""
         if not self._pending:
             return
         rows = [(key, *value) for key, value in self._pending.items()]

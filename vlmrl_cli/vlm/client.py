@@ -21,8 +21,7 @@ SCORED_KEY = "#mcq-logprob"
 
 @dataclass
 class ClientStats:
-    """What a client did: queries asked (cache hits included), the backend calls they took and
-    how many frames those carried, and the seconds spent waiting for the backend."""
+    """What a client did: queries (cache hits included), backend calls, their frames and seconds."""
 
     queries: int = 0
     cache_hits: int = 0
@@ -36,12 +35,7 @@ class ClientStats:
 
 
 class VLMClient:
-    """Ask a backend about a frame, through the cache, writing every query to the transcript.
-
-    ``ask`` is the only entry point; ``MissingAnswer`` and ``BackendUnavailable`` from the
-    backend propagate to the caller. The replay backend is never cached (it is a cache), and
-    neither is a ``stochastic`` one (its next answer to the same query may differ).
-    """
+    """Ask a backend through the cache (never for replay or a ``stochastic`` one), writing a transcript."""
 
     def __init__(
         self,
@@ -63,13 +57,11 @@ class VLMClient:
 
     @property
     def stochastic(self) -> bool:
-        """True when the backend may answer one query differently each time (never cached)."""
         return bool(getattr(self.backend, "stochastic", False))
 
     @property
     def label(self) -> str:
-        """``describe(backend)``, and for a backend that can score, how it answers an MCQ
-        (``MCQ by option log-probability`` or ``MCQ by generation``): the runs' provenance tag."""
+        """``describe(backend)``, plus how a scoring backend answers an MCQ: the runs' provenance tag."""
         if not isinstance(self.backend, ScoringBackend):
             return describe(self.backend)
         mode = "option log-probability" if self.mcq_mode != "generate" and self.backend.can_score else "generation"
@@ -80,48 +72,32 @@ class VLMClient:
         return self.ask_many(prompt, [frame])[0]
 
     def ask_many(self, prompt: Prompt, frames: Sequence[Frame], *, generate: bool = False) -> list[Answer]:
-        """The answers about ``frames``, in order: each looked up in the cache, the others sent to
-        the backend in ONE call (``answer_all``: a batch, concurrent requests, or one by one for a
-        backend that cannot batch; for an MCQ with options that the backend can score,
-        ``score_many``, the frames it returns no scores for then generated), a frame asked twice in
-        the call sent once unless the backend is stochastic; every query written to the transcript
-        in the order of ``frames``. The answers do not depend on how a caller splits its frames
-        into calls. A scored answer is cached apart from a generated one (its model key ends in
-        ``SCORED_KEY``): the two modes may answer one frame differently. ``generate`` decodes
-        whatever the mode (the probe's comparison of the two)."""
+        """The answers about ``frames``: cache misses go to the backend in ONE call, a repeated frame once
+        unless stochastic; ``generate`` decodes whatever the mode."""
         b = self.backend
         scored = self.scores(prompt) and not generate
         keys = [self._key(prompt, frame, scored) for frame in frames]
-        hits: dict[int, tuple[str, float]] = {}
-        for i, key in enumerate(keys):
-            hit = self.cache.get(key) if self.cache is not None else None
-            if hit is not None:
-                hits[i] = (hit[0], hit[1])
-        missing = [i for i in range(len(frames)) if i not in hits]
-        # one query per distinct frame, unless each query is a fresh draw
+        hits = {i: hit for i, key in enumerate(keys) if self.cache is not None and (hit := self.cache.get(key))}
         first: dict[str, int] = {}
-        send = []
-        for i in missing:
-            if self.stochastic or keys[i] not in first:
-                first.setdefault(keys[i], i)
-                send.append(i)
+        send = [i for i in range(len(frames))  # one query per distinct frame, unless each is a fresh draw
+                if i not in hits and (self.stochastic or first.setdefault(keys[i], i) == i)]
         fresh, latency = self._fresh(prompt, [frames[i] for i in send], scored) if send else ([], 0.0)
         answered = dict(zip(send, fresh, strict=True))
         answers = []
         for i, frame in enumerate(frames):
-            self.stats.queries += 1
-            if i not in hits and i not in answered and self.cache is not None:  # as a later ask would find it
-                hits[i] = (answered[first[keys[i]]][0], latency)
             confidence: float | None = None
             if i in hits:
-                self.stats.cache_hits += 1
-                text, took, cached = hits[i][0], hits[i][1], True
+                (text, took), cached = hits[i], True
             else:
-                self.stats.cache_misses += 1
-                text, confidence, key = answered[i] if i in answered else answered[first[keys[i]]]
-                took, cached = latency, False
-                if self.cache is not None and i in answered:
+                text, confidence, key = answered.get(i) or answered[first[keys[i]]]
+                took, cached = latency, i not in answered and self.cache is not None  # as a later ask would find it
+                if cached:
+                    confidence = None
+                elif self.cache is not None:
                     self.cache.put(key, b.name, b.model, text, took)
+            self.stats.queries += 1
+            self.stats.cache_hits += cached
+            self.stats.cache_misses += not cached
             if self.transcript is not None:
                 self.transcript.write(TranscriptRecord(
                     backend=b.name, model=b.model, prompt_kind=prompt.kind.value, prompt=prompt.text,
@@ -132,14 +108,12 @@ class VLMClient:
         return answers
 
     def scores(self, prompt: Prompt) -> bool:
-        """Whether ``prompt`` is answered by its options' log-probabilities: an MCQ with options,
-        a backend that can score, and a mode other than ``generate``."""
+        """Whether ``prompt`` is answered by its options' log-probabilities."""
         return (prompt.options is not None and self.mcq_mode != "generate"
                 and isinstance(self.backend, ScoringBackend) and bool(self.backend.can_score))
 
     def mcq_mode_entry(self, prompt: Prompt) -> dict[str, str]:
-        """``{"mcq.mode": "logprob" | "generate"}``, how ``prompt`` is answered, for a backend that
-        can score; empty for the others (the simulated VLM, replay), whose records stay as they were."""
+        """``{"mcq.mode": "logprob" | "generate"}`` for a backend that can score, else empty."""
         if not isinstance(self.backend, ScoringBackend):
             return {}
         return {"mcq.mode": "logprob" if self.scores(prompt) else "generate"}
@@ -150,9 +124,7 @@ class VLMClient:
 
     def _fresh(self, prompt: Prompt, frames: list[Frame], scored: bool
                ) -> tuple[list[tuple[str, float | None, str]], float]:
-        """(text, confidence, cache key) of each of ``frames`` from ONE backend call, and its seconds
-        per frame: scored where it can (``scores``), generated for the rest (``BackendUnavailable``
-        in ``logprob`` mode)."""
+        """(text, confidence, cache key) of each of ``frames`` from ONE backend call, and seconds per frame."""
         start = time.perf_counter()
         results: list[OptionScores | None] = [None] * len(frames)
         if scored:
@@ -169,12 +141,10 @@ class VLMClient:
         texts = dict(zip(fallback, answer_all(self.backend, prompt, [frames[j] for j in fallback]), strict=True))
         self.stats.scored += len(frames) - len(fallback)
         self.stats.generated += len(fallback)
-        out: list[tuple[str, float | None, str]] = []
-        for j, (frame, r) in enumerate(zip(frames, results, strict=True)):
-            if r is None:
-                out.append((texts[j], None, self._key(prompt, frame, False)))
-            else:
-                out.append((r.label, r.margin, self._key(prompt, frame, True)))
+        out: list[tuple[str, float | None, str]] = [
+            (texts[j], None, self._key(prompt, frame, False)) if r is None else
+            (r.label, r.margin, self._key(prompt, frame, True))
+            for j, (frame, r) in enumerate(zip(frames, results, strict=True))]
         elapsed = time.perf_counter() - start
         self.stats.backend_calls += 1
         self.stats.backend_frames += len(frames)

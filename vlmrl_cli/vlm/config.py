@@ -17,21 +17,15 @@ from vlmrl_cli.core.fields import one_of
 from vlmrl_cli.core.provenance import to_jsonable
 
 BACKENDS: tuple[str, ...] = ("sim", "hf", "openai", "replay")
-#: How an MCQ with options is answered: ``logprob`` scores each option's log-probability (one
-#: prefill, no decoding) and fails where the backend cannot; ``generate`` decodes an answer and
-#: parses it; ``auto`` scores where the backend can and generates elsewhere (the simulated VLM,
-#: replay, a server that returns no log-probabilities).
 MCQ_MODES: tuple[str, ...] = ("auto", "logprob", "generate")
 PAPER_MODEL = "llava-hf/llava-1.5-7b-hf"
 PAPER_TRANSCRIPT = paper.TABLE1_TRANSCRIPT
 DEFAULT_CACHE = Path(".vlmrl-cache") / "responses.sqlite"
-
-
 DEFAULT_SIM_PROFILE = "default"
 
 
 def _profile_name(value: str) -> str:
-    """A profile's name as written; which names a run may use is its task's (``profile_problem``)."""
+    """A profile's name as written (which names exist is the task's: ``profile_problem``)."""
     if not value or value != value.strip():
         raise ValueError(f"a simulated-VLM profile is a name such as '{DEFAULT_SIM_PROFILE}', got {value!r}")
     return value
@@ -39,22 +33,7 @@ def _profile_name(value: str) -> str:
 
 @dataclass(frozen=True)
 class SimKnobs:
-    """Knobs of the simulated VLM (``sim``). All randomness but ``query_flicker``'s is a pure
-    function of (seed, prompt, image bytes), so the same frame always gets the same answer;
-    ``query_flicker > 0`` makes the VLM stochastic (a fresh draw per query, from a stream seeded
-    by (seed, the run's seed)), and its answers then bypass every cache.
-
-    ``profile`` names the set of knob values the others were resolved from: a generic one
-    (``SIM_PROFILES``) or one of the run's task (``Task.sim_profiles``); build a profile's knobs
-    with ``SimKnobs.of_profile``. The name is checked against the task where the task is known
-    (``resolve_sim_profile``, ``profile_problem``), not here: this layer knows no task. The
-    dataclass defaults are the ``default`` profile, today's simulated VLM, whose answers never
-    change.
-
-    ``float_anchor``, ``mcq_bottom_halfwidth`` and ``box_anchor_x`` are read by a
-    ``NumberReader`` (vlm/sim.py), in the units of its reading; what they mean for a task is its
-    reader's (MountainCar's: ``tasks/mountain_car/profiles.py``). Their names and values stay as
-    they were when they were MountainCar's, because both enter config hashes."""
+    """Knobs of the SIMULATED VLM (vlm/sim.py); the defaults are the ``default`` profile (``of_profile``)."""
 
     flicker: float = field(default=0.1, metadata={"rules": (Interval(ge=0, le=1),),
                                                   "help": "P(answer a neighbouring MCQ label)"})
@@ -98,50 +77,25 @@ class SimKnobs:
 
     @classmethod
     def of_profile(cls, name: str, task: ProfileOwner | None = None, **overrides: Any) -> SimKnobs:
-        """The knobs of profile ``name``, a generic one or one ``task`` offers, with ``overrides``
-        laid over them: an explicit knob beats the profile's value.
-
-        Example:
-            >>> k = SimKnobs.of_profile("ideal", flicker=0.3)
-            >>> k.profile, k.flicker, k.float_noise
-            ('ideal', 0.3, 0.0)
-            >>> SimKnobs.of_profile("default") == SimKnobs()
-            True
-        """
+        """The knobs of profile ``name`` (generic or ``task``'s) with ``overrides`` laid over them."""
         problem = profile_problem(name, task)
         if problem:
             raise ValueError(problem + ".")
         return cls(**{**sim_profiles(task)[name], **overrides, "profile": name})
 
 
-#: The generic profiles, which every task offers: named sets of ``SimKnobs`` values (knobs not
-#: named keep their dataclass default). ``ideal``: no noise and a one-pixel grid. ``default``:
-#: today's knobs (the results so far). A task adds its own (``Task.sim_profiles``: MountainCar's
-#: ``llava-table1``, the failures of the paper's Table 1).
+#: The generic profiles every task offers (a task adds its own: ``Task.sim_profiles``).
 SIM_PROFILES: dict[str, Mapping[str, Any]] = {
     "ideal": {"flicker": 0.0, "float_noise": 0.0, "box_noise_px": 0.0, "box_failure": 0.0, "patch_px": 1},
     DEFAULT_SIM_PROFILE: {},
 }
 
-#: The knobs a profile may set: every ``SimKnobs`` field but ``profile`` itself.
 _PROFILE_KNOBS = tuple(f.name for f in dataclasses.fields(SimKnobs) if f.name != "profile")
 
 
 @dataclass(frozen=True)
 class SimProfile:
-    """A named set of ``SimKnobs`` values that a task offers beside the generic ``SIM_PROFILES``
-    (``Task.sim_profiles``): the knobs' values in its reader's units, e.g. MountainCar's
-    ``llava-table1``. Knobs it does not name keep their dataclass default.
-
-    Example:
-        >>> stuck = SimProfile("stuck", {"flicker": 0.0, "float_anchor": 0.5})
-        >>> SimKnobs(**stuck.knobs, profile=stuck.name).float_anchor
-        0.5
-        >>> SimProfile("ideal", {})
-        Traceback (most recent call last):
-        ...
-        ValueError: simulated-VLM profile 'ideal' is a generic one; give the task's profile another name
-    """
+    """A task's named set of ``SimKnobs`` values (``Task.sim_profiles``); others keep their default."""
 
     name: str
     knobs: Mapping[str, Any]
@@ -159,8 +113,7 @@ class SimProfile:
 
 
 class ProfileOwner(Protocol):
-    """What the profile lookup needs of a task (``tasks.base.Task``, which this layer may not
-    import): its name, for the errors, and the profiles it adds to the generic ones."""
+    """What the profile lookup needs of a ``tasks.base.Task`` (a layer above this one)."""
 
     @property
     def name(self) -> str: ...
@@ -170,32 +123,18 @@ class ProfileOwner(Protocol):
 
 
 def sim_profiles(task: ProfileOwner | None = None) -> dict[str, Mapping[str, Any]]:
-    """The profiles a run of ``task`` may name, in order: the generic ``SIM_PROFILES``, then the
-    task's own (no task: the generic ones alone).
-
-    Example:
-        >>> list(sim_profiles())
-        ['ideal', 'default']
-    """
+    """The profiles a run of ``task`` may name: the generic ones, then the task's own."""
     table = dict(SIM_PROFILES)
     if task is not None:
         for profile in task.sim_profiles:
-            if profile.name in table:  # a SimProfile is never named as a generic one: a task's twice
+            if profile.name in table:
                 raise ValueError(f"task '{task.name}' offers the simulated-VLM profile '{profile.name}' twice")
             table[profile.name] = profile.knobs
     return table
 
 
 def profile_problem(name: str, task: ProfileOwner | None = None) -> str | None:
-    """Why ``name`` is not a profile a run of ``task`` may name (None when it is): one sentence
-    naming the task and its profiles.
-
-    Example:
-        >>> profile_problem("ideal") is None
-        True
-        >>> profile_problem("idael")
-        "unknown simulated-VLM profile 'idael' (did you mean 'ideal'?); choose from ideal, default"
-    """
+    """Why a run of ``task`` may not name profile ``name`` (None: it may)."""
     offered = sim_profiles(task)
     if name in offered:
         return None
@@ -204,9 +143,7 @@ def profile_problem(name: str, task: ProfileOwner | None = None) -> str | None:
             f"choose from {', '.join(offered)}")
 
 
-#: Knobs added after results were produced with the default ones, and the values that leave the
-#: answers as before: while they hold these values they stay out of every hash and cache key,
-#: so existing runs and cached answers keep theirs.
+#: Knobs added after results were produced: at these values they stay out of every hash and cache key.
 NEUTRAL_SIM_KNOBS: dict[str, Any] = {
     "profile": DEFAULT_SIM_PROFILE, "float_anchor": None, "mcq_bottom_halfwidth": None, "box_anchor_x": None,
     "query_flicker": 0.0,
@@ -214,45 +151,25 @@ NEUTRAL_SIM_KNOBS: dict[str, Any] = {
 
 
 def sim_identity(knobs: SimKnobs) -> dict[str, Any]:
-    """The knobs as they enter hashes: every field, minus the ``NEUTRAL_SIM_KNOBS`` at their neutral value.
-
-    Example:
-        >>> "profile" in sim_identity(SimKnobs()), sim_identity(SimKnobs.of_profile("ideal"))["profile"]
-        (False, 'ideal')
-    """
+    """The knobs as they enter hashes: ``NEUTRAL_SIM_KNOBS`` at their neutral value left out."""
     values = {f.name: getattr(knobs, f.name) for f in dataclasses.fields(knobs)}
     return {k: v for k, v in values.items() if k not in NEUTRAL_SIM_KNOBS or NEUTRAL_SIM_KNOBS[k] != v}
 
 
 def resolve_sim_profile(sim: Mapping[str, Any], task: ProfileOwner | None = None) -> dict[str, Any]:
-    """A raw ``[vlm.sim]`` table (the keys some layer set) with its profile's values beneath the
-    keys set explicitly. The profile is looked up among those ``task``, the run's, offers
-    (``sim_profiles``): one it does not offer is a ``BadInput`` naming the task. Without a task
-    (the run's task is not known yet: its own check says why), or when the table names no
-    profile, the table comes back unchanged.
-
-    Example:
-        >>> resolve_sim_profile({"profile": "ideal", "flicker": 0.3})["flicker"]
-        0.3
-        >>> resolve_sim_profile({"profile": "ideal"})["patch_px"]
-        1
-    """
+    """A raw ``[vlm.sim]`` table with its profile's values beneath the keys set explicitly."""
     name = sim.get("profile")
-    if not isinstance(name, str):
-        return dict(sim)  # the schema says what is wrong with a profile that is no string
     offered = sim_profiles(task)
+    if not isinstance(name, str) or (name not in offered and task is None):
+        return dict(sim)
     if name not in offered:
-        problem = profile_problem(name, task)
-        if task is None or problem is None:
-            return dict(sim)
-        raise BadInput(f"vlm.sim.profile: {problem}.")
+        raise BadInput(f"vlm.sim.profile: {profile_problem(name, task)}.")
     return {**offered[name], **sim}
 
 
 @dataclass(frozen=True)
 class VLMConfig:
-    """Which VLM answers, and how. ``api_key_env`` names an environment variable; the key
-    itself is never stored, logged or hashed."""
+    """Which VLM answers, and how (the API key itself is never stored, logged or hashed)."""
 
     backend: str = field(default="sim", metadata={"rules": (AfterValidator(one_of(BACKENDS, "VLM backend")),),
                                                   "flag": "--vlm",
@@ -284,21 +201,12 @@ class VLMConfig:
 #: VLM settings that change speed, not answers: never in a run's identity.
 SPEED_ONLY_VLM: tuple[str, ...] = ("cache_path", "use_cache", "timeout_s", "retries", "api_key_env",
                                    "max_concurrency")
-#: Settings added after runs were recorded, and the values that leave those runs' answers as they
-#: were: while they hold these values they stay out of the identity, so the runs keep their hashes.
+#: Settings added after runs were recorded: at these values they stay out of the identity.
 NEUTRAL_VLM: dict[str, Any] = {"mcq_mode": "auto", "max_queries": None}
 
 
 def vlm_identity(cfg: VLMConfig) -> dict[str, Any]:
-    """``cfg`` as it enters a run's identity: the settings that can change an answer, the simulated
-    VLM's knobs only for ``sim`` (``sim_identity``), the ``NEUTRAL_VLM`` ones only off their neutral value.
-
-    Example:
-        >>> sorted(vlm_identity(VLMConfig()))
-        ['backend', 'base_url', 'device', 'dtype', 'max_new_tokens', 'model', 'sim', 'transcript_in']
-        >>> vlm_identity(VLMConfig(mcq_mode="generate", max_concurrency=1))["mcq_mode"]
-        'generate'
-    """
+    """``cfg`` as it enters a run's identity: what can change an answer (``sim`` knobs for ``sim`` only)."""
     out: dict[str, Any] = {}
     for f in dataclasses.fields(cfg):
         value = getattr(cfg, f.name)

@@ -1,10 +1,4 @@
-"""A local image-text-to-text model (LLaVA, Qwen-VL, ...) run in-process through transformers.
-
-Any model that ``AutoProcessor`` and ``AutoModelForImageTextToText`` can load works: a hub id
-(``llava-hf/llava-1.5-7b-hf``, the paper's model) or a local folder written by
-``save_pretrained``. transformers is imported only when a model is loaded, so the CLI starts
-fast for the other backends.
-"""
+"""A local image-text-to-text model run in-process through transformers. See docs/real-vlm.md."""
 
 from __future__ import annotations
 
@@ -25,24 +19,8 @@ logger = logging.getLogger(__name__)
 DTYPES: tuple[str, ...] = ("auto", "float32", "float16", "bfloat16")
 
 
-def resolve_device(requested: str | None) -> str:
-    """The torch device to run on: ``requested`` if given, else ``cuda`` when present, else ``cpu``."""
-    if requested:
-        return requested
-    import torch
-
-    return "cuda" if torch.cuda.is_available() else "cpu"
-
-
 def resolve_dtype(name: str, device: str) -> Any:
-    """The ``torch.dtype`` named ``name``; ``auto`` is float16 on CUDA and float32 elsewhere.
-
-    Example:
-        >>> resolve_dtype("auto", "cpu")
-        torch.float32
-        >>> resolve_dtype("bfloat16", "cuda")
-        torch.bfloat16
-    """
+    """The ``torch.dtype`` named ``name``; ``auto`` is float16 on CUDA and float32 elsewhere."""
     import torch
 
     if name not in DTYPES:
@@ -53,7 +31,7 @@ def resolve_dtype(name: str, device: str) -> Any:
 
 
 def _dtype_kwarg() -> str:
-    """``from_pretrained``'s dtype keyword: ``dtype`` since transformers 4.56, ``torch_dtype`` before."""
+    """``from_pretrained``'s dtype keyword (``torch_dtype`` before transformers 4.56)."""
     import transformers
 
     major, minor = (int(p) for p in transformers.__version__.split(".")[:2])
@@ -70,19 +48,15 @@ def _looks_like_path(model: str) -> bool:
     )
 
 
-def _chain(exc: BaseException) -> list[BaseException]:
-    """``exc`` and every exception it was raised from (``__cause__`` / ``__context__``)."""
-    seen: list[BaseException] = []
-    cur: BaseException | None = exc
-    while cur is not None and cur not in seen:
-        seen.append(cur)
-        cur = cur.__cause__ or cur.__context__
-    return seen
-
-
 def _load_error(model: str, exc: BaseException) -> BackendUnavailable:
     """One sentence saying why ``model`` did not load and what to do about it."""
-    names = {type(e).__name__ for e in _chain(exc)}
+    names: set[str] = set()
+    seen: list[BaseException] = []
+    cur: BaseException | None = exc
+    while cur is not None and cur not in seen:  # exc and every exception it was raised from
+        seen.append(cur)
+        names.add(type(cur).__name__)
+        cur = cur.__cause__ or cur.__context__
     head = f"cannot load the model '{model}' with transformers"
     if names & {"LocalEntryNotFoundError", "OfflineModeIsEnabled", "ConnectError", "ConnectionError"}:
         why = ("no such local folder and the Hugging Face hub is unreachable (or offline mode is on); "
@@ -111,9 +85,7 @@ def _one_line(exc: BaseException, limit: int = 200) -> str:
 
 
 def locate_model(cfg: VLMConfig) -> tuple[Path, bool]:
-    """``(path, local)`` of ``cfg.model`` without loading it: a local folder with a config.json
-    (``local``) or a hub id; ``BackendUnavailable`` for a missing model, a path that is no model
-    folder. (A hub id is only checked when loading, or by ``hub_problem``.)"""
+    """``(path, local)`` of ``cfg.model`` without loading it: a model folder or a hub id (unchecked)."""
     if not cfg.model:
         raise BackendUnavailable(
             f"the hf backend needs --model: a Hugging Face hub id such as {PAPER_MODEL} "
@@ -136,8 +108,7 @@ def locate_model(cfg: VLMConfig) -> tuple[Path, bool]:
 
 
 def hub_problem(model_id: str, timeout_s: float = 10.0) -> str | None:
-    """Why the hub id ``model_id`` cannot be loaded here, or None: it is in the local Hugging
-    Face cache, or the hub answers for it (offline mode, ``HF_HUB_OFFLINE``, asks no server)."""
+    """Why the hub id ``model_id`` cannot be loaded here (None: cached locally or on the hub)."""
     import os
 
     from huggingface_hub import try_to_load_from_cache
@@ -157,20 +128,18 @@ def hub_problem(model_id: str, timeout_s: float = 10.0) -> str | None:
 
 
 def _chunks(frames: Sequence[Frame], size: int) -> Iterator[Sequence[Frame]]:
-    """``frames`` in consecutive slices of at most ``size``."""
     for i in range(0, len(frames), max(1, size)):
         yield frames[i:i + max(1, size)]
 
 
 def _cache_kwarg(model: Any) -> str:
-    """``forward``'s KV-cache keyword: ``cache`` in newer transformers, ``past_key_values`` before."""
+    """``forward``'s KV-cache keyword (``past_key_values`` in older transformers)."""
     import inspect
 
     return "cache" if "cache" in inspect.signature(model.forward).parameters else "past_key_values"
 
 
 def _kv_cache(output: Any) -> Any:
-    """The KV cache a forward pass returned (``cache`` or, in older transformers, ``past_key_values``)."""
     cache = output.get("cache") if hasattr(output, "get") else None
     return cache if cache is not None else output.past_key_values
 
@@ -184,19 +153,10 @@ class _Loaded:
 
 
 class HFBackend:
-    """A transformers image-text-to-text model, greedy-decoded, answering (prompt, frame) one at a
-    time (``answer``) or a round of frames in batches (``answer_many``), and scoring an MCQ's
-    options by their log-probabilities (``score_many``).
-
-    The prompt goes through the processor's chat template as one user turn holding the image
-    and the text; only the newly generated tokens are decoded. A failure while generating (an
-    odd tokenizer, a model that chokes on the image) is logged and answered with ``""`` so a
-    probe over many frames carries on; the parsers count it as a failed answer.
-    """
+    """A transformers VLM, greedy, in batches; a failed generation is logged and answered ``""``."""
 
     name = "hf"
     simulated = False
-
     can_score = True
 
     def __init__(self, model_id: str, loaded: _Loaded, max_new_tokens: int = 32, batch_size: int = 8) -> None:
@@ -211,14 +171,12 @@ class HFBackend:
 
     @classmethod
     def from_config(cls, cfg: VLMConfig) -> HFBackend:
-        """Load ``cfg.model`` (hub id or local folder) on ``cfg.device`` in ``cfg.dtype``.
-
-        Raises ``BackendUnavailable`` with one sentence when the model cannot be loaded, and
-        ``BadInput`` for an unknown dtype.
-        """
+        """Load ``cfg.model`` on ``cfg.device`` (None: cuda if present) in ``cfg.dtype``."""
         model_id = cfg.model or ""
-        path, local = locate_model(cfg)
-        device = resolve_device(cfg.device)
+        path, local = locate_model(cfg)  # before torch loads: a wrong path fails fast
+        import torch
+
+        device = cfg.device or ("cuda" if torch.cuda.is_available() else "cpu")
         dtype = resolve_dtype(cfg.dtype, device)
         source = str(path) if local else model_id
         try:
@@ -235,7 +193,6 @@ class HFBackend:
                    batch_size=cfg.max_concurrency)
 
     def _chat_text(self, loaded: _Loaded, text: str) -> str:
-        """``text`` as one user turn holding the image, through the chat template if any."""
         processor = loaded.processor
         if getattr(processor, "chat_template", None):
             messages = [{"role": "user", "content": [{"type": "image"}, {"type": "text", "text": text}]}]
@@ -243,8 +200,7 @@ class HFBackend:
         return text  # processors without a template (e.g. PaliGemma) insert their image tokens themselves
 
     def _inputs(self, loaded: _Loaded, text: str, images: Sequence[Any]) -> Any:
-        """Processor inputs for one user turn of (image, text) per image, padded on the left (a
-        decoder continues each row from its last token) when the rows differ in length."""
+        """Processor inputs of one (image, text) user turn per image, left-padded."""
         processor = loaded.processor
         chat = self._chat_text(loaded, text)
         tokenizer = getattr(processor, "tokenizer", None)
@@ -258,10 +214,6 @@ class HFBackend:
             raise BackendUnavailable(f"the hf backend for '{self.model}' was closed; build a new one.")
         return self._loaded
 
-    def _decoded(self, loaded: _Loaded, out: Any, prompt_len: int) -> list[str]:
-        tokenizer = getattr(loaded.processor, "tokenizer", loaded.processor)
-        return [str(tokenizer.decode(row[prompt_len:], skip_special_tokens=True)).strip() for row in out]
-
     def _generate(self, loaded: _Loaded, prompt: Prompt, frames: Sequence[Frame]) -> list[str]:
         """Greedy answers about ``frames`` from one batched ``generate``."""
         import torch
@@ -270,7 +222,9 @@ class HFBackend:
         inputs = self._inputs(loaded, prompt.text, [Image.fromarray(f.pixels) for f in frames])
         with torch.inference_mode():
             out = loaded.model.generate(**inputs, do_sample=False, max_new_tokens=self.max_new_tokens)
-        return self._decoded(loaded, out, inputs["input_ids"].shape[1])
+        tokenizer = getattr(loaded.processor, "tokenizer", loaded.processor)
+        start = inputs["input_ids"].shape[1]
+        return [str(tokenizer.decode(row[start:], skip_special_tokens=True)).strip() for row in out]
 
     def answer(self, prompt: Prompt, frame: Frame) -> str:
         """The model's greedy answer to ``prompt`` about ``frame``; ``""`` if generation fails."""
@@ -283,9 +237,7 @@ class HFBackend:
             return ""
 
     def answer_many(self, prompt: Prompt, frames: Sequence[Frame]) -> list[str]:
-        """The greedy answers about ``frames``, in order, from batched ``generate`` calls of at most
-        ``batch_size`` frames (left-padded): what ``answer`` says of each. A batch that fails is
-        asked again frame by frame, so one bad frame costs only its own answer."""
+        """``answer`` of each frame, from batches of ``batch_size``; a failed batch is asked frame by frame."""
         loaded = self._loaded_or_refuse()
         answers: list[str] = []
         for chunk in _chunks(frames, self.batch_size):
@@ -297,14 +249,8 @@ class HFBackend:
                 answers.extend(self.answer(prompt, f) for f in chunk)
         return answers
 
-    # -- MCQ by option log-probability --------------------------------------------------------
-
     def option_ids(self, prompt: Prompt) -> list[list[int]]:
-        """The token ids of each of ``prompt.options`` as the model would write it after the
-        prompt: the tail of the tokenised (prompt + answer), where the prompt's own tokens are its
-        head, else the answer tokenised alone. The answer is the label after a space unless the
-        template ends in whitespace (LLaVA-1.5's ``ASSISTANT:`` is followed by `` BOTTOM``; a
-        template ending in a newline, as Qwen's, by ``BOTTOM``)."""
+        """The token ids of each option as the model would write it after the prompt (and a space)."""
         if not prompt.options:
             raise ValueError("option log-probabilities need an MCQ prompt with options (mcq_prompt)")
         loaded = self._loaded_or_refuse()
@@ -323,18 +269,12 @@ class HFBackend:
         return ids
 
     def score_many(self, prompt: Prompt, frames: Sequence[Frame]) -> list[OptionScores | None]:
-        """Each option's log-probability about each of ``frames``: one prefill of the prompt and
-        image per frame (batched, left-padded), whose last position scores every option's first
-        token; options of several tokens continue from a copy of the prefill's KV cache, all in
-        one more forward pass."""
+        """Each option's log-probability about each frame: a prefill, then one pass over later tokens."""
         loaded = self._loaded_or_refuse()
         assert prompt.options is not None
         ids = self.option_ids(prompt)
-        out: list[OptionScores | None] = []
-        for chunk in _chunks(frames, self.batch_size):
-            rows = self._option_logprobs(loaded, prompt, chunk, ids)
-            out.extend(OptionScores(prompt.options, tuple(row)) for row in rows)
-        return out
+        return [OptionScores(prompt.options, tuple(row)) for chunk in _chunks(frames, self.batch_size)
+                for row in self._option_logprobs(loaded, prompt, chunk, ids)]
 
     def _option_logprobs(self, loaded: _Loaded, prompt: Prompt, frames: Sequence[Frame],
                          ids: list[list[int]]) -> list[list[float]]:
@@ -351,8 +291,7 @@ class HFBackend:
             longest = max(len(tok) for tok in ids)
             if longest > 1:  # the options' later tokens: one pass over (frame, option) rows
                 n_opt, batch = len(ids), len(frames)
-                pad = 0
-                cont = torch.tensor([tok[:-1] + [pad] * (longest - len(tok)) for tok in ids], device=mask.device)
+                cont = torch.tensor([tok[:-1] + [0] * (longest - len(tok)) for tok in ids], device=mask.device)
                 real = torch.tensor([[1] * (len(tok) - 1) + [0] * (longest - len(tok)) for tok in ids],
                                     device=mask.device, dtype=mask.dtype)
                 cache = _kv_cache(pre)
@@ -370,5 +309,4 @@ class HFBackend:
         return [[float(v) for v in row] for row in scores.cpu()]
 
     def close(self) -> None:
-        """Drop the model and processor so their memory can be freed."""
         self._loaded = None

@@ -1,18 +1,10 @@
-"""Any OpenAI-compatible chat-completions server (Ollama, vLLM, llama.cpp server, LM Studio).
-
-The frame travels as a base64 PNG data URL in the OpenAI vision message format; decoding is
-greedy (temperature 0). A round of frames goes out as concurrent requests (``max_concurrency`` in
-flight); an MCQ with options is scored from the completion's log-probabilities where the server
-returns them (vLLM, SGLang, OpenAI), else generated. Transient failures (connection errors, timeouts, HTTP 429 and 5xx)
-are retried with exponential backoff by tenacity; everything else fails at once with one
-sentence that says what to check. The API key is read from the environment at each request
-and is never stored, logged, shown in ``repr`` or put in an error message.
-"""
+"""Any OpenAI-compatible chat-completions server, greedy, transient failures retried with backoff; the
+API key is read from the environment per request, never stored or shown. See docs/real-vlm.md."""
 
 from __future__ import annotations
 
 import base64
-import json
+import contextlib
 import logging
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -38,11 +30,7 @@ T = TypeVar("T")
 
 
 class _Transient(Exception):
-    """An HTTP answer worth retrying (429 or 5xx)."""
-
-    def __init__(self, status: int) -> None:
-        super().__init__(f"HTTP {status}")
-        self.status = status
+    """An HTTP status worth retrying (429, 5xx): ``args[0]``."""
 
 
 class _KeptFailing(BackendUnavailable):
@@ -50,7 +38,7 @@ class _KeptFailing(BackendUnavailable):
 
 
 def _display_url(url: str) -> str:
-    """``url`` without any ``user:password@`` part, safe to print."""
+    """``url`` without any ``user:password@`` part."""
     parsed = httpx.URL(url)
     return str(parsed.copy_with(username=None, password=None)) if parsed.userinfo else url
 
@@ -83,14 +71,11 @@ def _content(payload: Any) -> str | None:
 
 
 def _logprob_steps(payload: Any) -> list[tuple[str, float, dict[str, float]]] | None:
-    """``choices[0].logprobs.content`` as (token, its log-probability, the top alternatives'
-    log-probabilities) per generated token, or None when the server returned none."""
+    """(token, log-probability, top alternatives' log-probabilities) per generated token, or None."""
     try:
-        content = payload["choices"][0]["logprobs"]["content"]
-        steps = []
-        for item in content:
-            top = {str(t["token"]): float(t["logprob"]) for t in item.get("top_logprobs") or []}
-            steps.append((str(item["token"]), float(item["logprob"]), top))
+        steps = [(str(item["token"]), float(item["logprob"]),
+                  {str(t["token"]): float(t["logprob"]) for t in item.get("top_logprobs") or []})
+                 for item in payload["choices"][0]["logprobs"]["content"]]
     except (KeyError, IndexError, TypeError, ValueError):
         return None
     return steps or None
@@ -104,14 +89,10 @@ def _completes(text: str, option: str) -> bool:
 
 def option_logprobs(steps: Sequence[tuple[str, float, Mapping[str, float]]],
                     options: Sequence[str]) -> tuple[float, ...]:
-    """Each option's log-probability from a greedy completion's per-token log-probabilities:
-    ``steps`` holds (decoded token, its log-probability, the top alternatives'). An option is
-    followed along the decoded tokens while they spell its beginning (leading spaces aside): where
-    a token (decoded or alternative) completes it, its score is the sum so far plus that token's;
-    where it branches off the decoded path, the sum so far plus its best alternative's (its
-    prefix's log-probability: an upper bound on its own); where no token spells it, the sum so far
-    plus the least listed alternative's (an upper bound, as it ranked below them all). Options
-    whose first tokens differ (a server asked for one token suffices) are scored exactly.
+    """Each option's log-probability from a greedy completion's ``steps`` (``_logprob_steps``).
+
+    An option follows the decoded tokens while they spell it; where it branches off, its bound is
+    the best alternative spelling it, else the least listed one. Distinct first tokens are exact.
 
     Example:
         >>> steps = [(" LEFT", -0.2, {" LEFT": -0.2, " BOTTOM": -1.9, " GO": -4.0}),
@@ -144,12 +125,7 @@ def image_data_url(frame: Frame) -> str:
 
 
 class OpenAIBackend:
-    """A VLM behind an OpenAI-compatible ``/chat/completions`` endpoint.
-
-    ``base_url`` is the API root (e.g. ``http://localhost:11434/v1`` for Ollama); ``api_key_env``
-    names the environment variable holding the key, if the server needs one. ``retries`` is the
-    number of retries after the first attempt, ``backoff_s`` the first wait between them.
-    """
+    """A VLM behind ``{base_url}/chat/completions``; ``retries`` after the first attempt."""
 
     name = "openai"
     simulated = False
@@ -194,11 +170,7 @@ class OpenAIBackend:
 
     @classmethod
     def from_config(cls, cfg: VLMConfig, *, backoff_s: float = DEFAULT_BACKOFF_S) -> OpenAIBackend:
-        """Build the backend of ``cfg`` and check that its server answers.
-
-        Raises ``BadInput`` for a missing base URL or model and ``BackendUnavailable`` when the
-        server cannot be reached or refuses the credentials.
-        """
+        """Build the backend of ``cfg`` and check that its server answers (``check``)."""
         backend = cls(
             cfg.base_url or "", cfg.model or "", api_key_env=cfg.api_key_env, timeout_s=cfg.timeout_s,
             retries=cfg.retries, max_tokens=cfg.max_new_tokens, backoff_s=backoff_s,
@@ -211,8 +183,6 @@ class OpenAIBackend:
             raise
         return backend
 
-    # -- HTTP ---------------------------------------------------------------------------------
-
     @property
     def _where(self) -> str:
         return f"the VLM server at {_display_url(self.base_url)}"
@@ -220,14 +190,8 @@ class OpenAIBackend:
     def _api_key(self) -> str | None:
         return (os.environ.get(self.api_key_env) or None) if self.api_key_env else None
 
-    def _scrub(self, text: str) -> str:
-        """``text`` with the API key (should a server echo it) masked."""
-        key = self._api_key()
-        return text.replace(key, "***") if key else text
-
     def _send(self, method: str, path: str, payload: dict[str, Any] | None = None) -> httpx.Response:
-        """One request with retries on transient failures; raises ``BackendUnavailable`` when
-        they are exhausted. Returns the response of any non-transient status."""
+        """The response of one request, retried on transient failures (then ``BackendUnavailable``)."""
         headers = {"Accept": "application/json"}
         key = self._api_key()
         if key:
@@ -254,19 +218,20 @@ class OpenAIBackend:
             ) from None
         except _Transient as exc:
             raise _KeptFailing(
-                f"{self._where} kept failing (HTTP {exc.status}, {attempts} attempt(s)); "
+                f"{self._where} kept failing (HTTP {exc.args[0]}, {attempts} attempt(s)); "
                 "check the server's logs, or retry later with more --retries."
             ) from None
         raise AssertionError("unreachable: tenacity either returns or re-raises")  # pragma: no cover
 
     def _refused(self, response: httpx.Response) -> BackendUnavailable:
-        """The one-sentence error of a non-transient 4xx answer, with a hint per status."""
+        """The one-sentence error of a 4xx answer, with a hint per status."""
         status = response.status_code
-        said = self._scrub(_server_message(response))
-        said = f": {said}" if said else ""
+        key = self._api_key()
+        said = _server_message(response)
+        said = f": {said.replace(key, '***') if key else said}" if said else ""  # a server may echo the key
         if status in (401, 403):
             hint = (f"set the API key in the environment variable {self.api_key_env} (see --api-key-env)"
-                    if not self._api_key() else f"check the API key in {self.api_key_env}")
+                    if not key else f"check the API key in {self.api_key_env}")
         elif status == 404:
             served = f" (it serves: {', '.join(self.served_models[:8])})" if self.served_models else ""
             hint = f"check --model '{self.model}'{served} and --base-url (usually ending in /v1)"
@@ -275,12 +240,7 @@ class OpenAIBackend:
         return BackendUnavailable(f"{self._where} refused the request (HTTP {status}{said}); {hint}.")
 
     def check(self) -> None:
-        """A cheap reachability check: ``GET /models``.
-
-        A connection failure or refused credentials (401/403) raise ``BackendUnavailable``;
-        servers that do not implement ``/models`` (404 and the like) pass, since they may still
-        answer chat completions. The listed model names, if any, feed later error hints.
-        """
+        """``GET /models``: unreachable or 401/403 raise; other failures pass (the route is optional)."""
         try:
             response = self._send("GET", "/models")
         except _KeptFailing:
@@ -288,11 +248,9 @@ class OpenAIBackend:
         if response.status_code in (401, 403):
             raise self._refused(response)
         if response.is_success:
-            try:
+            with contextlib.suppress(ValueError, AttributeError, TypeError):  # no list: no hints
                 data = response.json().get("data", [])
                 self.served_models = tuple(str(m["id"]) for m in data if isinstance(m, dict) and "id" in m)
-            except (ValueError, AttributeError, TypeError):
-                self.served_models = ()
 
     def _payload(self, prompt: Prompt, frame: Frame, *, logprobs: bool = False) -> dict[str, Any]:
         payload: dict[str, Any] = {
@@ -319,7 +277,7 @@ class OpenAIBackend:
             raise self._refused(response)
         try:
             body = response.json()
-        except (ValueError, json.JSONDecodeError):
+        except ValueError:  # json.JSONDecodeError included
             body = None
         if _content(body) is None:
             raise BackendUnavailable(
@@ -329,34 +287,26 @@ class OpenAIBackend:
         return body
 
     def answer(self, prompt: Prompt, frame: Frame) -> str:
-        """The server's answer to ``prompt`` about ``frame`` (greedy, at most ``max_tokens``)."""
         text = _content(self._complete(self._payload(prompt, frame)))
         assert text is not None  # _complete checked it
         return text
 
     def _in_flight(self, ask: Callable[[Frame], T], frames: Sequence[Frame]) -> list[T]:
-        """``ask`` of each of ``frames``, at most ``max_concurrency`` requests in flight, in the
-        order of ``frames``; the first failure (in that order) is raised, the requests not yet
-        started are dropped."""
+        """``ask`` of each frame in order, ``max_concurrency`` in flight; the first failure drops the rest."""
         if len(frames) <= 1 or self.max_concurrency == 1:
             return [ask(f) for f in frames]
         pool = ThreadPoolExecutor(max_workers=min(self.max_concurrency, len(frames)),
                                   thread_name_prefix="vlmrl-openai")
         try:
-            futures = [pool.submit(ask, f) for f in frames]
-            return [future.result() for future in futures]
+            return list(pool.map(ask, frames))
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
 
     def answer_many(self, prompt: Prompt, frames: Sequence[Frame]) -> list[str]:
-        """The server's answers about ``frames``, in order, from concurrent requests (at most
-        ``max_concurrency`` in flight): what ``answer`` says of each."""
         return self._in_flight(lambda frame: self.answer(prompt, frame), frames)
 
     def score(self, prompt: Prompt, frame: Frame) -> OptionScores | None:
-        """``prompt.options`` scored about ``frame`` from the log-probabilities of a greedy
-        completion (``logprobs``, ``top_logprobs``): ``option_logprobs``. None, and ``can_score``
-        False from then on, when the server returns none (it does not support them)."""
+        """The options scored from a completion's log-probabilities; None (and no more tries) if none."""
         assert prompt.options is not None
         body = self._complete(self._payload(prompt, frame, logprobs=True))
         steps = _logprob_steps(body)
@@ -369,9 +319,7 @@ class OpenAIBackend:
         return OptionScores(prompt.options, option_logprobs(steps, prompt.options))
 
     def score_many(self, prompt: Prompt, frames: Sequence[Frame]) -> list[OptionScores | None]:
-        """``score`` of each of ``frames``, concurrently as ``answer_many``."""
         return self._in_flight(lambda frame: self.score(prompt, frame), frames)
 
     def close(self) -> None:
-        """Close the HTTP connection pool."""
         self._client.close()

@@ -1,14 +1,4 @@
-"""Parse raw VLM text into typed answers; a parser never raises, it reports a status.
-
-Each parser accepts the formats small VLMs actually emit (bare values, values in prose,
-``x = -0.5``, ``Box [..]``, JSON, ``Choice = BOTTOM``) and classifies everything else:
-
-- ``FORMAT_COLLAPSE``: nothing parseable, or the all-zero ``Error [0, 0, 0, 0]`` box;
-- ``OUT_OF_RANGE``: a float outside the task's range (``NumberQuestions``), a box outside the
-  frame or degenerate (zero or negative width/height);
-- ``AMBIGUOUS``: several different answers in one text (two labels, two numbers, two boxes);
-- ``EMPTY``: blank text; ``NO_ANSWER``: there was no text at all (replay had no record).
-"""
+"""Parse raw VLM text (the formats small VLMs emit) into typed answers; a parser never raises."""
 
 from __future__ import annotations
 
@@ -17,15 +7,19 @@ import functools
 import json
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Concatenate, ParamSpec, TypeVar
 
 Box = tuple[float, float, float, float]
+P = ParamSpec("P")
 
 
 class ParseStatus(StrEnum):
-    """How a raw answer parsed; only ``OK`` answers carry a usable value."""
+    """How a raw answer parsed; only ``OK`` carries a usable value. FORMAT_COLLAPSE: nothing
+    parseable or ``Error [0, 0, 0, 0]``; OUT_OF_RANGE: outside the task's range or frame, or a
+    degenerate box; AMBIGUOUS: several different answers; NO_ANSWER: no text (replay had none)."""
 
     OK = "ok"
     FORMAT_COLLAPSE = "format_collapse"
@@ -53,10 +47,7 @@ class FloatResult(_Parsed):
 
 @dataclass(frozen=True)
 class BoxResult(_Parsed):
-    """A parsed box (x0, y0, x1, y1) in image pixels, set for OK and OUT_OF_RANGE, else None.
-
-    ``normalised`` is True when the text gave 0-1 coordinates, which were scaled to pixels.
-    """
+    """A parsed box (x0, y0, x1, y1, pixels) for OK and OUT_OF_RANGE; ``normalised``: given as 0-1."""
 
     box: Box | None = None
     normalised: bool = False
@@ -67,6 +58,29 @@ class MCQResult(_Parsed):
     """A parsed zone label, set only for OK."""
 
     label: str | None = None
+
+
+R = TypeVar("R", bound=_Parsed)
+
+
+def _guarded(result: type[R]) -> Callable[[Callable[Concatenate[str, P], R]], Callable[Concatenate[str | None, P], R]]:
+    """A parser that answers NO_ANSWER for None, EMPTY for blank text and FORMAT_COLLAPSE for any error."""
+
+    def wrap(parse: Callable[Concatenate[str, P], R]) -> Callable[Concatenate[str | None, P], R]:
+        @functools.wraps(parse)
+        def parser(text: str | None, *args: P.args, **kwargs: P.kwargs) -> R:
+            if text is None:
+                return result(ParseStatus.NO_ANSWER)
+            if not text.strip():
+                return result(ParseStatus.EMPTY)
+            try:
+                return parse(text, *args, **kwargs)
+            except Exception:  # a parser must never take the probe down; odd input is a collapse
+                return result(ParseStatus.FORMAT_COLLAPSE)
+
+        return parser
+
+    return wrap
 
 
 _NUM = r"[-+\u2212]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?"
@@ -95,35 +109,20 @@ def _to_float(token: str) -> float | None:
     return None if math.isnan(value) else value
 
 
-def parse_float(text: str | None, low: float, high: float) -> FloatResult:
-    """The number in a float answer; outside ``[low, high]`` (the task's range) it is OUT_OF_RANGE.
-
-    An explicit ``x = ...`` wins; otherwise the text must hold exactly one distinct number.
-
-    Example:
-        >>> parse_float("The car is at approximately -0.52.", -1.2, 0.6)
-        FloatResult(status=<ParseStatus.OK: 'ok'>, value=-0.52)
-        >>> parse_float("7", -1.2, 0.6).status, parse_float("no idea", -1.2, 0.6).status
-        (<ParseStatus.OUT_OF_RANGE: 'out_of_range'>, <ParseStatus.FORMAT_COLLAPSE: 'format_collapse'>)
-    """
-    try:
-        if text is None:
-            return FloatResult(ParseStatus.NO_ANSWER)
-        if not text.strip():
-            return FloatResult(ParseStatus.EMPTY)
-        assigned = [v for v in (_to_float(m) for m in _ASSIGNED.findall(text)) if v is not None]
-        candidates = assigned or [v for v in (_to_float(m) for m in _NUMBER.findall(text)) if v is not None]
-        distinct = list(dict.fromkeys(candidates))
-        if not distinct:
-            return FloatResult(ParseStatus.FORMAT_COLLAPSE)
-        if len(distinct) > 1:
-            return FloatResult(ParseStatus.AMBIGUOUS)
-        value = distinct[0]
-        if not (math.isfinite(value) and low <= value <= high):
-            return FloatResult(ParseStatus.OUT_OF_RANGE, value)
-        return FloatResult(ParseStatus.OK, value)
-    except Exception:  # a parser must never take the probe down; odd input is a collapse
+@_guarded(FloatResult)
+def parse_float(text: str, low: float, high: float) -> FloatResult:
+    """The one number in a float answer (``x = ...`` wins); outside ``[low, high]``: OUT_OF_RANGE."""
+    assigned = [v for v in (_to_float(m) for m in _ASSIGNED.findall(text)) if v is not None]
+    candidates = assigned or [v for v in (_to_float(m) for m in _NUMBER.findall(text)) if v is not None]
+    distinct = list(dict.fromkeys(candidates))
+    if not distinct:
         return FloatResult(ParseStatus.FORMAT_COLLAPSE)
+    if len(distinct) > 1:
+        return FloatResult(ParseStatus.AMBIGUOUS)
+    value = distinct[0]
+    if not (math.isfinite(value) and low <= value <= high):
+        return FloatResult(ParseStatus.OUT_OF_RANGE, value)
+    return FloatResult(ParseStatus.OK, value)
 
 
 def _json_boxes(text: str) -> list[tuple[float, ...]]:
@@ -145,10 +144,8 @@ def _json_boxes(text: str) -> list[tuple[float, ...]]:
 
 
 def _validate_box(raw: tuple[float, ...], width: int, height: int) -> BoxResult:
-    if any(math.isnan(v) for v in raw):
+    if any(math.isnan(v) for v in raw) or all(v == 0 for v in raw):  # all 0: "Error [0, 0, 0, 0]", it gave up
         return BoxResult(ParseStatus.FORMAT_COLLAPSE)
-    if all(v == 0 for v in raw):
-        return BoxResult(ParseStatus.FORMAT_COLLAPSE)  # "Error [0, 0, 0, 0]": the model gave up
     normalised = all(0.0 <= v <= 1.0 for v in raw)
     if normalised:  # 0-1 coordinates (fractions of width and height) are scaled to pixels
         raw = (raw[0] * width, raw[1] * height, raw[2] * width, raw[3] * height)
@@ -160,51 +157,30 @@ def _validate_box(raw: tuple[float, ...], width: int, height: int) -> BoxResult:
     return BoxResult(ParseStatus.OK, box, normalised)
 
 
-def parse_box(text: str | None, width: int, height: int) -> BoxResult:
-    """The box (x0, y0, x1, y1) in image pixels in a box answer about a ``width`` x ``height`` frame.
-
-    Accepts ``[a, b, c, d]``, ``(a, b, c, d)``, ``Box [..]``, JSON objects with ``x_min``..
-    ``y_max`` (or ``xmin``.., ``x1``..``y2``, ``left``..``bottom``), and four bare numbers.
-    Boxes whose four coordinates all lie in [0, 1] are read as fractions of the frame's width
-    and height and scaled to pixels (``normalised=True``).
-
-    Example:
-        >>> parse_box("Box [450, 210, 480, 230]", 600, 400).box
-        (450.0, 210.0, 480.0, 230.0)
-        >>> parse_box("Error [0, 0, 0, 0]", 600, 400).status
-        <ParseStatus.FORMAT_COLLAPSE: 'format_collapse'>
-        >>> parse_box('{"x_min": 0.5, "y_min": 0.5, "x_max": 0.75, "y_max": 1.0}', 600, 400).box
-        (300.0, 200.0, 450.0, 400.0)
-    """
-    try:
-        if text is None:
-            return BoxResult(ParseStatus.NO_ANSWER)
-        if not text.strip():
-            return BoxResult(ParseStatus.EMPTY)
-        boxes: list[tuple[float, ...]] = _json_boxes(text)
-        if not boxes:
-            for match in _BOX.finditer(text):
-                values = tuple(_to_float(g) for g in match.groups())
-                if all(v is not None for v in values):
-                    boxes.append(tuple(float(v) for v in values if v is not None))
-        if not boxes:
-            numbers = [_to_float(m) for m in _NUMBER.findall(text)]
-            if len(numbers) == 4 and all(v is not None for v in numbers):
-                boxes.append(tuple(float(v) for v in numbers if v is not None))
-        distinct = list(dict.fromkeys(boxes))
-        if not distinct:
-            return BoxResult(ParseStatus.FORMAT_COLLAPSE)
-        if len(distinct) > 1:
-            return BoxResult(ParseStatus.AMBIGUOUS)
-        return _validate_box(distinct[0], width, height)
-    except Exception:  # a parser must never take the probe down; odd input is a collapse
+@_guarded(BoxResult)
+def parse_box(text: str, width: int, height: int) -> BoxResult:
+    """The box (x0, y0, x1, y1, pixels) in an answer: a list, JSON or four numbers; 0-1 ones are fractions."""
+    boxes: list[tuple[float, ...]] = _json_boxes(text)
+    if not boxes:
+        for match in _BOX.finditer(text):
+            values = tuple(_to_float(g) for g in match.groups())
+            if all(v is not None for v in values):
+                boxes.append(tuple(float(v) for v in values if v is not None))
+    if not boxes:
+        numbers = [_to_float(m) for m in _NUMBER.findall(text)]
+        if len(numbers) == 4 and all(v is not None for v in numbers):
+            boxes.append(tuple(float(v) for v in numbers if v is not None))
+    distinct = list(dict.fromkeys(boxes))
+    if not distinct:
         return BoxResult(ParseStatus.FORMAT_COLLAPSE)
+    if len(distinct) > 1:
+        return BoxResult(ParseStatus.AMBIGUOUS)
+    return _validate_box(distinct[0], width, height)
 
 
 @functools.lru_cache(maxsize=16)
 def _label_patterns(labels: tuple[str, ...]) -> tuple[re.Pattern[str], re.Pattern[str]]:
-    """The (choice, label) patterns of a vocabulary: ``Choice = X`` (or ``Answer:``, ``Label is``,
-    ``Zone:``) and a bare label; longer labels first, so that ``NEAR TOP`` is not read as ``TOP``."""
+    """The (``Choice = X``, bare label) patterns of a vocabulary, longest label first (``NEAR TOP``)."""
     words = sorted((re.escape(_normalise_label_text(label)) for label in labels), key=len, reverse=True)
     alternatives = "|".join(words)
     return (re.compile(rf"\b(?:CHOICE|ANSWER|LABEL|ZONE)\s*(?:=|:|IS)\s*({alternatives})\b"),
@@ -215,34 +191,14 @@ def _normalise_label_text(text: str) -> str:
     return re.sub(r"[\s_\-]+", " ", text.upper())
 
 
-def parse_mcq(text: str | None, labels: Sequence[str]) -> MCQResult:
-    """The label of the task's vocabulary ``labels`` (upper-case, ``_`` between words) in an MCQ
-    answer, in any case, with ``_``, ``-`` or spaces inside.
-
-    ``Choice = X`` / ``Answer: X`` wins; otherwise exactly one distinct label must appear
-    (a text naming two labels, e.g. an echo of the choices, is AMBIGUOUS).
-
-    Example:
-        >>> stages = ("LOW", "HALF_WAY", "NEAR_TOP", "TOP")
-        >>> parse_mcq("Choice = LOW", stages).label, parse_mcq("near-top.", stages).label
-        ('LOW', 'NEAR_TOP')
-        >>> parse_mcq("LOW or HALF_WAY", stages).status
-        <ParseStatus.AMBIGUOUS: 'ambiguous'>
-        >>> parse_mcq("Answer: above bar", ("HANGING", "ABOVE_BAR")).label
-        'ABOVE_BAR'
-    """
-    try:
-        if text is None:
-            return MCQResult(ParseStatus.NO_ANSWER)
-        if not text.strip():
-            return MCQResult(ParseStatus.EMPTY)
-        norm = _normalise_label_text(text)
-        choice, label = _label_patterns(tuple(labels))
-        chosen = list(dict.fromkeys(choice.findall(norm))) or list(dict.fromkeys(label.findall(norm)))
-        if not chosen:
-            return MCQResult(ParseStatus.FORMAT_COLLAPSE)
-        if len(chosen) > 1:
-            return MCQResult(ParseStatus.AMBIGUOUS)
-        return MCQResult(ParseStatus.OK, chosen[0].replace(" ", "_"))
-    except Exception:  # a parser must never take the probe down; odd input is a collapse
+@_guarded(MCQResult)
+def parse_mcq(text: str, labels: Sequence[str]) -> MCQResult:
+    """The one label of ``labels`` in an MCQ answer, in any case and word separator; ``Choice = X`` wins."""
+    norm = _normalise_label_text(text)
+    choice, label = _label_patterns(tuple(labels))
+    chosen = list(dict.fromkeys(choice.findall(norm))) or list(dict.fromkeys(label.findall(norm)))
+    if not chosen:
         return MCQResult(ParseStatus.FORMAT_COLLAPSE)
+    if len(chosen) > 1:
+        return MCQResult(ParseStatus.AMBIGUOUS)
+    return MCQResult(ParseStatus.OK, chosen[0].replace(" ", "_"))

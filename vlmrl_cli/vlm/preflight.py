@@ -1,11 +1,4 @@
-"""What can be known about a VLM configuration before any store, folder or cache exists.
-
-``check_vlm`` is the one pass every command runs on its ``VLMConfig`` first: the response
-cache's path can be created, and the backend can start (the hf model is a local folder, in the
-local Hugging Face cache or on the hub; the openai server answers; the replay transcript can be
-read). ``check_coverage`` adds, for training, that a replay transcript answers every frame a run
-can see. Each raises ``BadInput`` (or its ``BackendUnavailable``) with one sentence.
-"""
+"""The checks every command runs on its ``VLMConfig`` before any store, folder or cache exists."""
 
 from __future__ import annotations
 
@@ -19,7 +12,7 @@ from vlmrl_cli.vlm.prompts import Prompt
 
 
 def check_vlm(cfg: VLMConfig) -> None:
-    """Refuse a VLM configuration that would fail once the command has started; creates nothing."""
+    """Refuse a VLM configuration that would fail once started (cache path, model, server, transcript)."""
     if cfg.use_cache and cfg.cache_path is not None:
         problem = file_problem(cfg.cache_path)
         if problem:
@@ -42,8 +35,7 @@ def check_vlm(cfg: VLMConfig) -> None:
 
 
 def check_coverage(cfg: VLMConfig, prompts: Iterable[Prompt], frames: Iterable[Frame]) -> None:
-    """For the replay backend: every frame of ``frames`` has an answer to every one of
-    ``prompts`` (a training run may be shown any of them); other backends answer anything."""
+    """Refuse a replay transcript that lacks an answer to a (prompt, frame) a training run can see."""
     if cfg.backend != "replay":
         return
     from vlmrl_cli.core.errors import MissingAnswer

@@ -1,8 +1,4 @@
-"""The three prompt kinds of the taxonomy probe (paper Table 1), and what a task asks with them:
-its MCQ vocabulary (``Milestones``) and, where the picture has a number to read, its float and box
-questions (``NumberQuestions``), with what Table 1 needs to ask them of any reading and score the
-answers (``NumberProbe``: a renderer, the answer key, Figure 1's frames). MountainCar's are
-``tasks/mountain_car/prompts.py`` and ``tasks/mountain_car/probe.py``."""
+"""The prompt kinds of the taxonomy probe (paper Table 1) and a task's questions asked with them."""
 
 from __future__ import annotations
 
@@ -27,10 +23,7 @@ class PromptKind(StrEnum):
 
 @dataclass(frozen=True)
 class Prompt:
-    """A prompt kind and the exact text sent to the VLM with the frame; an MCQ's ``options`` (its
-    labels, in order) let a backend that can score answer it by each option's log-probability.
-    ``options`` is carried beside the text, never hashed: the text alone is the cache key and what
-    configs hash (``core.fields.CARRIED``).
+    """A prompt kind and the exact text sent with the frame; an MCQ's ``options`` are never hashed.
 
     Example:
         >>> from vlmrl_cli.core.provenance import to_jsonable
@@ -51,14 +44,7 @@ class Prompt:
 
 @dataclass(frozen=True)
 class Milestones:
-    """A task's MCQ vocabulary: its ``labels`` in order (a flickering answer moves to a neighbour
-    in this order) and the ``prompt`` that asks for one of them.
-
-    Example:
-        >>> m = Milestones(("LOW", "HIGH"), mcq_prompt("Is the arm low or high?", ("LOW", "HIGH")))
-        >>> m.labels, m.prompt.kind
-        (('LOW', 'HIGH'), <PromptKind.MCQ: 'mcq'>)
-    """
+    """A task's MCQ vocabulary: its ``labels`` in order (flicker moves to a neighbour) and ``prompt``."""
 
     labels: tuple[str, ...]
     prompt: Prompt
@@ -75,21 +61,18 @@ class Milestones:
 
 
 def mcq_prompt(scene: str, labels: tuple[str, ...]) -> Prompt:
-    """The MCQ prompt of a task: ``scene`` describes the picture and asks the question; the
-    choices and the answer format follow, as in MountainCar's prompt; ``labels`` are its options."""
+    """The MCQ prompt asking ``scene``, then the choices ``labels`` and the answer format."""
     return Prompt(PromptKind.MCQ, f"{scene} Choose exactly one of: {', '.join(labels)}. Answer with the label only.",
                   options=tuple(labels))
 
 
 @dataclass(frozen=True)
 class NumberQuestions:
-    """A task's float and box questions (Table 1's rows I and II, and the ``vision-float`` arm):
-    the two prompts, the range ``[low, high]`` a float answer must lie in (its potential maps
-    it linearly onto [0, 1]), and the ``width`` x ``height`` of the frame a box must fit.
+    """A task's float and box prompts, the float's range ``[low, high]`` and the frame's size in pixels.
 
     Example:
         >>> q = NumberQuestions(Prompt(PromptKind.FLOAT, "x?"), Prompt(PromptKind.BOX, "box?"), -1.0, 1.0, 64, 48)
-        >>> q.prompt(PromptKind.BOX).text, q.potential(0.0), q.potential(5.0)
+        >>> q.box_prompt.text, q.potential(0.0), q.potential(5.0)
         ('box?', 0.5, 1.0)
     """
 
@@ -106,22 +89,13 @@ class NumberQuestions:
         if not self.low < self.high or self.width < 1 or self.height < 1:
             raise ValueError("NumberQuestions needs low < high and a frame of at least 1 x 1 pixels")
 
-    def prompt(self, kind: PromptKind) -> Prompt:
-        """The float or the box prompt."""
-        if kind is PromptKind.MCQ:
-            raise ValueError("the MCQ prompt is the task's Milestones.prompt")
-        return self.float_prompt if kind is PromptKind.FLOAT else self.box_prompt
-
     def potential(self, value: float) -> float:
         """A float answer mapped linearly onto [0, 1] over ``[low, high]``, clipped."""
         return min(max((value - self.low) / (self.high - self.low), 0.0), 1.0)
 
 
 class NumberTruth(Protocol):
-    """The answer key of one frame of a task's number probe, in the units its prompts ask for:
-    ``x`` the number the frame shows (MountainCar: the car's position), ``box_px`` the agent's
-    box (x0, y0, x1, y1) and ``centre_px`` its centre (column, row) in image pixels, ``label``
-    the true MCQ label."""
+    """The answer key of one frame: the reading ``x``, the agent's box and centre (pixels), the label."""
 
     @property
     def x(self) -> float: ...
@@ -137,7 +111,7 @@ class NumberTruth(Protocol):
 
 
 class NumberRenderer(Protocol):
-    """Draws a task's frame at any reading ``x`` (its ``NumberProbe``'s range); closed when done."""
+    """Draws a task's frame at any reading ``x``; closed when done."""
 
     def render(self, x: float, *, frame_id: str | None = None) -> Frame: ...
 
@@ -150,24 +124,8 @@ Panel = tuple[str, float, str]
 
 @dataclass(frozen=True)
 class NumberProbe(NumberQuestions):
-    """A task's float and box questions (``NumberQuestions``, so the ``vision-float`` arm reads
-    them as before) with what Table 1 needs to ask them of any reading and to score the answers
-    (``Task.numbers``; probe/scoring.py):
-
-    - ``renderer``: makes a ``NumberRenderer``, which draws the frame at a reading in
-      ``[low, high]``;
-    - ``truth``: the answer key of the frame at a reading (``NumberTruth``);
-    - ``panels``: Figure 1's frames (panel, reading, caption), always probed, the first two the
-      pair (a) -> (b) of Table 1's rows;
-    - ``notes``: sentences printed under Table 1 (how the task's truths differ from the paper's).
-
-    Example:
-        >>> q = NumberQuestions(Prompt(PromptKind.FLOAT, "x?"), Prompt(PromptKind.BOX, "box?"), -1.0, 1.0, 64, 48)
-        >>> probe = NumberProbe.of(q, renderer=lambda: None, truth=lambda x: None,
-        ...                        panels=(("a", 0.0, "centre"), ("b", 0.5, "right")))
-        >>> probe.low, probe.panels[1][1], probe.prompt(PromptKind.FLOAT).text
-        (-1.0, 0.5, 'x?')
-    """
+    """``NumberQuestions`` with what Table 1 needs (``Task.numbers``): a ``renderer`` factory, the
+    ``truth`` at a reading, Figure 1's ``panels`` (the first two Table 1's pair) and ``notes``."""
 
     renderer: Callable[[], NumberRenderer]
     truth: Callable[[float], NumberTruth]

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import importlib
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.vlm.base import Backend
@@ -15,29 +16,22 @@ if TYPE_CHECKING:
     from vlmrl_cli.vlm.sim import MilestoneReader
 
 
+_REAL = {"hf": ("vlmrl_cli.vlm.hf", "HFBackend"), "openai": ("vlmrl_cli.vlm.openai_compat", "OpenAIBackend"),
+         "replay": ("vlmrl_cli.vlm.replay", "ReplayBackend")}
+
+
 def build_backend(cfg: VLMConfig, stream: int = 0, reader: MilestoneReader | None = None) -> Backend:
-    """Instantiate the backend ``cfg.backend``; unknown names are a ``BadInput``. ``stream`` seeds a
-    stochastic simulated VLM's per-query draws (the training run's seed); ``reader`` is the task's
-    pixel reader (``Task.reader``), which the simulated VLM needs. Real backends ignore both."""
+    """The backend ``cfg.backend``; ``stream`` (a run's seed) and ``reader`` are the simulated VLM's."""
     if cfg.backend == "sim":
         from vlmrl_cli.vlm.sim import SimulatedVLM
 
         if reader is None:
             raise BadInput("the simulated VLM reads a task's frames through the task's reader; pass Task.reader.")
         return SimulatedVLM(reader, cfg.sim, stream=stream)
-    if cfg.backend == "hf":
-        from vlmrl_cli.vlm.hf import HFBackend
-
-        return HFBackend.from_config(cfg)
-    if cfg.backend == "openai":
-        from vlmrl_cli.vlm.openai_compat import OpenAIBackend
-
-        return OpenAIBackend.from_config(cfg)
-    if cfg.backend == "replay":
-        from vlmrl_cli.vlm.replay import ReplayBackend
-
-        return ReplayBackend.from_config(cfg)
-    raise BadInput(f"unknown VLM backend '{cfg.backend}'; choose one of {', '.join(BACKENDS)}.")
+    if cfg.backend not in _REAL:
+        raise BadInput(f"unknown VLM backend '{cfg.backend}'; choose one of {', '.join(BACKENDS)}.")
+    module, cls = _REAL[cfg.backend]  # imported only when chosen: transformers and httpx load slowly
+    return cast(Backend, getattr(importlib.import_module(module), cls).from_config(cfg))
 
 
 def build_client(cfg: VLMConfig, transcript: Path | None = None, stream: int = 0,

@@ -13,17 +13,7 @@ from vlmrl_cli.vlm.transcript import TranscriptRecord, read_transcript
 
 
 class ReplayBackend:
-    """Answers from a transcript, looked up by (prompt kind, image SHA-256), else by
-    (prompt kind, frame id); anything else raises ``MissingAnswer``.
-
-    ``simulated`` is True when any replayed record says it was simulated, so a replayed sim
-    run is never mistaken for a real model; ``model`` is the transcript's model.
-
-    Example:
-        >>> backend = ReplayBackend.from_config(VLMConfig(backend="replay"))
-        >>> backend.model, backend.simulated, backend.frame_ids()
-        ('llava-hf/llava-1.5-7b-hf', False, ['x=-0.50', 'x=-0.69'])
-    """
+    """Answers from a transcript by (prompt kind, image SHA-256), else frame id; ``simulated`` if any was."""
 
     name = "replay"
 
@@ -32,8 +22,7 @@ class ReplayBackend:
             raise BadInput("the replay transcript holds no records.")
         self.source = source
         self.records = tuple(records)
-        models = list(dict.fromkeys(r.model for r in records))
-        self.model = models[0] if len(models) == 1 else "+".join(models)
+        self.model = "+".join(dict.fromkeys(r.model for r in records))
         self.simulated = any(r.simulated for r in records)
         # the first record wins on duplicates: a transcript that re-asks a cached query repeats it
         self._by_sha: dict[tuple[str, str], str] = {}
@@ -45,18 +34,13 @@ class ReplayBackend:
 
     @classmethod
     def from_config(cls, cfg: VLMConfig) -> ReplayBackend:
-        """Read ``cfg.transcript_in`` (default: the paper's Table 1 transcript); ``BadInput``
-        when it cannot be read."""
+        """Read ``cfg.transcript_in`` (default: the paper's Table 1 transcript)."""
         path = cfg.transcript_in if cfg.transcript_in is not None else PAPER_TRANSCRIPT
         return cls(read_transcript(path), source=path)
 
     def frame_ids(self) -> list[str]:
-        """The recorded frame ids, in the order they first appear (records without one skipped)."""
+        """The recorded frame ids, in the order they first appear."""
         return list(dict.fromkeys(r.frame_id for r in self.records if r.frame_id is not None))
-
-    def notes(self) -> list[str]:
-        """The distinct notes of the records (e.g. where the answers came from)."""
-        return list(dict.fromkeys(r.note for r in self.records if r.note))
 
     def answer(self, prompt: Prompt, frame: Frame) -> str:
         kind = prompt.kind.value
@@ -64,10 +48,8 @@ class ReplayBackend:
         if text is None and frame.frame_id is not None:
             text = self._by_id.get((kind, frame.frame_id))
         if text is None:
-            raise MissingAnswer(
-                f"the transcript has no {kind} answer for frame {frame.frame_id or frame.sha256[:12]}"
-            )
+            raise MissingAnswer(f"the transcript has no {kind} answer for frame {frame.frame_id or frame.sha256[:12]}")
         return text
 
     def close(self) -> None:
-        """Nothing to release."""
+        pass

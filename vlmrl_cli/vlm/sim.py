@@ -1,22 +1,16 @@
-"""A SIMULATED stand-in for a small VLM: a task's pixel reader with a coarse patch grid and noise.
-
-This is not a vision-language model and produces no evidence about one. It exists so that
-every command runs end to end without a GPU and so that tests are fast and deterministic.
-A task's ``MilestoneReader`` reads the label from the frame's pixels (never the environment
-state, never ``frame.frame_id``); a ``NumberReader`` (MountainCar's) also reads a number from
-them, snapped to a grid of ``patch_px`` pixels as a ViT sees the image through patches, and so
-answers the float and box prompts too. The answers then carry the noise and the format failures
-that Table 1 of the paper describes.
-"""
+"""A SIMULATED stand-in for a small VLM (not a real model). See docs/getting-started.md."""
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
+import math
 import time
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from vlmrl_cli.core.fields import rules_of
 from vlmrl_cli.frames.render import Frame
 from vlmrl_cli.vlm.config import NEUTRAL_SIM_KNOBS, SimKnobs, sim_identity
 from vlmrl_cli.vlm.prompts import Milestones, Prompt, PromptKind
@@ -33,13 +27,9 @@ _TASK_MCQ_FORMATS: tuple[str, ...] = ("{label}", "Choice = {label}", "{label}.",
 
 
 class MilestoneReader(Protocol):
-    """A task's pixel reader (``Task.reader``): the milestone label a frame shows, read from its
-    pixels only, or None when the picture shows no agent. ``name`` goes into the simulated
-    model's name, so that cached answers of two tasks never mix.
+    """A task's pixel reader: the label the pixels show (None: no agent).
 
-    A reader may also set ``model_base`` (the model name before the knobs' digest; default
-    ``pixel-reader-v1-<name>``), ``refusal`` (the answer when it finds no agent) and
-    ``mcq_formats`` (templates of an MCQ answer, each with ``{label}``)."""
+    Optional attributes: ``model_base``, ``refusal`` and ``mcq_formats`` (templates with ``{label}``)."""
 
     name: str
     milestones: Milestones
@@ -48,27 +38,17 @@ class MilestoneReader(Protocol):
 
 
 @runtime_checkable
-class NumberReader(Protocol):
-    """A reader that also reads a number from the pixels (a position, an angle), so the
-    simulated VLM answers the task's float and box prompts (``Task.numbers``) as well: Table 1's
-    rows I and II. Its MCQ answer is the label of the same patch-limited reading."""
-
-    name: str
-    milestones: Milestones
-
-    def read(self, pixels: np.ndarray) -> str | None: ...
+class NumberReader(MilestoneReader, Protocol):
+    """A reader that also reads a number (a position, an angle): the float and box prompts too."""
 
     def estimate(self, pixels: np.ndarray, patch_px: int) -> float | None:
         """The noise-free reading, limited to a grid of ``patch_px`` pixels (None: no agent)."""
-        ...
 
     def label_at(self, estimate: float, knobs: SimKnobs) -> str:
         """The label of a reading before flicker (a profile's knobs may widen a label's zone)."""
-        ...
 
     def box_at(self, estimate: float) -> tuple[float, float, float, float]:
         """The agent's box (x0, y0, x1, y1, image pixels) where the reading puts it."""
-        ...
 
 
 NO_NUMBER = "I can only say which of the listed stages the image shows."
@@ -76,17 +56,7 @@ TASK_REFUSAL = "I'm sorry, but I cannot find what the question is about in this 
 
 
 def knobs_digest(knobs: SimKnobs) -> str:
-    """8 hex digits identifying the knobs that change answers (latency does not), and the profile.
-
-    The knobs added with the profiles count only when they leave their neutral value, so the
-    default profile keeps the digest (and the cached answers) it had before they existed.
-
-    Example:
-        >>> knobs_digest(SimKnobs()) == knobs_digest(SimKnobs(latency_s=1.0)) != knobs_digest(SimKnobs(seed=1))
-        True
-        >>> knobs_digest(SimKnobs()) != knobs_digest(SimKnobs(float_anchor=0.38))
-        True
-    """
+    """8 hex digits naming the knobs that change answers; ``NEUTRAL_SIM_KNOBS`` count only off neutral."""
     shaping: tuple[object, ...] = (knobs.flicker, knobs.float_noise, knobs.box_noise_px, knobs.box_failure,
                                    knobs.patch_px, knobs.seed)
     added = sorted((k, v) for k, v in sim_identity(knobs).items() if k in NEUTRAL_SIM_KNOBS)
@@ -96,7 +66,7 @@ def knobs_digest(knobs: SimKnobs) -> str:
 
 
 def _step(index: int, n: int, left: bool) -> int:
-    """The index one step left (or right) of ``index`` among ``n`` labels, turned back at the ends."""
+    """The neighbouring label index, turned back at the ends."""
     step = -1 if left else 1
     if not 0 <= index + step < n:
         step = -step
@@ -104,63 +74,31 @@ def _step(index: int, n: int, left: bool) -> int:
 
 
 class SimulatedVLM:
-    """SIMULATED VLM (not a real model): answers the probe prompts from the pixels, through the
-    task's ``reader``.
+    """SIMULATED VLM (not a real model): answers the probe prompts from the pixels via ``reader``.
 
-    MCQ: the reader's label, with probability ``flicker`` a neighbouring label (in the task's
-    label order). With a ``NumberReader``, also FLOAT: the patch-snapped reading (or
-    ``float_anchor`` when set: a reading stuck on one value) plus Gaussian noise (std
-    ``float_noise``, the task's units), in one of a few chatty formats; BOX: with probability
-    ``box_failure`` a format collapse ``"Error [0, 0, 0, 0]"``, else the agent's box at the
-    reading (or at ``box_anchor_x``) with corner jitter (std ``box_noise_px``). Another reader
-    gets no number (a format failure). No agent in the pixels: a refusal. The knobs' units are
-    the reader's (a task's ``NumberReader`` reads a position, an angle); named sets of them are
-    the generic ``SIM_PROFILES`` (vlm/config.py) and a task's own (``Task.sim_profiles``).
-
-    Answers are a pure function of (seed, prompt text, image bytes): the response cache and
-    replay transcripts rely on that. The one exception is ``query_flicker > 0``: then each MCQ
-    answer is also moved to a neighbouring label with that probability by a draw from a stream
-    seeded by ``(seed, stream)`` (``stream``: the training run's seed), fresh at every query, so
-    the VLM is ``stochastic`` and its client caches nothing.
-
-    Example:
-        >>> from vlmrl_cli.frames.render import Frame
-        >>> from vlmrl_cli.vlm.prompts import Milestones, mcq_prompt
-        >>> class Lit:  # a toy reader: is the picture bright?
-        ...     name, milestones = "lit", Milestones(("DARK", "LIT"), mcq_prompt("Lit?", ("DARK", "LIT")))
-        ...     def read(self, pixels): return "LIT" if pixels.mean() > 127 else "DARK"
-        >>> vlm = SimulatedVLM(Lit(), SimKnobs(flicker=0.0))
-        >>> frame = Frame.from_pixels(np.full((8, 8, 3), 255, np.uint8))
-        >>> vlm.answer(Lit.milestones.prompt, frame) in {"LIT", "Choice = LIT", "LIT.", "The image shows LIT."}
-        True
-        >>> vlm.model.startswith("pixel-reader-v1-lit/")
-        True
-    """
+    MCQ: the label, a neighbour's with probability ``flicker``; FLOAT and BOX (``NumberReader``
+    only): the patch-snapped reading with noise, a box that collapses with ``box_failure``. Answers
+    are a pure function of (seed, prompt, image bytes), except with ``query_flicker > 0``: a fresh
+    draw per query from a stream seeded by (seed, ``stream``), never cached (``stochastic``)."""
 
     name = "sim"
     simulated = True
 
     def __init__(self, reader: MilestoneReader, knobs: SimKnobs | None = None, stream: int = 0) -> None:
         knobs = knobs or SimKnobs()
-        for prob_name in ("flicker", "box_failure", "query_flicker"):
-            value = getattr(knobs, prob_name)
-            if not 0.0 <= value <= 1.0:
-                raise ValueError(f"SimKnobs.{prob_name}={value} is a probability; pass a value in [0, 1].")
-        if knobs.float_noise < 0 or knobs.box_noise_px < 0 or knobs.latency_s < 0:
-            raise ValueError("SimKnobs noise and latency must be >= 0.")
-        if knobs.mcq_bottom_halfwidth is not None and knobs.mcq_bottom_halfwidth < 0:
-            raise ValueError(f"SimKnobs.mcq_bottom_halfwidth={knobs.mcq_bottom_halfwidth} must be >= 0 (a distance "
-                             "in the reader's units).")
-        if knobs.patch_px < 1:
-            raise ValueError(f"SimKnobs.patch_px={knobs.patch_px} must be >= 1 pixel.")
+        for f in dataclasses.fields(knobs):  # the rules the config schema applies, for knobs built in code
+            value = getattr(knobs, f.name)
+            for rule in rules_of(f):
+                low, high = getattr(rule, "ge", -math.inf), getattr(rule, "le", math.inf)
+                if isinstance(value, int | float) and not low <= value <= high:
+                    raise ValueError(f"SimKnobs.{f.name}={value} must lie in [{low}, {high}].")
         self.knobs = knobs
         self.reader = reader
         self._numbers = reader if isinstance(reader, NumberReader) else None
         self._labels = reader.milestones.labels
         self._refusal: str = getattr(reader, "refusal", TASK_REFUSAL)
         self._mcq_formats: tuple[str, ...] = tuple(getattr(reader, "mcq_formats", _TASK_MCQ_FORMATS))
-        # The response cache keys on (backend, model, prompt, image): the knobs that shape the
-        # answers go into the model name so that a cached answer never outlives its knobs.
+        # the knobs that shape the answers are in the model name, hence in every cache key
         base = getattr(reader, "model_base", f"{MODEL_BASE}-{reader.name}")
         self.model = f"{base}/{knobs_digest(knobs)}"
         self.stochastic = knobs.query_flicker > 0
