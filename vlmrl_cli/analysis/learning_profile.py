@@ -1,22 +1,7 @@
-"""How far one PPO regime's baseline learning profile is from a target profile (the paper's baseline).
-
-A *learning profile* is the steps to each reward threshold and the reliability (the fraction of
-seeds reaching the last threshold within the budget). For a regime trained on ``n`` seeds with
-budget ``B``, thresholds ``r_1..r_K`` and target steps ``T_1..T_K`` and reliability ``rho*``:
-
-    c[s, k] = steps of seed s to threshold r_k, a DNF counted at B (censored, never dropped)
-    S_k     = mean over seeds of c[s, k]
-    rho     = fraction of seeds whose rolling mean reached r_K within B
-    D       = (1/K) sum_k |ln(S_k / T_k)|  +  |rho - rho*|
-
-The first term is a mean absolute log ratio (0.1 ~ 10% too fast or too slow; symmetric in
-"twice as fast" and "twice as slow"), the second a difference of fractions; ``D = 0`` is a perfect
-match. A regime whose budget is below ``T_k`` cannot get the log term to 0. ``D``'s confidence
-interval is a percentile bootstrap over seeds (``scipy.stats.bootstrap``, paired: a resampled seed
-keeps all its thresholds and its reliability together).
-
-The inputs are *episode tables*: one row per training episode with columns ``seed``,
-``timestep`` (global step at the episode's end) and ``native_return``.
+"""How far one regime's baseline learning profile (censored steps to each threshold, and the
+reliability at the last) is from a target profile: the distance ``D`` of docs/commands/calibrate.md,
+``(1/K) sum_k |ln(S_k / T_k)| + |rho - rho*|``, with a paired bootstrap CI over seeds. Inputs are
+episode tables (``seed``, ``timestep``, ``native_return``).
 """
 
 from __future__ import annotations
@@ -79,11 +64,8 @@ def paper_baseline(path: Path) -> TargetProfile:
 
 
 def scaled_target(thresholds: Sequence[float], budget: int, paper: TargetProfile, paper_budget: int) -> TargetProfile:
-    """The paper's baseline profile (``paper``, trained for ``paper_budget`` steps: the paper's task's
-    ``PaperTask.budget``) carried to another task: the same *shape* (each threshold crossed at the same
-    fraction of the budget as the paper's baseline crossed its k-th, interpolated when the task has
-    another number of thresholds; the same reliability) on ``thresholds`` and ``budget``. A regime
-    close to it is slow and fails on some seeds, as the paper's baseline does.
+    """The paper's baseline profile (trained for ``paper_budget`` steps) carried to ``thresholds`` and
+    ``budget``: each threshold at the paper's fraction of the budget (interpolated), the same reliability.
 
     Example:
         >>> from vlmrl_cli import paper
@@ -113,19 +95,8 @@ def seed_steps(
     window: int = 100,
     seeds: Sequence[int] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per seed, censored steps to each threshold and whether it reached each within the budget.
-
-    Args:
-        episodes: episode table (``seed``, ``timestep``, ``native_return``) of one regime.
-        thresholds: shape ``(K,)``.
-        budget: training steps per run; a seed that never reaches a threshold counts at it.
-        seeds: the regime's seeds (default: those in ``episodes``); a seed without a single
-            completed episode is a DNF at every threshold, never dropped.
-
-    Returns:
-        ``(steps, reached)``, both shape ``(n_seeds, K)`` (seeds in ascending order): float steps
-        (DNF = ``budget``) and bool.
-    """
+    """Per seed (ascending), censored steps to each threshold (a DNF at ``budget``) and whether it
+    was reached, both shape ``(n_seeds, K)``; a seed of ``seeds`` without episodes is a DNF everywhere."""
     steps, reached = [], []
     for seed in sorted(set(episodes["seed"]) if seeds is None else seeds):
         ep = episodes[episodes["seed"] == seed]
@@ -139,7 +110,7 @@ def seed_steps(
 
 
 def distance(steps: npt.ArrayLike, reached: npt.ArrayLike, target: TargetProfile) -> float:
-    """``D`` of the module docstring for censored ``steps`` (``(n_seeds, K)``) and ``reached`` (``(n_seeds,)``).
+    """``D`` for censored ``steps`` (``(n_seeds, K)``) and ``reached`` (``(n_seeds,)``).
 
     Example:
         >>> t = TargetProfile((-130.0,), (100.0,), 0.5)

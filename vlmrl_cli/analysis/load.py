@@ -1,9 +1,5 @@
-"""Read finished training runs of one MLflow experiment into tidy DataFrames.
-
-Analysis reads tracked results only (never trainer internals). The contract it relies on is
-the one ``vlmrl run`` writes: child runs tagged ``vlmrl.kind=train`` with ``vlmrl.arm``,
-``vlmrl.seed``, ``vlmrl.config_hash``, ``vlmrl.vlm``, ``vlmrl.simulated``, ``vlmrl.preset``,
-param ``timesteps``; metrics ``episode/*`` stepped by global timestep and ``eval/*``.
+"""Read the finished training runs of one MLflow experiment (the tags, params and metrics that
+``vlmrl run`` writes, ``tracking.schema``) into tidy DataFrames.
 """
 
 from __future__ import annotations
@@ -46,14 +42,9 @@ EVAL_EPISODE_COLUMNS = ["run_id", "arm", "seed", "episode", "length"]
 
 @dataclass(frozen=True)
 class ExperimentData:
-    """Finished training runs of one experiment.
-
-    ``runs``: one row per kept run (columns ``RUN_COLUMNS``; ``end_time`` a UTC timestamp).
-    ``episodes``: one row per training episode (``EPISODE_COLUMNS``; ``timestep`` = global step
-    at the episode's end), sorted by run and timestep. ``eval_episodes``: one row per detached
-    evaluation episode when the runs logged ``eval/episode_length`` (else empty). ``task``: the
-    runs' one task (``check_one_task``).
-    """
+    """Finished training runs of one experiment: ``runs`` (``RUN_COLUMNS``), ``episodes`` (one row per
+    training episode, ``EPISODE_COLUMNS``, by run and timestep), ``eval_episodes`` (one row per
+    detached evaluation episode, or empty) and the runs' one ``task``."""
 
     experiment_id: str
     experiment_name: str
@@ -136,9 +127,7 @@ def _run_row(run: Any) -> dict[str, Any]:
 
 
 def numeric_path(tags: Mapping[str, str]) -> str:
-    """The numeric path a run computed on, from its tags: the pin and its values in force, and
-    torch's CPU capability. Runs on one path train the same agent whatever CPU ran them; numpy's
-    SIMD level and the BLAS kernel are not part of it (no training path depends on them).
+    """The numeric path a run computed on, from its tags: the pin, its values, and torch's CPU capability.
 
     Example:
         >>> numeric_path({"vlmrl.pin": "x86-64-v3/1", "vlmrl.pin.env": "MKL_CBWR=COMPATIBLE",
