@@ -20,8 +20,7 @@ TaskScores = npt.ArrayLike | Sequence[npt.ArrayLike]
 
 
 def per_task(scores: TaskScores) -> list[np.ndarray]:
-    """The scores as one float array per task (a 2-D array is ``(n_runs, n_tasks)``), checked: at
-    least one task, one run per task, all finite.
+    """The scores as one checked float array per task (2-D: ``(n_runs, n_tasks)``): finite, none empty.
 
     Example:
         >>> [a.tolist() for a in per_task(np.array([[1, 2], [3, 4], [5, 6]]))]
@@ -44,13 +43,7 @@ def per_task(scores: TaskScores) -> list[np.ndarray]:
 
 
 def normalise(scores: TaskScores, lo: npt.ArrayLike, hi: npt.ArrayLike) -> list[np.ndarray]:
-    """Min-max normalised scores ``(x - lo_m) / (hi_m - lo_m)`` per task ``m``; ``lo``, ``hi``: shape
-    ``(n_tasks,)``, ``hi != lo``.
-
-    Example:
-        >>> [a.tolist() for a in normalise([[-200.0, -150.0], [0.0, 100.0]], [-200.0, 0.0], [-100.0, 50.0])]
-        [[0.0, 0.5], [0.0, 2.0]]
-    """
+    """Min-max normalised scores per task, 0 at ``lo`` and 1 at ``hi`` (shapes ``(n_tasks,)``)."""
     tasks = per_task(scores)
     low, high = np.asarray(lo, dtype=float).reshape(-1), np.asarray(hi, dtype=float).reshape(-1)
     if low.size != len(tasks) or high.size != len(tasks):
@@ -79,25 +72,12 @@ def _mean_axis(*tasks: np.ndarray, axis: int = -1) -> np.ndarray:
 
 
 def iqm(scores: TaskScores) -> float:
-    """Interquartile mean over the runs of all tasks, each task weighing the same (rliable's
-    ``aggregate_iqm`` when every task has the same multiple of 4 runs).
-
-    Example (rliable's ``metrics_test``; then a task with 3 runs against one with 1):
-        >>> iqm(np.array([[1, 2], [2, 2], [1, 1], [2, 1]]))
-        1.5
-        >>> round(iqm([[0.0, 0.0, 0.0], [1.0]]), 12)  # half the weight at 0, half at 1: the middle half averages 0.5
-        0.5
-    """
+    """Interquartile mean over all tasks' runs, each task weighing the same (rliable's ``aggregate_iqm``)."""
     return float(_iqm_axis(*per_task(scores)))
 
 
 def mean(scores: TaskScores) -> float:
-    """Mean over tasks of each task's mean score, as rliable's ``aggregate_mean``.
-
-    Example:
-        >>> mean([[0.0, 1.0], [3.0, 3.0, 3.0]])
-        1.75
-    """
+    """Mean over tasks of each task's mean score, as rliable's ``aggregate_mean``."""
     return float(_mean_axis(*per_task(scores)))
 
 
@@ -131,13 +111,7 @@ def _interval(statistic: Callable[..., np.ndarray], tasks: list[np.ndarray], rng
 
 def iqm_interval(scores: TaskScores, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
                  ) -> Estimate:
-    """``iqm`` with its stratified bootstrap percentile interval (``n``: runs over all tasks).
-
-    Example:
-        >>> e = iqm_interval(np.arange(80.0).reshape(5, 16), np.random.default_rng(0), n_boot=200)
-        >>> e.value, e.low < e.value < e.high
-        (39.5, True)
-    """
+    """``iqm`` with its stratified bootstrap percentile interval (``n``: runs over all tasks)."""
     return _interval(_iqm_axis, per_task(scores), rng, n_boot, ci)
 
 
@@ -169,22 +143,14 @@ def _pair(x: TaskScores, y: TaskScores) -> tuple[list[np.ndarray], list[np.ndarr
 
 
 def probability_of_improvement(x: TaskScores, y: TaskScores) -> float:
-    """rliable's average probability of improvement of arm X over arm Y (same tasks, same order):
-    the mean over tasks of ``P(X_m > Y_m) + P(X_m = Y_m) / 2``; 0.5 = no difference.
-
-    Example (rliable's ``metrics_test``: 1/3):
-        >>> round(probability_of_improvement(np.array([[1, 2], [2, 2], [1, 1], [2, 1]]),
-        ...                                  np.array([[1, 1], [2, 2], [3, 3]])), 6)
-        0.333333
-    """
+    """rliable's probability of improvement of arm X over Y: the mean over tasks of P(X > Y) + P(X = Y)/2."""
     xs, ys = _pair(x, y)
     return float(_poi_of(len(xs))(*xs, *ys))
 
 
 def probability_of_improvement_interval(x: TaskScores, y: TaskScores, rng: np.random.Generator,
                                         n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95) -> Estimate:
-    """``probability_of_improvement`` with a stratified bootstrap interval, each task's runs of X and
-    of Y resampled independently (``n``: the runs of both arms)."""
+    """``probability_of_improvement`` with a stratified bootstrap interval (``n``: both arms' runs)."""
     xs, ys = _pair(x, y)
     return _interval(_poi_of(len(xs)), [*xs, *ys], rng, n_boot, ci)
 
@@ -200,13 +166,7 @@ def _profile_of(taus: np.ndarray) -> Callable[..., np.ndarray]:
 
 
 def performance_profile(scores: TaskScores, taus: npt.ArrayLike) -> np.ndarray:
-    """rliable's score distribution, shape ``(n_taus,)``: the mean over tasks of the fraction of the
-    task's runs strictly above each ``tau``.
-
-    Example:
-        >>> performance_profile([[0.0, 0.5, 1.0], [1.0, 2.0]], [-1.0, 0.5, 1.0, 2.0]).tolist()
-        [1.0, 0.6666666666666666, 0.25, 0.0]
-    """
+    """rliable's score distribution: the mean over tasks of the share of runs strictly above each ``tau``."""
     t = np.asarray(taus, dtype=float).reshape(-1)
     return np.asarray(_profile_of(t)(*per_task(scores)), dtype=float)
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import math
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,10 +15,9 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
-from scipy import stats as sps
 
 from vlmrl_cli.analysis import censored
-from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, reliability
+from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, bootstrap_ci, reliability
 from vlmrl_cli.analysis.thresholds import steps_to_threshold
 from vlmrl_cli.core.errors import BadInput
 
@@ -43,12 +41,6 @@ class TargetProfile:
 def paper_baseline(path: Path) -> TargetProfile:
     """The baseline of a paper's reported Table 2 (``path``, the paper's task's ``PaperTask.reported``):
     steps to each threshold and its final reliability.
-
-    Example:
-        >>> from vlmrl_cli import paper
-        >>> t = paper_baseline(paper.REPORTED)
-        >>> t.thresholds, t.steps, t.reliability
-        ((-190.0, -160.0, -130.0), (196717.0, 219679.0, 272448.0), 0.6)
     """
     try:
         table2 = json.loads(path.read_text(encoding="utf-8"))["table2"]
@@ -66,12 +58,6 @@ def paper_baseline(path: Path) -> TargetProfile:
 def scaled_target(thresholds: Sequence[float], budget: int, paper: TargetProfile, paper_budget: int) -> TargetProfile:
     """The paper's baseline profile (trained for ``paper_budget`` steps) carried to ``thresholds`` and
     ``budget``: each threshold at the paper's fraction of the budget (interpolated), the same reliability.
-
-    Example:
-        >>> from vlmrl_cli import paper
-        >>> t = scaled_target((0.0, 50.0, 90.0), 100_000, paper_baseline(paper.REPORTED), 300_000)
-        >>> [round(s) for s in t.steps], t.reliability
-        ([65572, 73226, 90816], 0.6)
     """
     fractions = np.asarray(paper.steps, dtype=float) / paper_budget
     k = len(thresholds)
@@ -110,13 +96,7 @@ def seed_steps(
 
 
 def distance(steps: npt.ArrayLike, reached: npt.ArrayLike, target: TargetProfile) -> float:
-    """``D`` for censored ``steps`` (``(n_seeds, K)``) and ``reached`` (``(n_seeds,)``).
-
-    Example:
-        >>> t = TargetProfile((-130.0,), (100.0,), 0.5)
-        >>> round(distance([[200.0], [200.0]], [True, False], t), 4)  # twice as slow, reliability right
-        0.6931
-    """
+    """``D`` for censored ``steps`` (``(n_seeds, K)``) and ``reached`` (``(n_seeds,)``)."""
     s = np.asarray(steps, dtype=float)
     r = np.asarray(reached, dtype=float)
     return float(_distance_stat(*s.T, r, target=target))
@@ -145,19 +125,8 @@ def distance_ci(
     value = distance(s, r, target)
     if r.size < 2:
         return Estimate(value, n=int(r.size), note="fewer than 2 seeds: no CI")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # degenerate resamples (all seeds alike) warn but are fine
-        res = sps.bootstrap(
-            (*s.T, r),
-            lambda *cols, axis=-1: _distance_stat(*cols, target=target, axis=axis),
-            paired=True,
-            vectorized=True,
-            n_resamples=n_boot,
-            confidence_level=ci,
-            method="percentile",
-            rng=rng,
-        )
-    low, high = float(res.confidence_interval.low), float(res.confidence_interval.high)
+    low, high = bootstrap_ci((*s.T, r), lambda *cols, axis=-1: _distance_stat(*cols, target=target, axis=axis),
+                             rng, n_boot, ci, paired=True)
     if not (np.isfinite(low) and np.isfinite(high)):  # every resample equal: the interval is the point
         low = high = value
     if low > high:  # seeds alike up to rounding: interpolated percentiles can cross by an ulp
@@ -187,8 +156,7 @@ def regime_profile(
     ci: float = 0.95,
     seeds: Sequence[int] | None = None,
 ) -> RegimeProfile:
-    """The profile of one regime's episode table against ``target`` (see the module docstring);
-    ``seeds`` as in ``seed_steps``."""
+    """The profile of one regime's episode table against ``target``; ``seeds`` as in ``seed_steps``."""
     steps, reached = seed_steps(episodes, target.thresholds, budget, window, seeds)
     return RegimeProfile(
         n_seeds=int(reached.shape[0]),

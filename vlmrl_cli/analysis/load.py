@@ -65,8 +65,7 @@ def _history(client: Any, run_id: str, key: str) -> pd.DataFrame:
 
 
 def _episodes(client: Any, run_id: str, table: str | None = None) -> pd.DataFrame:
-    """The run's episodes: from its per-episode table artifact ``table`` when it has one, else
-    (runs made before the table existed, imported runs) merged from the metric histories."""
+    """The run's episodes: from its episode table artifact ``table``, else from the metric histories."""
     if table:
         from_table = _episodes_from_table(client, run_id, table)
         if from_table is not None:
@@ -143,8 +142,7 @@ def numeric_path(tags: Mapping[str, str]) -> str:
 
 
 def check_one_task(runs: Sequence[Any], experiment: str) -> str:
-    """The one task of ``runs`` (runs from before tasks carry no ``vlmrl.task`` tag: they are
-    MountainCar-v0's); ``BadInput`` when they mix tasks, as a report never does."""
+    """The one task of ``runs`` (no ``vlmrl.task`` tag: MountainCar-v0); ``BadInput`` when they mix tasks."""
     tasks = sorted({recorded_task(r.data.tags.get(schema.TAG_TASK)) for r in runs})
     if len(tasks) > 1:
         raise BadInput(f"MLflow experiment '{experiment}' mixes tasks ({', '.join(tasks)}); a report compares runs "
@@ -153,11 +151,8 @@ def check_one_task(runs: Sequence[Any], experiment: str) -> str:
 
 
 def load_experiment(client: Any, experiment: str) -> ExperimentData:
-    """The finished training runs of ``experiment``, the latest per (arm, seed, config_hash).
-
-    Raises:
-        BadInput: the experiment does not exist, or holds no finished training run.
-    """
+    """The finished training runs of ``experiment``, the latest per (arm, seed, config_hash); ``BadInput``
+    when there are none."""
     exp = client.get_experiment_by_name(experiment)
     if exp is None or exp.lifecycle_stage == "deleted":
         raise BadInput(f"MLflow experiment '{experiment}' does not exist; pass --experiment NAME of a run sweep.")

@@ -20,26 +20,14 @@ NAMES = {"holm": "Holm's step-down (family-wise error rate)",
 
 
 def check_method(method: str) -> Adjust:
-    """``method`` as an ``Adjust`` value; ``ValueError`` naming the choices otherwise.
-
-    Example:
-        >>> check_method("bh")
-        'bh'
-    """
+    """``method`` as an ``Adjust`` value; ``ValueError`` naming the choices otherwise."""
     if method not in METHODS:
         raise ValueError(f"unknown multiplicity adjustment '{method}'; choose one of {', '.join(METHODS)}")
     return method  # type: ignore[return-value]
 
 
 def adjust(p_values: npt.ArrayLike, method: str = DEFAULT_ADJUST) -> np.ndarray:
-    """Adjusted p-values of one family (shape ``(m,)``, NaN: not made), in the order given.
-
-    Example:
-        >>> adjust([0.01, 0.04, float("nan"), 0.03]).round(3).tolist()
-        [0.03, 0.06, nan, 0.06]
-        >>> adjust([0.01, 0.04, 0.03], "bh").round(3).tolist()
-        [0.03, 0.04, 0.04]
-    """
+    """Adjusted p-values of one family (shape ``(m,)``, NaN: not made), in the order given."""
     method = check_method(method)
     p = np.asarray(p_values, dtype=float).reshape(-1)
     finite = p[np.isfinite(p)]
@@ -73,23 +61,12 @@ def family_line(method: str, size: int, what: str) -> str:
 
 
 def smallest_exact_p(n_a: int, n_b: int) -> float:
-    """The smallest two-sided p an exact rank test of ``n_a`` against ``n_b`` seeds can give.
-
-    Example:
-        >>> smallest_exact_p(5, 5) == 2 / 252
-        True
-    """
+    """The smallest two-sided p an exact rank test of ``n_a`` against ``n_b`` seeds can give."""
     return min(1.0, 2.0 / math.comb(n_a + n_b, n_a))
 
 
 def seeds_to_reach(size: int, alpha: float = 0.05, most: int = 100) -> int | None:
-    """The fewest seeds per arm at which the smallest exact p passes Holm's first step
-    (``alpha / size``); None above ``most``.
-
-    Example:
-        >>> seeds_to_reach(12), seeds_to_reach(1)
-        (6, 4)
-    """
+    """The fewest seeds per arm whose smallest exact p passes Holm's first step; None above ``most``."""
     for n in range(2, most + 1):
         if smallest_exact_p(n, n) < alpha / max(1, size):
             return n
@@ -99,13 +76,6 @@ def seeds_to_reach(size: int, alpha: float = 0.05, most: int = 100) -> int | Non
 def reach_line(method: str, size: int, n_a: int, n_b: int, alpha: float = 0.05) -> str | None:
     """The warning that a family of ``size`` exact rank tests at ``n_a`` vs ``n_b`` seeds cannot give
     any adjusted p below ``alpha``; None when it can.
-
-    Example:
-        >>> print(reach_line("holm", 12, 5, 5))  # doctest: +NORMALIZE_WHITESPACE
-        At 5 vs 5 seeds the rank test's smallest exact two-sided p is 2/252 = 0.0079;
-        Holm's first step compares it with 0.05/12 = 0.0042, so no test of this family can reach an
-        adjusted p below 0.05 whatever the data, and no speedup can be called faster: that takes at
-        least 6 seeds per arm (2/924 = 0.0022).
     """
     method = check_method(method)
     p_min = smallest_exact_p(n_a, n_b)

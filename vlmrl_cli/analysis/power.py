@@ -21,12 +21,6 @@ DEFAULT_N_SIMS = 1_000
 def reference_median(reliability: float, sd_log: float, budget: float, n: int) -> float:
     """The median steps of a log-normal whose fraction ``reliability`` lies below ``budget``; a
     reliability of 1 (0) is taken as ``1 - 0.5 / n`` (``0.5 / n``), half a seed short of all (none).
-
-    Example:
-        >>> round(reference_median(0.5, 0.3, 100_000, 20))
-        100000
-        >>> reference_median(1.0, 0.3, 100_000, 20) < reference_median(0.9, 0.3, 100_000, 20)
-        True
     """
     r = min(max(reliability, 0.5 / n), 1 - 0.5 / n)
     return float(budget * math.exp(-sd_log * sps.norm.ppf(r)))
@@ -34,15 +28,13 @@ def reference_median(reliability: float, sd_log: float, budget: float, n: int) -
 
 def simulate_steps(rng: np.random.Generator, n_sims: int, n: int, median: float, sd_log: float,
                    budget: float) -> np.ndarray:
-    """Steps to a threshold of ``n_sims`` simulated arms of ``n`` seeds: shape ``(n_sims, n)``,
-    log-normal around ``median`` with spread ``sd_log``, NaN (a DNF) past ``budget``."""
+    """Log-normal steps of ``n_sims`` simulated arms of ``n`` seeds, shape ``(n_sims, n)``, NaN past ``budget``."""
     steps = median * np.exp(sd_log * rng.standard_normal((n_sims, n)))
     return np.where(steps <= budget, steps, np.nan)
 
 
 def _rank_p(ref: np.ndarray, arm: np.ndarray) -> np.ndarray:
-    """Two-sided Mann-Whitney p per row (shapes ``(n_sims, n)``), a DNF (NaN) tied above every finish,
-    normal approximation with tie correction."""
+    """Two-sided Mann-Whitney p per row, a DNF (NaN) tied above every finish, normal approximation."""
     big = np.finfo(float).max
     a, b = np.where(np.isnan(arm), big, arm), np.where(np.isnan(ref), big, ref)
     with warnings.catch_warnings():
@@ -63,13 +55,6 @@ def censored_power(rng: np.random.Generator, speedup: float, n: int, sd_log: flo
     """The probability that a study of ``n`` seeds per arm calls an arm ``speedup`` times faster than
     the reference "faster", by ``n_sims`` simulated studies; ``sd_log_arm``: the arm's spread (None:
     the reference's ``sd_log``).
-
-    Example:
-        >>> rng = np.random.default_rng(0)
-        >>> weak = censored_power(rng, 1.1, 10, 0.3, 0.6, 300_000, n_sims=300)
-        >>> strong = censored_power(np.random.default_rng(0), 2.0, 10, 0.3, 0.6, 300_000, n_sims=300)
-        >>> weak < 0.5 < strong
-        True
     """
     median = reference_median(reliability, sd_log, budget, n)
     ref = simulate_steps(rng, n_sims, n, median, sd_log, budget)
@@ -86,12 +71,6 @@ def detectable_speedup(seed: int, n: int, sd_log: float, reliability: float, bud
                        high: float = 4.0, sd_log_arm: float | None = None) -> float:
     """The smallest speedup that ``n`` seeds per arm call "faster" with ``power`` (bisection over
     ``[1, high]``, the same noise at every step); ``inf`` when even ``high`` is not detected.
-
-    Example:
-        >>> few = detectable_speedup(0, 5, 0.3, 0.6, 300_000, n_sims=300)
-        >>> many = detectable_speedup(0, 20, 0.3, 0.6, 300_000, n_sims=300)
-        >>> 1 < many < few
-        True
     """
     def power_at(s: float) -> float:
         return censored_power(np.random.default_rng(seed), s, n, sd_log, reliability, budget, alpha, family,
@@ -107,13 +86,7 @@ def detectable_speedup(seed: int, n: int, sd_log: float, reliability: float, bud
 
 
 def fisher_power(p_a: float, p_b: float, n: int, alpha: float = 0.05) -> float:
-    """Power of a two-sided Fisher exact test telling rates ``p_a`` and ``p_b`` apart at ``n`` seeds
-    per arm (every outcome pair enumerated).
-
-    Example:
-        >>> round(fisher_power(1.0, 0.6, 16), 2) >= 0.8 > round(fisher_power(1.0, 0.6, 10), 2)
-        True
-    """
+    """Power of a two-sided Fisher exact test telling rates ``p_a`` and ``p_b`` apart at ``n`` seeds per arm."""
     if n < 1:
         return math.nan
     ks = np.arange(n + 1)
@@ -133,10 +106,6 @@ def fisher_power(p_a: float, p_b: float, n: int, alpha: float = 0.05) -> float:
 def detectable_reliability(p_b: float, n: int, alpha: float = 0.05, power: float = 0.8) -> float | None:
     """The smallest reliability (1% grid, by bisection) that Fisher's exact test tells from ``p_b``
     with ``power`` at ``n`` seeds per arm; None when not even 100% is detected.
-
-    Example:
-        >>> detectable_reliability(0.0, 10), detectable_reliability(0.6, 10)
-        (0.59, None)
     """
     lo, hi = math.floor(100 * p_b) + 1, 100  # percent
     if lo > hi or fisher_power(hi / 100, p_b, n, alpha) < power:
@@ -151,8 +120,7 @@ def detectable_reliability(p_b: float, n: int, alpha: float = 0.05, power: float
 
 
 def fit_censored_lognormal(steps: np.ndarray, budgets: np.ndarray) -> tuple[float, float] | None:
-    """Maximum-likelihood ``(mu, sd)`` of log steps, a DNF right-censored at its log budget; None
-    with fewer than two distinct finishes.
+    """Maximum-likelihood ``(mu, sd)`` of log steps, DNFs right-censored; None with < 2 distinct finishes.
 
     Example:
         >>> rng = np.random.default_rng(0)
@@ -198,10 +166,6 @@ def restricted_mean_steps(mu: float, sd: float, budget: float) -> float:
 def restricted_ratio(mu: float, sd: float, budget: float, speedup: float, sd_arm: float | None = None) -> float:
     """The ratio of restricted means, reference over arm, for a median ratio ``speedup`` (the arm's
     spread ``sd_arm``, None: ``sd``): what the tables would show for that effect.
-
-    Example:
-        >>> round(restricted_ratio(math.log(1000.0), 0.2, 1e9, 1.5), 3), restricted_ratio(20.0, 0.2, 100.0, 1.5)
-        (1.5, 1.0)
     """
     arm_sd = sd if sd_arm is None else sd_arm
     return restricted_mean_steps(mu, sd, budget) / restricted_mean_steps(mu - math.log(speedup), arm_sd, budget)

@@ -31,11 +31,6 @@ class ProportionComparison:
 def newcombe_difference(k_a: int, n_a: int, k_b: int, n_b: int, ci: float = 0.95) -> Estimate:
     """``k_a/n_a - k_b/n_b`` with Newcombe's hybrid score interval (method 10 of Newcombe 1998, from
     the two Wilson intervals; it never collapses to a point).
-
-    Example:
-        >>> e = newcombe_difference(5, 5, 5, 5)
-        >>> e.value, round(e.low, 3), round(e.high, 3)
-        (0.0, -0.434, 0.434)
     """
     if n_a <= 0 or n_b <= 0:
         return Estimate(float("nan"), n=int(min(n_a, n_b, 0)), note="an arm has no seeds")
@@ -48,12 +43,7 @@ def newcombe_difference(k_a: int, n_a: int, k_b: int, n_b: int, ci: float = 0.95
 
 
 def exact_test(k_a: int, n_a: int, k_b: int, n_b: int) -> float:
-    """Two-sided Fisher exact p-value for ``k_a/n_a`` vs ``k_b/n_b`` (1.0 when both arms agree entirely).
-
-    Example:
-        >>> round(exact_test(5, 5, 0, 5), 4), exact_test(5, 5, 5, 5)
-        (0.0079, 1.0)
-    """
+    """Two-sided Fisher exact p-value for ``k_a/n_a`` vs ``k_b/n_b`` (1.0 when both arms agree entirely)."""
     if n_a <= 0 or n_b <= 0:
         return float("nan")
     table = [[int(k_a), int(n_a - k_a)], [int(k_b), int(n_b - k_b)]]
@@ -61,13 +51,7 @@ def exact_test(k_a: int, n_a: int, k_b: int, n_b: int) -> float:
 
 
 def compare_proportions(a: npt.ArrayLike, b: npt.ArrayLike, ci: float = 0.95) -> ProportionComparison:
-    """Compare two arms' per-seed successes (bool arrays of shape ``(n_a,)``, ``(n_b,)``; NaN dropped).
-
-    Example:
-        >>> c = compare_proportions([1, 1, 1, 1, 1], [1, 1, 1, 0, 0])
-        >>> round(c.difference.value, 2), round(c.p_value, 3)
-        (0.4, 0.444)
-    """
+    """Compare two arms' per-seed successes (bool arrays of shape ``(n_a,)``, ``(n_b,)``; NaN dropped)."""
     xa, xb = _bools(a), _bools(b)
     ka, na, kb, nb = int(xa.sum()), int(xa.size), int(xb.sum()), int(xb.size)
     return ProportionComparison(ka, na, kb, nb, newcombe_difference(ka, na, kb, nb, ci), exact_test(ka, na, kb, nb))
@@ -79,11 +63,6 @@ def _bools(values: npt.ArrayLike) -> np.ndarray:
 
 
 def detached_successes(success_rates: npt.ArrayLike, cut: float = DETACHED_SUCCESS_CUT) -> np.ndarray:
-    """Per seed, 1.0 when its share of successful detached episodes is at least ``cut``, else 0.0 (NaN kept).
-
-    Example:
-        >>> detached_successes([1.0, 0.95, 0.2, float("nan")])
-        array([ 1.,  1.,  0., nan])
-    """
+    """Per seed, 1.0 when its share of successful detached episodes is at least ``cut``, else 0.0 (NaN kept)."""
     r = np.asarray(success_rates, dtype=float).reshape(-1)
     return np.where(np.isfinite(r), (r >= cut).astype(float), np.nan)

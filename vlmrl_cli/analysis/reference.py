@@ -36,15 +36,7 @@ class ReferenceVerdict:
 
 def reference_equivalence(scores: npt.ArrayLike, reference: float, random_score: float, fraction: float = FRACTION,
                           alpha: float = 0.05, min_seeds: int = MIN_SEEDS) -> ReferenceVerdict:
-    """Judge the seeds' ``scores`` against ``reference`` by the module's rule.
-
-    Example:
-        >>> v = reference_equivalence([-108.0, -112.0, -105.0, -115.0, -110.0] * 2, -110.423, -200.0)
-        >>> v.verdict, round(v.delta, 2), v.p_tost < 0.05
-        ('met', 8.96, True)
-        >>> reference_equivalence([-108.0, -112.0, -105.0], -110.423, -200.0).verdict
-        'cannot tell'
-    """
+    """Judge the seeds' ``scores`` against ``reference`` by the module's rule."""
     x = np.asarray(scores, dtype=float).reshape(-1)
     x = x[np.isfinite(x)]
     delta = fraction * abs(reference - random_score)

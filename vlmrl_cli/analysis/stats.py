@@ -84,25 +84,20 @@ def bootstrap_ci(
     rng: np.random.Generator,
     n_boot: int = DEFAULT_N_BOOT,
     ci: float = 0.95,
+    paired: bool = False,
 ) -> tuple[float, float]:
     """Percentile bootstrap ``(low, high)`` of ``statistic(*samples)`` (vectorised, ``axis=-1``), each
-    sample (shape ``(n_i,)``, ``n_i >= 2``) resampled independently; NaN where it is undefined."""
+    sample (shape ``(n_i,)``, ``n_i >= 2``) resampled independently unless ``paired``; NaN where undefined."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # degenerate samples (all equal) warn but are fine here
         res = sps.bootstrap(samples, statistic, n_resamples=n_boot, confidence_level=ci, method="percentile",
-                            vectorized=True, axis=-1, rng=rng)
+                            vectorized=True, paired=paired, axis=-1, rng=rng)
     return float(res.confidence_interval.low), float(res.confidence_interval.high)
 
 
 def mean_ci(values: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
             ) -> Estimate:
-    """Mean of ``values`` (shape ``(n,)``, NaN ignored) with a bootstrap CI.
-
-    Example:
-        >>> e = mean_ci([1.0, 2.0, 3.0], np.random.default_rng(0), n_boot=200)
-        >>> e.value, e.low <= 2.0 <= e.high
-        (2.0, True)
-    """
+    """Mean of ``values`` (shape ``(n,)``, NaN ignored) with a bootstrap CI."""
     x = _finite(values)
     if x.size == 0:
         return Estimate(float("nan"), n=0, note="no values")
@@ -116,14 +111,7 @@ def summarize_steps(
     steps: npt.ArrayLike, budget: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT,
     ci: float = 0.95,
 ) -> StepsSummary:
-    """Summary of one arm's ``steps`` (shape ``(n_seeds,)``, NaN = DNF) to one threshold; ``budget``
-    scalar or per seed.
-
-    Example:
-        >>> s = summarize_steps([100.0, np.nan, 300.0], 1000, np.random.default_rng(0), n_boot=100)
-        >>> s.n_reached, s.n_dnf, s.mean.value, s.censored_mean
-        (2, 1, 200.0, 466.6666666666667)
-    """
+    """Summary of one arm's ``steps`` (shape ``(n_seeds,)``, NaN = DNF) to one threshold."""
     x = np.asarray(steps, dtype=float).reshape(-1)
     b = np.broadcast_to(np.asarray(budget, dtype=float), x.shape)
     reached = x[np.isfinite(x)]
@@ -145,13 +133,7 @@ def summarize_steps(
 
 
 def wilson_ci(successes: int, n: int, ci: float = 0.95) -> Estimate:
-    """A proportion ``successes / n`` with its Wilson score interval.
-
-    Example:
-        >>> e = wilson_ci(3, 3)
-        >>> e.value, round(e.low, 3), e.high
-        (1.0, 0.439, 1.0)
-    """
+    """A proportion ``successes / n`` with its Wilson score interval."""
     if n <= 0:
         return Estimate(float("nan"), n=0, note="no seeds")
     interval = sps.binomtest(int(successes), int(n)).proportion_ci(confidence_level=ci, method="wilson")
@@ -194,12 +176,7 @@ def _std_diff(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
 def std_difference(
     a: npt.ArrayLike, b: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
 ) -> Estimate:
-    """``std(a) - std(b)`` across seeds (ddof=1; below 0: ``a`` is narrower) with a bootstrap CI.
-
-    Example:
-        >>> std_difference([1.0, 1.0, 1.0], [0.0, 2.0, 4.0], np.random.default_rng(0), n_boot=100).value
-        -2.0
-    """
+    """``std(a) - std(b)`` across seeds (ddof=1; below 0: ``a`` is narrower) with a bootstrap CI."""
     x, y = _finite(a), _finite(b)
     if x.size < 2 or y.size < 2:
         return Estimate(float("nan"), n=int(min(x.size, y.size)), note="fewer than 2 seeds: no spread")
@@ -209,12 +186,7 @@ def std_difference(
 
 
 def iqm(values: npt.ArrayLike) -> float:
-    """Interquartile mean of ``values`` (shape ``(n,)``): the mean of the middle 50% (``trim_mean`` 0.25).
-
-    Example:
-        >>> iqm([0.0, 1.0, 2.0, 3.0, 100.0, -100.0, 1.5, 2.5])
-        1.75
-    """
+    """Interquartile mean of ``values`` (shape ``(n,)``): the mean of the middle 50% (``trim_mean`` 0.25)."""
     x = _finite(values)
     return float(sps.trim_mean(x, 0.25)) if x.size else float("nan")
 
@@ -234,12 +206,7 @@ def iqm_ci(values: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAUL
 
 
 def final_return(returns: npt.ArrayLike, window: int = 100) -> float:
-    """Mean native return of the last ``window`` training episodes (shape ``(E,)``, time order).
-
-    Example:
-        >>> final_return([-200.0, -150.0, -100.0], window=2)
-        -125.0
-    """
+    """Mean native return of the last ``window`` training episodes (shape ``(E,)``, time order)."""
     r = np.asarray(returns, dtype=float).reshape(-1)
     return float(r[-window:].mean()) if r.size else float("nan")
 

@@ -34,10 +34,6 @@ def rolling_mean_return(
     """The rolling mean return as a step function of the global timestep: ``(steps, mean)``, shape
     ``(K,)`` over the distinct end steps, ``mean[k]`` over the last ``window`` episodes ended by
     ``steps[k]`` (NaN before ``min_episodes``).
-
-    Example:
-        >>> rolling_mean_return([10, 20, 20, 30], [-200, -100, -150, -50], window=2)
-        (array([10, 20, 30]), array([-200., -125., -100.]))
     """
     ts, ret = _check(timesteps, returns, window, min_episodes)
     if ts.size == 0:
@@ -54,15 +50,7 @@ def steps_to_threshold(
     window: int = 100,
     min_episodes: int = 1,
 ) -> int | None:
-    """First global timestep at which the rolling mean return reaches ``threshold`` (>=); ``None``
-    for a DNF. Partial windows count from ``min_episodes`` episodes (1: like SB3's ``ep_rew_mean``).
-
-    Example:
-        >>> steps_to_threshold([100, 200, 300], [-200, -120, -100], -160, window=2)
-        200
-        >>> steps_to_threshold([100, 200], [-200, -199], -130) is None
-        True
-    """
+    """First global timestep at which the rolling mean return reaches ``threshold`` (>=); ``None``: a DNF."""
     steps, mean = rolling_mean_return(timesteps, returns, window, min_episodes)
     tol = RTOL * max(1.0, abs(float(threshold)))
     hit = np.flatnonzero(mean >= float(threshold) - tol)  # NaN compares False
@@ -72,12 +60,5 @@ def steps_to_threshold(
 def full_window_steps_to_threshold(
     timesteps: npt.ArrayLike, returns: npt.ArrayLike, threshold: float, window: int = 100
 ) -> int | None:
-    """``steps_to_threshold`` with no partial window: nothing counts before ``window`` episodes ended.
-
-    Example:
-        >>> full_window_steps_to_threshold([100, 200, 300], [-100, -200, -50], -140, window=2)
-        300
-        >>> steps_to_threshold([100, 200, 300], [-100, -200, -50], -140, window=2)
-        100
-    """
+    """``steps_to_threshold`` with no partial window: nothing counts before ``window`` episodes ended."""
     return steps_to_threshold(timesteps, returns, threshold, window, min_episodes=window)
