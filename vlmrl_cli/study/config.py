@@ -123,16 +123,8 @@ class StudyConfig:
     @classmethod
     def from_sources(cls, file: Path | None, flags: Mapping[str, Any] | None = None, overrides: Iterable[str] = (),
                      tasks: TaskLookup | None = None) -> StudyConfig:
-        """The validated study of a TOML ``file`` (or None), ``overrides`` (``--set`` strings) and
-        ``flags`` (dotted keys, the study's under ``study.``), layered preset < file < overrides <
-        flags; the task is looked up once, by ``tasks`` (None: the built-in tasks).
-
-        Example:
-            >>> cfg = StudyConfig.from_sources(None, {"study.regimes": {"a": {"preset": "smoke"}},
-            ...                                       "study.alphas": []}, ["study.alphas=[25]", "seeds=[0]"])
-            >>> [r.id for r in cfg.regimes], cfg.base.seeds, {c.alpha for c in cfg.cells if c.kind == "dose"}
-            (['a'], (0,), {0.0})
-        """
+        """The validated study of a TOML ``file`` (or None), ``--set`` ``overrides`` and ``flags`` (dotted keys,
+        the study's under ``study.``), layered preset < file < overrides < flags; one task lookup."""
         layers = source_layers(file, flags or {}, overrides)
         settings = settings_of([layer.pop("study", {}) for layer in layers])
         tasks = once(tasks)
@@ -214,14 +206,7 @@ def study_section(raw: Any) -> dict[str, Any]:
 
 
 def settings_of(tables: Sequence[Any]) -> StudySettings:
-    """The checked ``StudySettings`` of the layers' ``[study]`` tables, lowest first, a key replacing
-    the one below whole.
-
-    Example:
-        >>> s = settings_of([{"alphas": [5], "regimes": {"a": "smoke", "b": "paper"}}, {}, {"regimes": {"c": "zoo"}}])
-        >>> s.alphas, s.regimes, s.kin_scales == StudySettings().kin_scales
-        ((5.0,), {'c': {'preset': 'zoo'}}, True)
-    """
+    """The checked ``StudySettings`` of the layers' ``[study]`` tables, lowest first, each key replacing whole."""
     from vlmrl_cli.training.validation import validate_as
 
     merged: dict[str, Any] = {}
@@ -261,10 +246,8 @@ def build_study(
     tasks: TaskLookup | None = None,
     **settings: Any,
 ) -> StudyConfig:
-    """One validated ``StudyConfig``: every regime's run of every arm (``layers`` above the study's
-    defaults, the regime's overrides above them), the hybrid's VLM variants and the control cells
-    in ``vlm_regime`` (default: the task's study preset, else the first). Anything invalid is
-    ``BadInput`` now."""
+    """One validated ``StudyConfig`` (``BadInput`` now if invalid): every regime's run of every arm, the
+    hybrid's VLM variants and the control cells in ``vlm_regime`` (default: the study preset, else the first)."""
     if not regimes:
         raise BadInput("the study has no regime; pass --regime NAME[=...] or drop the [study.regimes] table.")
     base = {"experiment": DEFAULT_EXPERIMENT, "seeds": list(range(DEFAULT_SEEDS)), "arms": list(DEFAULT_ARMS)}

@@ -31,18 +31,8 @@ COLUMNS = ("task", "comparison", "speedup", "low", "high", "p", "test", "p_withi
 
 def primary_family(maps: Mapping[str, pd.DataFrame], method: str = DEFAULT_ADJUST, alpha: float = 0.05,
                    margin: float = censored.DEFAULT_MARGIN, pairs: Sequence[str] = PRIMARY) -> pd.DataFrame:
-    """One row per (task, comparison) of the family (``COLUMNS``), each p adjusted across every task
-    by ``method`` and re-judged; ``maps``: task -> its study's ``regime_map.csv`` (row 0: main regime).
-
-    Example:
-        >>> row = {"speedup": 1.5, "low": 1.2, "high": 1.9, "p": 0.004, "p_adj": 0.01, "tost_low": 1.25,
-        ...        "tost_high": 1.8, "direction": 0.4, "equivalence_ok": True, "verdict": "faster",
-        ...        "test": "exact"}
-        >>> m = pd.DataFrame([{f"k.{c}": v for c, v in row.items()}])
-        >>> out = primary_family({"t1": m, "t2": m}, pairs=["k"])
-        >>> out["p_family"].round(3).tolist(), out["verdict"].tolist()
-        ([0.008, 0.008], ['faster', 'faster'])
-    """
+    """One row per (task, comparison) of the family (``COLUMNS``), p adjusted across tasks and re-judged;
+    ``maps``: task -> its study's ``regime_map.csv`` (row 0: the main regime)."""
     rows = []
     for task, frame in maps.items():
         main = frame.iloc[0]

@@ -48,8 +48,7 @@ def _partial_family(planned: int, size: int, no_test: int) -> str:
 
 def format_speedup(row: dict[str, Any], key: str) -> str:
     """``1.40x [1.10, 1.80], p = 0.01 (adj. 0.05); log-rank p = 0.02 (adj. 0.08) (faster)`` from a
-    map row; a note where the rank test and the log-rank disagree after adjustment. Where neither arm
-    reached the threshold no test says anything (every seed ties as a DNF): no p is printed.
+    map row, noting where the two tests disagree; no p where every seed of both arms is a DNF.
 
     Example:
         >>> format_speedup({"s.verdict": NEITHER, "s.p": 1.0}, "s")
@@ -101,8 +100,7 @@ def format_difference(row: dict[str, Any], key: str, kind: str) -> str:
 
 def controls_markdown(rows: Sequence[dict[str, Any]], top: float, margin: float, ci: float = 0.95,
                       adjust: str = DEFAULT_ADJUST) -> str:
-    """The control comparisons: each side's seeds reaching ``top`` and restricted mean steps, the
-    speedup of a over b with its verdict, the learning-curve area difference with its verdict."""
+    """The controls' table: each side's seeds reaching ``top`` and steps, the speedup and the area."""
     pct = f"{100 * ci:g}%"
     head = ["Comparison (a vs b)", "Question", f"a: reached {top:g}; steps", f"b: reached {top:g}; steps",
             f"Speedup a / b [{pct} CI], rank p ({adjust}-adj.); log-rank p ({adjust}-adj.) (verdict, margin "
@@ -141,11 +139,8 @@ def summary(rows: Sequence[dict[str, Any]], points: pd.DataFrame, top: float, al
             control_rows: Sequence[dict[str, Any]] = (), margin: float = censored.DEFAULT_MARGIN,
             adjust: str = DEFAULT_ADJUST, ci: float = 0.95, registry: Mapping[str, ArmSpec] = ARMS,
             hacking: Mapping[str, str] | None = None, planned: int = 0) -> list[str]:
-    """The report's opening: the answers to the study's questions, in sentences made from the numbers.
-    Every verdict follows ``censored.judge_speedup`` on the rank test's p adjusted within the study's
-    family (``adjust_family``): faster / slower, equivalent within ``margin``, or inconclusive
-    (saying which way it leans). ``hacking``: each regime's ``hacking_answer``; ``planned``: the
-    family the finished study will hold (the power line's), said when fewer were measured."""
+    """The report's opening: the answers to the study's questions in sentences made from the numbers;
+    ``hacking``: each regime's ``hacking_answer``; ``planned``: the finished study's family size."""
     size = family_size(rows, control_rows, registry)
     partial = (_partial_family(planned, size, untestable(rows, control_rows, registry)) if adjust != "none"
                else "")

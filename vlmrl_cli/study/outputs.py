@@ -183,29 +183,13 @@ INVOCATION_FIELDS = ("command", "git_commit", "versions", "stages", "wall_s", "r
 
 
 def earlier_invocations(previous: Any, experiment: str, tracking_uri: str) -> list[dict[str, Any]]:
-    """The invocations behind an earlier manifest in ``--out``, oldest first, when it describes the same
-    store and experiment (a resumed study); [] otherwise, or when it is not a manifest.
-
-    A resumed study trains only what was missing, so the runs in its tables may come from earlier
-    invocations; their commands, commits and wall times stay on record.
-
-    Example:
-        >>> old = {"experiment": "e", "tracking_uri": "u", "command": "vlmrl study", "wall_s": 7417.0}
-        >>> earlier_invocations(old, "e", "u"), earlier_invocations(old, "e", "other")
-        ([{'command': 'vlmrl study', 'wall_s': 7417.0}], [])
-    """
+    """The invocations behind an earlier manifest of the same store and experiment in ``--out`` (a
+    resumed study), oldest first; [] otherwise."""
     if not isinstance(previous, dict) or (previous.get("experiment"), previous.get("tracking_uri")) != (
             experiment, tracking_uri):
         return []
     history = [h for h in previous.get("earlier_invocations", []) if isinstance(h, dict)]
     return [*history, {k: previous[k] for k in INVOCATION_FIELDS if k in previous}]
-
-
-def _read_manifest(path: Path) -> Any:
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
 
 
 #: The files a study writes into ``--out``, in the order they are listed and logged.
@@ -219,7 +203,11 @@ def write(cfg: StudyConfig, result: StudyResult, hack_frame: pd.DataFrame, simul
     out.mkdir(parents=True, exist_ok=True)
     path = {name: out / name for name in OUTPUTS}
     tracking_uri = store.resolve_tracking_uri(cfg.base.tracking_uri)
-    history = earlier_invocations(_read_manifest(path["manifest.json"]), cfg.base.experiment, tracking_uri)
+    try:
+        previous = json.loads(path["manifest.json"].read_text(encoding="utf-8"))
+    except (OSError, ValueError):  # none yet, or not a manifest
+        previous = None
+    history = earlier_invocations(previous, cfg.base.experiment, tracking_uri)
     vlm_note = "SIMULATED VLM, not a real model." if simulated else ""
     heading = " (SIMULATED VLM)" if simulated else ""
     path["regime_map.md"].write_text(f"# Regime map{heading}\n\n"

@@ -40,16 +40,6 @@ def estimate_cost(cfg: StudyConfig) -> CostEstimate:
     return cost_model.estimate_sweeps([regime.run for regime in cfg.all_regimes()])
 
 
-def _existing_experiment(cfg: StudyConfig) -> tuple[Any, Any] | None:
-    """The client and the study's experiment, read-only (None when either does not exist)."""
-    uri = store.resolve_tracking_uri(cfg.base.tracking_uri)
-    if uri.startswith("sqlite:///") and not Path(uri.removeprefix("sqlite:///")).exists():
-        return None
-    client = store.connect(uri)
-    exp = client.get_experiment_by_name(cfg.base.experiment)
-    return None if exp is None or exp.lifecycle_stage == "deleted" else (client, exp)
-
-
 def slug(name: str) -> str:
     """A folder name for a variant.
 
@@ -104,8 +94,7 @@ def run_study(
 
 def _analyse(cfg: StudyConfig, result: StudyResult, client: Any, data: Any, accuracy: Mapping[str, float]
              ) -> pd.DataFrame:
-    """Fill ``result`` from the study's runs in ``data`` (the map and the controls adjusted as one
-    family); return the reward-hacking table."""
+    """Fill ``result`` from the study's runs in ``data``; return the reward-hacking table."""
     streams = stats.Streams(cfg.seed)
     rows, hack, seeds, hacking_answers = [], [], [], {}
     for regime in cfg.regimes:
@@ -121,7 +110,7 @@ def _analyse(cfg: StudyConfig, result: StudyResult, client: Any, data: Any, accu
         answer = verdicts.hacking_answer(per_seed, streams(f"study/hacking/{regime.id}"), cfg.alpha, cfg.n_boot, cfg.ci)
         if answer:
             hacking_answers[regime.id] = answer
-    result.per_seed = study_per_seed(seeds + _other_sweep_frames(cfg, data), cfg.thresholds)
+    result.per_seed = study_per_seed(seeds + _sweep_frames(cfg, data), cfg.thresholds)
     result.missing = missing_runs(cfg, result.per_seed)
     # the cost of everything reported, not only of the regimes' runs (cells and variants too; a run that
     # two cells share counts once)
@@ -148,34 +137,31 @@ def _analyse(cfg: StudyConfig, result: StudyResult, client: Any, data: Any, accu
     return pd.concat(hack, ignore_index=True) if hack else pd.DataFrame()
 
 
-def _other_sweep_frames(cfg: StudyConfig, data: Any) -> list[pd.DataFrame]:
-    """The per-seed tables of the VLM variants and control cells (in the VLM regime), by sweep id."""
-    return [per_seed_table(verdicts.subset(data, sweep.run), cfg.thresholds, cfg.window).assign(regime=cfg.vlm_regime,
-                                                                                     variant=sweep.id)
-            for sweep in (*cfg.variants, *(c.regime for c in cfg.cells))]
+def _sweep_frames(cfg: StudyConfig, data: Any, own: bool = False) -> list[pd.DataFrame]:
+    """The per-seed tables of the regimes' arms (``own``), then of the variants and cells (by sweep id)."""
+    sweeps = [(r, r.id, "") for r in cfg.regimes] if own else []
+    sweeps += [(s, cfg.vlm_regime, s.id) for s in (*cfg.variants, *(c.regime for c in cfg.cells))]
+    return [per_seed_table(verdicts.subset(data, s.run), cfg.thresholds, cfg.window).assign(regime=r, variant=v)
+            for s, r, v in sweeps]
 
 
 def finished_per_seed(cfg: StudyConfig) -> pd.DataFrame | None:
     """The per-seed table of the study's runs already FINISHED in the store, read-only (None: none yet)."""
-    found_exp = _existing_experiment(cfg)
-    if found_exp is None:
-        return None
+    uri = store.resolve_tracking_uri(cfg.base.tracking_uri)
+    if uri.startswith("sqlite:///") and not Path(uri.removeprefix("sqlite:///")).exists():
+        return None  # read-only: no store is created
+    client = store.connect(uri)  # a store that does not answer raises BadInput here
     try:
-        data = load_experiment(found_exp[0], cfg.base.experiment)
-    except BadInput:  # no finished training run yet
+        data = load_experiment(client, cfg.base.experiment)
+    except BadInput:  # no such experiment, or no finished training run yet
         return None
-    frames = [per_seed_table(verdicts.subset(data, r.run), cfg.thresholds, cfg.window).assign(regime=r.id, variant="")
-              for r in cfg.regimes]
-    frames += _other_sweep_frames(cfg, data)
-    table = study_per_seed([f for f in frames if len(f)], cfg.thresholds)
+    table = study_per_seed([f for f in _sweep_frames(cfg, data, own=True) if len(f)], cfg.thresholds)
     return table if len(table) else None
 
 
 #: The columns of ``per_seed.csv``, after the steps to each threshold and whether each was reached.
 PER_SEED_COLUMNS = ["regime", "variant", "arm", "seed", "config_hash", "run_id", "budget"]
 PER_SEED_TAIL = ["auc", "final_return", "detached_success", "eval_success_rate", "eval_mean_length"]
-
-
 
 
 def missing_runs(cfg: StudyConfig, per_seed: pd.DataFrame) -> dict[str, int]:
@@ -203,8 +189,7 @@ def study_per_seed(frames: Sequence[pd.DataFrame], thresholds: Sequence[float]) 
     return df[PER_SEED_COLUMNS + steps + PER_SEED_TAIL].reset_index(drop=True)
 
 
-#: The spread of log steps to the top threshold assumed for power when no run has finished yet: the
-#: committed 2026-11-29 study's arms ranged from 0.15 to 0.25 (issue 18's audit).
+#: The sd of log steps assumed for power before any run has finished (the 2026-11-29 study's: 0.15-0.25).
 DEFAULT_SD_LOG = 0.2
 
 
@@ -218,9 +203,8 @@ def planned_family(cfg: StudyConfig) -> int:
 
 
 def power_lines(cfg: StudyConfig, per_seed: pd.DataFrame | None = None, made: int | None = None) -> list[str]:
-    """What the study can detect at 80% power, per comparison, simulated on censored data as the
-    verdict sees it (docs/commands/study.md); ``made``: the family a finished study adjusted. With
-    no finished run: one line on an assumed spread (``DEFAULT_SD_LOG``) and 60% reliability."""
+    """What the study can detect at 80% power per comparison (docs/commands/study.md); ``made``: the
+    family a finished study adjusted. No finished run: an assumed spread (``DEFAULT_SD_LOG``), 60%."""
     n, family = len(cfg.base.seeds), _power_family(cfg, made)
     budget = float(cfg.base.budget)
     lines = [_power_head(cfg, made)]

@@ -17,6 +17,7 @@ import pandas as pd
 from vlmrl_cli.analysis import censored, stats
 from vlmrl_cli.analysis.load import ExperimentData
 from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST
+from vlmrl_cli.analysis.ranks import censored_rank_test
 from vlmrl_cli.calibration.regimes import Regime
 from vlmrl_cli.report import attribution
 from vlmrl_cli.report.table2 import (
@@ -26,7 +27,7 @@ from vlmrl_cli.report.table2 import (
     per_seed_table,
     threshold_key,
 )
-from vlmrl_cli.shaping.arms import ARMS, BASELINE, METHOD, NO_LOCK, ArmSpec, comparisons
+from vlmrl_cli.shaping.arms import ARMS, BASELINE, DENSE_POTENTIAL, METHOD, NO_LOCK, ArmSpec, comparisons
 from vlmrl_cli.study.config import Cell
 from vlmrl_cli.sweep.multi import runs_of
 from vlmrl_cli.training.config import RunConfig
@@ -40,8 +41,7 @@ FAMILY_WHAT = ("The study's comparisons of steps to the top threshold (each regi
 
 
 def map_pairs(registry: Mapping[str, ArmSpec] = ARMS) -> tuple[tuple[str, str, str], ...]:
-    """The regime map's comparisons of ``registry`` (``Comparison.in_study``) as (arm a, arm b, what
-    the difference isolates), in the report's order.
+    """The regime map's (arm a, arm b, what it isolates) of ``registry`` (``in_study``), in report order.
 
     Example:
         >>> [f"{a}_vs_{b}" for a, b, _ in map_pairs()][-3:]
@@ -198,8 +198,7 @@ def control_row(control: Control, data: ExperimentData, thresholds: Sequence[flo
                 n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, alpha: float = 0.05,
                 margin: float = censored.DEFAULT_MARGIN, window: int = 100,
                 auc_delta: float = attribution.DEFAULT_AUC_DELTA) -> dict[str, Any]:
-    """One control's row: each side's arm, seeds reaching the top threshold and restricted mean steps,
-    then the comparison's columns (as the map's)."""
+    """One control's row: each side's arm, reached seeds and restricted mean steps, then the comparison."""
     top = max(thresholds)
     a_runs, b_runs = runs_of(data.runs, control.a.regime.run), runs_of(data.runs, control.b.regime.run)
     both = _restrict(data, pd.concat([a_runs, b_runs]).drop_duplicates("run_id"))
@@ -284,8 +283,7 @@ def untestable(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[s
 
 def vlm_point(name: str, data: ExperimentData, top: float, accuracy: float, streams: stats.Streams,
               n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95) -> dict[str, Any]:
-    """One VLM-quality point: the variant's MCQ accuracy and the hybrid's speedup over the baseline
-    (``data``: ``paired``)."""
+    """One VLM-quality point: the variant's MCQ accuracy and the hybrid's speedup (``data``: ``paired``)."""
     per_seed = per_seed_table(data, [top])
     est, test = compare_steps(per_seed, METHOD, BASELINE, top, streams, n_boot, ci)
     return {"variant": name, "mcq_accuracy": accuracy, "speedup": est.value, "low": est.low, "high": est.high,
@@ -297,8 +295,6 @@ def _share_comparison(a: np.ndarray, b: np.ndarray, rng: np.random.Generator, n_
                       ) -> tuple[stats.Estimate, float]:
     """Mean per-seed failure share of ``a`` minus ``b`` with its bootstrap interval, and the two-sided
     Mann-Whitney p on the shares (NaN when every seed ties)."""
-    from vlmrl_cli.analysis.ranks import censored_rank_test
-
     diff = stats.difference_of_means(a, b, rng, n_boot, ci)
     tied = np.unique(np.concatenate([a, b])).size <= 1
     return diff, float("nan") if tied else censored_rank_test(a, b, rng).p_value
@@ -308,15 +304,7 @@ def hacking_answer(per_seed: pd.DataFrame, rng: np.random.Generator, alpha: floa
                    n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95) -> str | None:
     """One regime's answer to ``markdown.HACKING_QUESTION`` on each seed's share of failed detached
     episodes, by the rule of docs/commands/study.md; None when an arm is missing.
-
-    Example:
-        >>> seeds = pd.DataFrame({"arm": ["baseline"] * 4 + ["hybrid"] * 4 + ["hybrid-dense-pbrs"] * 4,
-        ...                       "eval_success_rate": [1, 1, 1, 1, .2, .3, .1, .2, 1, 1, .9, 1]})
-        >>> hacking_answer(seeds, np.random.default_rng(0), n_boot=200).split(":")[0]
-        '**removed**'
     """
-    from vlmrl_cli.shaping.arms import DENSE_POTENTIAL
-
     share = {arm: 1.0 - per_seed.loc[per_seed["arm"] == arm, "eval_success_rate"].to_numpy(dtype=float)
              for arm in (BASELINE, METHOD, DENSE_POTENTIAL)}
     if any(v.size < 2 for v in share.values()):
@@ -324,24 +312,21 @@ def hacking_answer(per_seed: pd.DataFrame, rng: np.random.Generator, alpha: floa
     vs = {pair: _share_comparison(share[pair[0]], share[pair[1]], rng, n_boot, ci)
           for pair in ((METHOD, BASELINE), (DENSE_POTENTIAL, METHOD), (DENSE_POTENTIAL, BASELINE))}
 
-    def above(pair: tuple[str, str]) -> bool:
+    def beyond(pair: tuple[str, str], side: int) -> bool:
+        """Whether ``pair[0]``'s share is above (``side`` 1) or below (-1) ``pair[1]``'s, test and interval."""
         diff, p = vs[pair]
-        return math.isfinite(p) and p < alpha and diff.value > 0 and diff.low > 0
+        bound = diff.low if side > 0 else diff.high
+        return math.isfinite(p) and p < alpha and side * diff.value > 0 and side * bound > 0
 
-    def below(pair: tuple[str, str]) -> bool:
-        diff, p = vs[pair]
-        return math.isfinite(p) and p < alpha and diff.value < 0 and diff.high < 0
-
-    hybrid_hacks = above((METHOD, BASELINE))
-    if not hybrid_hacks:
+    if not beyond((METHOD, BASELINE), 1):
         word = "no hacking to remove"
-    elif below((DENSE_POTENTIAL, METHOD)) and not above((DENSE_POTENTIAL, BASELINE)):
+    elif beyond((DENSE_POTENTIAL, METHOD), -1) and not beyond((DENSE_POTENTIAL, BASELINE), 1):
         word = "removed"
-    elif above((DENSE_POTENTIAL, BASELINE)):
+    elif beyond((DENSE_POTENTIAL, BASELINE), 1):
         word = "not removed"
     else:
         word = "cannot tell"
-    worse = " The potential form fails more often than the hybrid." if above((DENSE_POTENTIAL, METHOD)) else ""
+    worse = " The potential form fails more often than the hybrid." if beyond((DENSE_POTENTIAL, METHOD), 1) else ""
 
     def text(pair: tuple[str, str]) -> str:
         diff, p = vs[pair]
