@@ -68,10 +68,6 @@ class StepsSummary:
     std: float
     iqr: float
 
-    @property
-    def n_dnf(self) -> int:
-        return self.n - self.n_reached
-
 
 def _finite(values: npt.ArrayLike) -> np.ndarray:
     arr = np.asarray(values, dtype=float).reshape(-1)
