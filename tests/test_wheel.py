@@ -43,7 +43,7 @@ def test_wheel_installed_elsewhere_finds_its_paper_data(tmp_path: Path) -> None:
     assert (work / "tax" / "table1.md").is_file()
     report_help = vlmrl("report", "--help")
     assert report_help.returncode == 0 and "--experiment" in report_help.stdout
-    prose = subprocess.run([sys.executable, "-c", "from vlmrl_cli.study.pipeline import prose; "
+    prose = subprocess.run([sys.executable, "-c", "from vlmrl_cli.study.outputs import prose; "
                             "print(prose('estimate', pending=1, minutes=2, how='x'))"], cwd=work, env=env,
                            capture_output=True, text=True, timeout=300)  # the report's prose is package data
     assert prose.returncode == 0 and "Estimated up front: 1 run(s)" in prose.stdout, prose.stderr

@@ -107,7 +107,7 @@ def test_learning_curve_area_weighs_steps() -> None:
 
 
 def test_no_speedup_is_claimed_when_neither_arm_finishes() -> None:
-    est = censored.speedup([np.nan] * 3, [np.nan] * 3, BUDGET, BUDGET, np.random.default_rng(0), 100)
+    est = censored.speedup([np.nan] * 3, [np.nan] * 3, BUDGET, BUDGET)
     assert math.isnan(est.value) and est.note == "neither arm reached the threshold"
 
 
@@ -203,7 +203,7 @@ def _coverage(sd_ref: float, sd_arm: float, shift: float, budget: float, reps: i
     for _ in range(reps):
         ref, arm = np.exp(rng.normal(mu_ref, sd_ref, 10)), np.exp(rng.normal(mu_arm, sd_arm, 10))
         ref[ref > budget], arm[arm > budget] = np.nan, np.nan
-        est = censored.speedup(ref, arm, budget, budget, np.random.default_rng(0), 1000)
+        est = censored.speedup(ref, arm, budget, budget)
         hits += int(est.low <= truth <= est.high)
     return hits / reps
 

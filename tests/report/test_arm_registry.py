@@ -18,7 +18,7 @@ from vlmrl_cli.report.table2 import build_table2, order_arms, to_markdown
 from vlmrl_cli.report.writer import ReportConfig, ReportResult, write_report
 from vlmrl_cli.shaping import arms as arms_mod
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec, Comparison, PotentialSource
-from vlmrl_cli.study import verdicts
+from vlmrl_cli.study import markdown, verdicts
 from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.tracking import store
 
@@ -97,7 +97,7 @@ def test_the_study_map_compares_the_new_arm_when_its_comparison_is_in_the_study(
     data = load_experiment(store.connect_existing(fake_uri), "HALF")
     row, _ = verdicts.regime_row("r", data, THRESHOLDS, Streams(0), n_boot=50, window=WINDOW, registry=REGISTRY)
     assert "hybrid-half_vs_hybrid.speedup" in row and "hybrid_vs_baseline.speedup" in row
-    head = verdicts.map_markdown([row], -130.0, registry=REGISTRY).splitlines()[0]
+    head = markdown.map_markdown([row], -130.0, registry=REGISTRY).splitlines()[0]
     assert "Speedup hybrid-half / hybrid" in head and "hybrid-half: reliability" in head
     out_of_study = {**ARMS, HALF.name: ArmSpec(
         HALF.name, HALF.description, True, PotentialSource.MCQ,

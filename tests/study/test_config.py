@@ -5,18 +5,16 @@ from __future__ import annotations
 import pytest
 
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.study.config import build_study, choose_regimes, settings_of, study_section
+from vlmrl_cli.study.config import build_study, settings_of, study_section, task_regimes
 from vlmrl_cli.tasks.registry import get_task
 
 
 def test_the_default_regime_is_the_unreliable_calibrated_one() -> None:
-    regimes, notes = choose_regimes([], None, get_task("mountain-car"))
-    assert regimes == {"paper-unreliable": {"preset": "paper-unreliable"}} and notes == []
+    assert task_regimes(get_task("mountain-car")) == {"paper-unreliable": {"preset": "paper-unreliable"}}
 
 
 def test_the_default_grid_has_the_placebo_the_dose_response_and_the_lock_test() -> None:
-    regimes, _ = choose_regimes([], None, get_task("mountain-car"))
-    cfg = build_study([], regimes)
+    cfg = build_study([], task_regimes(get_task("mountain-car")))
     assert cfg.base.seeds == tuple(range(20)) and "hybrid-shuffled" in cfg.base.arms
     doses = [c for c in cfg.cells if c.kind == "dose"]
     assert {(c.alpha, c.kin_scale) for c in doses if not c.placebo} == {
@@ -38,8 +36,7 @@ def test_the_default_grid_has_the_placebo_the_dose_response_and_the_lock_test() 
 
 def test_file_regimes_and_variants() -> None:
     section = study_section({"regimes": {"a": "smoke", "b": {"preset": "smoke", "ppo": {"normalize_obs": False}}}})
-    regimes, _ = choose_regimes([], section["regimes"], get_task("mountain-car"))
-    cfg = build_study([], regimes, profiles=["ideal", "default"], flickers=[0.1, 0.5])
+    cfg = build_study([], section["regimes"], profiles=["ideal", "default"], flickers=[0.1, 0.5])
     assert [r.id for r in cfg.regimes] == ["a", "b"] and cfg.vlm_regime == "a"
     assert not cfg.regimes[1].run.ppo_config.normalize_obs
     # profile default and flicker 0.1 are the same knobs: one variant, both names
@@ -63,9 +60,9 @@ def test_a_study_of_another_task_takes_its_study_preset_thresholds_and_window() 
     layers = [{"task": "acrobot"}]
     assert task_in(layers).name == "acrobot" and task_in([]).name == "mountain-car"
     task = get_task("acrobot")
-    chosen, notes = choose_regimes([], None, get_task("acrobot"))
+    chosen = task_regimes(task)
     preset = task.study_preset or task.default_preset
-    assert chosen == {preset: {"preset": preset}} and notes == []
+    assert chosen == {preset: {"preset": preset}}
     cfg = build_study(layers, chosen, profiles=(), flickers=(), alphas=(), kin_scales=(), query_flickers=())
     assert cfg.thresholds == task.thresholds and cfg.window == task.window
     assert all(r.run.task == "acrobot" for r in cfg.all_regimes())

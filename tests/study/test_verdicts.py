@@ -10,9 +10,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from vlmrl_cli.study import pipeline, verdicts
+from vlmrl_cli.study import markdown, outputs, pipeline, verdicts
 from vlmrl_cli.study.config import build_study
-from vlmrl_cli.study.pipeline import StudyResult
+from vlmrl_cli.study.outputs import StudyResult
 
 
 def _cmp(key: str, p: float, low: float, high: float, logrank_p: float | None = None, verdict: str = "faster",
@@ -65,25 +65,25 @@ def test_without_adjustment_the_p_values_and_the_one_rule_stand_alone() -> None:
 
 def test_the_tables_show_raw_and_adjusted_p_and_both_tests() -> None:
     rows, controls = verdicts.adjust_family(*_rows(), "holm")
-    text = verdicts.format_speedup(controls[0], "cmp")
+    text = markdown.format_speedup(controls[0], "cmp")
     assert text.startswith("1.16x [1.02, 1.30], p = 0.04 (adj. 0.12); log-rank p = 0.0001 (adj. 0.0003)")
     assert "**the tests disagree**: only the log-rank rejects" in text
     assert text.endswith("(inconclusive, leans faster)")
-    head = verdicts.map_markdown(rows, -130.0, adjust="holm").splitlines()[0]
+    head = markdown.map_markdown(rows, -130.0, adjust="holm").splitlines()[0]
     assert "rank p (holm-adj.); log-rank p (holm-adj.)" in head
-    controls_head = verdicts.controls_markdown(controls, -130.0, 1.15, adjust="bh").splitlines()[0]
+    controls_head = markdown.controls_markdown(controls, -130.0, 1.15, adjust="bh").splitlines()[0]
     assert "rank p (bh-adj.)" in controls_head and "not adjusted" in controls_head
 
 
 def test_the_summary_and_the_method_state_the_family_and_the_adjustment() -> None:
     rows, controls = verdicts.adjust_family(*_rows(), "holm")
-    first = verdicts.summary(rows, pd.DataFrame(), -130.0, 0.05, "paper", controls, 1.15, "holm")[0]
+    first = markdown.summary(rows, pd.DataFrame(), -130.0, 0.05, "paper", controls, 1.15, "holm")[0]
     assert "one family of 5 tests, adjusted by Holm's step-down" in first
     assert "excludes 1 on the same side" in first
     cfg = build_study([], {"paper": {"preset": "smoke"}}, profiles=(), flickers=(), alphas=(), kin_scales=(),
                       query_flickers=(), adjust="bh")
     result = StudyResult(regime_map=pd.DataFrame(rows), controls=pd.DataFrame(controls))
-    md = pipeline.to_markdown(cfg, result, pd.DataFrame(columns=["regime"]), True, None)
+    md = outputs.to_markdown(cfg, result, pd.DataFrame(columns=["regime"]), True, None)
     method = md[md.index("## Method"):]
     assert "one family of 5 tests, adjusted by Benjamini-Hochberg" in method
     assert "The rank test drives the verdict" in method and "log-rank" in method
@@ -98,7 +98,7 @@ def test_a_bad_adjustment_is_refused_when_the_study_is_built() -> None:
 
 
 def test_an_area_on_a_zero_to_one_return_scale_keeps_its_digits() -> None:
-    from vlmrl_cli.study.verdicts import format_difference
+    from vlmrl_cli.study.markdown import format_difference
 
     small = {"k.auc_diff": -0.0123, "k.auc_low": -0.02, "k.auc_high": -0.004, "k.auc_p": 0.01,
              "k.auc_verdict": "lower"}
@@ -132,18 +132,18 @@ def test_no_hacking_answer_without_every_arm() -> None:
 
 def test_a_partial_family_says_the_finished_one_is_larger() -> None:
     row = {"regime": "zoo", "seeds": 10}
-    lines = verdicts.summary([row], pd.DataFrame(), -130.0, 0.05, "zoo", planned=15)
+    lines = markdown.summary([row], pd.DataFrame(), -130.0, 0.05, "zoo", planned=15)
     assert "the finished study's family holds 15" in lines[0] and "15 not measured yet" in lines[0]
-    assert "finished study's family" not in verdicts.summary([row], pd.DataFrame(), -130.0, 0.05, "zoo")[0]
+    assert "finished study's family" not in markdown.summary([row], pd.DataFrame(), -130.0, 0.05, "zoo")[0]
 
 
 def test_a_comparison_without_a_test_is_not_called_unmeasured() -> None:
     rows, controls = _rows()  # one map pair where neither arm reached: measured, but no test
-    lines = verdicts.summary(rows, pd.DataFrame(), -130.0, 0.05, "paper", controls, planned=6)
+    lines = markdown.summary(rows, pd.DataFrame(), -130.0, 0.05, "paper", controls, planned=6)
     assert verdicts.untestable(rows, controls) == 1
     assert "1 of them have no test" in lines[0]
     assert "not measured yet" not in lines[0]
-    assert "not measured yet" in verdicts.summary(rows, pd.DataFrame(), -130.0, 0.05, "paper", controls,
+    assert "not measured yet" in markdown.summary(rows, pd.DataFrame(), -130.0, 0.05, "paper", controls,
                                                    planned=8)[0]
 
 

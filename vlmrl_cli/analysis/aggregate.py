@@ -1,18 +1,7 @@
-"""Aggregates across tasks, after rliable (Agarwal et al. 2021, "Deep RL at the edge of the
-statistical precipice"): small pure functions over the scores of one arm on several tasks.
-
-The scores of an arm are a matrix of shape ``(n_runs, n_tasks)`` (rliable's layout: column ``m``
-holds the runs of task ``m``) or, when tasks have different numbers of runs, a sequence of
-``n_tasks`` arrays of shape ``(n_runs_m,)``. Scores are finite (NaN is a ``ValueError``: say what
-a missing run means before aggregating) and, in practice, normalised per task so that tasks are
-comparable (``normalise``).
-
-Intervals are percentile intervals of a **stratified bootstrap**: each task's runs are resampled
-with replacement, independently of the other tasks (and, for two arms, of the other arm), the
-tasks themselves are kept. That is rliable's ``StratifiedBootstrap`` /
-``StratifiedIndependentBootstrap`` without task resampling; here it is ``scipy.stats.bootstrap``
-with one sample per task (scipy resamples each sample independently), and the randomness comes in
-as an explicit ``numpy.random.Generator``.
+"""Aggregates across tasks after rliable (Agarwal et al. 2021) over one arm's finite scores: a
+``(n_runs, n_tasks)`` matrix or one ``(n_runs_m,)`` array per task, usually ``normalise``d. Intervals
+are stratified percentile bootstraps: each task's runs resampled on their own, the tasks kept.
+See docs/commands/compare.md.
 """
 
 from __future__ import annotations
@@ -31,9 +20,7 @@ TaskScores = npt.ArrayLike | Sequence[npt.ArrayLike]
 
 
 def per_task(scores: TaskScores) -> list[np.ndarray]:
-    """The scores as one float array per task, checked: at least one task, one run per task, all finite.
-
-    A 2-D input is read as ``(n_runs, n_tasks)``; anything else as a sequence of per-task arrays.
+    """The scores as one checked float array per task (2-D: ``(n_runs, n_tasks)``): finite, none empty.
 
     Example:
         >>> [a.tolist() for a in per_task(np.array([[1, 2], [3, 4], [5, 6]]))]
@@ -56,16 +43,7 @@ def per_task(scores: TaskScores) -> list[np.ndarray]:
 
 
 def normalise(scores: TaskScores, lo: npt.ArrayLike, hi: npt.ArrayLike) -> list[np.ndarray]:
-    """Min-max normalised scores ``(x - lo_m) / (hi_m - lo_m)`` per task ``m`` (0 at ``lo``, 1 at ``hi``).
-
-    Args:
-        scores: one arm's scores (``TaskScores``), in the task's own units (e.g. mean return).
-        lo, hi: shape ``(n_tasks,)``, the reference pair of each task, ``hi != lo``.
-
-    Example:
-        >>> [a.tolist() for a in normalise([[-200.0, -150.0], [0.0, 100.0]], [-200.0, 0.0], [-100.0, 50.0])]
-        [[0.0, 0.5], [0.0, 2.0]]
-    """
+    """Min-max normalised scores per task, 0 at ``lo`` and 1 at ``hi`` (shapes ``(n_tasks,)``)."""
     tasks = per_task(scores)
     low, high = np.asarray(lo, dtype=float).reshape(-1), np.asarray(hi, dtype=float).reshape(-1)
     if low.size != len(tasks) or high.size != len(tasks):
@@ -75,12 +53,9 @@ def normalise(scores: TaskScores, lo: npt.ArrayLike, hi: npt.ArrayLike) -> list[
     return [(t - a) / (b - a) for t, a, b in zip(tasks, low, high, strict=True)]
 
 
-# --- point estimates; the private forms take one array per task with resamples on axis 0 --------
-
 def _iqm_axis(*tasks: np.ndarray, axis: int = -1) -> np.ndarray:
-    """The interquartile mean of the mixture of the tasks' run distributions, each task weighing
-    ``1 / n_tasks`` and each of its ``n_m`` runs ``1 / (n_tasks n_m)``: the mean of the weighted
-    quantile function over (0.25, 0.75), a run straddling a quartile counting for its share."""
+    """The IQM of the mixture of the tasks' runs (a task weighs ``1 / n_tasks``, each of its ``n_m``
+    runs ``1 / (n_tasks n_m)``): the weighted quantile function's mean over (0.25, 0.75)."""
     values = np.concatenate([np.moveaxis(t, axis, -1) for t in tasks], axis=-1)
     weights = np.concatenate([np.full(t.shape[axis], 1.0 / (len(tasks) * t.shape[axis])) for t in tasks])
     order = np.argsort(values, axis=-1, kind="stable")
@@ -97,28 +72,12 @@ def _mean_axis(*tasks: np.ndarray, axis: int = -1) -> np.ndarray:
 
 
 def iqm(scores: TaskScores) -> float:
-    """Interquartile mean over the runs of all tasks, **each task weighing the same**: the middle
-    half of the mixture of the tasks' score distributions. With the same number of runs on every
-    task and a run count that is a multiple of 4, it is rliable's ``aggregate_iqm``
-    (``scipy.stats.trim_mean(all, 0.25)``); with unequal counts, rliable (which needs equal ones)
-    would let a task with more runs weigh more, this does not.
-
-    Example (rliable's ``metrics_test``; then a task with 3 runs against one with 1):
-        >>> iqm(np.array([[1, 2], [2, 2], [1, 1], [2, 1]]))
-        1.5
-        >>> round(iqm([[0.0, 0.0, 0.0], [1.0]]), 12)  # half the weight at 0, half at 1: the middle half averages 0.5
-        0.5
-    """
+    """Interquartile mean over all tasks' runs, each task weighing the same (rliable's ``aggregate_iqm``)."""
     return float(_iqm_axis(*per_task(scores)))
 
 
 def mean(scores: TaskScores) -> float:
-    """Mean over tasks of each task's mean score, as rliable's ``aggregate_mean``.
-
-    Example:
-        >>> mean([[0.0, 1.0], [3.0, 3.0, 3.0]])
-        1.75
-    """
+    """Mean over tasks of each task's mean score, as rliable's ``aggregate_mean``."""
     return float(_mean_axis(*per_task(scores)))
 
 
@@ -129,17 +88,8 @@ def stratified_bootstrap(
     n_boot: int = DEFAULT_N_BOOT,
     ci: float = 0.95,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Percentile interval of ``statistic(*samples)``, each sample resampled with replacement on its own.
-
-    Args:
-        statistic: vectorised: called as ``statistic(*resampled, axis=-1)`` with arrays of shape
-            ``(n_boot, n_i)``; returns shape ``(n_boot,)`` or ``(k, n_boot)`` (k values at once).
-        samples: the strata, e.g. one array of shape ``(n_runs_m,)`` per task, each ``n_runs_m >= 2``.
-        rng: the source of randomness.
-
-    Returns:
-        ``(low, high)``, each of shape ``()`` or ``(k,)``.
-    """
+    """Percentile ``(low, high)`` of ``statistic(*samples, axis=-1)`` (vectorised; one or ``k`` values),
+    each sample (a stratum of at least 2 runs) resampled on its own; shapes ``()`` or ``(k,)``."""
     if any(s.size < 2 for s in samples):
         raise ValueError("a stratified bootstrap needs at least 2 runs in every stratum (task)")
     with warnings.catch_warnings():
@@ -161,13 +111,7 @@ def _interval(statistic: Callable[..., np.ndarray], tasks: list[np.ndarray], rng
 
 def iqm_interval(scores: TaskScores, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
                  ) -> Estimate:
-    """``iqm`` with its stratified bootstrap percentile interval (``n``: runs over all tasks).
-
-    Example:
-        >>> e = iqm_interval(np.arange(80.0).reshape(5, 16), np.random.default_rng(0), n_boot=200)
-        >>> e.value, e.low < e.value < e.high
-        (39.5, True)
-    """
+    """``iqm`` with its stratified bootstrap percentile interval (``n``: runs over all tasks)."""
     return _interval(_iqm_axis, per_task(scores), rng, n_boot, ci)
 
 
@@ -177,9 +121,7 @@ def mean_interval(scores: TaskScores, rng: np.random.Generator, n_boot: int = DE
     return _interval(_mean_axis, per_task(scores), rng, n_boot, ci)
 
 
-# --- probability of improvement ------------------------------------------------------------------
-
-def _p_greater(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
+def p_greater(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
     """P(X > Y) + P(X = Y)/2 over all pairs, i.e. the Mann-Whitney U of ``x`` over ``n_x n_y``."""
     a, b = np.moveaxis(x, axis, -1)[..., :, None], np.moveaxis(y, axis, -1)[..., None, :]
     return np.mean((a > b) + 0.5 * (a == b), axis=(-2, -1))
@@ -188,7 +130,7 @@ def _p_greater(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
 def _poi_of(n_tasks: int) -> Callable[..., np.ndarray]:
     def poi(*samples: np.ndarray, axis: int = -1) -> np.ndarray:
         xs, ys = samples[:n_tasks], samples[n_tasks:]
-        return np.mean(np.stack([_p_greater(x, y, axis) for x, y in zip(xs, ys, strict=True)]), axis=0)
+        return np.mean(np.stack([p_greater(x, y, axis) for x, y in zip(xs, ys, strict=True)]), axis=0)
 
     return poi
 
@@ -201,35 +143,17 @@ def _pair(x: TaskScores, y: TaskScores) -> tuple[list[np.ndarray], list[np.ndarr
 
 
 def probability_of_improvement(x: TaskScores, y: TaskScores) -> float:
-    """rliable's average probability of improvement of arm X over arm Y.
-
-    For each task ``m``, ``P(X_m > Y_m) + P(X_m = Y_m) / 2`` for a random run of each arm: the
-    Mann-Whitney U statistic of X's runs over ``n_x n_y``; then the mean over tasks. 0.5 = no
-    difference; 1 = every run of X beats every run of Y on every task.
-
-    Args:
-        x, y: the two arms' scores (``TaskScores``) on the same tasks, in the same order; the
-            numbers of runs may differ between arms and tasks.
-
-    Example (rliable's ``metrics_test``: 1/3):
-        >>> round(probability_of_improvement(np.array([[1, 2], [2, 2], [1, 1], [2, 1]]),
-        ...                                  np.array([[1, 1], [2, 2], [3, 3]])), 6)
-        0.333333
-    """
+    """rliable's probability of improvement of arm X over Y: the mean over tasks of P(X > Y) + P(X = Y)/2."""
     xs, ys = _pair(x, y)
     return float(_poi_of(len(xs))(*xs, *ys))
 
 
 def probability_of_improvement_interval(x: TaskScores, y: TaskScores, rng: np.random.Generator,
                                         n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95) -> Estimate:
-    """``probability_of_improvement`` with a stratified bootstrap interval: the runs of each task
-    are resampled independently for X and for Y (rliable's ``StratifiedIndependentBootstrap``).
-    ``n``: the runs of both arms over all tasks."""
+    """``probability_of_improvement`` with a stratified bootstrap interval (``n``: both arms' runs)."""
     xs, ys = _pair(x, y)
     return _interval(_poi_of(len(xs)), [*xs, *ys], rng, n_boot, ci)
 
-
-# --- performance profile -------------------------------------------------------------------------
 
 def _profile_of(taus: np.ndarray) -> Callable[..., np.ndarray]:
     def profile(*tasks: np.ndarray, axis: int = -1) -> np.ndarray:
@@ -242,22 +166,7 @@ def _profile_of(taus: np.ndarray) -> Callable[..., np.ndarray]:
 
 
 def performance_profile(scores: TaskScores, taus: npt.ArrayLike) -> np.ndarray:
-    """rliable's score distribution: the fraction of runs whose score is strictly above each ``tau``.
-
-    Each task weighs the same: the mean over tasks of the fraction of that task's runs above
-    ``tau`` (with equal runs per task, rliable's ``np.mean(scores > tau)`` on the matrix).
-
-    Args:
-        scores: one arm's scores (``TaskScores``), normalised per task.
-        taus: shape ``(n_taus,)``, the thresholds.
-
-    Returns:
-        shape ``(n_taus,)``, values in [0, 1], non-increasing in ``tau``.
-
-    Example:
-        >>> performance_profile([[0.0, 0.5, 1.0], [1.0, 2.0]], [-1.0, 0.5, 1.0, 2.0]).tolist()
-        [1.0, 0.6666666666666666, 0.25, 0.0]
-    """
+    """rliable's score distribution: the mean over tasks of the share of runs strictly above each ``tau``."""
     t = np.asarray(taus, dtype=float).reshape(-1)
     return np.asarray(_profile_of(t)(*per_task(scores)), dtype=float)
 
@@ -265,11 +174,7 @@ def performance_profile(scores: TaskScores, taus: npt.ArrayLike) -> np.ndarray:
 def performance_profile_band(scores: TaskScores, taus: npt.ArrayLike, rng: np.random.Generator,
                              n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
                              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``performance_profile`` and its pointwise stratified bootstrap percentile band.
-
-    Returns:
-        ``(profile, low, high)``, each of shape ``(n_taus,)``.
-    """
+    """``performance_profile`` and its pointwise stratified bootstrap band, each shape ``(n_taus,)``."""
     t = np.asarray(taus, dtype=float).reshape(-1)
     tasks = per_task(scores)
     profile = np.asarray(_profile_of(t)(*tasks), dtype=float)

@@ -1,28 +1,7 @@
-"""The one rule for steps to a threshold, and the verdicts built on it.
+"""The DNF rule for steps to a threshold (restricted mean, a DNF at the budget) and the verdicts
+built on it (``judge_speedup``, ``judge_family``). See docs/method.md.
 
-**The DNF rule.** Steps to a threshold are right-censored at the run's budget: a seed that did
-not finish (DNF) is only known to need more than its budget. Every estimate, speedup and verdict
-of ``report``, ``study`` and ``calibrate`` uses the *restricted mean*: the mean over all seeds of
-``min(steps, budget)``, a DNF counted at the budget. With every run censored at the same budget
-this is exactly the restricted mean survival time up to the budget (RMST, the area under the
-Kaplan-Meier curve to the budget), a well-defined estimand that keeps every seed. It is a lower
-bound on the unrestricted mean, and a speedup of restricted means is pulled towards 1 when many
-seeds DNF; equivalence is therefore only claimed when each arm finished on at least
-``MIN_FINISHED_FOR_EQUIVALENCE`` of its seeds. A seed *reached* a threshold when its rolling mean
-return crossed it at a step no later than its budget. The paper's convention (the mean over the
-seeds that finished) survives only as a labelled column of Table 2, never as a verdict's basis.
-
-**Verdicts** (``judge_speedup``, the one rule of the report and the study). Arm ``a`` against
-reference ``b``: ``faster`` / ``slower`` when the censored rank test, its p adjusted within its
-family (``multiplicity.py``), rejects at ``alpha`` *and* the ``ci`` (95%) interval of the speedup
-(``log_ratio_interval``: the delta method on the log ratio, each arm's own spread) excludes 1 on
-the test's side; otherwise ``equivalent within M x`` when the ``1 - 2 alpha`` interval lies inside
-``[1/M, M]`` (two one-sided tests, TOST, on the ratio of restricted means; default margin 1.15x);
-otherwise ``inconclusive``, or ``inconclusive, leans faster`` (``slower``) when the 95% interval
-excludes 1 or the adjusted test rejects, and all of that points one way.
-
-All functions are pure; shapes are ``(n_seeds,)`` arrays with NaN for a DNF; randomness comes in
-as an explicit generator.
+Shapes are ``(n_seeds,)`` with NaN for a DNF; randomness comes in as an explicit generator.
 """
 
 from __future__ import annotations
@@ -51,34 +30,19 @@ RULE = ("steps to a threshold are censored at the budget: a seed that never reac
 
 
 def equivalent(margin: float) -> str:
-    """The verdict text of an equivalence, naming its margin.
-
-    Example:
-        >>> equivalent(1.15)
-        'equivalent within 1.15x'
-    """
+    """The verdict text of an equivalence, naming its margin."""
     return f"equivalent within {margin:g}x"
 
 
 def restricted(steps: npt.ArrayLike, budget: npt.ArrayLike) -> np.ndarray:
-    """``min(steps, budget)`` per seed, a DNF (NaN) at the budget: shape ``(n,)``, in env steps.
-
-    Example:
-        >>> restricted([100.0, float("nan"), 2000.0], 1000).tolist()
-        [100.0, 1000.0, 1000.0]
-    """
+    """``min(steps, budget)`` per seed, a DNF (NaN) at the budget: shape ``(n,)``, in env steps."""
     x = np.asarray(steps, dtype=float).reshape(-1)
     b = np.broadcast_to(np.asarray(budget, dtype=float), x.shape)
     return np.where(np.isfinite(x), np.minimum(x, b), b)
 
 
 def reached(steps: npt.ArrayLike, budget: npt.ArrayLike) -> np.ndarray:
-    """Whether each seed reached the threshold within its budget: shape ``(n,)`` of bools.
-
-    Example:
-        >>> reached([100.0, float("nan"), 2000.0], 1000).tolist()
-        [True, False, False]
-    """
+    """Whether each seed reached the threshold within its budget: shape ``(n,)`` of bools."""
     x = np.asarray(steps, dtype=float).reshape(-1)
     b = np.broadcast_to(np.asarray(budget, dtype=float), x.shape)
     return np.isfinite(x) & (x <= b)
@@ -86,12 +50,7 @@ def reached(steps: npt.ArrayLike, budget: npt.ArrayLike) -> np.ndarray:
 
 def restricted_mean(steps: npt.ArrayLike, budget: npt.ArrayLike, rng: np.random.Generator | None = None,
                     n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95) -> Estimate:
-    """The restricted mean of steps (env steps) with a bootstrap CI over seeds when ``rng`` is given.
-
-    Example:
-        >>> restricted_mean([100.0, float("nan"), 300.0], 1000).value
-        466.6666666666667
-    """
+    """The restricted mean of steps (env steps) with a bootstrap CI over seeds when ``rng`` is given."""
     r = restricted(steps, budget)
     if r.size == 0:
         return Estimate(math.nan, n=0, note="no seeds")
@@ -105,18 +64,8 @@ def restricted_mean(steps: npt.ArrayLike, budget: npt.ArrayLike, rng: np.random.
 
 def log_ratio_interval(b: npt.ArrayLike, a: npt.ArrayLike, ci: float = 0.95) -> tuple[float, float]:
     """An interval for ``mean(b) / mean(a)`` (shapes ``(n_b,)``, ``(n_a,)``, positive values):
-    the delta method on the log ratio, ``log(m_b / m_a) +- t se`` with
-    ``se^2 = s_b^2 / (n_b m_b^2) + s_a^2 / (n_a m_a^2)`` and Student's t on ``min(n_a, n_b) - 1``
-    degrees of freedom (Hsu's conservative choice for unequal variances), exponentiated.
-
-    Why not the percentile bootstrap: at 10 seeds per arm it covers about 90% at nominal 95% on
-    log-normal arms (a bootstrap's variance is ``(n - 1)/n`` of the sample's, and its quantiles are
-    normal ones); this interval covers at least 94% there, censored or not (the coverage test in
-    ``tests/analysis/test_censored.py`` simulates both). Each arm's own spread enters ``se``.
-
-    Example:
-        >>> [round(x, 3) for x in log_ratio_interval([110.0, 120.0, 130.0], [100.0, 100.0, 100.0])]
-        [0.976, 1.476]
+    ``exp(log(m_b / m_a) +- t se)``, ``se^2 = s_b^2 / (n_b m_b^2) + s_a^2 / (n_a m_a^2)``, Student's
+    t on ``min(n_a, n_b) - 1`` df (``RATIO_INTERVAL`` says why not a bootstrap).
     """
     x_b, x_a = np.asarray(b, dtype=float).reshape(-1), np.asarray(a, dtype=float).reshape(-1)
     if min(x_a.size, x_b.size) < 2:
@@ -126,8 +75,7 @@ def log_ratio_interval(b: npt.ArrayLike, a: npt.ArrayLike, ci: float = 0.95) -> 
 
 
 def log_ratio_bounds(b: np.ndarray, a: np.ndarray, ci: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
-    """``log_ratio_interval`` of every row at once: ``b``, ``a`` of shapes ``(..., n_b)``,
-    ``(..., n_a)`` (``n >= 2``); returns the lower and upper bounds, shape ``(...)``.
+    """``log_ratio_interval`` of every row (shapes ``(..., n)``, ``n >= 2``): bounds of shape ``(...)``.
 
     Example:
         >>> low, high = log_ratio_bounds(np.array([[110.0, 120.0, 130.0]]), np.array([[100.0, 100.0, 100.0]]))
@@ -143,16 +91,8 @@ def log_ratio_bounds(b: np.ndarray, a: np.ndarray, ci: float = 0.95) -> tuple[np
 
 
 def speedup(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget: npt.ArrayLike,
-            arm_budget: npt.ArrayLike, rng: np.random.Generator | None = None, n_boot: int = DEFAULT_N_BOOT,
-            ci: float = 0.95) -> Estimate:
-    """Restricted mean steps of the reference over the arm's (above 1: the arm is faster), with a
-    ``ci`` interval on the log ratio (``log_ratio_interval``; ``rng`` and ``n_boot`` are kept for
-    callers' sake, no resample is drawn).
-
-    Example:
-        >>> speedup([280.0, float("nan")], [200.0, 200.0], 300, 300).value
-        1.45
-    """
+            arm_budget: npt.ArrayLike, ci: float = 0.95) -> Estimate:
+    """Restricted mean steps of the reference over the arm's (above 1: the arm is faster), ``ci`` interval."""
     b, a = restricted(ref_steps, ref_budget), restricted(arm_steps, arm_budget)
     if a.size == 0 or b.size == 0:
         return Estimate(math.nan, n=0, note="an arm has no seeds")
@@ -168,8 +108,7 @@ def speedup(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget: npt.
 
 
 def tost_equivalent(interval: tuple[float, float], margin: float = DEFAULT_MARGIN) -> bool:
-    """TOST on a ratio: both one-sided tests at level alpha reject iff the ``1 - 2 alpha`` interval
-    lies inside ``[1/margin, margin]``.
+    """TOST on a ratio: whether the ``1 - 2 alpha`` interval lies inside ``[1/margin, margin]``.
 
     Example:
         >>> tost_equivalent((0.92, 1.10)), tost_equivalent((0.80, 1.10)), tost_equivalent((float("nan"), 1.0))
@@ -182,12 +121,7 @@ def tost_equivalent(interval: tuple[float, float], margin: float = DEFAULT_MARGI
 
 
 def leans(direction: str) -> str:
-    """The verdict text of an inconclusive comparison whose evidence points one way.
-
-    Example:
-        >>> leans(FASTER)
-        'inconclusive, leans faster'
-    """
+    """The verdict text of an inconclusive comparison whose evidence points one way."""
     return f"{INCONCLUSIVE}, leans {direction}"
 
 
@@ -202,28 +136,10 @@ def _side(interval: tuple[float, float]) -> int:
 def judge_speedup(p_adjusted: float, direction: float, interval: tuple[float, float],
                   tost_interval: tuple[float, float], margin: float = DEFAULT_MARGIN, alpha: float = 0.05,
                   equivalence_allowed: bool = True) -> str:
-    """The verdict on a speedup (reference over arm; above 1: the arm is faster), in one rule:
-    "faster"/"slower" needs the adjusted test to reject AND the 95% interval to exclude 1 on the
-    test's side; "equivalent" needs the 90% interval inside [1/margin, margin]; otherwise
-    "inconclusive", saying which way it leans when the interval or the test points one way.
-
-    Args:
-        p_adjusted: the verdict's test's p, adjusted within its family (NaN: no test).
-        direction: the side the test's statistic favours: > 0 the arm is faster, < 0 slower
-            (e.g. ``P(arm faster) - 0.5``); 0 or NaN: unknown, the interval's side decides.
-        interval: the speedup's ``ci`` (95%) interval.
-        tost_interval: its ``1 - 2 alpha`` (90%) interval, for the two one-sided tests.
-        equivalence_allowed: False when too few seeds finished for an equivalence to mean much.
-
-    Example:
-        >>> judge_speedup(0.04, 1.0, (0.98, 1.13), (1.00, 1.11))  # the test rejects, the interval holds 1
-        'equivalent within 1.15x'
-        >>> judge_speedup(0.04, 1.0, (0.98, 1.22), (0.99, 1.19))
-        'inconclusive, leans faster'
-        >>> judge_speedup(0.001, 1.0, (1.09, 1.20), (1.10, 1.19))
-        'faster'
-        >>> judge_speedup(0.11, -1.0, (0.77, 0.97), (0.79, 0.95))
-        'inconclusive, leans slower'
+    """The verdict on a speedup (above 1: the arm is faster): "faster"/"slower" needs the adjusted
+    test to reject AND the 95% ``interval`` to exclude 1 on the test's side; "equivalent" needs the
+    90% ``tost_interval`` inside [1/margin, margin]; otherwise "inconclusive", saying which way it
+    leans. ``direction`` > 0: the test favours the arm (0 or NaN: the interval's side decides).
     """
     side = _side(interval)
     rejects = math.isfinite(p_adjusted) and p_adjusted < alpha
@@ -240,9 +156,7 @@ def judge_speedup(p_adjusted: float, direction: float, interval: tuple[float, fl
 
 @dataclass(frozen=True)
 class Verdict:
-    """A comparison's verdict and what it rests on: the speedup (at the report's CI), the ``1 - 2 alpha``
-    interval the equivalence test used, the censored rank test's raw p, the margin, the test's
-    direction and whether enough seeds finished for an equivalence."""
+    """A comparison's verdict and what it rests on (``tost_*``: the ``1 - 2 alpha`` interval)."""
 
     text: str
     speedup: Estimate
@@ -258,18 +172,10 @@ def steps_verdict(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget
                   arm_budget: npt.ArrayLike, p_value: float, rng: np.random.Generator,
                   n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95, alpha: float = 0.05,
                   margin: float = DEFAULT_MARGIN, direction: float = math.nan) -> Verdict:
-    """The verdict of arm vs reference on steps to one threshold (``judge_speedup``), from their
-    steps (NaN = DNF), budgets and the censored rank test's ``p_value`` and ``direction`` (> 0: the
-    arm is faster), judged on ``p_value`` as given: a family's adjustment comes after, by
-    ``judge_family``.
-
-    Example:
-        >>> rng = np.random.default_rng(0)
-        >>> steps_verdict([100.0] * 6, [101.0, 99.0] * 3, 1000, 1000, 0.9, rng, 500).text
-        'equivalent within 1.15x'
-    """
-    est = speedup(ref_steps, arm_steps, ref_budget, arm_budget, rng, n_boot, ci)
-    tost = speedup(ref_steps, arm_steps, ref_budget, arm_budget, rng, n_boot, 1 - 2 * alpha)
+    """The verdict of arm vs reference on one threshold's steps, on ``p_value`` as given (``judge_speedup``;
+    ``rng`` and ``n_boot`` are unused)."""
+    est = speedup(ref_steps, arm_steps, ref_budget, arm_budget, ci)
+    tost = speedup(ref_steps, arm_steps, ref_budget, arm_budget, 1 - 2 * alpha)
     finished = min(float(reached(ref_steps, ref_budget).mean()) if np.size(ref_steps) else 0.0,
                    float(reached(arm_steps, arm_budget).mean()) if np.size(arm_steps) else 0.0)
     allowed = finished >= MIN_FINISHED_FOR_EQUIVALENCE
@@ -279,11 +185,7 @@ def steps_verdict(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget
 
 @dataclass(frozen=True)
 class FamilyVerdicts:
-    """The verdicts of one family of speedups, each judged on its adjusted p (shapes ``(m,)``).
-
-    ``disagreement``: per comparison, "" when the rank test and the log-rank test agree about
-    significance after adjustment, else which one rejects (``"rank test only"``,
-    ``"log-rank only"``)."""
+    """A family's verdicts (shapes ``(m,)``); ``disagreement``: which of the two tests alone rejects, or ""."""
 
     p_adjusted: np.ndarray
     logrank_adjusted: np.ndarray
@@ -295,21 +197,9 @@ def judge_family(p_values: npt.ArrayLike, logrank_p: npt.ArrayLike, directions: 
                  intervals: npt.ArrayLike, tost_intervals: npt.ArrayLike, equivalence_allowed: npt.ArrayLike,
                  method: str = DEFAULT_ADJUST, alpha: float = 0.05, margin: float = DEFAULT_MARGIN
                  ) -> FamilyVerdicts:
-    """Adjust a family's p-values (``multiplicity.adjust``; the rank test's and the log-rank's,
-    each within the family) and judge each comparison on its adjusted rank-test p (``judge_speedup``).
-
-    Args:
-        p_values, logrank_p: shape ``(m,)``, the raw p of the verdict's test and of the log-rank
-            test; NaN for a comparison not made (kept out of the family size).
-        directions: shape ``(m,)``, the side each test's statistic favours (> 0: the arm is faster).
-        intervals, tost_intervals: shape ``(m, 2)``, the speedups' 95% and 90% intervals.
-        equivalence_allowed: shape ``(m,)`` of bools.
-
-    Example:
-        >>> f = judge_family([0.001, 0.04], [0.002, 0.3], [1, 1], [[1.1, 1.3], [1.05, 1.4]],
-        ...                  [[1.12, 1.28], [1.08, 1.35]], [True, True])
-        >>> f.p_adjusted.tolist(), f.verdicts, f.disagreement
-        ([0.002, 0.04], ('faster', 'faster'), ('', 'rank test only'))
+    """Adjust a family's rank-test and log-rank p-values (``multiplicity.adjust``; shape ``(m,)``,
+    NaN: not made) and judge each comparison on its adjusted rank-test p (``judge_speedup``);
+    ``intervals``, ``tost_intervals``: shape ``(m, 2)``.
     """
     p = np.asarray(p_values, dtype=float).reshape(-1)
     lr = np.asarray(logrank_p, dtype=float).reshape(-1)
@@ -332,16 +222,9 @@ def judge_family(p_values: npt.ArrayLike, logrank_p: npt.ArrayLike, directions: 
 
 def difference_verdict(diff: Estimate, tost: tuple[float, float], p_value: float, alpha: float,
                        delta: float) -> str:
-    """Verdict on a difference where higher is better (e.g. AUC, return units): ``higher``/``lower``
-    when the test is significant *and* the interval excludes 0 on the same side (as for speedups: a
-    test and an interval that disagree make no verdict), ``equivalent within +-delta`` when the
+    """Verdict on a difference where higher is better: ``higher``/``lower`` when the test is
+    significant *and* the interval excludes 0 on that side, ``equivalent within +-delta`` when the
     ``1 - 2 alpha`` interval ``tost`` lies inside ``(-delta, delta)``, else ``inconclusive``.
-
-    Example:
-        >>> difference_verdict(Estimate(1.0, -2.0, 3.0), (-1.5, 2.5), 0.4, 0.05, 5.0)
-        'equivalent within +-5'
-        >>> difference_verdict(Estimate(0.005, -0.001, 0.012), (0.0, 0.011), 0.026, 0.05, 0.1)
-        'equivalent within +-0.1'
     """
     significant = math.isfinite(p_value) and p_value < alpha and math.isfinite(diff.value) and diff.value != 0
     if significant and diff.value > 0 and diff.low > 0:
@@ -355,13 +238,7 @@ def difference_verdict(diff: Estimate, tost: tuple[float, float], p_value: float
 
 
 def format_p(p_value: float, method: str = "", n_perm: int = 0) -> str:
-    """A p-value for a table: ``p < 1/(B+1)`` when a permutation p sits at its resolution floor
-    (it cannot be smaller with ``B`` permutations), otherwise two significant digits.
-
-    Example:
-        >>> format_p(0.0001, "permutation", 9999), format_p(0.012), format_p(float("nan"))
-        ('p < 0.0001', 'p = 0.012', 'no test')
-    """
+    """A p-value for a table: ``p < 1/(B+1)`` at a permutation p's floor, else two significant digits."""
     if not math.isfinite(p_value):
         return "no test"
     if method == "permutation" and n_perm > 0 and p_value <= 1.0 / (n_perm + 1) * (1 + 1e-9):
@@ -369,19 +246,9 @@ def format_p(p_value: float, method: str = "", n_perm: int = 0) -> str:
     return f"p = {p_value:.2g}"
 
 
-# ---- a threshold-free measure ------------------------------------------------------------------
-
-
 def learning_curve_area(timesteps: npt.ArrayLike, returns: npt.ArrayLike, lengths: npt.ArrayLike,
                         budget: int) -> float:
-    """Area under the learning curve, as a mean native return over the budget: each env step of the
-    episodes that ended within the budget weighs the return of its episode (shapes ``(E,)``). No
-    threshold and no window: higher is better, in return units.
-
-    Example:
-        >>> learning_curve_area([200, 300], [-200.0, -100.0], [200, 100], budget=1000)
-        -166.66666666666666
-    """
+    """Area under the learning curve: mean native return per env step within the budget (shapes ``(E,)``)."""
     ts = np.asarray(timesteps, dtype=float).reshape(-1)
     ret = np.asarray(returns, dtype=float).reshape(-1)
     length = np.asarray(lengths, dtype=float).reshape(-1)

@@ -1,29 +1,13 @@
-"""How far one PPO regime's baseline learning profile is from a target profile (the paper's baseline).
-
-A *learning profile* is the steps to each reward threshold and the reliability (the fraction of
-seeds reaching the last threshold within the budget). For a regime trained on ``n`` seeds with
-budget ``B``, thresholds ``r_1..r_K`` and target steps ``T_1..T_K`` and reliability ``rho*``:
-
-    c[s, k] = steps of seed s to threshold r_k, a DNF counted at B (censored, never dropped)
-    S_k     = mean over seeds of c[s, k]
-    rho     = fraction of seeds whose rolling mean reached r_K within B
-    D       = (1/K) sum_k |ln(S_k / T_k)|  +  |rho - rho*|
-
-The first term is a mean absolute log ratio (0.1 ~ 10% too fast or too slow; symmetric in
-"twice as fast" and "twice as slow"), the second a difference of fractions; ``D = 0`` is a perfect
-match. A regime whose budget is below ``T_k`` cannot get the log term to 0. ``D``'s confidence
-interval is a percentile bootstrap over seeds (``scipy.stats.bootstrap``, paired: a resampled seed
-keeps all its thresholds and its reliability together).
-
-The inputs are *episode tables*: one row per training episode with columns ``seed``,
-``timestep`` (global step at the episode's end) and ``native_return``.
+"""How far one regime's baseline learning profile (censored steps to each threshold, and the
+reliability at the last) is from a target profile: the distance ``D`` of docs/commands/calibrate.md,
+``(1/K) sum_k |ln(S_k / T_k)| + |rho - rho*|``, with a paired bootstrap CI over seeds. Inputs are
+episode tables (``seed``, ``timestep``, ``native_return``).
 """
 
 from __future__ import annotations
 
 import json
 import math
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,10 +15,9 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
-from scipy import stats as sps
 
 from vlmrl_cli.analysis import censored
-from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, reliability
+from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, bootstrap_ci, reliability
 from vlmrl_cli.analysis.thresholds import steps_to_threshold
 from vlmrl_cli.core.errors import BadInput
 
@@ -58,12 +41,6 @@ class TargetProfile:
 def paper_baseline(path: Path) -> TargetProfile:
     """The baseline of a paper's reported Table 2 (``path``, the paper's task's ``PaperTask.reported``):
     steps to each threshold and its final reliability.
-
-    Example:
-        >>> from vlmrl_cli import paper
-        >>> t = paper_baseline(paper.REPORTED)
-        >>> t.thresholds, t.steps, t.reliability
-        ((-190.0, -160.0, -130.0), (196717.0, 219679.0, 272448.0), 0.6)
     """
     try:
         table2 = json.loads(path.read_text(encoding="utf-8"))["table2"]
@@ -79,17 +56,8 @@ def paper_baseline(path: Path) -> TargetProfile:
 
 
 def scaled_target(thresholds: Sequence[float], budget: int, paper: TargetProfile, paper_budget: int) -> TargetProfile:
-    """The paper's baseline profile (``paper``, trained for ``paper_budget`` steps: the paper's task's
-    ``PaperTask.budget``) carried to another task: the same *shape* (each threshold crossed at the same
-    fraction of the budget as the paper's baseline crossed its k-th, interpolated when the task has
-    another number of thresholds; the same reliability) on ``thresholds`` and ``budget``. A regime
-    close to it is slow and fails on some seeds, as the paper's baseline does.
-
-    Example:
-        >>> from vlmrl_cli import paper
-        >>> t = scaled_target((0.0, 50.0, 90.0), 100_000, paper_baseline(paper.REPORTED), 300_000)
-        >>> [round(s) for s in t.steps], t.reliability
-        ([65572, 73226, 90816], 0.6)
+    """The paper's baseline profile (trained for ``paper_budget`` steps) carried to ``thresholds`` and
+    ``budget``: each threshold at the paper's fraction of the budget (interpolated), the same reliability.
     """
     fractions = np.asarray(paper.steps, dtype=float) / paper_budget
     k = len(thresholds)
@@ -113,19 +81,8 @@ def seed_steps(
     window: int = 100,
     seeds: Sequence[int] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per seed, censored steps to each threshold and whether it reached each within the budget.
-
-    Args:
-        episodes: episode table (``seed``, ``timestep``, ``native_return``) of one regime.
-        thresholds: shape ``(K,)``.
-        budget: training steps per run; a seed that never reaches a threshold counts at it.
-        seeds: the regime's seeds (default: those in ``episodes``); a seed without a single
-            completed episode is a DNF at every threshold, never dropped.
-
-    Returns:
-        ``(steps, reached)``, both shape ``(n_seeds, K)`` (seeds in ascending order): float steps
-        (DNF = ``budget``) and bool.
-    """
+    """Per seed (ascending), censored steps to each threshold (a DNF at ``budget``) and whether it
+    was reached, both shape ``(n_seeds, K)``; a seed of ``seeds`` without episodes is a DNF everywhere."""
     steps, reached = [], []
     for seed in sorted(set(episodes["seed"]) if seeds is None else seeds):
         ep = episodes[episodes["seed"] == seed]
@@ -139,13 +96,7 @@ def seed_steps(
 
 
 def distance(steps: npt.ArrayLike, reached: npt.ArrayLike, target: TargetProfile) -> float:
-    """``D`` of the module docstring for censored ``steps`` (``(n_seeds, K)``) and ``reached`` (``(n_seeds,)``).
-
-    Example:
-        >>> t = TargetProfile((-130.0,), (100.0,), 0.5)
-        >>> round(distance([[200.0], [200.0]], [True, False], t), 4)  # twice as slow, reliability right
-        0.6931
-    """
+    """``D`` for censored ``steps`` (``(n_seeds, K)``) and ``reached`` (``(n_seeds,)``)."""
     s = np.asarray(steps, dtype=float)
     r = np.asarray(reached, dtype=float)
     return float(_distance_stat(*s.T, r, target=target))
@@ -174,19 +125,8 @@ def distance_ci(
     value = distance(s, r, target)
     if r.size < 2:
         return Estimate(value, n=int(r.size), note="fewer than 2 seeds: no CI")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # degenerate resamples (all seeds alike) warn but are fine
-        res = sps.bootstrap(
-            (*s.T, r),
-            lambda *cols, axis=-1: _distance_stat(*cols, target=target, axis=axis),
-            paired=True,
-            vectorized=True,
-            n_resamples=n_boot,
-            confidence_level=ci,
-            method="percentile",
-            rng=rng,
-        )
-    low, high = float(res.confidence_interval.low), float(res.confidence_interval.high)
+    low, high = bootstrap_ci((*s.T, r), lambda *cols, axis=-1: _distance_stat(*cols, target=target, axis=axis),
+                             rng, n_boot, ci, paired=True)
     if not (np.isfinite(low) and np.isfinite(high)):  # every resample equal: the interval is the point
         low = high = value
     if low > high:  # seeds alike up to rounding: interpolated percentiles can cross by an ulp
@@ -216,8 +156,7 @@ def regime_profile(
     ci: float = 0.95,
     seeds: Sequence[int] | None = None,
 ) -> RegimeProfile:
-    """The profile of one regime's episode table against ``target`` (see the module docstring);
-    ``seeds`` as in ``seed_steps``."""
+    """The profile of one regime's episode table against ``target``; ``seeds`` as in ``seed_steps``."""
     steps, reached = seed_steps(episodes, target.thresholds, budget, window, seeds)
     return RegimeProfile(
         n_seeds=int(reached.shape[0]),

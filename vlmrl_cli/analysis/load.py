@@ -1,9 +1,5 @@
-"""Read finished training runs of one MLflow experiment into tidy DataFrames.
-
-Analysis reads tracked results only (never trainer internals). The contract it relies on is
-the one ``vlmrl run`` writes: child runs tagged ``vlmrl.kind=train`` with ``vlmrl.arm``,
-``vlmrl.seed``, ``vlmrl.config_hash``, ``vlmrl.vlm``, ``vlmrl.simulated``, ``vlmrl.preset``,
-param ``timesteps``; metrics ``episode/*`` stepped by global timestep and ``eval/*``.
+"""Read the finished training runs of one MLflow experiment (the tags, params and metrics that
+``vlmrl run`` writes, ``tracking.schema``) into tidy DataFrames.
 """
 
 from __future__ import annotations
@@ -46,14 +42,9 @@ EVAL_EPISODE_COLUMNS = ["run_id", "arm", "seed", "episode", "length"]
 
 @dataclass(frozen=True)
 class ExperimentData:
-    """Finished training runs of one experiment.
-
-    ``runs``: one row per kept run (columns ``RUN_COLUMNS``; ``end_time`` a UTC timestamp).
-    ``episodes``: one row per training episode (``EPISODE_COLUMNS``; ``timestep`` = global step
-    at the episode's end), sorted by run and timestep. ``eval_episodes``: one row per detached
-    evaluation episode when the runs logged ``eval/episode_length`` (else empty). ``task``: the
-    runs' one task (``check_one_task``).
-    """
+    """Finished training runs of one experiment: ``runs`` (``RUN_COLUMNS``), ``episodes`` (one row per
+    training episode, ``EPISODE_COLUMNS``, by run and timestep), ``eval_episodes`` (one row per
+    detached evaluation episode, or empty) and the runs' one ``task``."""
 
     experiment_id: str
     experiment_name: str
@@ -74,8 +65,7 @@ def _history(client: Any, run_id: str, key: str) -> pd.DataFrame:
 
 
 def _episodes(client: Any, run_id: str, table: str | None = None) -> pd.DataFrame:
-    """The run's episodes: from its per-episode table artifact ``table`` when it has one, else
-    (runs made before the table existed, imported runs) merged from the metric histories."""
+    """The run's episodes: from its episode table artifact ``table``, else from the metric histories."""
     if table:
         from_table = _episodes_from_table(client, run_id, table)
         if from_table is not None:
@@ -136,9 +126,7 @@ def _run_row(run: Any) -> dict[str, Any]:
 
 
 def numeric_path(tags: Mapping[str, str]) -> str:
-    """The numeric path a run computed on, from its tags: the pin and its values in force, and
-    torch's CPU capability. Runs on one path train the same agent whatever CPU ran them; numpy's
-    SIMD level and the BLAS kernel are not part of it (no training path depends on them).
+    """The numeric path a run computed on, from its tags: the pin, its values, and torch's CPU capability.
 
     Example:
         >>> numeric_path({"vlmrl.pin": "x86-64-v3/1", "vlmrl.pin.env": "MKL_CBWR=COMPATIBLE",
@@ -154,8 +142,7 @@ def numeric_path(tags: Mapping[str, str]) -> str:
 
 
 def check_one_task(runs: Sequence[Any], experiment: str) -> str:
-    """The one task of ``runs`` (runs from before tasks carry no ``vlmrl.task`` tag: they are
-    MountainCar-v0's); ``BadInput`` when they mix tasks, as a report never does."""
+    """The one task of ``runs`` (no ``vlmrl.task`` tag: MountainCar-v0); ``BadInput`` when they mix tasks."""
     tasks = sorted({recorded_task(r.data.tags.get(schema.TAG_TASK)) for r in runs})
     if len(tasks) > 1:
         raise BadInput(f"MLflow experiment '{experiment}' mixes tasks ({', '.join(tasks)}); a report compares runs "
@@ -164,11 +151,8 @@ def check_one_task(runs: Sequence[Any], experiment: str) -> str:
 
 
 def load_experiment(client: Any, experiment: str) -> ExperimentData:
-    """The finished training runs of ``experiment``, the latest per (arm, seed, config_hash).
-
-    Raises:
-        BadInput: the experiment does not exist, or holds no finished training run.
-    """
+    """The finished training runs of ``experiment``, the latest per (arm, seed, config_hash); ``BadInput``
+    when there are none."""
     exp = client.get_experiment_by_name(experiment)
     if exp is None or exp.lifecycle_stage == "deleted":
         raise BadInput(f"MLflow experiment '{experiment}' does not exist; pass --experiment NAME of a run sweep.")

@@ -1,17 +1,6 @@
-"""Adjusting p-values for multiplicity within a declared family of comparisons.
-
-A table that judges many comparisons at ``alpha`` each will call some of them significant by
-chance alone; the adjusted p-values here let each verdict be judged at ``alpha`` while the whole
-family keeps its error rate:
-
-* ``holm`` (default): Holm's step-down procedure, controls the family-wise error rate (the chance
-  of any false "faster"/"slower" in the family) under any dependence between the tests.
-* ``bh``: Benjamini-Hochberg, controls the false discovery rate (the expected share of false
-  rejections among the rejections); valid for independent or positively dependent tests.
-* ``none``: the raw p-values (each comparison on its own).
-
-A comparison that was not made (NaN) stays NaN and does not count in the family size. All
-functions are pure.
+"""Adjusting p-values for multiplicity within a declared family: ``holm`` (family-wise error rate,
+any dependence), ``bh`` (Benjamini-Hochberg, false discovery rate) or ``none``. A comparison not
+made (NaN) stays NaN and does not count in the family size.
 """
 
 from __future__ import annotations
@@ -31,35 +20,14 @@ NAMES = {"holm": "Holm's step-down (family-wise error rate)",
 
 
 def check_method(method: str) -> Adjust:
-    """``method`` as an ``Adjust`` value; ``ValueError`` naming the choices otherwise.
-
-    Example:
-        >>> check_method("bh")
-        'bh'
-    """
+    """``method`` as an ``Adjust`` value; ``ValueError`` naming the choices otherwise."""
     if method not in METHODS:
         raise ValueError(f"unknown multiplicity adjustment '{method}'; choose one of {', '.join(METHODS)}")
     return method  # type: ignore[return-value]
 
 
 def adjust(p_values: npt.ArrayLike, method: str = DEFAULT_ADJUST) -> np.ndarray:
-    """Adjusted p-values of one family, in the order given.
-
-    Args:
-        p_values: shape ``(m,)``, raw p-values in [0, 1]; NaN for a comparison not made (kept NaN,
-            not counted in the family size).
-        method: ``"holm"``, ``"bh"`` or ``"none"``.
-
-    Returns:
-        Shape ``(m,)``: each adjusted p is at least its raw p, at most 1, and the adjusted values
-        keep the order of the raw ones (a smaller raw p never gets a larger adjusted p).
-
-    Example:
-        >>> adjust([0.01, 0.04, float("nan"), 0.03]).round(3).tolist()
-        [0.03, 0.06, nan, 0.06]
-        >>> adjust([0.01, 0.04, 0.03], "bh").round(3).tolist()
-        [0.03, 0.04, 0.04]
-    """
+    """Adjusted p-values of one family (shape ``(m,)``, NaN: not made), in the order given."""
     method = check_method(method)
     p = np.asarray(p_values, dtype=float).reshape(-1)
     finite = p[np.isfinite(p)]
@@ -93,24 +61,12 @@ def family_line(method: str, size: int, what: str) -> str:
 
 
 def smallest_exact_p(n_a: int, n_b: int) -> float:
-    """The smallest two-sided p an exact rank test of ``n_a`` against ``n_b`` seeds can give: every
-    seed of one arm ahead of every seed of the other, one split of ``C(n_a + n_b, n_a)`` on each side.
-
-    Example:
-        >>> smallest_exact_p(5, 5) == 2 / 252
-        True
-    """
+    """The smallest two-sided p an exact rank test of ``n_a`` against ``n_b`` seeds can give."""
     return min(1.0, 2.0 / math.comb(n_a + n_b, n_a))
 
 
 def seeds_to_reach(size: int, alpha: float = 0.05, most: int = 100) -> int | None:
-    """The fewest seeds per arm at which the smallest exact p passes Holm's first step
-    (``alpha / size``); None above ``most``.
-
-    Example:
-        >>> seeds_to_reach(12), seeds_to_reach(1)
-        (6, 4)
-    """
+    """The fewest seeds per arm whose smallest exact p passes Holm's first step; None above ``most``."""
     for n in range(2, most + 1):
         if smallest_exact_p(n, n) < alpha / max(1, size):
             return n
@@ -118,15 +74,8 @@ def seeds_to_reach(size: int, alpha: float = 0.05, most: int = 100) -> int | Non
 
 
 def reach_line(method: str, size: int, n_a: int, n_b: int, alpha: float = 0.05) -> str | None:
-    """Whether a family of ``size`` exact rank tests at ``n_a`` vs ``n_b`` seeds can give any adjusted
-    p below ``alpha`` at all (None when it can: nothing to warn about).
-
-    Example:
-        >>> print(reach_line("holm", 12, 5, 5))  # doctest: +NORMALIZE_WHITESPACE
-        At 5 vs 5 seeds the rank test's smallest exact two-sided p is 2/252 = 0.0079;
-        Holm's first step compares it with 0.05/12 = 0.0042, so no test of this family can reach an
-        adjusted p below 0.05 whatever the data, and no speedup can be called faster: that takes at
-        least 6 seeds per arm (2/924 = 0.0022).
+    """The warning that a family of ``size`` exact rank tests at ``n_a`` vs ``n_b`` seeds cannot give
+    any adjusted p below ``alpha``; None when it can.
     """
     method = check_method(method)
     p_min = smallest_exact_p(n_a, n_b)

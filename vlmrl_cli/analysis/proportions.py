@@ -1,10 +1,5 @@
-"""Proportions over seeds: score intervals and exact tests, never a bootstrap.
-
-A proportion over a handful of seeds (5/5 succeeded) has a percentile-bootstrap interval that
-collapses to the point [1, 1]; score intervals do not. One arm gets a Wilson interval
-(``stats.wilson_ci``); a difference of two independent arms gets Newcombe's hybrid score interval
-(method 10 of Newcombe 1998, built from the two Wilson intervals) and a two-sided Fisher exact
-test. The unit of every count here is the seed.
+"""Proportions over seeds: Wilson and Newcombe score intervals and Fisher's exact test, never a
+bootstrap (it collapses to [1, 1] when every seed succeeds).
 """
 
 from __future__ import annotations
@@ -34,17 +29,8 @@ class ProportionComparison:
 
 
 def newcombe_difference(k_a: int, n_a: int, k_b: int, n_b: int, ci: float = 0.95) -> Estimate:
-    """``k_a/n_a - k_b/n_b`` (a difference of proportions in [-1, 1]) with Newcombe's hybrid score interval.
-
-    Method 10 of Newcombe (1998): with Wilson limits ``(l_a, u_a)``, ``(l_b, u_b)`` and
-    ``d = p_a - p_b``, the interval is ``[d - sqrt((p_a - l_a)^2 + (u_b - p_b)^2),
-    d + sqrt((u_a - p_a)^2 + (p_b - l_b)^2)]``. It never collapses to a point: 5/5 vs 5/5
-    gives about [-0.43, 0.43].
-
-    Example:
-        >>> e = newcombe_difference(5, 5, 5, 5)
-        >>> e.value, round(e.low, 3), round(e.high, 3)
-        (0.0, -0.434, 0.434)
+    """``k_a/n_a - k_b/n_b`` with Newcombe's hybrid score interval (method 10 of Newcombe 1998, from
+    the two Wilson intervals; it never collapses to a point).
     """
     if n_a <= 0 or n_b <= 0:
         return Estimate(float("nan"), n=int(min(n_a, n_b, 0)), note="an arm has no seeds")
@@ -57,12 +43,7 @@ def newcombe_difference(k_a: int, n_a: int, k_b: int, n_b: int, ci: float = 0.95
 
 
 def exact_test(k_a: int, n_a: int, k_b: int, n_b: int) -> float:
-    """Two-sided Fisher exact p-value for ``k_a/n_a`` vs ``k_b/n_b`` (1.0 when both arms agree entirely).
-
-    Example:
-        >>> round(exact_test(5, 5, 0, 5), 4), exact_test(5, 5, 5, 5)
-        (0.0079, 1.0)
-    """
+    """Two-sided Fisher exact p-value for ``k_a/n_a`` vs ``k_b/n_b`` (1.0 when both arms agree entirely)."""
     if n_a <= 0 or n_b <= 0:
         return float("nan")
     table = [[int(k_a), int(n_a - k_a)], [int(k_b), int(n_b - k_b)]]
@@ -70,13 +51,7 @@ def exact_test(k_a: int, n_a: int, k_b: int, n_b: int) -> float:
 
 
 def compare_proportions(a: npt.ArrayLike, b: npt.ArrayLike, ci: float = 0.95) -> ProportionComparison:
-    """Compare two arms' per-seed successes (bool arrays of shape ``(n_a,)``, ``(n_b,)``; NaN dropped).
-
-    Example:
-        >>> c = compare_proportions([1, 1, 1, 1, 1], [1, 1, 1, 0, 0])
-        >>> round(c.difference.value, 2), round(c.p_value, 3)
-        (0.4, 0.444)
-    """
+    """Compare two arms' per-seed successes (bool arrays of shape ``(n_a,)``, ``(n_b,)``; NaN dropped)."""
     xa, xb = _bools(a), _bools(b)
     ka, na, kb, nb = int(xa.sum()), int(xa.size), int(xb.sum()), int(xb.size)
     return ProportionComparison(ka, na, kb, nb, newcombe_difference(ka, na, kb, nb, ci), exact_test(ka, na, kb, nb))
@@ -88,14 +63,6 @@ def _bools(values: npt.ArrayLike) -> np.ndarray:
 
 
 def detached_successes(success_rates: npt.ArrayLike, cut: float = DETACHED_SUCCESS_CUT) -> np.ndarray:
-    """Per seed: did its detached evaluation succeed? Shape ``(n_seeds,)`` of floats 1/0, NaN kept.
-
-    ``success_rates`` (shape ``(n_seeds,)``) is each seed's fraction of detached episodes that
-    reached the flag; a seed succeeds when that is at least ``cut``.
-
-    Example:
-        >>> detached_successes([1.0, 0.95, 0.2, float("nan")])
-        array([ 1.,  1.,  0., nan])
-    """
+    """Per seed, 1.0 when its share of successful detached episodes is at least ``cut``, else 0.0 (NaN kept)."""
     r = np.asarray(success_rates, dtype=float).reshape(-1)
     return np.where(np.isfinite(r), (r >= cut).astype(float), np.nan)

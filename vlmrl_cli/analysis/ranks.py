@@ -1,11 +1,5 @@
-"""Rank-based comparisons of two arms over seeds: censored rank test, probability of improvement,
-performance profile.
-
-Steps to a threshold are right-censored: a seed that did not finish (DNF) is only known to need
-more than its budget. Dropping it flatters the arm that fails most; the rank test here keeps it,
-as a value tied with every other DNF and above every finished seed. Which seeds finished is
-decided by ``censored.reached``, the one DNF rule of every test: a crossing after the budget is a
-DNF.
+"""Rank-based comparisons of two arms over seeds: the censored rank test (a DNF tied with every
+other DNF and above every finish, by ``censored.reached``), probability of improvement, profile.
 """
 
 from __future__ import annotations
@@ -18,6 +12,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import stats as sps
 
+from vlmrl_cli.analysis.aggregate import p_greater
 from vlmrl_cli.analysis.censored import reached
 from vlmrl_cli.analysis.defaults import DEFAULT_N_PERM
 from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, bootstrap_ci
@@ -25,11 +20,8 @@ from vlmrl_cli.analysis.stats import DEFAULT_N_BOOT, Estimate, bootstrap_ci
 
 @dataclass(frozen=True)
 class RankTest:
-    """A two-sided Mann-Whitney U test of arm ``a`` vs arm ``b`` on censored steps.
-
-    ``p_faster`` = P(a seed of ``a`` needs fewer steps than one of ``b``) + half the ties
-    (``1 - U/(n_a n_b)``): 0.5 is no difference, above 0.5 favours ``a``.
-    """
+    """A two-sided Mann-Whitney U test of arm ``a`` vs arm ``b`` on censored steps; ``p_faster`` =
+    ``1 - U/(n_a n_b)``, above 0.5 favours ``a``."""
 
     u: float
     p_value: float
@@ -43,9 +35,7 @@ class RankTest:
 
 
 def censor(steps: npt.ArrayLike, budget: npt.ArrayLike | None = None) -> np.ndarray:
-    """Steps to a threshold (shape ``(n,)``, NaN = DNF) with each DNF as ``+inf``: tied with every
-    other DNF and ranked above every finished seed. A DNF is what ``censored.reached`` says it is
-    (the one rule): NaN, or a crossing after ``budget`` (scalar or per seed; None: no budget known).
+    """Steps (shape ``(n,)``) with each DNF by ``censored.reached`` (None: no budget known) as ``+inf``.
 
     Example:
         >>> censor([100.0, float("nan"), 1200.0], 1000)
@@ -67,25 +57,9 @@ def censored_rank_test(
     steps_a: npt.ArrayLike, steps_b: npt.ArrayLike, rng: np.random.Generator, n_perm: int = DEFAULT_N_PERM,
     budget_a: npt.ArrayLike | None = None, budget_b: npt.ArrayLike | None = None,
 ) -> RankTest:
-    """Mann-Whitney U test on steps to a threshold with DNF seeds censored at the budget.
-
-    Args:
-        steps_a, steps_b: shapes ``(n_a,)``, ``(n_b,)``, timesteps to the threshold, NaN for DNF.
-        rng: kept for the signature's sake; no p-value is drawn at random.
-        n_perm: up to this many splits of the seeds, every split is counted and the p-value is
-            exact, conditional on the ties (``exact_rank_sum_p``); beyond, the normal approximation
-            with tie and continuity correction (``method="asymptotic"``).
-        budget_a, budget_b: the arms' budgets (scalar or per seed): a crossing after its budget is
-            a DNF (``censor``). When the arms' budgets differ a DNF of the shorter one may not be
-            slower than a finished seed of the longer one, and the note says so.
-
-    Returns:
-        ``RankTest`` with the two-sided p-value of U, its ``method``, and ``p_faster`` for ``a``.
-
-    Example:
-        >>> t = censored_rank_test([1.0, 2.0, 3.0], [np.nan, np.nan, np.nan], np.random.default_rng(0))
-        >>> round(t.p_value, 3), t.p_faster
-        (0.1, 1.0)
+    """Mann-Whitney U test on steps (shapes ``(n_a,)``, ``(n_b,)``, NaN = DNF) with each DNF censored
+    at its budget (``censor``), the p exact up to ``n_perm`` splits (``rank_sum_p``); ``rng`` is
+    unused. The note says when the budgets differ (a DNF only exceeds its own budget).
     """
     a, b = censor(steps_a, budget_a), censor(steps_b, budget_b)
     dnf_a, dnf_b = int(np.isinf(a).sum()), int(np.isinf(b).sum())
@@ -98,20 +72,18 @@ def censored_rank_test(
         shown = f" ({one_a:g} vs {one_b:g})" if one_a is not None and one_b is not None else ""
         notes.append(f"budgets differ{shown}: a DNF is only known to exceed its own budget")
     note = "; ".join(notes)
-    if a.size < 2 or b.size < 2:
-        u = float(np.sum((a[:, None] > b[None, :]) + 0.5 * (a[:, None] == b[None, :])))
-        return RankTest(u, float("nan"), 1.0 - u / (a.size * b.size), int(a.size), int(b.size), dnf_a, dnf_b,
-                        "; ".join([*notes, "fewer than 2 seeds in an arm: no test"]))
     # U of a: pairs where a needs more steps, ties (DNF with DNF) counted half
     u = float(np.sum((a[:, None] > b[None, :]) + 0.5 * (a[:, None] == b[None, :])))
+    if a.size < 2 or b.size < 2:
+        return RankTest(u, float("nan"), 1.0 - u / (a.size * b.size), int(a.size), int(b.size), dnf_a, dnf_b,
+                        "; ".join([*notes, "fewer than 2 seeds in an arm: no test"]))
     p, method = rank_sum_p(a, b, n_perm)
     return RankTest(u, p, 1.0 - u / (a.size * b.size), int(a.size), int(b.size), dnf_a, dnf_b, note, method)
 
 
 def rank_sum_p(x: npt.ArrayLike, y: npt.ArrayLike, n_perm: int = DEFAULT_N_PERM) -> tuple[float, str]:
-    """The two-sided Wilcoxon-Mann-Whitney p of ``x`` vs ``y`` (shapes ``(n_x,)``, ``(n_y,)``, at
-    least 2 each; ``+inf`` allowed, NaN not) and its method: ``"exact"`` (``exact_rank_sum_p``)
-    when the splits number at most ``n_perm``, else ``"asymptotic"`` (normal, tie-corrected).
+    """The two-sided Wilcoxon-Mann-Whitney p of ``x`` vs ``y`` (at least 2 each; ``+inf`` allowed)
+    and its method: ``"exact"`` up to ``n_perm`` splits, else ``"asymptotic"`` (normal, tie-corrected).
 
     Example:
         >>> rank_sum_p([1.0, 2.0], [3.0, 4.0])
@@ -129,23 +101,10 @@ def rank_sum_p(x: npt.ArrayLike, y: npt.ArrayLike, n_perm: int = DEFAULT_N_PERM)
 
 
 def exact_rank_sum_p(x: npt.ArrayLike, y: npt.ArrayLike) -> float:
-    """The exact two-sided permutation p-value of the Wilcoxon-Mann-Whitney test (midranks for
-    ties), conditional on the ties: every split of the pooled values into groups of ``n_x`` and
-    ``n_y`` is counted, ``p = min(1, 2 min(P(R <= r), P(R >= r)))`` for the rank sum ``R`` of ``x``
-    (scipy's ``permutation_test`` convention, against which the tests check it).
-
-    The splits are counted by dynamic programming over the (doubled, hence integer) midranks, so
-    the cost is ``n_x (n_x + n_y)^3`` additions, not ``C(n_x + n_y, n_x)`` splits.
-
-    Args:
-        x, y: shapes ``(n_x,)``, ``(n_y,)``; ``+inf`` allowed (a DNF: tied with the other DNFs, above
-            every finite value); NaN not allowed. ``C(n_x + n_y, n_x)`` must fit int64.
-
-    Example:
-        >>> round(exact_rank_sum_p([1.0, 2, 3, 4, 5, 6, 7, 8, 9, 10], [11.0] * 10), 7)  # 2 / C(20, 10)
-        1.08e-05
-        >>> exact_rank_sum_p([1.0, np.inf], [np.inf, np.inf])
-        1.0
+    """The exact two-sided permutation p of the Wilcoxon-Mann-Whitney test (midranks), conditional
+    on the ties: ``min(1, 2 min(P(R <= r), P(R >= r)))`` for the rank sum ``R`` of ``x`` over every
+    split, counted by dynamic programming over the doubled midranks (``C(n_x + n_y, n_x)`` must fit
+    int64). ``+inf`` allowed, NaN not.
     """
     a, b = np.asarray(x, dtype=float).reshape(-1), np.asarray(y, dtype=float).reshape(-1)
     if np.isnan(a).any() or np.isnan(b).any():
@@ -169,53 +128,25 @@ def exact_rank_sum_p(x: npt.ArrayLike, y: npt.ArrayLike) -> float:
     return float(min(1.0, 2 * min(lower, upper)))
 
 
-def _p_greater(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
-    xs = np.moveaxis(np.asarray(x), axis, -1)[..., :, None]
-    ys = np.moveaxis(np.asarray(y), axis, -1)[..., None, :]
-    return np.asarray(np.mean((xs > ys) + 0.5 * (xs == ys), axis=(-2, -1)))
-
-
 def probability_of_improvement(
     x: npt.ArrayLike, y: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
 ) -> Estimate:
-    """P(X > Y) + P(X = Y)/2 for a random seed of arm X against one of arm Y, with a bootstrap CI.
-
-    Args:
-        x, y: shapes ``(n_x,)``, ``(n_y,)``, one score per seed where higher is better (e.g. the
-            final return); NaN dropped. Seeds of each arm are resampled independently.
-
-    The bootstrap interval is a descriptive aggregate: when every seed of X beats every seed of Y
-    all resamples agree and it collapses to [1, 1] (``note`` says so); the seed-level test is the
-    rank test.
-
-    Example:
-        >>> probability_of_improvement([3.0, 4.0], [1.0, 3.0], np.random.default_rng(0), n_boot=100).value
-        0.875
-    """
+    """P(X > Y) + P(X = Y)/2 for a random seed of each arm (NaN dropped), with a descriptive bootstrap CI."""
     a, b = np.asarray(x, dtype=float).reshape(-1), np.asarray(y, dtype=float).reshape(-1)
     a, b = a[np.isfinite(a)], b[np.isfinite(b)]
     if a.size == 0 or b.size == 0:
         return Estimate(float("nan"), note="an arm has no values")
-    value = float(_p_greater(a, b))
+    value = float(p_greater(a, b))
     n = int(min(a.size, b.size))
     if n < 2:
         return Estimate(value, n=n, note="fewer than 2 seeds: no CI")
-    low, high = bootstrap_ci((a, b), _p_greater, rng, n_boot, ci)
+    low, high = bootstrap_ci((a, b), p_greater, rng, n_boot, ci)
     note = "every resample gives the same value (degenerate bootstrap)" if low == high else ""
     return Estimate(value, low, high, n=n, note=note)
 
 
 def performance_profile(values: npt.ArrayLike, taus: npt.ArrayLike) -> np.ndarray:
-    """Fraction of seeds whose score is at least each ``tau``: shape ``(n_taus,)`` in [0, 1].
-
-    Args:
-        values: shape ``(n_seeds,)``, one score per seed (e.g. final native return); NaN dropped.
-        taus: shape ``(n_taus,)``, the score thresholds.
-
-    Non-increasing in ``tau``. Example:
-        >>> performance_profile([-150.0, -120.0, -110.0, -200.0], [-200.0, -130.0, -100.0])
-        array([1. , 0.5, 0. ])
-    """
+    """Fraction of seeds (NaN dropped) whose score is at least each ``tau``: shape ``(n_taus,)``."""
     v = np.asarray(values, dtype=float).reshape(-1)
     v = v[np.isfinite(v)]
     t = np.asarray(taus, dtype=float).reshape(-1)

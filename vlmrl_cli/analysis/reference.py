@@ -1,14 +1,5 @@
-"""Whether plain PPO meets a published reference score: an equivalence test with a stated margin.
-
-The rule (issue 51): a task's baseline meets rl-baselines3-zoo's score when the mean over seeds of
-its detached evaluation score is **equivalent** to the zoo's within ``FRACTION`` (10%) of the
-task's span from a random policy's score to the zoo's (``Task.random_score``): two one-sided t
-tests (TOST) at ``alpha`` on at least ``MIN_SEEDS`` seeds, i.e. the ``1 - 2 alpha`` t interval of
-the seed mean lies inside ``zoo +- delta``. It is **not met** when that interval lies wholly
-outside the band, and **cannot tell** otherwise, or with fewer seeds. An overlap of intervals
-(the old rule) accepted any mean within +-32 of MountainCar's figure on 3 seeds.
-
-Pure functions; shapes are ``(n_seeds,)``.
+"""Whether plain PPO meets a published reference score (rl-baselines3-zoo's): an equivalence test
+(TOST, t intervals) within a stated margin, by the rule ``RULE`` (issue 51). Shapes are ``(n_seeds,)``.
 """
 
 from __future__ import annotations
@@ -45,15 +36,7 @@ class ReferenceVerdict:
 
 def reference_equivalence(scores: npt.ArrayLike, reference: float, random_score: float, fraction: float = FRACTION,
                           alpha: float = 0.05, min_seeds: int = MIN_SEEDS) -> ReferenceVerdict:
-    """Judge the seeds' ``scores`` against ``reference`` by the module's rule.
-
-    Example:
-        >>> v = reference_equivalence([-108.0, -112.0, -105.0, -115.0, -110.0] * 2, -110.423, -200.0)
-        >>> v.verdict, round(v.delta, 2), v.p_tost < 0.05
-        ('met', 8.96, True)
-        >>> reference_equivalence([-108.0, -112.0, -105.0], -110.423, -200.0).verdict
-        'cannot tell'
-    """
+    """Judge the seeds' ``scores`` against ``reference`` by the module's rule."""
     x = np.asarray(scores, dtype=float).reshape(-1)
     x = x[np.isfinite(x)]
     delta = fraction * abs(reference - random_score)

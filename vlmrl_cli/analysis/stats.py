@@ -1,13 +1,6 @@
-"""Statistics over seeds: small pure functions over arrays whose shape each docstring states.
-
-Confidence intervals are percentile bootstrap intervals from ``scipy.stats.bootstrap``
-(percentile rather than BCa: with 3-10 seeds BCa is often undefined), resampling the seeds of
-each arm independently; randomness comes in as an explicit ``numpy.random.Generator``.
-Where an interval cannot be computed (fewer than 2 values, an arm that never reached the
-threshold) the bounds are NaN and ``Estimate.note`` says why. Proportions of seeds do not use the
-bootstrap (it collapses to [1, 1] when every seed succeeds): ``wilson_ci`` here and the Newcombe
-interval in ``analysis.proportions``. ``Streams`` gives each report section and metric its own
-random stream.
+"""Statistics over seeds: percentile bootstrap intervals (``scipy.stats.bootstrap``; BCa is often
+undefined at 3-10 seeds), each arm's seeds resampled independently; Wilson intervals for proportions.
+An interval that cannot be computed has NaN bounds and ``Estimate.note`` says why.
 """
 
 from __future__ import annotations
@@ -26,10 +19,8 @@ from vlmrl_cli.analysis.defaults import DEFAULT_N_BOOT
 
 @dataclass(frozen=True)
 class Streams:
-    """Independent random streams keyed by name, all from one seed.
-
-    ``Streams(seed)("table2/reliability/hybrid")`` is a generator that depends only on the seed
-    and the key, so adding a metric (a new key) changes no other metric's interval.
+    """Independent random streams keyed by name: ``Streams(seed)(key)`` depends only on the seed
+    and the key, so adding a metric changes no other metric's interval.
 
     Example:
         >>> s = Streams(0)
@@ -66,11 +57,8 @@ class Estimate:
 
 @dataclass(frozen=True)
 class StepsSummary:
-    """Steps to one threshold over the seeds of one arm.
-
-    ``mean``/``median`` are over seeds that reached the threshold (as the paper reports);
-    ``censored_mean`` counts a DNF seed at its budget (a lower bound on the true mean).
-    """
+    """Steps to one threshold over one arm's seeds: ``mean``/``median`` over the seeds that reached
+    it (the paper's convention); ``censored_mean`` counts a DNF at its budget."""
 
     n: int
     n_reached: int
@@ -79,10 +67,6 @@ class StepsSummary:
     censored_mean: float
     std: float
     iqr: float
-
-    @property
-    def n_dnf(self) -> int:
-        return self.n - self.n_reached
 
 
 def _finite(values: npt.ArrayLike) -> np.ndarray:
@@ -96,33 +80,20 @@ def bootstrap_ci(
     rng: np.random.Generator,
     n_boot: int = DEFAULT_N_BOOT,
     ci: float = 0.95,
+    paired: bool = False,
 ) -> tuple[float, float]:
-    """Percentile bootstrap CI of ``statistic(*samples)``; each sample is resampled independently.
-
-    Args:
-        samples: one or more 1-D arrays, shape ``(n_i,)`` each, ``n_i >= 2``.
-        statistic: vectorised over the last axis (``axis=-1`` keyword), returns one value per resample.
-        rng: the source of randomness.
-
-    Returns:
-        ``(low, high)``; NaN when the statistic is undefined on some resamples.
-    """
+    """Percentile bootstrap ``(low, high)`` of ``statistic(*samples)`` (vectorised, ``axis=-1``), each
+    sample (shape ``(n_i,)``, ``n_i >= 2``) resampled independently unless ``paired``; NaN where undefined."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # degenerate samples (all equal) warn but are fine here
         res = sps.bootstrap(samples, statistic, n_resamples=n_boot, confidence_level=ci, method="percentile",
-                            vectorized=True, axis=-1, rng=rng)
+                            vectorized=True, paired=paired, axis=-1, rng=rng)
     return float(res.confidence_interval.low), float(res.confidence_interval.high)
 
 
 def mean_ci(values: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
             ) -> Estimate:
-    """Mean of ``values`` (shape ``(n,)``, NaN ignored) with a bootstrap CI.
-
-    Example:
-        >>> e = mean_ci([1.0, 2.0, 3.0], np.random.default_rng(0), n_boot=200)
-        >>> e.value, e.low <= 2.0 <= e.high
-        (2.0, True)
-    """
+    """Mean of ``values`` (shape ``(n,)``, NaN ignored) with a bootstrap CI."""
     x = _finite(values)
     if x.size == 0:
         return Estimate(float("nan"), n=0, note="no values")
@@ -136,17 +107,7 @@ def summarize_steps(
     steps: npt.ArrayLike, budget: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT,
     ci: float = 0.95,
 ) -> StepsSummary:
-    """Summary of steps to one threshold for one arm.
-
-    Args:
-        steps: shape ``(n_seeds,)``, steps to the threshold, NaN for a seed that did not reach it.
-        budget: shape ``(n_seeds,)`` or scalar, each seed's training budget (timesteps).
-
-    Example:
-        >>> s = summarize_steps([100.0, np.nan, 300.0], 1000, np.random.default_rng(0), n_boot=100)
-        >>> s.n_reached, s.n_dnf, s.mean.value, s.censored_mean
-        (2, 1, 200.0, 466.6666666666667)
-    """
+    """Summary of one arm's ``steps`` (shape ``(n_seeds,)``, NaN = DNF) to one threshold."""
     x = np.asarray(steps, dtype=float).reshape(-1)
     b = np.broadcast_to(np.asarray(budget, dtype=float), x.shape)
     reached = x[np.isfinite(x)]
@@ -168,13 +129,7 @@ def summarize_steps(
 
 
 def wilson_ci(successes: int, n: int, ci: float = 0.95) -> Estimate:
-    """A proportion ``successes / n`` with its Wilson score interval.
-
-    Example:
-        >>> e = wilson_ci(3, 3)
-        >>> e.value, round(e.low, 3), e.high
-        (1.0, 0.439, 1.0)
-    """
+    """A proportion ``successes / n`` with its Wilson score interval."""
     if n <= 0:
         return Estimate(float("nan"), n=0, note="no seeds")
     interval = sps.binomtest(int(successes), int(n)).proportion_ci(confidence_level=ci, method="wilson")
@@ -217,14 +172,7 @@ def _std_diff(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
 def std_difference(
     a: npt.ArrayLike, b: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
 ) -> Estimate:
-    """``std(a) - std(b)`` across seeds (ddof=1; shapes ``(n_a,)``, ``(n_b,)``) with a bootstrap CI.
-
-    Below 0 means ``a`` is narrower. It stays defined when an arm has zero spread (a ratio of spreads would not).
-
-    Example:
-        >>> std_difference([1.0, 1.0, 1.0], [0.0, 2.0, 4.0], np.random.default_rng(0), n_boot=100).value
-        -2.0
-    """
+    """``std(a) - std(b)`` across seeds (ddof=1; below 0: ``a`` is narrower) with a bootstrap CI."""
     x, y = _finite(a), _finite(b)
     if x.size < 2 or y.size < 2:
         return Estimate(float("nan"), n=int(min(x.size, y.size)), note="fewer than 2 seeds: no spread")
@@ -234,12 +182,7 @@ def std_difference(
 
 
 def iqm(values: npt.ArrayLike) -> float:
-    """Interquartile mean of ``values`` (shape ``(n,)``): the mean of the middle 50% (``trim_mean`` 0.25).
-
-    Example:
-        >>> iqm([0.0, 1.0, 2.0, 3.0, 100.0, -100.0, 1.5, 2.5])
-        1.75
-    """
+    """Interquartile mean of ``values`` (shape ``(n,)``): the mean of the middle 50% (``trim_mean`` 0.25)."""
     x = _finite(values)
     return float(sps.trim_mean(x, 0.25)) if x.size else float("nan")
 
@@ -259,12 +202,7 @@ def iqm_ci(values: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAUL
 
 
 def final_return(returns: npt.ArrayLike, window: int = 100) -> float:
-    """Mean native return of the last ``window`` training episodes (shape ``(E,)``, time order).
-
-    Example:
-        >>> final_return([-200.0, -150.0, -100.0], window=2)
-        -125.0
-    """
+    """Mean native return of the last ``window`` training episodes (shape ``(E,)``, time order)."""
     r = np.asarray(returns, dtype=float).reshape(-1)
     return float(r[-window:].mean()) if r.size else float("nan")
 
@@ -272,15 +210,8 @@ def final_return(returns: npt.ArrayLike, window: int = 100) -> float:
 def mean_band(
     curves: npt.ArrayLike, rng: np.random.Generator, n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Mean over seeds of curves on a common grid, with a pointwise bootstrap band.
-
-    Args:
-        curves: shape ``(n_seeds, G)``; NaN where a seed has no value yet.
-
-    Returns:
-        ``(mean, low, high)``, each shape ``(G,)``: ``mean`` over available seeds; the band only
-        where every seed has a value and there are at least 2 seeds (NaN elsewhere).
-    """
+    """Mean over seeds of ``curves`` (shape ``(n_seeds, G)``, NaN: no value yet) and a pointwise
+    bootstrap band, each shape ``(G,)``; the band only where every seed (at least 2) has a value."""
     c = np.asarray(curves, dtype=float)
     if c.ndim != 2:
         raise ValueError(f"curves must have shape (n_seeds, G), got {c.shape}.")

@@ -1,20 +1,5 @@
-"""The two-sample log-rank test on right-censored steps to a threshold.
-
-A seed's "survival time" is the steps it took to reach the threshold; a seed that did not finish
-(DNF) is censored at its budget: it is known only to need more. The log-rank test compares, at
-every step where some seed finished, how many of the seeds still running in each arm finished
-against the number expected if both arms had the same hazard; the sum over those steps of
-observed minus expected, squared over its hypergeometric variance (ties handled exactly), is
-chi-square with 1 df under the null (Mantel 1966; Peto & Peto 1972).
-
-Why here and not lifelines: lifelines 0.30.3 requires pandas < 3, and this project runs pandas 3;
-the statistic is twenty lines of numpy, checked against the published Freireich (1963) 6-MP
-example in the tests.
-
-Beside the censored rank test (``ranks.censored_rank_test``, Gehan's generalised Wilcoxon when
-every DNF sits at one budget), it weighs every finishing step equally where the rank test weighs
-early differences more; it also handles arms with different budgets exactly. All functions are
-pure.
+"""The two-sample log-rank test on right-censored steps to a threshold (Mantel 1966; ties handled
+exactly), beside the censored rank test; hand-written because lifelines needs pandas < 3.
 """
 
 from __future__ import annotations
@@ -31,12 +16,7 @@ from vlmrl_cli.analysis.censored import reached, restricted
 
 @dataclass(frozen=True)
 class LogRank:
-    """A two-sided log-rank test of arm ``a`` vs arm ``b``.
-
-    ``observed_a`` / ``expected_a``: events (finishes) of ``a`` and their expectation under the
-    null; ``observed_a < expected_a`` means ``a`` finishes less often than ``b`` at each step, i.e.
-    ``a`` is slower (``direction`` -1), ``>`` that ``a`` is faster (+1).
-    """
+    """A two-sided log-rank test of arm ``a`` vs arm ``b`` (``observed_a``: the finishes of ``a``)."""
 
     statistic: float  # chi-square, 1 df
     p_value: float
@@ -56,22 +36,7 @@ class LogRank:
 
 def logrank_test(durations_a: npt.ArrayLike, events_a: npt.ArrayLike, durations_b: npt.ArrayLike,
                  events_b: npt.ArrayLike) -> LogRank:
-    """The log-rank test of two right-censored samples.
-
-    Args:
-        durations_a, durations_b: shapes ``(n_a,)``, ``(n_b,)``: the time of the event, or of
-            censoring (any unit; here env steps).
-        events_a, events_b: same shapes, True where the event was observed, False where censored.
-
-    Returns:
-        ``LogRank`` with the chi-square statistic (1 df) and its p-value; NaN with a note when an
-        arm is empty or no event happened (nothing to compare).
-
-    Example:
-        >>> t = logrank_test([1, 2, 3], [True, True, True], [4, 5, 6], [True, True, False])
-        >>> round(t.statistic, 3), round(t.p_value, 4), t.direction
-        (5.052, 0.0246, 1)
-    """
+    """The log-rank test of two right-censored samples (``events`` False: censored); NaN when nothing happened."""
     ta, tb = (np.asarray(d, dtype=float).reshape(-1) for d in (durations_a, durations_b))
     ea, eb = (np.asarray(e, dtype=bool).reshape(-1) for e in (events_a, events_b))
     if ta.shape != ea.shape or tb.shape != eb.shape:
@@ -101,13 +66,6 @@ def logrank_test(durations_a: npt.ArrayLike, events_a: npt.ArrayLike, durations_
 
 def censored_logrank(steps_a: npt.ArrayLike, steps_b: npt.ArrayLike, budget_a: npt.ArrayLike,
                      budget_b: npt.ArrayLike) -> LogRank:
-    """The log-rank test on steps to a threshold, a DNF (NaN, or past the budget) censored at its
-    budget: shapes ``(n_a,)``, ``(n_b,)`` in env steps, budgets scalar or per seed.
-
-    Example:
-        >>> t = censored_logrank([100.0, 200.0, 300.0], [float("nan")] * 3, 1000, 1000)
-        >>> t.direction, round(t.p_value, 4)
-        (1, 0.0246)
-    """
+    """The log-rank test on steps to a threshold (shapes ``(n_a,)``, ``(n_b,)``), a DNF censored at its budget."""
     return logrank_test(restricted(steps_a, budget_a), reached(steps_a, budget_a),
                         restricted(steps_b, budget_b), reached(steps_b, budget_b))

@@ -1,15 +1,6 @@
-"""Steps to a reward threshold: the paper's sample-efficiency measure (Section 4.1, Table 2).
-
-The paper records "the exact timesteps that each agent required to reach specific reward
-targets". We read that as: the first global timestep at which the mean native return of the
-last ``window`` completed episodes is at or above the target -- the quantity Stable-Baselines3
-logs as ``rollout/ep_rew_mean`` (a 100-episode buffer). Like that buffer, the mean is taken
-over the episodes completed so far while fewer than ``window`` have completed; pass
-``min_episodes=window`` to demand a full window instead.
-
-All functions are pure and take one run's episodes as two aligned arrays of shape ``(E,)``:
-``timesteps`` (global environment step at which each episode ended, int) and ``returns``
-(native, unshaped episode return).
+"""Steps to a reward threshold (the paper's Table 2): the first global timestep at which the mean
+native return of the last ``window`` completed episodes reaches the target (SB3's ``ep_rew_mean``).
+Inputs are one run's episodes as aligned ``(E,)`` arrays of end timesteps and native returns.
 """
 
 from __future__ import annotations
@@ -40,22 +31,9 @@ def _check(timesteps: npt.ArrayLike, returns: npt.ArrayLike, window: int, min_ep
 def rolling_mean_return(
     timesteps: npt.ArrayLike, returns: npt.ArrayLike, window: int = 100, min_episodes: int = 1
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The rolling mean return as a step function of the global timestep.
-
-    Args:
-        timesteps: shape ``(E,)``, global step at which each episode ended (any order).
-        returns: shape ``(E,)``, native return of each episode.
-        window: number of most recent completed episodes averaged.
-        min_episodes: fewest completed episodes for a defined mean (earlier points are NaN).
-
-    Returns:
-        ``(steps, mean)``, both shape ``(K,)`` with ``K`` the number of distinct end steps:
-        ``mean[k]`` is the mean over the last ``window`` episodes completed at or before
-        ``steps[k]``. Episodes ending at the same step all count at that step (ties).
-
-    Example:
-        >>> rolling_mean_return([10, 20, 20, 30], [-200, -100, -150, -50], window=2)
-        (array([10, 20, 30]), array([-200., -125., -100.]))
+    """The rolling mean return as a step function of the global timestep: ``(steps, mean)``, shape
+    ``(K,)`` over the distinct end steps, ``mean[k]`` over the last ``window`` episodes ended by
+    ``steps[k]`` (NaN before ``min_episodes``).
     """
     ts, ret = _check(timesteps, returns, window, min_episodes)
     if ts.size == 0:
@@ -72,25 +50,7 @@ def steps_to_threshold(
     window: int = 100,
     min_episodes: int = 1,
 ) -> int | None:
-    """First global timestep at which the rolling mean return reaches ``threshold`` (>=).
-
-    Args:
-        timesteps: shape ``(E,)``, global step at which each episode ended.
-        returns: shape ``(E,)``, native return of each episode.
-        threshold: target mean return (native units, e.g. -130).
-        window: episodes in the rolling mean (the paper's logs: 100).
-        min_episodes: fewest completed episodes before a mean counts (default 1: partial
-            windows count, like SB3's ``ep_rew_mean``).
-
-    Returns:
-        The timestep (int), or ``None`` if the run never reaches it (did not finish, DNF).
-
-    Example:
-        >>> steps_to_threshold([100, 200, 300], [-200, -120, -100], -160, window=2)
-        200
-        >>> steps_to_threshold([100, 200], [-200, -199], -130) is None
-        True
-    """
+    """First global timestep at which the rolling mean return reaches ``threshold`` (>=); ``None``: a DNF."""
     steps, mean = rolling_mean_return(timesteps, returns, window, min_episodes)
     tol = RTOL * max(1.0, abs(float(threshold)))
     hit = np.flatnonzero(mean >= float(threshold) - tol)  # NaN compares False
@@ -100,16 +60,5 @@ def steps_to_threshold(
 def full_window_steps_to_threshold(
     timesteps: npt.ArrayLike, returns: npt.ArrayLike, threshold: float, window: int = 100
 ) -> int | None:
-    """First global timestep at which the mean of the last ``window`` *complete* episodes reaches ``threshold``.
-
-    No partial window: nothing counts before ``window`` episodes have ended, so a lucky first
-    episode cannot meet the target on its own (``steps_to_threshold`` with ``min_episodes=window``).
-    Shapes and units as in ``steps_to_threshold``; ``None`` for a run that never reaches it.
-
-    Example:
-        >>> full_window_steps_to_threshold([100, 200, 300], [-100, -200, -50], -140, window=2)
-        300
-        >>> steps_to_threshold([100, 200, 300], [-100, -200, -50], -140, window=2)
-        100
-    """
+    """``steps_to_threshold`` with no partial window: nothing counts before ``window`` episodes ended."""
     return steps_to_threshold(timesteps, returns, threshold, window, min_episodes=window)

@@ -1,24 +1,6 @@
-"""The configuration of `vlmrl study`: named PPO regimes x arms x seeds, and VLM-quality variants.
-
-A *regime* is a name and a set of overrides (dotted keys, as ``--set`` takes them), often just a
-preset (``{"preset": "paper"}``); each is an ordinary `vlmrl run` configuration of every arm,
-built by ``calibration.regimes.resolve_regime``. A *variant* is the hybrid arm alone in the VLM
-regime with other simulated-VLM knobs: a named profile (``vlm.sim.profile``) or a flicker rate.
-
-What the user chooses is ``StudySettings`` (``study/settings.py``): a ``[study]`` table in TOML,
-``--set study.KEY=VALUE`` and the study's flags, each layer over the one below
-(``StudyConfig.from_sources``). Regimes come from ``--regime`` flags, else ``[study.regimes]``,
-else the task's study preset (``task_regimes``)::
-
-    [study]
-    profiles = ["ideal", "default", "llava-table1"]
-    flickers = [0.0, 0.1, 0.3, 0.5]
-    vlm_regime = "paper-calibrated"
-    margin = 1.2
-
-    [study.regimes]
-    paper = "paper"                                     # a preset name
-    hard = { "ppo.normalize_obs" = false, "ppo.normalize_reward" = false }
+"""The configuration of `vlmrl study`: named regimes (``--set`` overrides, often a preset) x arms x
+seeds, the hybrid's VLM-quality variants and the control cells, built from ``StudySettings``
+layered file < ``--set`` < flags. See docs/commands/study.md.
 """
 
 from __future__ import annotations
@@ -57,22 +39,13 @@ from vlmrl_cli.training.overrides import dotted, parse_assignment, parse_value
 from vlmrl_cli.vlm.config import profile_problem
 
 VARIANT_ARM = METHOD
-CALIBRATED = "paper-unreliable"
 LOCK_ARMS: tuple[str, ...] = (METHOD, NO_LOCK)
-#: The default grid: the calibrated regime whose baseline fails on some seeds (reliability is
-#: testable there), where every arm, the placebo and the controls run. The study of 2026-11-29
-#: (results/study/2026-11-29/) ran `paper`, `paper-calibrated` and `hard` at 10 seeds; pass them
-#: with --regime to add them again.
-DEFAULT_REGIMES: dict[str, Mapping[str, Any]] = {
-    CALIBRATED: {"preset": CALIBRATED},
-}
 
 
 @dataclass(frozen=True)
 class Cell:
-    """One control sweep in the VLM regime: a dose-response point (``kind`` ``dose``: the arm that
-    pays ``alpha`` x PBRS + ``kin_scale`` x R_kin, or its placebo) or a temporal-flicker point
-    (``query-flicker``: one of ``LOCK_ARMS`` at ``query_flicker``). ``regime.run`` lists one arm."""
+    """One control sweep of one arm in the VLM regime: a ``dose`` point (``alpha`` x PBRS +
+    ``kin_scale`` x R_kin, or its placebo) or a ``query-flicker`` point of one of ``LOCK_ARMS``."""
 
     kind: str
     arm: str
@@ -87,9 +60,8 @@ class Cell:
 
 
 def dose_point(alpha: float, kin_scale: float, placebo: bool = False) -> tuple[str, dict[str, Any]]:
-    """The arm and overrides that pay ``alpha`` x PBRS + ``kin_scale`` x R_kin. A term at 0 is
-    dropped by choosing the arm without it, and a knob the arm ignores is not set, so a point that
-    an ordinary arm already is (alpha 0 = kinematic, kin_scale 0 = semantic) shares its runs.
+    """The arm and overrides that pay ``alpha`` x PBRS + ``kin_scale`` x R_kin; a term at 0 picks the
+    arm without it, so a point that an ordinary arm already is shares its runs.
 
     Example:
         >>> dose_point(0, 0), dose_point(0, 2.0), dose_point(25, 0)
@@ -108,10 +80,8 @@ def dose_point(alpha: float, kin_scale: float, placebo: bool = False) -> tuple[s
 
 def control_points(alphas: Sequence[float], kin_scales: Sequence[float], query_flickers: Sequence[float]
                    ) -> list[tuple[str, str, dict[str, Any], dict[str, float]]]:
-    """The control sweeps, as (name, arm, overrides, knobs) in training order: per kin_scale, the
-    dense-only point, every alpha, then the placebo at the largest alpha; then each query-flicker
-    rate for both ``LOCK_ARMS``. Points at (0, 0) are the baseline; they are listed too, so the
-    dose-response table is complete, and resume finds their runs."""
+    """The control sweeps as (name, arm, overrides, knobs), in training order: per kin_scale, alpha 0,
+    every alpha, the placebo at the largest; then each query-flicker rate for both ``LOCK_ARMS``."""
     points: list[tuple[str, str, dict[str, Any], dict[str, float]]] = []
     for kin in kin_scales:
         for alpha in (0.0, *alphas):
@@ -153,26 +123,15 @@ class StudyConfig:
     @classmethod
     def from_sources(cls, file: Path | None, flags: Mapping[str, Any] | None = None, overrides: Iterable[str] = (),
                      tasks: TaskLookup | None = None) -> StudyConfig:
-        """The validated study of a TOML ``file`` (or None), ``overrides`` (``--set`` strings) and
-        ``flags`` typed on the command line (dotted keys: the run's, as ``RunConfig.from_sources``
-        takes them, and the study's under ``study.``, ``{"study.alphas": [25.0]}``), in the order
-        preset < file < overrides < flags, for the runs' keys and the ``[study]`` table alike; the
-        task they name is looked up once, by ``tasks`` (the command's registry; None: the built-in
-        tasks alone), and every regime carries it.
-
-        Example:
-            >>> cfg = StudyConfig.from_sources(None, {"study.regimes": {"a": {"preset": "smoke"}},
-            ...                                       "study.alphas": []}, ["study.alphas=[25]", "seeds=[0]"])
-            >>> [r.id for r in cfg.regimes], cfg.base.seeds, {c.alpha for c in cfg.cells if c.kind == "dose"}
-            (['a'], (0,), {0.0})
-        """
+        """The validated study of a TOML ``file`` (or None), ``--set`` ``overrides`` and ``flags`` (dotted keys,
+        the study's under ``study.``), layered preset < file < overrides < flags; one task lookup."""
         layers = source_layers(file, flags or {}, overrides)
         settings = settings_of([layer.pop("study", {}) for layer in layers])
         tasks = once(tasks)
-        regimes, notes = choose_regimes([], settings.regimes, task_in(layers, tasks))
+        regimes = settings.regimes or task_regimes(task_in(layers, tasks))
         return build_study(layers, regimes, tasks=tasks, profiles=settings.profiles, flickers=settings.flickers,
                            vlm_regime=settings.vlm_regime, alphas=settings.alphas, kin_scales=settings.kin_scales,
-                           query_flickers=settings.query_flickers, notes=notes, out=settings.out,
+                           query_flickers=settings.query_flickers, out=settings.out,
                            margin=settings.margin, adjust=settings.adjust, states=settings.states)
 
     @property
@@ -230,8 +189,7 @@ def regimes_of(flags: Sequence[str]) -> dict[str, dict[str, Any]]:
 
 
 def study_section(raw: Any) -> dict[str, Any]:
-    """A config file's ``[study]`` table (or one layer's) with its regimes as ``{name: point}``;
-    its keys and values are ``StudySettings``' to check (``settings_of``)."""
+    """A layer's ``[study]`` table with its regimes as ``{name: point}`` (checked by ``settings_of``)."""
     if not isinstance(raw, Mapping):
         raise BadInput("[study] must be a table (regimes, profiles, flickers, vlm_regime).")
     out = dict(raw)
@@ -248,14 +206,7 @@ def study_section(raw: Any) -> dict[str, Any]:
 
 
 def settings_of(tables: Sequence[Any]) -> StudySettings:
-    """The ``StudySettings`` of the layers' ``[study]`` tables, lowest first (file, ``--set``,
-    flags), each key replacing the one below whole, checked by the fields' own rules.
-
-    Example:
-        >>> s = settings_of([{"alphas": [5], "regimes": {"a": "smoke", "b": "paper"}}, {}, {"regimes": {"c": "zoo"}}])
-        >>> s.alphas, s.regimes, s.kin_scales == StudySettings().kin_scales
-        ((5.0,), {'c': {'preset': 'zoo'}}, True)
-    """
+    """The checked ``StudySettings`` of the layers' ``[study]`` tables, lowest first, each key replacing whole."""
     from vlmrl_cli.training.validation import validate_as
 
     merged: dict[str, Any] = {}
@@ -269,28 +220,14 @@ def _bad_regime(name: str) -> dict[str, Any]:
 
 
 def task_in(layers: Sequence[Mapping[str, Any]], tasks: TaskLookup | None = None) -> Task:
-    """The Task the layers (file, ``--set``, flags) name (the ``task`` key, or the default task),
-    looked up by ``tasks``."""
+    """The Task the layers name (the ``task`` key, or the default task), looked up by ``tasks``."""
     return resolve([*layers], tasks).task_plugin
 
 
 def task_regimes(task: Task) -> dict[str, dict[str, Any]]:
-    """A task's default regime: its study preset (calibrated: the baseline slow or unreliable),
-    else its default preset, under the preset's name."""
+    """A task's default regime: its study preset, else its default preset, under the preset's name."""
     preset = task.study_preset or task.default_preset
     return {preset: {"preset": preset}}
-
-
-def choose_regimes(flags: Sequence[str], file_regimes: Mapping[str, Mapping[str, Any]] | None,
-                   task: Task) -> tuple[dict[str, dict[str, Any]], list[str]]:
-    """The regimes to run (name -> overrides) and notes on the defaults left out: ``--regime``
-    flags, else the file's, else ``DEFAULT_REGIMES`` without those whose preset does not exist yet
-    (another task: ``task_regimes``)."""
-    if flags:
-        return regimes_of(flags), []
-    if file_regimes:
-        return {k: dict(v) for k, v in file_regimes.items()}, []
-    return task_regimes(task), []
 
 
 def _label(point: Mapping[str, Any]) -> str:
@@ -306,15 +243,11 @@ def build_study(
     alphas: Sequence[float] = DEFAULT_ALPHAS,
     kin_scales: Sequence[float] = DEFAULT_KIN_SCALES,
     query_flickers: Sequence[float] = DEFAULT_QUERY_FLICKERS,
-    notes: Sequence[str] = (),
     tasks: TaskLookup | None = None,
     **settings: Any,
 ) -> StudyConfig:
-    """One validated ``StudyConfig``: every regime's run of every arm (``layers`` above the study's
-    defaults, the regime's overrides above them), the hybrid's VLM variants and the control cells
-    (``control_points``) in ``vlm_regime`` (default: the calibrated regime, else the first); the
-    task is looked up once, by ``tasks`` (``training.config.resolve``). Anything invalid is
-    ``BadInput`` now."""
+    """One validated ``StudyConfig`` (``BadInput`` now if invalid): every regime's run of every arm, the
+    hybrid's VLM variants and the control cells in ``vlm_regime`` (default: the study preset, else the first)."""
     if not regimes:
         raise BadInput("the study has no regime; pass --regime NAME[=...] or drop the [study.regimes] table.")
     base = {"experiment": DEFAULT_EXPERIMENT, "seeds": list(range(DEFAULT_SEEDS)), "arms": list(DEFAULT_ARMS)}
@@ -325,21 +258,14 @@ def build_study(
     if len(names) > 1:
         raise BadInput(f"the regimes span tasks {', '.join(names)}; a study covers one task (--task).")
     task = built[0].run.task_plugin
-    if (profiles or flickers) and not task.probes_floats:
-        raise BadInput(f"task {names[0]}: the VLM-quality variants (--profiles, --flickers) take their accuracy "
-                       "from the float and box taxonomy probe, which this task has not; pass --profiles none "
-                       "--flickers none.")
-    problem = next(filter(None, (profile_problem(p, task) for p in profiles)), None)  # the task's profiles
-    if problem:
-        raise BadInput(problem + ".")
+    _check_variants(task, profiles, flickers)
     settings.setdefault("thresholds", task.thresholds)
     settings.setdefault("window", task.window)
-    notes = list(notes)
+    notes: list[str] = []
     preferred = task.study_preset if task.study_preset in regimes else None
     target = vlm_regime or preferred or next(iter(regimes))
     if target not in regimes:
         raise BadInput(f"--vlm-regime '{target}' is not a regime of this study{did_you_mean(target, regimes)}.")
-    variants: list[Regime] = []
     reference = next(r for r in built if r.id == target)
     adjust = settings.get("adjust", DEFAULT_ADJUST)
     if adjust not in METHODS:
@@ -354,22 +280,43 @@ def build_study(
                                    {"regime": f"{target} {name}", "arms": [arm]}, tasks), **knobs)
         for name, arm, over, knobs in control_points(alphas, kin_scales, query_flickers)
     )
+    variants: list[Regime] = []
     if reference.run.vlm.backend != "sim":
         notes.append(f"no VLM-quality variants: the VLM backend is '{reference.run.vlm.backend}', and profiles and "
                      "flicker are knobs of the simulated VLM.")
     else:
         points: list[tuple[str, dict[str, Any]]] = [("profile " + p, {"vlm.sim.profile": p}) for p in profiles]
         points += [(f"flicker {f:g}", {"vlm.sim.flicker": float(f)}) for f in flickers]
-        seen: dict[str, int] = {}
-        for name, extra in points:
-            variant = resolve_regime(name, {**regimes[target], **extra}, [base, *layers],
-                                     {"regime": f"{target} {_label(extra)}", "arms": [VARIANT_ARM]}, tasks)
-            key = variant.run.jobs()[0].config_hash
-            if key in seen:  # the same knobs reached twice (profile default = flicker 0.1): one point
-                first = variants[seen[key]]
-                variants[seen[key]] = Regime(f"{first.id} = {name}", first.overrides, first.run)
-                continue
-            seen[key] = len(variants)
-            variants.append(variant)
+        variants = _variants(points, target, regimes[target], [base, *layers], tasks)
     return StudyConfig(regimes=built, variants=tuple(variants), cells=cells, vlm_regime=target, notes=tuple(notes),
                        **settings)
+
+
+def _check_variants(task: Task, profiles: Sequence[str], flickers: Sequence[float]) -> None:
+    """``BadInput`` when ``task`` cannot run the VLM-quality variants, or lacks one of ``profiles``."""
+    if (profiles or flickers) and not task.probes_floats:
+        raise BadInput(f"task {task.name}: the VLM-quality variants (--profiles, --flickers) take their accuracy "
+                       "from the float and box taxonomy probe, which this task has not; pass --profiles none "
+                       "--flickers none.")
+    problem = next(filter(None, (profile_problem(p, task) for p in profiles)), None)
+    if problem:
+        raise BadInput(problem + ".")
+
+
+def _variants(points: Sequence[tuple[str, dict[str, Any]]], target: str, point: Mapping[str, Any],
+              layers: Sequence[Mapping[str, Any]], tasks: TaskLookup) -> list[Regime]:
+    """The hybrid in regime ``target`` (overrides ``point``) at each VLM variant's knobs; the same
+    knobs reached twice (profile default = flicker 0.1) are one variant with both names."""
+    variants: list[Regime] = []
+    seen: dict[str, int] = {}
+    for name, extra in points:
+        variant = resolve_regime(name, {**point, **extra}, layers,
+                                 {"regime": f"{target} {_label(extra)}", "arms": [VARIANT_ARM]}, tasks)
+        key = variant.run.jobs()[0].config_hash
+        if key in seen:
+            first = variants[seen[key]]
+            variants[seen[key]] = Regime(f"{first.id} = {name}", first.overrides, first.run)
+            continue
+        seen[key] = len(variants)
+        variants.append(variant)
+    return variants

@@ -1,13 +1,6 @@
-"""The cross-task primary family: one declared family of comparisons read off several tasks'
-studies, adjusted across them (a claim read off several studies needs a family across them).
-
-The primary family (declared in ``docs/results.md`` before it was drawn, issue 51): on each
-task's study, its main regime's **hybrid vs baseline** and **hybrid vs kinematic** speedups to the
-study's top threshold (each study's ``regime_map.csv``), Holm-adjusted across every task.
-Each comparison is then judged by the study's one rule (``censored.judge_family``): faster/slower
-needs the adjusted rank test to reject and the 95% interval to exclude 1 on the test's side;
-equivalent needs the 90% interval inside the margin. Every other verdict of a study stays a verdict
-"within task T's study".
+"""The cross-task primary family (issue 51, declared in docs/results.md): each task's study's
+hybrid vs baseline and hybrid vs kinematic speedups, Holm-adjusted across every task and judged by
+``censored.judge_family``.
 """
 
 from __future__ import annotations
@@ -27,8 +20,7 @@ from vlmrl_cli.shaping.arms import BASELINE, DENSE, METHOD
 PRIMARY: tuple[str, ...] = (f"{METHOD}_vs_{BASELINE}", f"{METHOD}_vs_{DENSE}")
 FAMILY_WHAT = ("The primary comparisons (each task's hybrid vs baseline and hybrid vs kinematic, steps to the "
                "study's top threshold)")
-#: Each task's study whose main regime enters the committed family (the task-scaled set of
-#: ``results/compare/task-scaled/``): paths relative to the repository root.
+#: Each task's study whose main regime enters the committed family (relative to the repository root).
 TASK_SCALED_STUDIES: dict[str, str] = {
     "mountain-car": "results/study", "acrobot": "results/tasks/acrobot/study-scaled",
     "minigrid-doorkey": "results/tasks/minigrid-doorkey/study-scaled",
@@ -39,22 +31,8 @@ COLUMNS = ("task", "comparison", "speedup", "low", "high", "p", "test", "p_withi
 
 def primary_family(maps: Mapping[str, pd.DataFrame], method: str = DEFAULT_ADJUST, alpha: float = 0.05,
                    margin: float = censored.DEFAULT_MARGIN, pairs: Sequence[str] = PRIMARY) -> pd.DataFrame:
-    """One row per (task, comparison) of the primary family (``COLUMNS``), its p adjusted across
-    every task by ``method`` and re-judged.
-
-    Args:
-        maps: task name -> that task's study ``regime_map.csv`` (its first row: the main regime).
-        pairs: the ``regime_map`` keys compared on every task.
-
-    Example:
-        >>> row = {"speedup": 1.5, "low": 1.2, "high": 1.9, "p": 0.004, "p_adj": 0.01, "tost_low": 1.25,
-        ...        "tost_high": 1.8, "direction": 0.4, "equivalence_ok": True, "verdict": "faster",
-        ...        "test": "exact"}
-        >>> m = pd.DataFrame([{f"k.{c}": v for c, v in row.items()}])
-        >>> out = primary_family({"t1": m, "t2": m}, pairs=["k"])
-        >>> out["p_family"].round(3).tolist(), out["verdict"].tolist()
-        ([0.008, 0.008], ['faster', 'faster'])
-    """
+    """One row per (task, comparison) of the family (``COLUMNS``), p adjusted across tasks and re-judged;
+    ``maps``: task -> its study's ``regime_map.csv`` (row 0: the main regime)."""
     rows = []
     for task, frame in maps.items():
         main = frame.iloc[0]

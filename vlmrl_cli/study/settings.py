@@ -1,13 +1,5 @@
-"""What a user chooses about `vlmrl study`, declared once: ``StudySettings``.
-
-Each field is a key of a config file's ``[study]`` table, of ``--set study.KEY=VALUE`` and an
-option of `vlmrl study` (``cli/study.py`` builds the options from these fields: their help, their
-checks, a flag of the field's name). The layers resolve as a run's do, each over the one below:
-the config file < ``--set`` < the flags typed (``study/config.py``, ``StudyConfig.from_sources``);
-a key replaces the lower one whole, so ``--regime`` replaces the file's ``regimes`` table.
-
-Light on purpose: `vlmrl --help` reads this module, so it loads no pandas, scipy or torch; the
-grid itself is built in ``study/config.py``.
+"""What a user chooses about `vlmrl study`, declared once: ``StudySettings``, whose fields are the
+``[study]`` keys and the command's options. Light on purpose: `vlmrl --help` reads it.
 """
 
 from __future__ import annotations
@@ -32,18 +24,12 @@ DEFAULT_SEEDS = 20
 PLACEBO_ARM = PLACEBO_OF[METHOD]
 # hybrid and its placebo first: a study stopped part-way has the comparison it exists for
 DEFAULT_ARMS = (BASELINE, METHOD, PLACEBO_ARM, DENSE, POTENTIAL_ONLY)
-#: The dose-response grid (issue 18): PBRS scales x kinematic scales, in the VLM regime. alpha 0 is
-#: the dense term alone (the kinematic arm; with kin_scale 0 the baseline), kin_scale 0 the VLM's
-#: potential alone (the semantic arm: the paper's "deadlock" case where only the VLM can help). At
-#: alpha 100 the potential pays about as much per episode as R_kin at its default scale (~45).
+#: The dose-response grid (issue 18): PBRS scales x kinematic scales, in the VLM regime.
 DEFAULT_ALPHAS: tuple[float, ...] = (5.0, 25.0, 100.0)
 DEFAULT_KIN_SCALES: tuple[float, ...] = (0.0, 0.5, 2.0)
-#: Per-query (temporal) flicker rates at which the hybrid and hybrid-no-lock are compared: what
-#: the hysteresis lock is for.
+#: Per-query flicker rates at which the hybrid and hybrid-no-lock are compared (the lock's test).
 DEFAULT_QUERY_FLICKERS: tuple[float, ...] = (0.3,)
-#: The VLM-quality variants are off by default since the dose-response and placebo controls came:
-#: the study of 2026-11-29 (results/study/2026-11-29/) ran them at 10 seeds and found no dependence
-#: it could detect; ``--profiles ideal,default,llava-table1 --flickers 0,0.1,0.3,0.5`` runs them again.
+#: The VLM-quality variants are off by default (the 2026-11-29 study found no dependence on them).
 DEFAULT_PROFILES: tuple[str, ...] = ()
 DEFAULT_FLICKERS: tuple[float, ...] = ()
 DEFAULT_OUT = Path("results/study")
@@ -53,8 +39,7 @@ Regimes = dict[str, dict[str, Any]] | None
 
 
 def _distinct(values: tuple[Any, ...]) -> tuple[Any, ...]:
-    """A list of points, each once: a repeated point trains nothing new but counts twice in the
-    verdicts' family."""
+    """The values, each once (a repeated point would count twice in the verdicts' family)."""
     twice = first_repeated(list(values))
     if twice is not None:
         raise ValueError(f"lists {listed((twice,))} twice; list each value once (a repeated value adds its "
@@ -97,9 +82,8 @@ def listed(values: Sequence[float | str]) -> str:
 
 @dataclass(frozen=True)
 class StudySettings:
-    """Everything a user sets about a study beyond its runs' own configuration: the regimes, the
-    hybrid's VLM-quality variants, the control cells, the verdicts' knobs and the output folder.
-    ``help`` is the option's help text; ``flag`` the option's name where it is not the field's."""
+    """Everything a user sets about a study beyond its runs' own configuration; ``help``: the option's
+    help text, ``flag``: the option's name where it is not the field's."""
 
     regimes: Regimes = field(default=None, metadata={"flag": "--regime", "help": (
         "A regime, repeatable: NAME (the preset of that name), NAME=PRESET, or NAME='KEY=VALUE KEY=VALUE' "
