@@ -27,10 +27,10 @@ from vlmrl_cli.calibration.regimes import Regime
 from vlmrl_cli.core import tables
 from vlmrl_cli.probe.metrics import spearman
 from vlmrl_cli.report import attribution, figures
+from vlmrl_cli.report.markdown import format_cell
 from vlmrl_cli.report.table2 import (
     build_table2,
     compare_steps,
-    format_cell,
     order_arms,
     per_seed_table,
     threshold_key,
