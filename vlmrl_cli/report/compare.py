@@ -8,6 +8,7 @@ from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -220,8 +221,9 @@ def fixed_pair(task: Task) -> tuple[float, str, float, str]:
             f"zoo PPO {task.env_id} ({zoo.budget} steps)")
 
 
-def _cell(e: Estimate, digits: int = 3) -> str:
-    return f"{e.value:.{digits}f} [{e.low:.{digits}f}, {e.high:.{digits}f}]"
+def _cell(r: Mapping[str, Any], key: str) -> str:
+    """``value [low, high]`` of the aggregate ``key`` in the row ``r`` of ``compare``'s table."""
+    return f"{r[key]:.3f} [{r[f'{key}_low']:.3f}, {r[f'{key}_high']:.3f}]"
 
 
 def compare(cfg: CompareConfig, lookup: TaskLookup) -> CompareResult:
@@ -254,15 +256,14 @@ def compare(cfg: CompareConfig, lookup: TaskLookup) -> CompareResult:
         est = {"iqm": agg.iqm_interval(scores[arm], streams(f"compare/iqm/{arm}"), cfg.n_boot, cfg.ci),
                "mean": agg.mean_interval(scores[arm], streams(f"compare/mean/{arm}"), cfg.n_boot, cfg.ci)}
         if arm != BASELINE:
-            est["poi"] = agg.probability_of_improvement_interval(scores[arm], scores[BASELINE],
-                                                                 streams(f"compare/poi/{arm}"), cfg.n_boot, cfg.ci)
+            est["poi_over_baseline"] = agg.probability_of_improvement_interval(
+                scores[arm], scores[BASELINE], streams(f"compare/poi/{arm}"), cfg.n_boot, cfg.ci)
         row: dict[str, object] = {"arm": arm, "tasks": len(tasks), "runs": sum(s.size for s in scores[arm])}
-        for key in ("iqm", "mean", "poi"):
+        for key in ("iqm", "mean", "poi_over_baseline"):
             e = est.get(key, Estimate(float("nan")))
             row |= {key: e.value, f"{key}_low": e.low, f"{key}_high": e.high}
         rows.append(row)
-    table = pd.DataFrame(rows).rename(columns={"poi": "poi_over_baseline", "poi_low": "poi_over_baseline_low",
-                                               "poi_high": "poi_over_baseline_high"})
+    table = pd.DataFrame(rows)
     table["normalisation"], table["vlm"] = cfg.normalise, note
 
     cfg.out.mkdir(parents=True, exist_ok=True)
@@ -319,12 +320,9 @@ def _markdown(cfg: CompareConfig, table: pd.DataFrame, runs: pd.DataFrame, pairs
                               for t, r in pairs.iterrows()]), "",
               f"## Aggregates of the normalised scores ({pct} stratified bootstrap intervals)", ""]
     body = []
-    for r in table.itertuples(index=False):
-        poi = ("—" if r.arm == BASELINE else
-               _cell(Estimate(float(r.poi_over_baseline), float(r.poi_over_baseline_low),
-                              float(r.poi_over_baseline_high))))
-        body.append([r.arm, r.tasks, r.runs, _cell(Estimate(float(r.iqm), float(r.iqm_low), float(r.iqm_high))),
-                     _cell(Estimate(float(r.mean), float(r.mean_low), float(r.mean_high))), poi])
+    for r in table.to_dict("records"):
+        poi = "—" if r["arm"] == BASELINE else _cell(r, "poi_over_baseline")
+        body.append([r["arm"], r["tasks"], r["runs"], _cell(r, "iqm"), _cell(r, "mean"), poi])
     lines += markdown_rows(["arm", "tasks", "runs", f"IQM [{pct}]", f"mean [{pct}]",
                             f"P(arm > {BASELINE}) [{pct}]"], body)
     lines += ["", "## Runs compared", ""]

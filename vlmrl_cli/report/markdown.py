@@ -228,15 +228,11 @@ def family_reach(cfg: ReportConfig, family: pd.DataFrame, paper_task: bool) -> l
     return out
 
 
-def _splits(n_perm: int) -> str:
-    """The rank test's largest exact case, in words: ``C(60, 30)`` for the default."""
-    return "C(60, 30)" if n_perm == DEFAULT_N_PERM else f"{n_perm:,}"
-
-
 def _statistics_md(cfg: ReportConfig, family_size: int = 0, auc_margin: float = 5.0,
                    reach: list[str] | None = None) -> list[str]:
     ci = f"{100 * cfg.ci:g}%"
     alpha = 1 - cfg.ci
+    splits = "C(60, 30)" if cfg.n_perm == DEFAULT_N_PERM else f"{cfg.n_perm:,}"  # the rank test's largest exact case
     return [
         "## How the numbers are computed", "",
         "- Unit: every claim is per seed unless it says 'episodes'. A seed counts as a detached success when at "
@@ -252,7 +248,7 @@ def _statistics_md(cfg: ReportConfig, family_size: int = 0, auc_margin: float = 
         "the mean over the seeds that finished, is shown as its own row of Table 2 only. Beside each speedup, a "
         "Mann-Whitney U test on all seeds with each DNF censored at the budget (tied with the other DNFs, slower "
         "than every finish; a crossing after the budget is a DNF): an exact permutation p, conditional on the "
-        f"ties, when the splits of the seeds number at most {_splits(cfg.n_perm)} (every split counted; 184,756 at "
+        f"ties, when the splits of the seeds number at most {splits} (every split counted; 184,756 at "
         "10 vs 10), else the tie-corrected normal approximation, and then the table's test column says 'asymptotic'.",
         f"- Multiplicity: {multiplicity.family_line(cfg.adjust, family_size, FAMILY_WHAT)}; "
         "the claims about speedups use the same adjusted p-values. Each table shows the raw p beside the adjusted "
