@@ -230,9 +230,8 @@ def compare(cfg: CompareConfig, lookup: TaskLookup) -> CompareResult:
     """Read the export files, aggregate across tasks (``lookup``: the command's task registry) and write
     ``aggregate.md``, ``aggregate.csv``, ``per_task.csv`` and ``performance_profile.png`` to ``cfg.out``."""
     check_compare(cfg)
-    runs, dropped = count_once(read_runs(cfg.files))
-    every_config = runs
-    runs = select_configs(runs, cfg.config_hashes)
+    every_config, dropped = count_once(read_runs(cfg.files))
+    runs = select_configs(every_config, cfg.config_hashes)
     other_configs = configs_left_out(every_config, runs)
     check_paths(runs, cfg.allow_mixed_paths)  # one numeric path, as `vlmrl report` requires
     arms, left_out = compared_arms(runs)
@@ -275,8 +274,7 @@ def compare(cfg: CompareConfig, lookup: TaskLookup) -> CompareResult:
     per_task.sort_values(["task", "arm", "seed"]).to_csv(files[1], index=False)
     files[2].write_text(_markdown(cfg, table, runs, pairs, left_out, simulated, len(dropped)) + "\n",
                         encoding="utf-8")
-    fig = _profile_figure(scores, cfg, streams, note)
-    fig.savefig(files[3], dpi=200)
+    _profile_figure(scores, cfg, streams, note).savefig(files[3], dpi=200)
     return CompareResult(cfg.out, files, table, arms, tasks, left_out, simulated, len(dropped), other_configs, pairs,
                          cfg.normalise in ESTIMATED)
 

@@ -315,7 +315,7 @@ def _intro_md(cfg: ReportConfig, data: ExperimentData, table: Table2, per_seed: 
               "within the budget.",
               *[f"- **Floor at {t:g}:** every seed of every arm crosses {t:g} at its first complete window of "
                 f"{cfg.window} episodes, so steps to {t:g} measure how fast episodes end, not learning: read no "
-                "speedup into that row." for t in floor_thresholds(per_seed, table.thresholds, cfg.window)],
+                "speedup into that row." for t in floor_thresholds(per_seed, table.thresholds)],
               f"- Intervals: {100 * cfg.ci:g}% percentile bootstrap over seeds ({cfg.n_boot} resamples, seed "
               f"{cfg.seed}) for means; speedups by the delta method on the log ratio; score intervals for "
               "proportions of seeds (see below).", ""]

@@ -136,7 +136,7 @@ def _cell(metric: str, arm: str, est: stats.Estimate, paper: Any, n: int, n_reac
             "n_reached": n_reached, "paper": float(paper) if paper is not None else float("nan"), "note": est.note}
 
 
-def floor_thresholds(per_seed: pd.DataFrame, thresholds: Sequence[float], window: int = 100) -> list[float]:
+def floor_thresholds(per_seed: pd.DataFrame, thresholds: Sequence[float]) -> list[float]:
     """The thresholds every seed of every arm crosses at its first complete window (floors: steps
     there measure how fast episodes end, not learning).
 
