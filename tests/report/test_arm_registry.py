@@ -14,7 +14,8 @@ from tests.report.fake_mlflow import WINDOW, FakeRun, build_fake_experiment
 from vlmrl_cli.analysis.load import load_experiment
 from vlmrl_cli.analysis.stats import Streams
 from vlmrl_cli.report.attribution import attribution_markdown, compare_arms, registry_pairs
-from vlmrl_cli.report.table2 import build_table2, order_arms, to_markdown
+from vlmrl_cli.report.markdown import table2_markdown
+from vlmrl_cli.report.table2 import build_table2, order_arms
 from vlmrl_cli.report.writer import ReportConfig, ReportResult, write_report
 from vlmrl_cli.shaping import arms as arms_mod
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec, Comparison, PotentialSource
@@ -56,7 +57,7 @@ def test_the_new_arm_and_its_pair_appear_in_table2_and_the_attribution_table() -
     per_seed, empty = _data(), pd.DataFrame(columns=["run_id", "arm", "seed", "episode", "length"])
     table = build_table2(per_seed, empty, {}, THRESHOLDS, Streams(0), n_boot=100, registry=REGISTRY)
     assert table.arms == ("hybrid", "baseline", "hybrid-half")
-    assert "hybrid-half (ours" in to_markdown(table)
+    assert "hybrid-half (ours" in table2_markdown(table)
     comparisons = compare_arms(per_seed, THRESHOLDS, Streams(0), n_boot=100, registry=REGISTRY)
     assert list(dict.fromkeys(comparisons["pair"])) == ["hybrid vs baseline", "hybrid-half vs hybrid"]
     assert "| hybrid-half vs hybrid | half the potential |" in attribution_markdown(comparisons)

@@ -7,15 +7,8 @@ import pandas as pd
 import pytest
 
 from vlmrl_cli import paper
-from vlmrl_cli.report.table2 import (
-    NEEDS_BASELINE,
-    build_table2,
-    compare_steps,
-    format_cell,
-    to_latex,
-    to_long,
-    to_markdown,
-)
+from vlmrl_cli.report.markdown import format_cell, table2_latex, table2_long, table2_markdown
+from vlmrl_cli.report.table2 import NEEDS_BASELINE, build_table2, compare_steps
 
 REPORTED = json.loads(paper.REPORTED.read_text())
 THRESHOLDS = (-190.0, -160.0, -130.0)
@@ -48,16 +41,16 @@ def test_reported_json_holds_the_papers_table2():
 def test_without_baseline_speedups_say_so():
     t = _build(_per_seed({"hybrid": [[100, 200, 300], [110, 210, np.nan]]}))
     assert not t.has_baseline
-    md = to_markdown(t)
+    md = table2_markdown(t)
     assert NEEDS_BASELINE in md and "272,448" in md  # the paper's baseline still shown
     assert "(DNF 1/2)" in md
-    assert "\\toprule" in to_latex(t)
+    assert "\\toprule" in table2_latex(t)
 
 
 def test_all_dnf_cell_and_long_form():
     t = _build(_per_seed({"hybrid": [[100, 200, 300]] * 3, "baseline": [[150, np.nan, np.nan]] * 3}))
     assert format_cell(t.cell("steps_-130", "baseline")) == "DNF 3/3"
-    long = to_long(t).set_index(["metric", "arm"])
+    long = table2_long(t).set_index(["metric", "arm"])
     assert long.loc[("speedup_-190", "hybrid"), "value"] == 1.5
     # no baseline seed finished: the restricted means (1000 for a DNF) give a lower bound, 1000 / 300
     assert long.loc[("speedup_-130", "hybrid"), "value"] == pytest.approx(1000 / 300)
@@ -67,7 +60,7 @@ def test_all_dnf_cell_and_long_form():
 def test_markdown_comes_in_narrow_ours_speedup_and_paper_blocks():
     rows = [[100.0, 200.0, 300.0], [120.0, 220.0, 320.0]]
     t = _build(_per_seed({"hybrid": rows, "baseline": rows, "kinematic": rows, "semantic": rows}))
-    md = to_markdown(t)
+    md = table2_markdown(t)
     assert "*Ours ([95% CI]; steps: restricted means, a DNF counted at the budget)*" in md
     assert "*The paper*" in md and "*Speedup vs baseline" in md
     widest = max(line.count(" | ") + 1 for line in md.splitlines() if line.startswith("| "))

@@ -1,11 +1,6 @@
 """`vlmrl calibrate` end to end: train each regime's baseline through the resumable sweep, read the
-runs back from MLflow, score each regime against the target profile, write the outputs.
-
-Outputs in ``cfg.out``: ``calibration.csv`` and ``calibration.md`` (one row per regime, closest
-first), ``calibration.png`` (each regime's mean learning curve, the target's threshold crossings
-marked) and ``manifest.json`` (commit, versions, command, wall times), also logged as artifacts of
-one MLflow run tagged ``vlmrl.kind=calibration``, found again (not duplicated) on a rerun.
-"""
+runs back from MLflow, score each regime against the target profile, write the outputs (see
+docs/commands/calibrate.md) and log them to one ``vlmrl.kind=calibration`` run."""
 
 from __future__ import annotations
 
@@ -23,6 +18,7 @@ from matplotlib.figure import Figure
 
 from vlmrl_cli.analysis.learning_profile import RegimeProfile, regime_profile
 from vlmrl_cli.analysis.load import load_experiment
+from vlmrl_cli.analysis.stats import Estimate
 from vlmrl_cli.calibration.regimes import CalibrateConfig, Regime
 from vlmrl_cli.core import tables
 from vlmrl_cli.core.paths import check_out_folder
@@ -86,33 +82,27 @@ def knob_columns(regimes: tuple[Regime, ...]) -> list[str]:
     return [k for k in ppo[0] if len({p[k] for p in ppo}) > 1]
 
 
+def _with_ci(key: str, est: Estimate) -> dict[str, float]:
+    return {key: est.value, f"{key}_low": est.low, f"{key}_high": est.high}
+
+
 def _row(regime: Regime, profile: RegimeProfile, cfg: CalibrateConfig) -> dict[str, Any]:
     ppo = flatten(regime.run.ppo_config)
     row: dict[str, Any] = {"id": regime.id, "regime": regime.label}
     row |= {f"ppo.{k}": ppo[k] for k in knob_columns(cfg.regimes)}
-    rel = profile.reliability
-    row |= {
-        "seeds": profile.n_seeds,
-        "budget": profile.budget,
-        "reliability": rel.value,
-        "reliability_low": rel.low,
-        "reliability_high": rel.high,
-    }
+    row |= {"seeds": profile.n_seeds, "budget": profile.budget} | _with_ci("reliability", profile.reliability)
     for t, est, n in zip(cfg.target.thresholds, profile.steps, profile.n_reached, strict=True):
-        key = threshold_key(t)
-        row |= {key: est.value, f"{key}_low": est.low, f"{key}_high": est.high, f"reached_{t:g}": n}
-    d = profile.distance
-    row |= {
-        "distance": d.value,
-        "distance_low": d.low,
-        "distance_high": d.high,
-        "config_hash": regime.run.jobs()[0].config_hash,
-    }
-    return row
+        row |= _with_ci(threshold_key(t), est) | {f"reached_{t:g}": n}
+    return row | _with_ci("distance", profile.distance) | {"config_hash": regime.run.jobs()[0].config_hash}
 
 
 def _fmt_steps(x: float) -> str:
     return "—" if not np.isfinite(x) else f"{x:,.0f}"
+
+
+def _shown(r: dict[str, Any], key: str, fmt: Callable[[float], str]) -> str:
+    """``value [low, high]`` of the columns ``_with_ci`` gave ``key`` in the row ``r``."""
+    return f"{fmt(r[key])} [{fmt(r[key + '_low'])}, {fmt(r[key + '_high'])}]"
 
 
 def to_markdown(cfg: CalibrateConfig, result: CalibrationResult) -> str:
@@ -139,19 +129,10 @@ def to_markdown(cfg: CalibrateConfig, result: CalibrationResult) -> str:
     ]
     rows = []
     for r in table.to_dict("records"):
-        cells = [
-            r["id"],
-            f"`{r['regime']}`",
-            f"{r['reliability']:.0%} [{r['reliability_low']:.0%}, {r['reliability_high']:.0%}] (n={r['seeds']})",
-        ]
+        cells = [r["id"], f"`{r['regime']}`", f"{_shown(r, 'reliability', '{:.0%}'.format)} (n={r['seeds']})"]
         for x in t.thresholds:
-            k = threshold_key(x)
-            cells.append(
-                f"{_fmt_steps(r[k])} [{_fmt_steps(r[k + '_low'])}, {_fmt_steps(r[k + '_high'])}] "
-                f"({r[f'reached_{x:g}']}/{r['seeds']} reached)"
-            )
-        cells.append(f"{r['distance']:.3f} [{r['distance_low']:.3f}, {r['distance_high']:.3f}]")
-        rows.append(cells)
+            cells.append(f"{_shown(r, threshold_key(x), _fmt_steps)} ({r[f'reached_{x:g}']}/{r['seeds']} reached)")
+        rows.append([*cells, _shown(r, "distance", "{:.3f}".format)])
     lines += tables.markdown_rows(head, rows)
     best = table.iloc[0]
     lines += [
@@ -216,21 +197,17 @@ def _write(
     return paths
 
 
-def identity(cfg: CalibrateConfig) -> dict[str, Any]:
-    """What makes two calibrations the same: the regimes' job hashes and seeds, the target, the scoring."""
-    return {
+def _log_run(client: Any, experiment_id: str, cfg: CalibrateConfig, files: list[Path]) -> str:
+    """The calibration's MLflow run (the existing one of the same calibration, else a new one)."""
+    params = flatten({"target": cfg.target, "window": cfg.window, "n_boot": cfg.n_boot,
+                      "regimes": [r.label for r in cfg.regimes]})
+    identity = {  # two calibrations are the same when their regimes' job hashes, target and scoring are
         "regimes": [[j.config_hash for j in r.run.jobs()] for r in cfg.regimes],
         "target": to_jsonable(cfg.target),
         "window": cfg.window,
         "n_boot": cfg.n_boot,
         "seed": cfg.seed,
     }
-
-
-def _log_run(client: Any, experiment_id: str, cfg: CalibrateConfig, files: list[Path]) -> str:
-    """The calibration's MLflow run (the existing one of the same calibration, else a new one)."""
-    params = flatten({"target": cfg.target, "window": cfg.window, "n_boot": cfg.n_boot,
-                      "regimes": [r.label for r in cfg.regimes]})
-    return log_summary_run(client, experiment_id, KIND, config_hash(identity(cfg)), params, files,
+    return log_summary_run(client, experiment_id, KIND, config_hash(identity), params, files,
                            ("none (the baseline arm queries no VLM)", False))
 

@@ -1,30 +1,19 @@
-"""The configuration of `vlmrl calibrate`: a base run configuration and a grid of PPO regimes.
-
-A *regime* is a set of overrides (dotted keys, as ``--set`` takes them) laid over the base; each
-regime's baseline arm x seeds is an ordinary `vlmrl run` configuration, checked by the same
-schema. A grid is given as a list of values per key (``[calibrate.grid]`` in TOML, or repeatable
-``--grid ppo.n_envs=1,4,16``) and spans their product. Without one, the task's default grid is its
-``Task.calibration`` (MountainCar's spans "always solves quickly", the zoo's tuned PPO, to "never
-solves", SB3's defaults on one env).
-
-The target is the paper's baseline (Table 2) for the task the paper reports
-(``Task.paper``), and that profile's shape scaled to the task's thresholds and budget
-for another task (``analysis.learning_profile.scaled_target``).
-"""
+"""The configuration of `vlmrl calibrate`: a base run configuration and a grid of PPO regimes, each
+a set of overrides (dotted keys, as ``--set`` takes them) whose baseline arm x seeds is an ordinary
+`vlmrl run` configuration. See docs/commands/calibrate.md and docs/tasks.md."""
 
 from __future__ import annotations
 
 import itertools
 import json
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from vlmrl_cli.analysis.defaults import DEFAULT_N_BOOT
 from vlmrl_cli.core.errors import BadInput, did_you_mean, first_repeated
-from vlmrl_cli.tasks.base import Task, TaskLookup
-from vlmrl_cli.tasks.capabilities import PaperTask
+from vlmrl_cli.tasks.base import TaskLookup
 from vlmrl_cli.tasks.registry import paper_task
 from vlmrl_cli.training.config import RunConfig, once, resolve
 from vlmrl_cli.training.overrides import dotted, nest, parse_assignment, parse_values
@@ -38,8 +27,7 @@ CALIBRATED_ARM = "baseline"
 
 @dataclass(frozen=True)
 class Regime:
-    """One point of the grid: its short id (R1, R2, ...; for tables and plots), its overrides, and
-    the run config they give (whose runs are tagged ``vlmrl.regime`` with the label)."""
+    """One point of the grid: its short id (R1, R2, ...), its overrides, and the run config they give."""
 
     id: str
     overrides: tuple[tuple[str, Any], ...]
@@ -56,7 +44,7 @@ class CalibrateConfig:
     """Everything one `vlmrl calibrate` does, as one value."""
 
     regimes: tuple[Regime, ...]
-    target: TargetProfile = field(default_factory=lambda: papers_baseline())
+    target: TargetProfile
     out: Path = Path("results/calibration")
     window: int = 100  # episodes in the rolling mean return
     n_boot: int = DEFAULT_N_BOOT
@@ -68,8 +56,7 @@ class CalibrateConfig:
 
 
 def grid_flags(items: Sequence[str]) -> dict[str, list[Any]]:
-    """``--grid KEY=V1,V2`` flags -> ``{dotted key: values}``; a key given twice is ``BadInput`` (one
-    of the two lists would be dropped).
+    """``--grid KEY=V1,V2`` flags -> ``{dotted key: values}``; a key given twice is ``BadInput``.
 
     Example:
         >>> grid_flags(["ppo.n_envs=1,4", "ppo.normalize_obs=true,false"])
@@ -95,8 +82,7 @@ def grid_product(grid: Mapping[str, Sequence[Any]]) -> list[dict[str, Any]]:
 
 
 def calibrate_section(raw: Mapping[str, Any]) -> dict[str, list[Any]]:
-    """The grid of a config file's ``[calibrate]`` table (its only key is ``grid``: dotted keys or
-    nested tables, a list per key) -> ``{dotted key: values}``.
+    """The grid of a config file's ``[calibrate]`` table (dotted keys or nested tables) -> ``{dotted key: values}``.
 
     Example:
         >>> calibrate_section({"grid": {"ppo": {"n_envs": [1, 4]}, "ppo.ent_coef": [0.0, 0.01]}})
@@ -122,10 +108,8 @@ def calibrate_section(raw: Mapping[str, Any]) -> dict[str, list[Any]]:
 def build_regimes(layers: Sequence[Mapping[str, Any]], grid: Mapping[str, Sequence[Any]],
                   tasks: TaskLookup | None = None) -> tuple[Regime, ...]:
     """One validated ``RunConfig`` per regime: ``layers`` (file, ``--set``, flags) with the
-    calibration's defaults below them, the regime's overrides and the baseline arm above them; the
-    task they name is looked up once, by ``tasks`` (the command's registry; None: the built-in
-    tasks alone), and carried by every regime. Any invalid regime is ``BadInput`` before anything
-    runs."""
+    calibration's defaults below them, the regime's overrides and the baseline arm above them
+    (``tasks``: the command's registry; None: the built-in tasks). Any invalid regime is ``BadInput``."""
     empty = [key for key, values in grid.items() if not values]
     if empty:
         raise BadInput(f"the grid of {empty[0]} lists no value; give at least one (e.g. --grid {empty[0]}=1,4).")
@@ -136,7 +120,10 @@ def build_regimes(layers: Sequence[Mapping[str, Any]], grid: Mapping[str, Sequen
                            "regimes of one configuration).")
     base = {"experiment": DEFAULT_EXPERIMENT, "seeds": list(range(DEFAULT_SEEDS))}
     tasks = once(tasks)
-    points = grid_product(grid) if grid else default_grid(resolve([base, *layers], tasks).task_plugin)
+    if grid:
+        points = grid_product(grid)
+    else:  # the task's own grid (``Task.calibration``), its default preset alone when that is empty
+        points = [dict(r) for r in resolve([base, *layers], tasks).task_plugin.calibration or ({},)]
     _refuse_shadowed(layers, points, given_grid=bool(grid))
     return tuple(
         resolve_regime(f"R{i}", point, [base, *layers], {"arms": [CALIBRATED_ARM], "regime": _label(point)}, tasks)
@@ -146,9 +133,7 @@ def build_regimes(layers: Sequence[Mapping[str, Any]], grid: Mapping[str, Sequen
 
 def _refuse_shadowed(layers: Sequence[Mapping[str, Any]], points: Sequence[Mapping[str, Any]], *, given_grid: bool
                      ) -> None:
-    """``BadInput`` when a key set on the command line, by ``--set`` or in the config file is also
-    set by a regime of the grid: the regime's value would replace the user's without a word (e.g.
-    ``--preset smoke`` under a task whose default grid is a list of presets)."""
+    """``BadInput`` when a key the user set is also set by a regime, whose value would replace it silently."""
     typed = {key for layer in layers for key in dotted(layer)}
     for point in points:
         shadowed = sorted(typed & set(point))
@@ -166,9 +151,8 @@ def resolve_regime(
     rid: str, point: Mapping[str, Any], layers: Sequence[Mapping[str, Any]], top: Mapping[str, Any],
     tasks: TaskLookup | None = None,
 ) -> Regime:
-    """The validated ``Regime`` ``rid``: ``layers`` (lowest first), then the point's overrides (dotted
-    keys), then ``top`` (top-level keys such as ``arms`` and the ``regime`` tag); its task looked up
-    by ``tasks`` (``training.config.resolve``). An invalid regime is ``BadInput`` naming it."""
+    """The validated ``Regime`` ``rid``: ``layers`` (lowest first), then the point's overrides, then
+    ``top`` (top-level keys such as ``arms``); an invalid regime is ``BadInput`` naming it."""
     try:
         run = resolve([*layers, nest(point.items()) | dict(top)], tasks)
     except BadInput as exc:
@@ -176,16 +160,9 @@ def resolve_regime(
     return Regime(rid, tuple(point.items()), run)
 
 
-def default_grid(task: Task) -> list[dict[str, Any]]:
-    """The regimes `vlmrl calibrate` tries without a grid: the task's ``Task.calibration`` (its
-    default preset alone when that is empty)."""
-    regimes = task.calibration or ({},)
-    return [dict(r) for r in regimes]
-
-
 def calibrate_config(regimes: tuple[Regime, ...], **settings: Any) -> CalibrateConfig:
     """The ``CalibrateConfig`` of ``regimes``, scored against their task's target on its window; a
-    grid that spans two tasks is ``BadInput`` (one target, one set of thresholds)."""
+    grid that spans two tasks is ``BadInput``."""
     tasks = sorted({r.run.task for r in regimes})
     if len(tasks) > 1:
         raise BadInput(f"the regimes span tasks {', '.join(tasks)}; calibrate one task at a time (--task).")
@@ -195,29 +172,16 @@ def calibrate_config(regimes: tuple[Regime, ...], **settings: Any) -> CalibrateC
     return CalibrateConfig(regimes, **settings)
 
 
-def _papers() -> PaperTask:
-    paper = paper_task().paper
-    assert paper is not None  # paper_task() is the task that has one
-    return paper
-
-
-def papers_baseline() -> TargetProfile:
-    """The paper's baseline profile (its task's Table 2, ``PaperTask.reported``)."""
-    from vlmrl_cli.analysis.learning_profile import paper_baseline
-
-    return paper_baseline(_papers().reported)
-
-
 def calibration_target(run: RunConfig) -> TargetProfile:
-    """What a regime's baseline is scored against: the paper's baseline for the task it reports,
-    else its shape on the task's thresholds and the run's budget (``scaled_target``), the paper's
-    budget (``PaperTask.budget``) read as the paper's baseline's."""
+    """The paper's baseline for the task it reports, else its shape on the task's thresholds and the
+    run's budget (``scaled_target``)."""
     from vlmrl_cli.analysis.learning_profile import paper_baseline, scaled_target
 
-    task = run.task_plugin
+    task, papers = run.task_plugin, paper_task().paper
+    assert papers is not None  # paper_task() is the task that has one
     if task.paper is not None:
         return paper_baseline(task.paper.reported)
-    return scaled_target(task.thresholds, run.budget, papers_baseline(), _papers().budget)
+    return scaled_target(task.thresholds, run.budget, paper_baseline(papers.reported), papers.budget)
 
 
 def _label(point: Mapping[str, Any]) -> str:

@@ -41,7 +41,8 @@ def parse_thresholds(text: str) -> tuple[float, ...]:
 def console_summary(table: Table2, experiment: str) -> list[str]:
     """Table 2's headline rows as short plain lines (readable at 80 columns and in a pipe); the
     full table is in table2.md."""
-    from vlmrl_cli.report.table2 import BASELINE, format_cell, format_speedup, threshold_key
+    from vlmrl_cli.report.markdown import format_cell, format_speedup
+    from vlmrl_cli.report.table2 import BASELINE, threshold_key
 
     lines = [f"Table 2, experiment {experiment} (full table: table2.md)"]
     for t in table.thresholds:

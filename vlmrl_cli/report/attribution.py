@@ -1,15 +1,6 @@
-"""Attribution: which reward term does the work? Pairwise comparisons of arms over seeds.
-
-Hybrid vs baseline is what the whole method changes; hybrid vs kinematic is what the VLM itself
-adds (both have the dense term); kinematic vs baseline is what the dense term adds. For each pair
-present in the experiment: the speedup to each threshold (ratio of restricted means, a DNF at
-the budget, bootstrap CI) with a censored rank test (DNF kept) and a verdict (faster, slower,
-equivalent within the margin by TOST, inconclusive: ``analysis/censored.py``), the
-reliability and detached-success differences with Newcombe intervals and Fisher exact
-p-values, the difference in learning-curve area (mean native return over the budget, a
-threshold-free measure) with a rank test and an equivalence margin in return units, and the
-probability of improvement on the final return. The unit of every comparison is the seed.
-"""
+"""Attribution: which reward term does the work? Pairwise comparisons of arms over seeds (speedups,
+reliability, detached success, learning-curve area, probability of improvement), the seed as unit.
+See docs/commands/report.md."""
 
 from __future__ import annotations
 
@@ -95,9 +86,8 @@ def _proportion_verdict(diff: float, p_value: float, alpha: float) -> str:
 def compare_auc(da: pd.DataFrame, db: pd.DataFrame, rng: np.random.Generator, n_boot: int, ci: float,
                 alpha: float, delta: float, n_perm: int = DEFAULT_N_PERM
                 ) -> tuple[stats.Estimate, float, str, tuple[float, float], str]:
-    """Learning-curve area of arm a minus arm b (return units): the difference of means with a
-    bootstrap CI, a two-sided Mann-Whitney p (``ranks.rank_sum_p``: exact up to ``DEFAULT_N_PERM``
-    splits), the verdict, the ``1 - 2 alpha`` interval its equivalence test used and the p's method."""
+    """Learning-curve area of arm a minus arm b (return units) with a bootstrap CI, a two-sided
+    Mann-Whitney p, the verdict, the ``1 - 2 alpha`` interval of its equivalence test and the p's method."""
     a, b = da["auc"].to_numpy(dtype=float), db["auc"].to_numpy(dtype=float)
     a, b = a[np.isfinite(a)], b[np.isfinite(b)]
     est = stats.difference_of_means(a, b, rng, n_boot, ci)
@@ -115,15 +105,9 @@ def compare_arms(
 ) -> pd.DataFrame:
     """Every comparison of every present pair (columns ``COLUMNS``), from ``per_seed`` (see ``per_seed_table``).
 
-    The speedups form one family: their p-values are adjusted by ``adjust`` (``multiplicity.py``)
-    and each speedup's verdict uses its adjusted p (``adjust_family``); a caller whose family spans
-    several frames (the study) passes ``"none"`` and adjusts the whole family itself.
-
-    Metrics: ``speedup_<t>`` (a over b, x), ``reliability_diff`` (seeds reaching the top threshold,
-    a minus b), ``detached_success_diff`` (seeds succeeding detached, a minus b), ``poi_final_return``
-    (P(final return of a seed of a > that of b), higher return is better), and ``auc_diff`` when
-    ``per_seed`` has an ``auc`` column. ``pairs``: the pairs to compare (default: those of ``registry``
-    whose two arms are present).
+    The speedups form one family, adjusted by ``adjust`` (``adjust_family``); a caller whose family
+    spans several frames (the study) passes ``"none"`` and adjusts it itself. ``pairs``: default,
+    those of ``registry`` whose two arms are present.
     """
     rows: list[dict[str, Any]] = []
     top = max(thresholds)
@@ -171,9 +155,8 @@ def is_family(comparisons: pd.DataFrame) -> pd.Series:
 
 def adjust_family(comparisons: pd.DataFrame, method: str = DEFAULT_ADJUST, alpha: float = 0.05,
                   margin: float = censored.DEFAULT_MARGIN) -> pd.DataFrame:
-    """``comparisons`` with its speedups adjusted as one family and re-judged (``censored.judge_family``):
-    ``p_adj``, ``logrank_p_adj``, ``tests_disagree`` and their ``verdict``. Other metrics keep their
-    verdicts on their raw p; a speedup not measured stays out of the family."""
+    """``comparisons`` with its measured speedups adjusted as one family and re-judged
+    (``censored.judge_family``); other metrics keep their verdicts on their raw p."""
     out = comparisons.copy()
     fam = is_family(out).to_numpy()
     if not fam.any():
@@ -189,13 +172,17 @@ def adjust_family(comparisons: pd.DataFrame, method: str = DEFAULT_ADJUST, alpha
     return out
 
 
+def _find(comparisons: pd.DataFrame, a: str, b: str, metric: str) -> pd.Series | None:
+    hit = comparisons[(comparisons["pair"] == f"{a} vs {b}") & (comparisons["metric"] == metric)]
+    return None if hit.empty else hit.iloc[0]
+
+
 def lookup(comparisons: pd.DataFrame, a: str, b: str, metric: str) -> tuple[stats.Estimate, float, float] | None:
     """The estimate, raw p-value and the p its verdict uses (adjusted within the family for a
     speedup, the raw one otherwise) of one comparison, or None when that pair or metric is absent."""
-    hit = comparisons[(comparisons["pair"] == f"{a} vs {b}") & (comparisons["metric"] == metric)]
-    if hit.empty:
+    r = _find(comparisons, a, b, metric)
+    if r is None:
         return None
-    r = hit.iloc[0]
     est = stats.Estimate(float(r["value"]), float(r["ci_low"]), float(r["ci_high"]),
                          int(min(r["n_a"], r["n_b"])), str(r["note"]))
     adjusted = float(r["p_adj"])
@@ -205,10 +192,9 @@ def lookup(comparisons: pd.DataFrame, a: str, b: str, metric: str) -> tuple[stat
 def lookup_verdict(comparisons: pd.DataFrame, a: str, b: str, metric: str) -> tuple[str, float, float]:
     """The verdict of one comparison and the ``1 - 2 alpha`` interval its equivalence test used
     (``("", nan, nan)`` when absent)."""
-    hit = comparisons[(comparisons["pair"] == f"{a} vs {b}") & (comparisons["metric"] == metric)]
-    if hit.empty:
+    r = _find(comparisons, a, b, metric)
+    if r is None:
         return "", float("nan"), float("nan")
-    r = hit.iloc[0]
     return str(r["verdict"]), float(r["tost_low"]), float(r["tost_high"])
 
 
@@ -245,8 +231,7 @@ def logrank_cell(p_raw: float, p_adj: float, disagree: str) -> str:
 
 
 def attribution_markdown(comparisons: pd.DataFrame, ci: float = 0.95, adjust: str = DEFAULT_ADJUST) -> str:
-    """Markdown table: pair (what it isolates), metric, value [CI], the raw p and (speedups) the p
-    adjusted within the family, the log-rank p beside the rank test's, test, verdict, seeds."""
+    """Markdown table of ``compare_arms``' rows."""
     rows = []
     for r in comparisons.itertuples(index=False):
         value = _fmt(r.value, r.unit)

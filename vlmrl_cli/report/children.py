@@ -1,9 +1,5 @@
-"""The training runs behind a sweep's jobs, one row each: what a user copies a run id from.
-
-``vlmrl run`` prints this table when it ends and ``vlmrl run --dry-run`` for a sweep already done,
-so ``vlmrl evaluate RUN_ID`` always has an id to take; ``children_of`` lists a parent sweep run's
-own training runs (for ``evaluate`` given a parent id).
-"""
+"""The training runs behind a sweep's jobs, one row each, printed by ``vlmrl run`` (and ``--dry-run``)
+so that ``vlmrl evaluate RUN_ID`` always has an id to take."""
 
 from __future__ import annotations
 

@@ -1,26 +1,5 @@
-"""The paper's quantitative claims, each with our measured value, CI and a verdict.
-
-Verdict rule (``VERDICT_RULE`` is printed in the report):
-
-* fewer than ``MIN_SEEDS`` (3) seeds behind our estimate in an arm it uses, or no computable CI
-  -> **inconclusive**; an arm the claim needs is absent -> **not tested**.
-* comparative claims (an effect against a null: speedup vs 1, reliability gap vs 0, spread
-  difference vs 0): **reproduced** if our whole CI lies strictly on the paper's side of the null;
-  **not reproduced** if it lies entirely on the other side (null included), or if it excludes the
-  paper's value while still containing the null; otherwise (it contains both the null and the
-  paper's value) **inconclusive**.
-* a comparative claim that also carries a test p-value (exact test for proportions, censored rank
-  test for steps) is reproduced only if that p-value is also below ``1 - ci``; otherwise inconclusive.
-* absolute claims (a value of one arm: 100% reliability, ~125 steps): **not reproduced** if our CI
-  excludes the paper's value (widened by +-10% when the paper says "~"); **reproduced** if it
-  contains it and our estimate is within 10% of it (or within the "~" tolerance); otherwise
-  (a CI wide enough to hold the paper's value around an estimate far from it, e.g. 5/5 seeds
-  succeeding against a claimed 60%) **inconclusive**.
-* proportions over seeds use score intervals (Wilson for one arm, Newcombe for a difference), so
-  5/5 vs 5/5 is a difference of 0 with CI about [-0.43, 0.43]: inconclusive, never [0, 0].
-* a claim that credits the VLM (``"vs": "kinematic"`` in ``reported.json``) is judged on hybrid vs
-  kinematic, the two arms that differ only by the VLM potential.
-"""
+"""The paper's quantitative claims, each with our measured value, CI and a verdict under ``VERDICT_RULE``
+(printed in every ``claims.md``; see docs/commands/report.md)."""
 
 from __future__ import annotations
 
@@ -69,15 +48,10 @@ def verdict(estimate: stats.Estimate, paper: float | None, null: float | None = 
             alpha: float = 0.05) -> tuple[str, str]:
     """The verdict and its reason for one claim (see ``VERDICT_RULE``).
 
-    Args:
-        estimate: our value with its CI.
-        paper: the paper's value (``None`` for a purely directional claim).
-        null: the no-effect value of a comparative claim; ``None`` for an absolute claim.
-        direction: ``">"`` if the paper's effect is above the null, ``"<"`` if below.
-        approximate: the paper's value is "~" (widen it by ``APPROX_TOLERANCE``).
-        n_seeds: the fewest seeds behind the estimate in any arm (default ``estimate.n``).
-        p_value: a comparative claim's test p-value (NaN or ``None``: no test); at or above ``alpha``
-            a CI on the paper's side is not enough and the verdict is inconclusive.
+    ``paper``: None for a purely directional claim; ``null``: the no-effect value of a comparative
+    claim (None: an absolute claim), ``direction`` the paper's side of it; ``approximate``: the paper
+    says "~"; ``n_seeds``: the fewest seeds in any arm (default ``estimate.n``); ``p_value``: the
+    claim's test p (NaN or None: no test).
 
     Example:
         >>> verdict(stats.Estimate(1.5, 1.2, 1.9, n=5), 1.4, null=1.0)
@@ -115,7 +89,6 @@ def verdict(estimate: stats.Estimate, paper: float | None, null: float | None = 
         return NOT_REPRODUCED, f"{ci_text} contains {null:g} and excludes the paper value {paper:g}{p_text}"
     return INCONCLUSIVE, (f"{ci_text} contains the null {null:g}" + ("" if paper is None else f" and {paper:g}")
                           + p_text)
-
 
 
 def _absolute_verdict(estimate: stats.Estimate, paper: float | None, approximate: bool) -> tuple[str, str]:
@@ -158,10 +131,6 @@ def _est_from_cell(cell: dict[str, Any] | None) -> stats.Estimate:
 _NULLS = {"x": 1.0, "%": 0.0}
 
 
-def _comparison_unit(metric: str) -> str:
-    return "x" if metric.startswith("speedup_") else "%"
-
-
 def evaluate_claims(
     table: Table2, per_seed: pd.DataFrame, reported: dict[str, Any], rng: np.random.Generator | stats.Streams,
     n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, comparisons: pd.DataFrame | None = None,
@@ -187,10 +156,8 @@ def evaluate_claims(
 
 @dataclass(frozen=True)
 class _Measure:
-    """What one claim is judged on: the arms it needs, our estimate and its unit, the null and the
-    paper's side of it (comparative claims only), the seeds behind it, the test's adjusted and raw
-    p, the comparison (a, b, metric) of a comparative claim, and why it cannot be tested, if known
-    before its arms are looked at."""
+    """What one claim is judged on (``verdict``'s arguments), the arms it needs, the comparison (a, b,
+    metric) of a comparative claim, and why it cannot be tested, if known before its arms are looked at."""
 
     need: frozenset[str] = frozenset()
     est: stats.Estimate = field(default_factory=lambda: stats.Estimate(float("nan")))
@@ -229,9 +196,9 @@ def _measure_comparison(comparison: tuple[str, str, str], table: Table2, compari
     """A comparative claim's estimate and p from the attribution table; for a speedup, the fewest
     seeds that reached its threshold in either arm."""
     a, b, metric = comparison
-    unit = _comparison_unit(metric)
-    measure = _Measure(need=frozenset({a, b}), unit=unit, null=_NULLS[unit], comparison=comparison)
     speedup = metric.startswith("speedup_")
+    unit = "x" if speedup else "%"
+    measure = _Measure(need=frozenset({a, b}), unit=unit, null=_NULLS[unit], comparison=comparison)
     if speedup and float(metric.removeprefix("speedup_")) not in table.thresholds:
         return replace(measure, untestable=f"threshold {metric.removeprefix('speedup_')} not in this report's "
                                            "thresholds")

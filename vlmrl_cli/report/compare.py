@@ -1,28 +1,6 @@
-"""`vlmrl compare`: one view across tasks of the arms' detached evaluation scores, read from export files.
-
-The score of a run is its detached evaluation's mean return (``eval/mean_return``). Scores are
-min-max normalised per task, ``(score - lo) / (hi - lo)``, with a stated pair (``NORMALISATIONS``):
-
-- ``random-zoo`` (default): fixed references, as rliable's: ``lo`` = a uniformly random policy's
-  measured score (``Task.random_score``, with the command that measured it), ``hi`` =
-  rl-baselines3-zoo's published PPO score of the env (``tasks.zoo``). No arm's runs move them, so
-  adding or removing an arm leaves every other arm's normalised scores as they were.
-- ``baseline-best``: ``lo`` = the baseline arm's mean score on the task, ``hi`` = the best compared
-  arm's mean score there. Its anchors are estimates from the data being compared (a task whose
-  arms differ little is magnified without bound), and every output says so above its tables.
-
-Which runs: the FINISHED training runs of the files, each counted once: by its source run id, and
-by its (task, arm, seed, config hash), since a study's and a calibration's export of one task can
-hold the same baseline seed as two runs (``RUN_RULE``; the first file's run is kept). Grouped
-by task (tag ``vlmrl.task``, absent = mountain-car), arm and config hash. For each task and arm
-one configuration is kept: the one named by ``--config-hash`` when one is named for that task
-and arm, else the one with the most runs (a tie is refused: name one). Every task must have the
-baseline arm; arms missing on some task are left out, and listed.
-
-Per arm, over all tasks: the IQM and the mean of the normalised scores, and the probability of
-improvement over the baseline, each with a 95% stratified bootstrap interval (runs resampled
-within each task, ``analysis.aggregate``), and the performance profile with its band.
-"""
+"""`vlmrl compare`: one view across tasks of the arms' detached evaluation scores, read from export files,
+min-max normalised per task (``NORMALISATIONS``) and aggregated with stratified bootstrap intervals.
+See docs/commands/compare.md."""
 
 from __future__ import annotations
 
@@ -30,6 +8,7 @@ from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -53,7 +32,6 @@ from vlmrl_cli.tracking.transfer import read_records
 SIMULATED_NOTE = "SIMULATED VLM, not a real model."
 REAL_NOTE = "no run used the simulated VLM"
 RUN_COLUMNS = ["task", "arm", "seed", "config_hash", "run_id", "score", "simulated", "numeric_path", "file", "regime"]
-#: How runs are counted, for the report.
 RUN_RULE = ("a run counts once per (task, arm, seed, config hash): when several export files hold it, the one in "
             "the first file named is kept")
 WEIGHT_RULE = ("every task weighs the same in every aggregate, whatever its number of runs (IQM: the middle half "
@@ -123,9 +101,8 @@ def count_once(runs: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
 
 
 def select_configs(runs: pd.DataFrame, config_hashes: Sequence[str] = ()) -> pd.DataFrame:
-    """The runs of one config hash per task and arm: the one ``config_hashes`` names (a full hash or
-    a prefix) for that task and arm, else the one with the most runs; ``BadInput`` for a tie, a
-    named hash that matches no run or several, or two named hashes for one task and arm.
+    """The runs of one config hash per task and arm: the one ``config_hashes`` names (a hash or a
+    prefix), else the one with the most runs; ``BadInput`` for a tie or an ambiguous name.
 
     Example:
         >>> runs = pd.DataFrame({"task": ["t"] * 3, "arm": ["a"] * 3, "config_hash": ["x1", "x1", "y2"]})
@@ -161,8 +138,7 @@ def select_configs(runs: pd.DataFrame, config_hashes: Sequence[str] = ()) -> pd.
 
 
 def configs_left_out(every: pd.DataFrame, kept: pd.DataFrame) -> tuple[str, ...]:
-    """The configurations of ``every`` run that ``select_configs`` did not keep in ``kept``, each as
-    ``arm on task: hash (n runs)``, so that a comparison says what it left out.
+    """The configurations of ``every`` run not in ``kept``, each as ``arm on task: hash (n runs)``.
 
     Example:
         >>> runs = pd.DataFrame({"task": ["t"] * 3, "arm": ["a"] * 3, "config_hash": ["x1", "x1", "y2"]})
@@ -209,10 +185,7 @@ def compared_arms(runs: pd.DataFrame) -> tuple[list[str], dict[str, list[str]]]:
 
 def normalisation_pairs(runs: pd.DataFrame, arms: Sequence[str], method: str, tasks: TaskLookup) -> pd.DataFrame:
     """Per task, the pair ``lo``/``hi`` of ``method`` and where each comes from (``tasks``: the
-    command's registry, which gives each recorded task's env, random score and zoo score).
-
-    ``BadInput`` when a task lacks a reference, or its pair is empty or reversed (``hi <= lo``).
-    """
+    command's registry); ``BadInput`` when a task lacks a reference, or ``hi <= lo``."""
     rows = []
     for task, cell in runs[runs["arm"].isin(arms)].groupby("task", sort=True):
         if method == "random-zoo":
@@ -229,8 +202,7 @@ def normalisation_pairs(runs: pd.DataFrame, arms: Sequence[str], method: str, ta
 
 
 def fixed_pair(task: Task) -> tuple[float, str, float, str]:
-    """The fixed references of ``task``: its random policy's measured score (0) and the zoo's PPO
-    score of its env (1), each with where it comes from; ``BadInput`` when either is missing.
+    """The fixed references of ``task`` (random policy: 0, the zoo's PPO: 1), each with where it comes from.
 
     Example:
         >>> from vlmrl_cli.tasks.registry import get_task
@@ -249,17 +221,17 @@ def fixed_pair(task: Task) -> tuple[float, str, float, str]:
             f"zoo PPO {task.env_id} ({zoo.budget} steps)")
 
 
-def _cell(e: Estimate, digits: int = 3) -> str:
-    return f"{e.value:.{digits}f} [{e.low:.{digits}f}, {e.high:.{digits}f}]"
+def _cell(r: Mapping[str, Any], key: str) -> str:
+    """``value [low, high]`` of the aggregate ``key`` in the row ``r`` of ``compare``'s table."""
+    return f"{r[key]:.3f} [{r[f'{key}_low']:.3f}, {r[f'{key}_high']:.3f}]"
 
 
 def compare(cfg: CompareConfig, lookup: TaskLookup) -> CompareResult:
     """Read the export files, aggregate across tasks (``lookup``: the command's task registry) and write
     ``aggregate.md``, ``aggregate.csv``, ``per_task.csv`` and ``performance_profile.png`` to ``cfg.out``."""
     check_compare(cfg)
-    runs, dropped = count_once(read_runs(cfg.files))
-    every_config = runs
-    runs = select_configs(runs, cfg.config_hashes)
+    every_config, dropped = count_once(read_runs(cfg.files))
+    runs = select_configs(every_config, cfg.config_hashes)
     other_configs = configs_left_out(every_config, runs)
     check_paths(runs, cfg.allow_mixed_paths)  # one numeric path, as `vlmrl report` requires
     arms, left_out = compared_arms(runs)
@@ -283,15 +255,14 @@ def compare(cfg: CompareConfig, lookup: TaskLookup) -> CompareResult:
         est = {"iqm": agg.iqm_interval(scores[arm], streams(f"compare/iqm/{arm}"), cfg.n_boot, cfg.ci),
                "mean": agg.mean_interval(scores[arm], streams(f"compare/mean/{arm}"), cfg.n_boot, cfg.ci)}
         if arm != BASELINE:
-            est["poi"] = agg.probability_of_improvement_interval(scores[arm], scores[BASELINE],
-                                                                 streams(f"compare/poi/{arm}"), cfg.n_boot, cfg.ci)
+            est["poi_over_baseline"] = agg.probability_of_improvement_interval(
+                scores[arm], scores[BASELINE], streams(f"compare/poi/{arm}"), cfg.n_boot, cfg.ci)
         row: dict[str, object] = {"arm": arm, "tasks": len(tasks), "runs": sum(s.size for s in scores[arm])}
-        for key in ("iqm", "mean", "poi"):
+        for key in ("iqm", "mean", "poi_over_baseline"):
             e = est.get(key, Estimate(float("nan")))
             row |= {key: e.value, f"{key}_low": e.low, f"{key}_high": e.high}
         rows.append(row)
-    table = pd.DataFrame(rows).rename(columns={"poi": "poi_over_baseline", "poi_low": "poi_over_baseline_low",
-                                               "poi_high": "poi_over_baseline_high"})
+    table = pd.DataFrame(rows)
     table["normalisation"], table["vlm"] = cfg.normalise, note
 
     cfg.out.mkdir(parents=True, exist_ok=True)
@@ -303,8 +274,7 @@ def compare(cfg: CompareConfig, lookup: TaskLookup) -> CompareResult:
     per_task.sort_values(["task", "arm", "seed"]).to_csv(files[1], index=False)
     files[2].write_text(_markdown(cfg, table, runs, pairs, left_out, simulated, len(dropped)) + "\n",
                         encoding="utf-8")
-    fig = _profile_figure(scores, cfg, streams, note)
-    fig.savefig(files[3], dpi=200)
+    _profile_figure(scores, cfg, streams, note).savefig(files[3], dpi=200)
     return CompareResult(cfg.out, files, table, arms, tasks, left_out, simulated, len(dropped), other_configs, pairs,
                          cfg.normalise in ESTIMATED)
 
@@ -348,12 +318,9 @@ def _markdown(cfg: CompareConfig, table: pd.DataFrame, runs: pd.DataFrame, pairs
                               for t, r in pairs.iterrows()]), "",
               f"## Aggregates of the normalised scores ({pct} stratified bootstrap intervals)", ""]
     body = []
-    for r in table.itertuples(index=False):
-        poi = ("—" if r.arm == BASELINE else
-               _cell(Estimate(float(r.poi_over_baseline), float(r.poi_over_baseline_low),
-                              float(r.poi_over_baseline_high))))
-        body.append([r.arm, r.tasks, r.runs, _cell(Estimate(float(r.iqm), float(r.iqm_low), float(r.iqm_high))),
-                     _cell(Estimate(float(r.mean), float(r.mean_low), float(r.mean_high))), poi])
+    for r in table.to_dict("records"):
+        poi = "—" if r["arm"] == BASELINE else _cell(r, "poi_over_baseline")
+        body.append([r["arm"], r["tasks"], r["runs"], _cell(r, "iqm"), _cell(r, "mean"), poi])
     lines += markdown_rows(["arm", "tasks", "runs", f"IQM [{pct}]", f"mean [{pct}]",
                             f"P(arm > {BASELINE}) [{pct}]"], body)
     lines += ["", "## Runs compared", ""]

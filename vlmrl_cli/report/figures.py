@@ -1,10 +1,6 @@
 """Figures 2-4 of the paper, the performance profile and the reward-hacking figure, drawn with
-matplotlib's object API (no pyplot state, no global style).
-
-Each ``plot_*`` function draws on ``ax`` (a new figure's axes when ``None``) and returns the axes;
-each ``figure*`` function builds a whole ~7-inch-wide figure with the VLM backend named in its
-suptitle. Fonts are >= 8 pt so the figures stay readable at paper size.
-"""
+matplotlib's object API (no pyplot state): each ``figure*`` builds a ~7-inch-wide figure with the VLM
+backend named in its suptitle, fonts >= 8 pt; each ``plot_*`` draws on a given ``ax``."""
 
 from __future__ import annotations
 
@@ -15,7 +11,9 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from matplotlib import colormaps
 from matplotlib.axes import Axes
+from matplotlib.colors import to_hex
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
@@ -63,21 +61,34 @@ def on_grid(curve: SeedCurve, grid: np.ndarray) -> np.ndarray:
     return np.asarray(out, dtype=float)
 
 
-def _new_ax(figsize: tuple[float, float] = (WIDTH_IN, 3.0)) -> Axes:
-    return Figure(figsize=figsize, layout="constrained").subplots()
-
-
 def _style(ax: Axes) -> None:
     ax.tick_params(labelsize=SMALL)
     ax.grid(alpha=0.3, linewidth=0.5)
 
 
-def plot_steps_to_threshold(table: Table2, ax: Axes | None = None) -> Axes:
-    """Figure 2: mean steps to each threshold per arm (seeds that reached it) with CI error bars,
-    ``DNF k/n`` annotated, and the paper's values as hollow markers. The step axis is
-    logarithmic: the paper's steps can be 20x ours, and on a shared linear axis our intervals
-    shrank to dots."""
-    ax = ax if ax is not None else _new_ax()
+def seed_color(seed: int) -> str:
+    """A fixed colour per seed (tab10, cycling), shared by every panel of Figure 3."""
+    return to_hex(colormaps["tab10"](seed % 10))
+
+
+def plot_mean_curve(grid: np.ndarray, mean: np.ndarray, low: np.ndarray, high: np.ndarray, ax: Axes,
+                    color: str = "tab:blue", label: str | None = None) -> None:
+    """Figure 4 layer: mean learning curve (shape ``(G,)``) with its band ``[low, high]``."""
+    ax.plot(grid, mean, color=color, linewidth=1.5, label=label)
+    ax.fill_between(grid, low, high, color=color, alpha=0.25, linewidth=0)
+    _style(ax)
+
+
+def _suptitle(fig: Figure, title: str, vlm_note: str) -> None:
+    # wrapped so a long backend label never runs off the figure's edges
+    fig.suptitle(f"{title}\n" + "\n".join(textwrap.wrap(vlm_note, 110)), fontsize=SMALL + 1)
+
+
+def figure2(table: Table2, vlm_note: str) -> Figure:
+    """Figure 2: steps to each threshold per arm with CI error bars, ``DNF k/n`` annotated, the paper's
+    values as hollow markers, on a log axis (the paper's steps can be 20x ours)."""
+    fig = Figure(figsize=(WIDTH_IN, 3.4), layout="constrained")
+    ax = fig.subplots()
     thresholds = list(table.thresholds)
     arms = list(table.arms)
     x = np.arange(len(thresholds), dtype=float)
@@ -117,67 +128,23 @@ def plot_steps_to_threshold(table: Table2, ax: Axes | None = None) -> Axes:
         ax.set_ylim(ymin / 1.6, ymax * 1.6)
     ax.legend(fontsize=SMALL, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     _style(ax)
-    return ax
-
-
-def seed_color(seed: int) -> str:
-    """A fixed colour per seed (tab10, cycling), shared by every panel of Figure 3."""
-    from matplotlib import colormaps
-
-    r, g, b, _ = colormaps["tab10"](seed % 10)
-    return f"#{int(r * 255):02x}{int(g * 255):02x}{int(b * 255):02x}"
-
-
-def plot_seed_curves(curves: Sequence[SeedCurve], ax: Axes | None = None, color: str | None = "tab:blue",
-                     thresholds: Sequence[float] = ()) -> Axes:
-    """Figure 3 panel: one line per seed (rolling mean return vs timestep), thresholds dashed.
-
-    ``color=None`` gives each seed its own colour (``seed_color``), the same in every panel, so a
-    seed can be followed across arms; otherwise all lines take ``color`` in shades."""
-    ax = ax if ax is not None else _new_ax()
-    shades = np.linspace(0.45, 1.0, max(len(curves), 1))
-    for curve, alpha in zip(curves, shades, strict=False):
-        ax.plot(curve.steps, curve.mean, color=color or seed_color(curve.seed),
-                alpha=float(alpha) if color else 0.9, linewidth=1.0, label=f"seed {curve.seed}")
-    for t in thresholds:
-        ax.axhline(t, color="gray", linestyle="--", linewidth=0.7)
-    _style(ax)
-    return ax
-
-
-def plot_mean_curve(grid: np.ndarray, mean: np.ndarray, low: np.ndarray, high: np.ndarray, ax: Axes | None = None,
-                    color: str = "tab:blue", label: str | None = None) -> Axes:
-    """Figure 4 layer: mean learning curve (shape ``(G,)``) with its band ``[low, high]``."""
-    ax = ax if ax is not None else _new_ax()
-    ax.plot(grid, mean, color=color, linewidth=1.5, label=label)
-    ax.fill_between(grid, low, high, color=color, alpha=0.25, linewidth=0)
-    _style(ax)
-    return ax
-
-
-def _suptitle(fig: Figure, title: str, vlm_note: str) -> None:
-    # wrapped so a long backend label never runs off the figure's edges
-    fig.suptitle(f"{title}\n" + "\n".join(textwrap.wrap(vlm_note, 110)), fontsize=SMALL + 1)
-
-
-def figure2(table: Table2, vlm_note: str) -> Figure:
-    """Figure 2: average steps required to reach each reward threshold."""
-    fig = Figure(figsize=(WIDTH_IN, 3.4), layout="constrained")
-    plot_steps_to_threshold(table, fig.subplots())
     _suptitle(fig, "Steps to reach reward thresholds (restricted mean: a DNF counts at the budget; 95% CI)", vlm_note)
     return fig
 
 
 def figure3(curves: Sequence[SeedCurve], vlm_note: str, thresholds: Sequence[float] = (), window: int = 100
             ) -> Figure:
-    """Figure 3: per-seed training curves, one panel per arm, shared axes, one colour per seed
-    (the legend names them)."""
+    """Figure 3: per-seed training curves, one panel per arm, shared axes, one colour per seed."""
     arms = order_arms(sorted({c.arm for c in curves}))
     fig = Figure(figsize=(WIDTH_IN, 3.4), layout="constrained")
     axes = np.atleast_1d(fig.subplots(1, max(len(arms), 1), sharex=True, sharey=True, squeeze=False)[0])
     for ax, arm in zip(axes, arms, strict=False):
         mine = [c for c in curves if c.arm == arm]
-        plot_seed_curves(mine, ax, None, thresholds)
+        for c in mine:
+            ax.plot(c.steps, c.mean, color=seed_color(c.seed), alpha=0.9, linewidth=1.0, label=f"seed {c.seed}")
+        for t in thresholds:
+            ax.axhline(t, color="gray", linestyle="--", linewidth=0.7)
+        _style(ax)
         ax.set_title(f"{arm} ({len(mine)} seeds)", fontsize=SMALL + 1)
         ax.set_xlabel("timestep", fontsize=SMALL + 1)
         ax.xaxis.get_offset_text().set_fontsize(SMALL)
@@ -234,19 +201,18 @@ def save_figure(fig: Figure, out: Path, stem: str, dpi: int = 200) -> list[Path]
     return paths
 
 
-def plot_performance_profile(final_returns: Mapping[str, np.ndarray], ax: Axes | None = None, ci: float = 0.95,
-                             n_points: int = 200) -> Axes:
-    """Performance profile of the final return: per arm, the fraction of seeds whose final return is
-    at least ``tau`` (a step function of ``tau``) with a pointwise Wilson band over seeds.
-
-    ``final_returns``: arm -> shape ``(n_seeds,)`` final native returns (NaN dropped).
-    """
-    ax = ax if ax is not None else _new_ax()
+def figure_performance_profile(final_returns: Mapping[str, np.ndarray], vlm_note: str, ci: float = 0.95,
+                               n_points: int = 200) -> Figure:
+    """The performance profile of the final return: per arm (``final_returns``: arm -> shape ``(n_seeds,)``,
+    NaN dropped), the fraction of seeds whose final return is at least ``tau``, with a pointwise Wilson band."""
+    fig = Figure(figsize=(WIDTH_IN, 3.2), layout="constrained")
+    ax = fig.subplots()
+    _suptitle(fig, f"Performance profile of the final return ({100 * ci:g}% Wilson band over seeds)", vlm_note)
     arms = list(final_returns)
     finite = {a: v[np.isfinite(v)] for a, v in ((a, np.asarray(v, dtype=float)) for a, v in final_returns.items())}
     every = np.concatenate([v for v in finite.values()] or [np.zeros(0)])
     if every.size == 0:
-        return ax
+        return fig
     pad = max(1.0, 0.05 * float(every.max() - every.min()))
     taus = np.linspace(float(every.min()) - pad, float(every.max()) + pad, n_points)
     for arm, values in finite.items():
@@ -263,24 +229,12 @@ def plot_performance_profile(final_returns: Mapping[str, np.ndarray], ax: Axes |
     ax.set_ylim(-0.02, 1.02)
     ax.legend(fontsize=SMALL, loc="lower left")
     _style(ax)
-    return ax
-
-
-def figure_performance_profile(final_returns: Mapping[str, np.ndarray], vlm_note: str, ci: float = 0.95) -> Figure:
-    """The performance profile of the final return, one curve per arm."""
-    fig = Figure(figsize=(WIDTH_IN, 3.2), layout="constrained")
-    plot_performance_profile(final_returns, fig.subplots(), ci)
-    _suptitle(fig, f"Performance profile of the final return ({100 * ci:g}% Wilson band over seeds)", vlm_note)
     return fig
 
 
-def plot_per_arm(values: Mapping[str, np.ndarray], ax: Axes | None = None, ylabel: str = "", box: bool = False
-                 ) -> Axes:
-    """One column per arm: every value as a dot (spread evenly, no randomness), with a box plot if ``box``.
-
-    ``values``: arm -> shape ``(n,)`` values (NaN dropped).
-    """
-    ax = ax if ax is not None else _new_ax()
+def plot_per_arm(values: Mapping[str, np.ndarray], ax: Axes, ylabel: str = "", box: bool = False) -> None:
+    """One column per arm (``values``: arm -> shape ``(n,)``, NaN dropped): every value as a dot, spread
+    evenly, with a box plot if ``box``."""
     arms = list(values)
     for i, arm in enumerate(arms):
         v = np.asarray(values[arm], dtype=float)
@@ -296,7 +250,6 @@ def plot_per_arm(values: Mapping[str, np.ndarray], ax: Axes | None = None, ylabe
     ax.set_xlim(-0.6, len(arms) - 0.4)
     ax.set_ylabel(ylabel, fontsize=SMALL + 1)
     _style(ax)
-    return ax
 
 
 def figure_hacking(eval_lengths: Mapping[str, np.ndarray], hover: Mapping[str, np.ndarray],
@@ -320,11 +273,9 @@ def figure_hacking(eval_lengths: Mapping[str, np.ndarray], hover: Mapping[str, n
 
 
 def plot_normalised_profile(taus: np.ndarray, profile: np.ndarray, low: np.ndarray, high: np.ndarray, arm: str,
-                            arms: Sequence[str], ax: Axes | None = None) -> Axes:
-    """One arm's performance profile across tasks (``vlmrl compare``): the fraction of runs whose
-    normalised score is above ``tau`` with its band; all arguments of shape ``(n_taus,)`` but
-    ``arm`` and ``arms`` (the arms of the figure, for a stable colour)."""
-    ax = ax if ax is not None else _new_ax()
+                            arms: Sequence[str], ax: Axes) -> None:
+    """One arm's performance profile across tasks (``vlmrl compare``), arrays of shape ``(n_taus,)``;
+    ``arms``: the figure's, for a stable colour."""
     color = arm_color(arm, arms)
     ax.plot(taus, profile, color=color, linewidth=1.5, label=arm)
     ax.fill_between(taus, low, high, color=color, alpha=0.15, linewidth=0)
@@ -332,4 +283,3 @@ def plot_normalised_profile(taus: np.ndarray, profile: np.ndarray, low: np.ndarr
     ax.set_ylim(-0.02, 1.02)
     ax.legend(fontsize=SMALL, loc="lower left")
     _style(ax)
-    return ax

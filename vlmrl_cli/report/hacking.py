@@ -1,9 +1,5 @@
 """Reward-hacking section: does an arm learn to hover short of the flag for the kinematic reward?
-
-Read from tracked results only: the per-run ``eval/hover_fraction`` and ``eval/dwell_right_steps``
-(computed by ``shaping.hacking`` during the detached evaluation), the per-episode detached
-lengths, and the gap between shaped and native training return.
-"""
+Read from tracked results only (``shaping.hacking``'s eval metrics, detached lengths, shaped - native)."""
 
 from __future__ import annotations
 
@@ -26,8 +22,7 @@ NO_DIAGNOSTIC = (
 
 
 def definition(hover_from: float | None) -> str:
-    """What the section's columns mean: the hovering diagnostic past ``hover_from`` (the task's
-    ``Hover.start``), or (None: the task gives no ``Hover``) only the columns that apply.
+    """What the section's columns mean, given the task's ``Hover.start`` (None: no hovering diagnostic).
 
     Example:
         >>> definition(0.3)[:64]
@@ -51,10 +46,8 @@ def _finite(x: Any) -> np.ndarray:
 
 
 def hacking_frame(per_seed: pd.DataFrame, eval_episodes: pd.DataFrame, ci: float, timeout: int) -> pd.DataFrame:
-    """One row per arm: seeds, hover fraction (mean, max over seeds), flagged seeds with a Wilson CI,
-    mean dwell, mean shaped-minus-native gap, and the detached episode lengths (episodes, median,
-    90th percentile, share of timeouts: episodes of ``timeout`` steps, the task's time limit). NaN
-    where the runs did not log a quantity."""
+    """One row per arm: hover fraction, flagged seeds (Wilson CI), dwell, shaped - native gap and the
+    detached lengths (``timeout``: the task's time limit); NaN where the runs did not log a quantity."""
     rows = []
     for arm in order_arms(per_seed["arm"].unique().tolist()):
         d = per_seed[per_seed["arm"] == arm]

@@ -1,8 +1,10 @@
-"""``report.md``: the report's text, composed from the tables and verdicts ``writer`` computed."""
+"""The report's text: Table 2's cells and files, and ``report.md`` composed from what ``writer`` computed."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -15,9 +17,148 @@ from vlmrl_cli.core import tables
 from vlmrl_cli.report import attribution, hacking
 from vlmrl_cli.report import claims as claims_mod
 from vlmrl_cli.report.config import ReportConfig
-from vlmrl_cli.report.table2 import Table2, floor_thresholds, format_cell, format_paper_cell, to_markdown
-from vlmrl_cli.shaping.arms import DENSE, METHOD
+from vlmrl_cli.report.table2 import NEEDS_BASELINE, Table2, floor_thresholds
+from vlmrl_cli.shaping.arms import BASELINE, DENSE, METHOD
 from vlmrl_cli.tasks.base import Task
+
+
+def is_steps(metric: str) -> bool:
+    """Whether ``metric`` is a steps-to-threshold row (partial or full window, or the finishers' mean)."""
+    return metric.startswith(("steps_", "full_steps_", "finishers_steps_"))
+
+
+def _isnan(x: Any) -> bool:
+    return x is None or (isinstance(x, float) and math.isnan(x))
+
+
+def _fmt(metric: str, x: Any) -> str:
+    if _isnan(x):
+        return "—"
+    x = float(x)
+    if is_steps(metric):
+        return f"{x:,.0f}"
+    if metric in ("reliability", "eval_success", "eval_success_mean"):
+        return f"{100 * x:.0f}%"
+    return f"{x:,.1f}"
+
+
+def format_cell(c: dict[str, Any] | None) -> str:
+    """``value [low, high]`` with ``DNF k/n`` for steps and ``k/n`` for reliability."""
+    if c is None:
+        return "—"
+    metric = c["metric"]
+    c = {**c, "n": int(c["n"] or 0), "n_reached": None if _isnan(c["n_reached"]) else int(c["n_reached"])}
+    if is_steps(metric) and c["n_reached"] == 0:
+        return f"DNF {c['n']}/{c['n']}"
+    text = _fmt(metric, c["value"])
+    if not (_isnan(c["ci_low"]) or _isnan(c["ci_high"])):
+        text += f" [{_fmt(metric, c['ci_low'])}, {_fmt(metric, c['ci_high'])}]"
+    if is_steps(metric) and c["n_reached"] < c["n"]:
+        text += f" (DNF {c['n'] - c['n_reached']}/{c['n']})"
+    if metric in ("reliability", "eval_success"):
+        text += f" ({c['n_reached']}/{c['n']})"
+    if metric == "final_std" or (c["n"] == 1 and metric != "reliability"):
+        text += f" (n={c['n']})"
+    return text
+
+
+def format_speedup(s: dict[str, Any] | None) -> str:
+    if s is None:
+        return ""
+    if s["note"] == NEEDS_BASELINE:
+        return NEEDS_BASELINE
+    if _isnan(s["value"]):
+        return "— (" + s["note"] + ")" if s["note"] else "—"
+    text = f"{s['value']:.2f}x"
+    if not (_isnan(s["ci_low"]) or _isnan(s["ci_high"])):
+        text += f" [{s['ci_low']:.2f}, {s['ci_high']:.2f}]"
+    if not _isnan(s.get("p_value")):
+        text += f" (rank p={s['p_value']:.2g})"
+    return text
+
+
+def format_paper_cell(metric: str, value: Any) -> str:
+    """The paper's figure as the paper states it: no interval, and no count of our seeds.
+
+    Example:
+        >>> format_paper_cell("reliability", 1.0), format_paper_cell("eval_length", 120.0)
+        ('100%', '~120.0')
+    """
+    if _isnan(value):
+        return "—"
+    text = _fmt(metric, value)
+    return f"~{text}" if metric == "eval_length" else text
+
+
+def display_frame(table: Table2) -> pd.DataFrame:
+    """The wide table as strings: metric rows; our arms, the paper's hybrid/baseline, speedups."""
+    ci_pct = f"{100 * table.ci:g}% CI"
+    speed_arms = [a for a in table.arms if a != BASELINE] if table.has_baseline else [METHOD]
+    records = []
+    for metric, label in table.labels.items():
+        rec: dict[str, str] = {"Metric": label}
+        for arm in table.arms:
+            rec[f"{arm} (ours [{ci_pct}])"] = format_cell(table.cell(metric, arm))
+        for arm in (METHOD, BASELINE):  # the paper's two arms
+            rec[f"{arm} (paper)"] = format_paper_cell(metric, table.paper.get(metric, {}).get(arm))
+        partial = metric.startswith("steps_")  # speedups are shown beside the paper's (partial) window
+        for arm in speed_arms:
+            text = NEEDS_BASELINE if partial else ""
+            if partial and table.has_baseline:
+                text = format_speedup(table.speedup(float(metric.removeprefix("steps_")), arm))
+            rec[f"speedup {arm} (ours)"] = text
+        paper_speed = table.paper.get(metric, {}).get("speedup")
+        rec["speedup (paper)"] = f"{float(paper_speed):.1f}x" if paper_speed is not None else ""
+        records.append(rec)
+    return pd.DataFrame(records)
+
+
+def table2_markdown(table: Table2) -> str:
+    """``display_frame`` as Markdown in three narrow blocks (ours, speedups, the paper), empty rows left out."""
+    df = display_frame(table)
+    first = df.columns[0]
+    speed = [c for c in df.columns if "speedup" in c]
+    paper = [c for c in df.columns if "(paper)" in c and c not in speed]
+    ours = [c for c in df.columns[1:] if c not in speed and c not in paper]
+    parts = []
+    blocks = (("Ours ([95% CI]; steps: restricted means, a DNF counted at the budget)", ours),
+              ("Speedup vs baseline (ours: ratio of restricted means, rank-test p) and the paper's", speed),
+              ("The paper", paper))
+    for title, cols in blocks:
+        block = df[[first, *cols]]
+        block = block[block[cols].astype(str).apply(lambda r: any(v.strip() not in ("", "—") for v in r), axis=1)]
+        if cols and len(block):
+            parts += [f"*{title}*", "", tables.markdown(block), ""]
+    return "\n".join(parts)
+
+
+def table2_latex(table: Table2, caption: str = "Steps to reward thresholds and reliability, ours vs the paper."
+                 ) -> str:
+    """A ``booktabs`` LaTeX table of ``display_frame``."""
+    return tables.latex(display_frame(table), caption) + "\n"
+
+
+def table2_long(table: Table2) -> pd.DataFrame:
+    """Tidy numeric form (CSV): one row per (metric, arm), speedups as ``speedup_<threshold>`` rows."""
+    cells = table.cells.copy()
+    cells.insert(1, "label", cells["metric"].map(table.labels))
+    sp = table.speedups.copy()
+    sp.insert(1, "label", "Speedup vs baseline to " + sp["metric"].str.removeprefix("steps_"))
+    sp["metric"] = "speedup_" + sp["metric"].str.removeprefix("steps_")
+    return pd.concat([cells, sp], ignore_index=True)
+
+
+TABLE2_CAPTION = "Table 2 (recomputed): steps to reward thresholds and reliability, ours vs the paper."
+
+
+def write_table2(table: Table2, out: Path, vlm_note: str) -> list[Path]:
+    """Write ``table2.md``, ``.csv`` and ``.tex`` under ``out``, ``vlm_note`` (the VLM behind the shaped
+    arms) in each; returns their paths."""
+    paths = [out / "table2.md", out / "table2.csv", out / "table2.tex"]
+    paths[0].write_text(f"**{TABLE2_CAPTION}** {vlm_note}.\n\n" + table2_markdown(table), encoding="utf-8")
+    table2_long(table).assign(vlm=vlm_note).to_csv(paths[1], index=False)
+    paths[2].write_text(table2_latex(table, caption=f"{TABLE2_CAPTION} {vlm_note}."), encoding="utf-8")
+    return paths
 
 
 def paper_disagreement(label: str, arm: str, c: dict[str, Any] | None) -> str | None:
@@ -87,15 +228,11 @@ def family_reach(cfg: ReportConfig, family: pd.DataFrame, paper_task: bool) -> l
     return out
 
 
-def _splits(n_perm: int) -> str:
-    """The rank test's largest exact case, in words: ``C(60, 30)`` for the default."""
-    return "C(60, 30)" if n_perm == DEFAULT_N_PERM else f"{n_perm:,}"
-
-
 def _statistics_md(cfg: ReportConfig, family_size: int = 0, auc_margin: float = 5.0,
                    reach: list[str] | None = None) -> list[str]:
     ci = f"{100 * cfg.ci:g}%"
     alpha = 1 - cfg.ci
+    splits = "C(60, 30)" if cfg.n_perm == DEFAULT_N_PERM else f"{cfg.n_perm:,}"  # the rank test's largest exact case
     return [
         "## How the numbers are computed", "",
         "- Unit: every claim is per seed unless it says 'episodes'. A seed counts as a detached success when at "
@@ -111,7 +248,7 @@ def _statistics_md(cfg: ReportConfig, family_size: int = 0, auc_margin: float = 
         "the mean over the seeds that finished, is shown as its own row of Table 2 only. Beside each speedup, a "
         "Mann-Whitney U test on all seeds with each DNF censored at the budget (tied with the other DNFs, slower "
         "than every finish; a crossing after the budget is a DNF): an exact permutation p, conditional on the "
-        f"ties, when the splits of the seeds number at most {_splits(cfg.n_perm)} (every split counted; 184,756 at "
+        f"ties, when the splits of the seeds number at most {splits} (every split counted; 184,756 at "
         "10 vs 10), else the tie-corrected normal approximation, and then the table's test column says 'asymptotic'.",
         f"- Multiplicity: {multiplicity.family_line(cfg.adjust, family_size, FAMILY_WHAT)}; "
         "the claims about speedups use the same adjusted p-values. Each table shows the raw p beside the adjusted "
@@ -178,7 +315,7 @@ def _intro_md(cfg: ReportConfig, data: ExperimentData, table: Table2, per_seed: 
               "within the budget.",
               *[f"- **Floor at {t:g}:** every seed of every arm crosses {t:g} at its first complete window of "
                 f"{cfg.window} episodes, so steps to {t:g} measure how fast episodes end, not learning: read no "
-                "speedup into that row." for t in floor_thresholds(per_seed, table.thresholds, cfg.window)],
+                "speedup into that row." for t in floor_thresholds(per_seed, table.thresholds)],
               f"- Intervals: {100 * cfg.ci:g}% percentile bootstrap over seeds ({cfg.n_boot} resamples, seed "
               f"{cfg.seed}) for means; speedups by the delta method on the log ratio; score intervals for "
               "proportions of seeds (see below).", ""]
@@ -193,7 +330,7 @@ def report_md(cfg: ReportConfig, data: ExperimentData, table: Table2, results: S
     parts = _intro_md(cfg, data, table, per_seed, note, task)
     if warns:
         parts += ["## Warnings", "", *[f"- {w}" for w in warns], ""]
-    parts += ["## Table 2: ours vs the paper" if paper_task else "## Table 2 (ours)", "", to_markdown(table)]
+    parts += ["## Table 2: ours vs the paper" if paper_task else "## Table 2 (ours)", "", table2_markdown(table)]
     if not table.has_baseline:
         parts += ["Speedups need the `baseline` arm, which this experiment does not have.", ""]
     parts += ["Files: [table2.md](table2.md), [table2.csv](table2.csv), [table2.tex](table2.tex).", ""]

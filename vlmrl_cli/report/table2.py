@@ -1,18 +1,11 @@
-"""Table 2 of the paper (steps to reward thresholds, final reliability), ours beside the paper's.
-
-``per_seed_table`` turns loaded runs into one row per (arm, seed); ``build_table2`` summarises
-it per arm (mean over seeds that reached each threshold with a bootstrap CI, DNF counts, the
-same with a full 100-episode window, speedup over ``baseline`` with a censored rank test,
-reliability and per-seed detached success with Wilson CIs, detached evaluation, final-return
-IQM and spread); ``to_markdown`` / ``to_latex`` / ``to_csv`` render it.
-"""
+"""Table 2 of the paper (steps to reward thresholds, final reliability), ours beside the paper's:
+``per_seed_table`` (one row per run) -> ``build_table2`` (per arm). See docs/commands/report.md."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -24,7 +17,6 @@ from vlmrl_cli.analysis.proportions import DETACHED_SUCCESS_CUT, detached_succes
 from vlmrl_cli.analysis.ranks import DEFAULT_N_PERM, RankTest, censored_rank_test
 from vlmrl_cli.analysis.survival import LogRank, censored_logrank
 from vlmrl_cli.analysis.thresholds import full_window_steps_to_threshold, steps_to_threshold
-from vlmrl_cli.core import tables
 from vlmrl_cli.shaping.arms import ARMS, BASELINE, METHOD, ArmSpec, report_order
 
 NEEDS_BASELINE = "needs baseline arm"
@@ -57,19 +49,11 @@ def finishers_key(threshold: float) -> str:
     return f"finishers_{threshold_key(threshold)}"
 
 
-def is_steps(metric: str) -> bool:
-    """Whether ``metric`` is a steps-to-threshold row (partial or full window, or the finishers' mean)."""
-    return metric.startswith(("steps_", "full_steps_", "finishers_steps_"))
-
-
 def per_seed_table(data: ExperimentData, thresholds: Sequence[float], window: int = 100,
                    min_episodes: int = 1, detached_cut: float = DETACHED_SUCCESS_CUT) -> pd.DataFrame:
-    """One row per run: arm, seed, run_id, config_hash, budget, steps to each threshold (NaN = DNF),
-    the same with a full window (``full_steps_*``), final return (mean of the last ``window``
-    episodes), the learning-curve area (``auc``: mean native return over the budget, return units),
-    the step at which the first complete window ends (``first_window_step``), shaped minus native
-    return over those episodes, number of episodes, the eval
-    metrics and ``detached_success`` (1 when the eval success rate is at least ``detached_cut``)."""
+    """One row per run: steps to each threshold (NaN = DNF; ``full_steps_*``: full windows only), final
+    return (last ``window`` episodes), ``auc`` (mean native return over the budget), eval metrics and
+    ``detached_success`` (1 when the eval success rate is at least ``detached_cut``)."""
     rows = []
     by_run = dict(tuple(data.episodes.groupby("run_id", sort=False)))
     for run in data.runs.itertuples(index=False):
@@ -86,14 +70,11 @@ def per_seed_table(data: ExperimentData, thresholds: Sequence[float], window: in
         budget = float(run.budget) if pd.notna(run.budget) else math.inf
         lengths = ep["length"].to_numpy(dtype=float) if "length" in ep else np.full(len(ep), np.nan)
         row["auc"] = censored.learning_curve_area(ts, ret, lengths, int(budget) if math.isfinite(budget) else 2**62)
-        # the step at which the first complete window of episodes ends (a floor for every threshold)
         row["first_window_step"] = float(ts[window - 1]) if len(ts) >= window else float("nan")
         shaped = ep["shaped_return"].to_numpy(dtype=float) if "shaped_return" in ep else np.full(len(ep), np.nan)
         row["shaped_gap"] = stats.final_return(shaped - ret, window)
         row["episodes"] = len(ep)
-        row["eval_success_rate"] = run.eval_success_rate
-        row["eval_mean_length"] = run.eval_mean_length
-        row["eval_mean_return"] = run.eval_mean_return
+        row |= {k: getattr(run, k) for k in ("eval_success_rate", "eval_mean_length", "eval_mean_return")}
         row["detached_success"] = float(detached_successes([run.eval_success_rate], detached_cut)[0])
         row["hover_fraction"] = getattr(run, "eval_hover_fraction", float("nan"))
         row["dwell_right_steps"] = getattr(run, "eval_dwell_right_steps", float("nan"))
@@ -155,10 +136,9 @@ def _cell(metric: str, arm: str, est: stats.Estimate, paper: Any, n: int, n_reac
             "n_reached": n_reached, "paper": float(paper) if paper is not None else float("nan"), "note": est.note}
 
 
-def floor_thresholds(per_seed: pd.DataFrame, thresholds: Sequence[float], window: int = 100) -> list[float]:
-    """The thresholds that every seed of every arm crosses at its first complete window of ``window``
-    episodes: a steps-to-threshold there measures how fast episodes end, not learning, and no
-    speedup can be read from it.
+def floor_thresholds(per_seed: pd.DataFrame, thresholds: Sequence[float]) -> list[float]:
+    """The thresholds every seed of every arm crosses at its first complete window (floors: steps
+    there measure how fast episodes end, not learning).
 
     Example:
         >>> df = pd.DataFrame({"full_steps_-190": [500.0, 510.0], "full_steps_-130": [500.0, 900.0],
@@ -192,12 +172,8 @@ def build_table2(
 ) -> Table2:
     """Table 2 from ``per_seed`` (see ``per_seed_table``) and per-episode eval lengths (may be empty).
 
-    Reliability is the fraction of seeds that reached the highest threshold (the paper: -130);
-    detached success the fraction of seeds whose detached success rate is at least
-    ``detached_cut``; both with Wilson intervals over seeds. Detached eval mean length uses the
-    per-episode lengths when logged (pooled over seeds), else one value per seed. ``rng``: one
-    shared generator, or ``Streams`` for one stream per (metric, arm) so that no cell's interval
-    depends on which other cells exist. ``registry``: the arms whose report order the columns follow.
+    ``rng``: one shared generator, or ``Streams`` for one stream per (metric, arm) so that no cell's
+    interval depends on which other cells exist; ``registry``: the arms whose order the columns follow.
     """
     arms = tuple(order_arms(per_seed["arm"].unique().tolist(), registry))
     labels = table2_labels(thresholds, window, detached_cut)
@@ -241,8 +217,8 @@ def table2_labels(thresholds: Sequence[float], window: int = 100, detached_cut: 
 
 def _steps_cells(d: pd.DataFrame, arm: str, reported: dict[str, Any], thresholds: Sequence[float],
                  rng: np.random.Generator | stats.Streams, n_boot: int, ci: float) -> list[dict[str, Any]]:
-    """One arm's steps to each threshold (``d``: its seeds' rows): the restricted mean with DNF at
-    the budget, the same with a full window, and the paper's mean over the seeds that finished."""
+    """One arm's restricted mean steps (DNF at the budget) to each threshold, partial and full window,
+    and the paper's mean over the seeds that finished."""
     cells = []
     budget = d["budget"].to_numpy(dtype=float)
     for t in thresholds:
@@ -263,8 +239,7 @@ def _steps_cells(d: pd.DataFrame, arm: str, reported: dict[str, Any], thresholds
 
 def _success_cells(d: pd.DataFrame, arm: str, reported: dict[str, Any], thresholds: Sequence[float], ci: float,
                    detached_cut: float) -> list[dict[str, Any]]:
-    """One arm's reliability (seeds reaching the top threshold), detached success (seeds whose
-    detached success rate reaches ``detached_cut``), both with Wilson intervals, and the mean rate."""
+    """One arm's reliability and detached success (seeds; Wilson intervals), and its mean success rate."""
     budget = d["budget"].to_numpy(dtype=float)
     reached = censored.reached(d[threshold_key(max(thresholds))].to_numpy(dtype=float), budget)
     rel = stats.reliability(reached, ci)
@@ -286,8 +261,7 @@ def _success_cells(d: pd.DataFrame, arm: str, reported: dict[str, Any], threshol
 
 def _length_cell(d: pd.DataFrame, ev: pd.DataFrame, arm: str, reported: dict[str, Any], thresholds: Sequence[float],
                  rng: np.random.Generator | stats.Streams, n_boot: int, ci: float) -> dict[str, Any]:
-    """One arm's detached mean episode length: over its logged episodes ``ev`` pooled over seeds,
-    else over its seeds' means."""
+    """One arm's detached mean episode length: its episodes ``ev`` pooled over seeds, else its seeds' means."""
     length_rng = stats.stream(rng, f"table2/eval_length/{arm}")
     if len(ev):
         length = stats.mean_ci(ev["length"].to_numpy(dtype=float), length_rng, n_boot, ci)
@@ -300,8 +274,7 @@ def _length_cell(d: pd.DataFrame, ev: pd.DataFrame, arm: str, reported: dict[str
 
 def _final_cells(d: pd.DataFrame, arm: str, window: int, rng: np.random.Generator | stats.Streams, n_boot: int,
                  ci: float) -> list[dict[str, Any]]:
-    """One arm's final return (the last ``window`` episodes of each seed): its IQM over seeds with a
-    bootstrap CI, and its standard deviation across seeds."""
+    """One arm's final return over seeds: its IQM with a bootstrap CI, and its standard deviation."""
     final = d["final_return"].to_numpy(dtype=float)
     iqm = stats.iqm_ci(final, stats.stream(rng, f"table2/final_iqm/{arm}"), n_boot, ci)
     fin = final[np.isfinite(final)]
@@ -317,8 +290,8 @@ SPEED_COLUMNS = ("metric", "arm", "value", "ci_low", "ci_high", "n", "paper", "n
 def _speedup_rows(per_seed: pd.DataFrame, arms: Sequence[str], reported: dict[str, Any], thresholds: Sequence[float],
                   rng: np.random.Generator | stats.Streams, n_boot: int, ci: float, n_perm: int
                   ) -> list[dict[str, Any]]:
-    """Every other arm's speedup over the baseline to each threshold, with its censored rank test
-    (NaN, and a note saying so, without a baseline); the paper's speedup beside the hybrid's."""
+    """Every other arm's speedup over the baseline to each threshold with its censored rank test (NaN
+    without a baseline); the paper's speedup beside the hybrid's."""
     rows: list[dict[str, Any]] = []
     for t in thresholds:
         paper = _paper_steps(reported, t).get("speedup")
@@ -337,18 +310,12 @@ def _speedup_rows(per_seed: pd.DataFrame, arms: Sequence[str], reported: dict[st
     return rows
 
 
-def speedup_key(threshold: float, arm: str, ref: str) -> str:
-    """The random stream of one speedup (shared by Table 2 and the attribution table, so both show one CI)."""
-    return f"speedup_{threshold:g}/{arm}-vs-{ref}"
-
-
 def compare_steps(
     per_seed: pd.DataFrame, arm: str, ref: str, threshold: float, rng: np.random.Generator | stats.Streams,
     n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, n_perm: int = DEFAULT_N_PERM,
 ) -> tuple[stats.Estimate, RankTest]:
-    """Speedup of ``arm`` over ``ref`` to ``threshold`` (ratio of restricted mean steps, DNF at the
-    budget, ``analysis/censored.py``; bootstrap CI) and the censored rank test of ``arm`` vs ``ref``
-    (DNF seeds kept, tied above every finish): ``judge_steps`` without its verdict."""
+    """Speedup of ``arm`` over ``ref`` to ``threshold`` (ratio of restricted mean steps, bootstrap CI)
+    and the censored rank test: ``judge_steps`` without its verdict."""
     judged, test, _ = judge_steps(per_seed, arm, ref, threshold, rng, n_boot, ci, n_perm)
     return judged.speedup, test
 
@@ -359,156 +326,14 @@ def judge_steps(
     margin: float = censored.DEFAULT_MARGIN,
 ) -> tuple[censored.Verdict, RankTest, LogRank]:
     """``compare_steps``, its verdict on the raw rank-test p (``censored.steps_verdict``; a family's
-    adjustment re-judges it later) and the log-rank test beside it. The speedup is the same draw as
-    ``compare_steps``' (one stream), then the ``1 - 2 alpha`` interval of the equivalence test."""
+    adjustment re-judges it later) and the log-rank test beside it."""
     key = threshold_key(threshold)
     mine, theirs = per_seed["arm"] == arm, per_seed["arm"] == ref
     a, r = per_seed.loc[mine, key].to_numpy(dtype=float), per_seed.loc[theirs, key].to_numpy(dtype=float)
     budget_a = per_seed.loc[mine, "budget"].to_numpy(dtype=float)
     budget_r = per_seed.loc[theirs, "budget"].to_numpy(dtype=float)
-    skey = speedup_key(threshold, arm, ref)
+    skey = f"speedup_{threshold:g}/{arm}-vs-{ref}"  # one stream: Table 2 and the attribution table show one CI
     test = censored_rank_test(a, r, stats.stream(rng, skey + "/rank"), n_perm, budget_a, budget_r)
     judged = censored.steps_verdict(r, a, budget_r, budget_a, test.p_value, stats.stream(rng, skey), n_boot, ci,
                                     alpha, margin, direction=test.p_faster - 0.5)
     return judged, test, censored_logrank(a, r, budget_a, budget_r)
-
-
-# ---- formatting -----------------------------------------------------------------------------
-
-
-def _isnan(x: Any) -> bool:
-    return x is None or (isinstance(x, float) and math.isnan(x))
-
-
-def _fmt(metric: str, x: Any) -> str:
-    if _isnan(x):
-        return "—"
-    x = float(x)
-    if is_steps(metric):
-        return f"{x:,.0f}"
-    if metric in ("reliability", "eval_success", "eval_success_mean"):
-        return f"{100 * x:.0f}%"
-    return f"{x:,.1f}"
-
-
-def format_cell(c: dict[str, Any] | None) -> str:
-    """``value [low, high]`` with ``DNF k/n`` for steps and ``k/n`` for reliability."""
-    if c is None:
-        return "—"
-    metric = c["metric"]
-    c = {**c, "n": int(c["n"] or 0), "n_reached": None if _isnan(c["n_reached"]) else int(c["n_reached"])}
-    if is_steps(metric) and c["n_reached"] == 0:
-        return f"DNF {c['n']}/{c['n']}"
-    text = _fmt(metric, c["value"])
-    if not (_isnan(c["ci_low"]) or _isnan(c["ci_high"])):
-        text += f" [{_fmt(metric, c['ci_low'])}, {_fmt(metric, c['ci_high'])}]"
-    if is_steps(metric) and c["n_reached"] < c["n"]:
-        text += f" (DNF {c['n'] - c['n_reached']}/{c['n']})"
-    if metric in ("reliability", "eval_success"):
-        text += f" ({c['n_reached']}/{c['n']})"
-    if metric == "final_std" or (c["n"] == 1 and metric != "reliability"):
-        text += f" (n={c['n']})"
-    return text
-
-
-def format_speedup(s: dict[str, Any] | None) -> str:
-    if s is None:
-        return ""
-    if s["note"] == NEEDS_BASELINE:
-        return NEEDS_BASELINE
-    if _isnan(s["value"]):
-        return "— (" + s["note"] + ")" if s["note"] else "—"
-    text = f"{s['value']:.2f}x"
-    if not (_isnan(s["ci_low"]) or _isnan(s["ci_high"])):
-        text += f" [{s['ci_low']:.2f}, {s['ci_high']:.2f}]"
-    if not _isnan(s.get("p_value")):
-        text += f" (rank p={s['p_value']:.2g})"
-    return text
-
-
-def format_paper_cell(metric: str, value: Any) -> str:
-    """The paper's figure as the paper states it: no interval, and no count of our seeds.
-
-    Example:
-        >>> format_paper_cell("reliability", 1.0), format_paper_cell("eval_length", 120.0)
-        ('100%', '~120.0')
-    """
-    if _isnan(value):
-        return "—"
-    text = _fmt(metric, value)
-    return f"~{text}" if metric == "eval_length" else text
-
-
-def display_frame(table: Table2) -> pd.DataFrame:
-    """The wide table as strings: metric rows; our arms, the paper's hybrid/baseline, speedups."""
-    ci_pct = f"{100 * table.ci:g}% CI"
-    speed_arms = [a for a in table.arms if a != BASELINE] if table.has_baseline else [METHOD]
-    records = []
-    for metric, label in table.labels.items():
-        rec: dict[str, str] = {"Metric": label}
-        for arm in table.arms:
-            rec[f"{arm} (ours [{ci_pct}])"] = format_cell(table.cell(metric, arm))
-        for arm in (METHOD, BASELINE):  # the paper's two arms
-            rec[f"{arm} (paper)"] = format_paper_cell(metric, table.paper.get(metric, {}).get(arm))
-        partial = metric.startswith("steps_")  # speedups are shown beside the paper's (partial) window
-        for arm in speed_arms:
-            col = f"speedup {arm} (ours)"
-            if not table.has_baseline:
-                rec[col] = NEEDS_BASELINE if partial else ""
-            else:
-                rec[col] = format_speedup(table.speedup(float(metric.removeprefix("steps_")), arm)) if partial else ""
-        paper_speed = table.paper.get(metric, {}).get("speedup")
-        rec["speedup (paper)"] = f"{float(paper_speed):.1f}x" if paper_speed is not None else ""
-        records.append(rec)
-    return pd.DataFrame(records)
-
-
-def to_markdown(table: Table2) -> str:
-    """GitHub Markdown of ``display_frame`` in three narrow blocks (ours, speedups, the paper), each
-    readable in a terminal; rows empty in a block are left out of it (no ``tabulate`` dependency)."""
-    df = display_frame(table)
-    first = df.columns[0]
-    speed = [c for c in df.columns if "speedup" in c]
-    paper = [c for c in df.columns if "(paper)" in c and c not in speed]
-    ours = [c for c in df.columns[1:] if c not in speed and c not in paper]
-    parts = []
-    blocks = (("Ours ([95% CI]; steps: restricted means, a DNF counted at the budget)", ours),
-              ("Speedup vs baseline (ours: ratio of restricted means, rank-test p) and the paper's", speed),
-              ("The paper", paper))
-    for title, cols in blocks:
-        block = df[[first, *cols]]
-        block = block[block[cols].astype(str).apply(lambda r: any(v.strip() not in ("", "—") for v in r), axis=1)]
-        if cols and len(block):
-            parts += [f"*{title}*", "", tables.markdown(block), ""]
-    return "\n".join(parts)
-
-
-def to_latex(table: Table2, caption: str = "Steps to reward thresholds and reliability, ours vs the paper.") -> str:
-    """A ``booktabs`` LaTeX table of ``display_frame``."""
-    return tables.latex(display_frame(table), caption) + "\n"
-
-
-def to_long(table: Table2) -> pd.DataFrame:
-    """Tidy numeric form (CSV): one row per (metric, arm), speedups as ``speedup_<threshold>`` rows."""
-    cells = table.cells.copy()
-    cells.insert(1, "label", cells["metric"].map(table.labels))
-    sp = table.speedups.copy()
-    sp.insert(1, "label", "Speedup vs baseline to " + sp["metric"].str.removeprefix("steps_"))
-    sp["metric"] = "speedup_" + sp["metric"].str.removeprefix("steps_")
-    return pd.concat([cells, sp], ignore_index=True)
-
-
-TABLE2_CAPTION = "Table 2 (recomputed): steps to reward thresholds and reliability, ours vs the paper."
-
-
-def write_table2(table: Table2, out: Path, vlm_note: str) -> list[Path]:
-    """Write ``table2.md``, ``table2.csv`` and ``table2.tex`` under ``out``; returns their paths.
-
-    ``vlm_note`` names the VLM behind the shaped arms (SIMULATED said plainly); it is the
-    caption's second sentence in Markdown and LaTeX and a ``vlm`` column in the CSV.
-    """
-    paths = [out / "table2.md", out / "table2.csv", out / "table2.tex"]
-    paths[0].write_text(f"**{TABLE2_CAPTION}** {vlm_note}.\n\n" + to_markdown(table), encoding="utf-8")
-    to_long(table).assign(vlm=vlm_note).to_csv(paths[1], index=False)
-    paths[2].write_text(to_latex(table, caption=f"{TABLE2_CAPTION} {vlm_note}."), encoding="utf-8")
-    return paths

@@ -22,15 +22,13 @@ from vlmrl_cli.core.provenance import config_hash, flatten, to_jsonable
 from vlmrl_cli.report import attribution, figures, hacking
 from vlmrl_cli.report import claims as claims_mod
 from vlmrl_cli.report.config import ReportConfig, check_report
-from vlmrl_cli.report.markdown import report_md
-from vlmrl_cli.report.table2 import BASELINE, Table2, build_table2, per_seed_table, write_table2
+from vlmrl_cli.report.markdown import report_md, write_table2
+from vlmrl_cli.report.table2 import Table2, build_table2, per_seed_table
 from vlmrl_cli.shaping.arms import ARMS, ArmSpec
 from vlmrl_cli.shaping.hacking import HOVER_FLAG
 from vlmrl_cli.tasks.base import Task, TaskLookup
 from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
-
-DEFAULT_REPORTED = paper.REPORTED
 
 
 @dataclass(frozen=True)
@@ -45,7 +43,7 @@ class ReportResult:
 
 def load_reported(path: Path | None) -> dict[str, Any]:
     """The paper's numbers (``vlmrl_cli/paper/reported.json``); ``BadInput`` when missing or malformed."""
-    p = path or DEFAULT_REPORTED
+    p = path or paper.REPORTED
     try:
         return dict(json.loads(p.read_text(encoding="utf-8")))
     except (OSError, json.JSONDecodeError) as exc:
@@ -80,10 +78,8 @@ def vlm_note(runs: pd.DataFrame) -> str:
 
 
 def check_paths(runs: pd.DataFrame, allow_mixed: bool) -> list[str]:
-    """Runs computed on different numeric paths (``analysis.load.numeric_path``: the pin, its
-    values, torch's capability) train different agents from one config: ``BadInput`` naming
-    the paths, unless ``allow_mixed``, where it is a warning instead. Several CPU models on one
-    path are expected (the pin's purpose) and are only listed in per_seed.csv."""
+    """``BadInput`` (a warning if ``allow_mixed``) when the runs come from several numeric paths
+    (``analysis.load.numeric_path``), which train different agents from one config."""
     if "numeric_path" not in runs or runs.empty:
         return []
     counts = runs["numeric_path"].astype(str).value_counts().sort_index()
@@ -113,9 +109,8 @@ def _warnings(data: ExperimentData, table: Table2, allow_mixed_paths: bool) -> l
 
 
 def for_task(cfg: ReportConfig, task: Task) -> ReportConfig:
-    """``cfg`` with the thresholds and window it leaves unset (None) taken from ``task``; given
-    ones are kept, whatever they are (``--window 100`` on Acrobot means 100). A window taken from
-    the task also caps ``min_episodes`` at it.
+    """``cfg`` with the thresholds and window it leaves unset (None) taken from ``task``; a window taken
+    from the task also caps ``min_episodes`` at it.
 
     Example:
         >>> from vlmrl_cli.tasks.registry import get_task
@@ -137,8 +132,7 @@ REPORTS_SUFFIX = "-reports"  # report runs live in their own experiment, beside 
 
 def _log_report_run(client: Any, data: ExperimentData, cfg: ReportConfig, files: Sequence[Path], note: str,
                     simulated: bool) -> str:
-    """One report run per (settings, output folder), in the experiment ``<experiment>-reports`` so
-    that reports never pile up among the training runs; rerunning the same report updates its run."""
+    """The report run of (settings, output folder) in ``<experiment>-reports``, updated on a rerun."""
     experiment_id = store.ensure_experiment(client, f"{data.experiment_name}{REPORTS_SUFFIX}")
     key = config_hash({"cfg": to_jsonable(cfg), "out": str(cfg.out.absolute())})
     tags = {schema.TAG_KIND: schema.KIND_REPORT, schema.TAG_REPORT_EXPERIMENT: data.experiment_name,
@@ -188,13 +182,8 @@ def _figures(cfg: ReportConfig, data: ExperimentData, table: Table2, per_seed: p
 
 
 def write_report(cfg: ReportConfig, tasks: TaskLookup, registry: Mapping[str, ArmSpec] = ARMS) -> ReportResult:
-    """Read the experiment's finished runs and write every report file under ``cfg.out``; ``tasks``:
-    the command's registry, which resolves the task the runs recorded; ``registry``: the arms whose
-    order and comparisons Table 2 and the attribution table follow.
-
-    Raises:
-        BadInput: bad settings, unwritable ``out``, unreachable store, missing or empty experiment.
-    """
+    """Read the experiment's finished runs and write every report file under ``cfg.out``; ``tasks``
+    resolves the task the runs recorded, ``registry`` gives the arms' order and comparisons."""
     check_report(cfg)
     check_out_folder(cfg.out)  # before touching MLflow, so a bad --out fails fast
     reported = load_reported(cfg.reported)
@@ -244,4 +233,4 @@ def write_report(cfg: ReportConfig, tasks: TaskLookup, registry: Mapping[str, Ar
     return ReportResult(out, tuple(files), table, tuple(results), run_id, tuple(warns))
 
 
-__all__ = ["BASELINE", "ReportConfig", "ReportResult", "write_report"]
+__all__ = ["ReportConfig", "ReportResult", "write_report"]

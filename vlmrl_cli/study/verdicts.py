@@ -20,10 +20,10 @@ from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST
 from vlmrl_cli.analysis.ranks import censored_rank_test
 from vlmrl_cli.calibration.regimes import Regime
 from vlmrl_cli.report import attribution
+from vlmrl_cli.report.markdown import format_cell
 from vlmrl_cli.report.table2 import (
     build_table2,
     compare_steps,
-    format_cell,
     per_seed_table,
     threshold_key,
 )
