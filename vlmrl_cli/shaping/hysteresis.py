@@ -7,20 +7,12 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class LockState:
-    """The lock of one episode.
-
-    ``level`` is the locked baseline potential (dimensionless, starts at 0); ``candidate`` the
-    raw potential of the latest label and ``count`` how many consecutive labels agreed on it.
-    """
+    """The lock of one episode (the default: its start): ``level`` the locked potential,
+    ``candidate`` the latest label's raw potential, ``count`` how many labels in a row agreed on it."""
 
     level: float = 0.0
     candidate: float | None = None
     count: int = 0
-
-    @classmethod
-    def reset(cls) -> LockState:
-        """The state at the start of an episode: nothing confirmed, level 0."""
-        return cls()
 
 
 def lock_step(state: LockState, label_potential: float, confirm: int) -> LockState:
@@ -32,7 +24,7 @@ def lock_step(state: LockState, label_potential: float, confirm: int) -> LockSta
     within the episode, whatever the VLM says afterwards (flicker cannot undo a milestone).
 
     Example:
-        >>> s = LockState.reset()
+        >>> s = LockState()
         >>> for p in (0.3, 0.3, 0.0, 0.1):
         ...     s = lock_step(s, p, confirm=2)
         >>> s.level

@@ -1,36 +1,8 @@
 """The macro-semantic potential Phi(s) (paper Section 3.2), built from camera views only.
 
-``SemanticOracle`` is shared by all envs of one run. It holds the Visual Prototype Cache:
-every frame the VLM labelled, with its features, label and raw potential. At a labelling step
-it reuses the label of an identical frame (and, with ``reuse_radius > 0``, of the nearest
-prototype within that feature distance) and asks the VLM otherwise. ``phi_rbf`` smooths the
-prototypes' raw potentials with an ``RBFField`` (``rbf_potential`` kept up to date per frame
-key as prototypes arrive), so the per-step cost is a dict lookup.
-
-One labelling round per vector step (issue 53): the envs of a run register the views they will
-label in this step (``request``, in the order the labels are then taken), ``fetch`` asks the VLM
-about those a label may need in ONE call (``VLMClient.ask_many``), and the labels are then taken
-env by env exactly as one env at a time would take them (``label``), the asked answers read from
-the round instead of the VLM. So the round changes when the VLM is asked, never a label, a
-prototype or a potential: a deterministic VLM may be asked about a frame that an earlier env's
-new prototype then covers (its answer goes unused), a stochastic one is asked every labelling
-view in the same order. ``max_queries`` caps the labels asked of the VLM in a run; past it a
-label is the nearest prototype's (RL-VLM-F's budget is the model: at most 20,000 labels in 1M
-steps).
-
-``EpisodePotential`` is the per-env part: when to label (every ``query_every`` steps, step 0
-of an episode included), the hysteresis lock, and the potential of the arm:
-
-============================  ======================================================
-arm (source, rbf, lock)       Phi(s)
-============================  ======================================================
-hybrid (MCQ, rbf, lock)       max(lock level, Phi_rbf(s))
-hybrid-no-lock (MCQ, rbf)     Phi_rbf(s)
-hybrid-no-rbf (MCQ, lock)     max(lock level, latest label's raw potential)
-vision-float (FLOAT)          latest float potential (parsed number mapped to [0, 1])
-============================  ======================================================
-
-Nothing here sees the environment state: the only input is a ``FrameView``.
+``SemanticOracle`` (one per run) holds the visual prototype cache and asks the VLM, one
+labelling round per vector step; ``EpisodePotential`` (one per env) holds the labelling schedule,
+the lock and the arm's combination. See docs/method.md for both.
 """
 
 from __future__ import annotations
@@ -53,31 +25,13 @@ from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.parsers import parse_float, parse_mcq
 from vlmrl_cli.vlm.prompts import Milestones, NumberQuestions
 
-STAT_KEYS: tuple[str, ...] = (
-    schema.METRIC_VLM_QUERIES,
-    schema.METRIC_VLM_CACHE_HITS,
-    schema.METRIC_VLM_PROTOTYPES,
-    schema.METRIC_VLM_LABEL_REUSES,
-    schema.METRIC_VLM_PARSE_FAILURES,
-    schema.METRIC_VLM_BACKEND_CALLS,
-    schema.METRIC_VLM_BACKEND_FRAMES,
-    schema.METRIC_VLM_LARGEST_BATCH,
-    schema.METRIC_VLM_BACKEND_S,
-    schema.METRIC_VLM_BUDGET_LABELS,
-    schema.METRIC_VLM_SCORED,
-    schema.METRIC_VLM_GENERATED,
-)
-
 
 class SemanticOracle:
-    """The VLM behind a Visual Prototype Cache, shared by the envs of one run.
+    """The VLM behind a visual prototype cache, shared by the envs of one run.
 
-    ``source`` picks the prompt: ``MCQ`` (label -> ``cfg.potential_of(label)``) or ``FLOAT``
-    (the parsed number through ``numbers.potential``). ``rbf`` says whether arms read the smoothed
-    ``phi_rbf`` or the raw label potentials. Unparsed answers count as parse failures and add
-    no prototype. ``milestones``: the task's MCQ vocabulary and prompt; ``feature_dim``: the size
-    of its frames' features (``features.feature_dim``); ``numbers``: the task's float question
-    (needed by the FLOAT source only).
+    ``source`` picks the prompt: ``MCQ`` (label -> ``cfg.potential_of(label)``) or ``FLOAT`` (the
+    parsed number through ``numbers.potential``, the task's float question). Unparsed answers count
+    as parse failures and add no prototype.
     """
 
     def __init__(self, client: VLMClient, cfg: ShapingConfig, source: PotentialSource, milestones: Milestones,
@@ -140,20 +94,14 @@ class SemanticOracle:
     def prototypes(self) -> int:
         return self._n
 
-    def prototype_potentials(self) -> np.ndarray:
-        """The raw potentials of the cached prototypes, shape (N,), in insertion order."""
-        return self._potentials[: self._n].copy()
-
     def request(self, view: FrameView) -> None:
         """Say that ``view`` is labelled in this vector step; requests come in the order their
         labels are then taken (env by env; an env's step before its reset)."""
         self._requests.append(view)
 
     def fetch(self) -> None:
-        """Ask the VLM, in one call, about every requested view whose label may need it: all of
-        them for a stochastic VLM; else those neither labelled nor within ``reuse_radius`` of a
-        prototype now, each frame once, no more than the budget has left. Labels taken after
-        this read the answers from here (``label``)."""
+        """Ask the VLM, in one call, about every requested view whose label may need it (all of
+        them for a stochastic VLM), within the budget; ``label`` then reads the answers."""
         views, self._requests = self._requests, []
         self._fetched.clear()  # what an earlier round fetched and no label took
         self._fetched_in_order.clear()
@@ -180,14 +128,10 @@ class SemanticOracle:
     def label(self, view: FrameView) -> float | None:
         """The raw potential of the view's label (reused or asked), or None if unparsed.
 
-        A frame already labelled reuses its own label: a deterministic VLM (greedy decoding,
-        the simulated one) answers an identical frame identically, so this changes no label.
-        With ``reuse_radius > 0`` the nearest prototype's label is also reused for frames within
-        that feature distance, which saves queries but can change labels near zone edges. A
-        stochastic VLM's client (``client.stochastic``) is asked at every labelling step, and its
-        newest answer about a frame replaces that prototype's potential. Once ``max_queries``
-        labels were asked, the label is the nearest prototype's, at any distance (None before
-        the first prototype).
+        A deterministic VLM's label of a frame is reused (and, with ``reuse_radius > 0``, the
+        nearest prototype's within that distance); a stochastic VLM is asked every time and its
+        newest answer replaces the prototype's potential. Past ``max_queries`` the label is the
+        nearest prototype's, at any distance (None before the first prototype).
         """
         known = self._label_of.get(view.key)
         if known is not None and not self._stochastic:
@@ -282,7 +226,7 @@ class SemanticOracle:
         return self._field.value
 
     def stats(self) -> dict[str, float]:
-        """Counters since construction, under the keys of ``STAT_KEYS``."""
+        """Counters since construction."""
         return {
             schema.METRIC_VLM_QUERIES: float(self._queries),
             schema.METRIC_VLM_CACHE_HITS: float(self._cache_hits),
@@ -300,18 +244,15 @@ class SemanticOracle:
 
 
 class EpisodePotential:
-    """Phi(s) of one env: labelling schedule, hysteresis lock and the arm's combination.
-
-    Call ``reset(view)`` at the start of each episode (it labels step 0 and resets the lock)
-    and ``step(view)`` with the view of every next state; both return Phi of that state.
-    """
+    """Phi(s) of one env: ``reset(view)`` at an episode's start (it labels step 0 and resets the
+    lock), ``step(view)`` with every next state's view; both return Phi of that state."""
 
     def __init__(self, oracle: SemanticOracle, lock: bool) -> None:
         self.oracle = oracle
         self.lock = lock
         self.query_every = oracle.cfg.query_every
         self.confirm = oracle.cfg.confirm
-        self.lock_state = LockState.reset()
+        self.lock_state = LockState()
         self.held = 0.0  # the latest label's raw potential, held between labels
         self.steps_since_label = 0
         # the oracle's RBF field's value(key, features), looked up once (None without the RBF)
@@ -327,18 +268,16 @@ class EpisodePotential:
             self.oracle.request(view)
 
     def reset(self, view: FrameView) -> float:
-        self.lock_state = LockState.reset()
+        self.lock_state = LockState()
         self.held = 0.0
-        self.steps_since_label = 0
-        self._label(view)
-        return self._phi(view)
+        self.steps_since_label = self.query_every - 1  # so that ``step`` labels the reset's view
+        return self.step(view)
 
     def step(self, view: FrameView) -> float:
         self.steps_since_label += 1
         if self.steps_since_label >= self.query_every:
             self.steps_since_label = 0
             self._label(view)
-        # _phi, inlined: this runs every env step
         base = self._rbf_value(view.key, view.features) if self._rbf_value is not None else self.held
         return max(self.lock_state.level, base) if self.lock else base
 
@@ -349,7 +288,3 @@ class EpisodePotential:
         self.held = potential
         if self.lock:
             self.lock_state = lock_step(self.lock_state, potential, self.confirm)
-
-    def _phi(self, view: FrameView) -> float:
-        base = self.oracle.phi_rbf(view) if self.oracle.rbf else self.held
-        return max(self.lock_state.level, base) if self.lock else base
