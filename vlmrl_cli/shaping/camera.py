@@ -1,11 +1,6 @@
-"""The simulator's camera: the only component of the visual pipeline that knows the state.
-
-A task's camera (``Task.camera``) snaps the simulator's state to a grid of cells, renders
-each cell once and memoises the cell's SHA-256 and features (``CellCamera``). Pixels are kept
-in a small LRU and re-rendered on demand. Everything downstream (features, VLM, RBF, lock)
-receives a ``FrameView`` that carries no state: this is the modality separation of paper
-Section 3.3. MountainCar's camera is ``tasks/mountain_car/camera.py``.
-"""
+"""The simulator's camera: the only part of the visual pipeline that reads the state (paper
+Section 3.3). A ``CellCamera`` renders each grid cell once and hands on ``FrameView`` s, which
+carry no state; MountainCar's is ``tasks/mountain_car/camera.py``."""
 
 from __future__ import annotations
 
@@ -25,10 +20,8 @@ Cell = TypeVar("Cell")  # a camera's grid cell: MountainCar's position index, Ac
 
 @dataclass(frozen=True, eq=False)
 class FrameView:
-    """What the camera shows: a frame's ``key`` (SHA-256 of its pixels), its ``features``
-    ((D,) int64 exact darkness counts, see ``darkness_counts``; divide by ``FEATURE_UNIT`` for
-    the [0, 1] features) and the frame itself, loaded lazily by ``frame()``.
-    """
+    """What the camera shows: ``key`` (SHA-256 of the pixels), ``features`` ((D,) int64
+    ``darkness_counts``) and the frame itself, loaded lazily by ``frame()``."""
 
     key: str
     features: np.ndarray = field(repr=False)
@@ -40,9 +33,7 @@ class FrameView:
         return self._load()
 
     def release(self) -> None:
-        """Say that this frame's pixels are not needed again soon (a deterministic VLM has
-        answered about it): the camera drops them first, so its pixel cache keeps the frames
-        still waiting for their first label instead of drawing those again."""
+        """Drop this frame's pixels from the camera's cache (a deterministic VLM has labelled it)."""
         self._release()
 
     @classmethod
@@ -52,13 +43,10 @@ class FrameView:
 
 
 class CellCamera(Generic[Cell]):
-    """What every camera shares: a state snapped to a grid ``Cell`` is rendered at most once per
-    cell, its ``FrameView`` (key, features) memoised for good, its pixels kept in an LRU of
-    ``pixel_cache`` frames and drawn again on demand (same pixels, same key). A subclass says how a
-    cell is drawn (``_draw``, with a ``_renderer`` it opens on demand: ``_release`` closes it).
-
-    ``renders`` counts calls to the renderer; ``cells`` how many cells have been seen.
-    """
+    """A camera of grid ``Cell`` s: each cell's ``FrameView`` is memoised for good, its pixels
+    kept in an LRU of ``pixel_cache`` frames and drawn again on demand (same pixels, same key).
+    A subclass draws a cell (``_draw``, with a ``_renderer`` it opens on demand); ``renders``
+    counts the draws."""
 
     def __init__(self, pixel_cache: int = 256) -> None:
         if pixel_cache < 1:

@@ -1,12 +1,5 @@
-"""Reward-hacking diagnostic for a dense term: does a policy hover short of the goal?
-
-A dense term that grows towards the goal can pay more per step near it than the native step
-cost, so an agent can earn more by parking there than by finishing the episode (MountainCar's
-Eq. 1 is the paper's case). These pure functions measure that on recorded trajectories of the
-task's position (``Task.hover``'s position: one array per episode, the position after each step) against
-``x_min``, where hovering starts (``Hover.start``). A policy that drives to the goal spends
-only its last few steps past ``x_min``; one that hovers stays there without finishing.
-"""
+"""Reward-hacking diagnostic: does a policy hover short of the goal, where a dense term pays
+more per step than finishing (``Task.hover``: the position, and ``x_min`` where hovering starts)?"""
 
 from __future__ import annotations
 
@@ -25,17 +18,8 @@ HOVER_FLAG = 0.1
 
 def hover_steps(xs: npt.ArrayLike, reached_flag: bool, x_min: float, horizon: int = HOVER_HORIZON
                 ) -> np.ndarray:
-    """Which steps of one episode hover: right of ``x_min`` without reaching the flag within ``horizon`` steps.
-
-    Args:
-        xs: shape ``(T,)``, the car's position after each of the episode's ``T`` steps.
-        reached_flag: whether the episode ended at the flag (terminated), not by the time limit.
-        x_min: the position (track units) right of which a step may hover.
-        horizon: steps; a step right of ``x_min`` with the flag reached at most ``horizon`` steps
-            later is on its way in, not hovering.
-
-    Returns:
-        Bool array of shape ``(T,)``.
+    """Which steps of one episode (``xs``: ``(T,)`` positions after each step) hover, as a ``(T,)``
+    bool array: right of ``x_min`` without reaching the flag within ``horizon`` more steps.
 
     Example:
         >>> hover_steps([0.1, 0.35, 0.45, 0.55], reached_flag=True, x_min=0.3, horizon=2).tolist()
@@ -63,12 +47,8 @@ def dwell_right_steps(xs: npt.ArrayLike, x_min: float) -> int:
 
 @dataclass(frozen=True)
 class HoverSummary:
-    """One run's detached evaluation, seen for hovering.
-
-    ``hover_fraction``: hovering steps / all steps, pooled over episodes (in [0, 1]).
-    ``dwell_right_steps``: mean over episodes of the steps spent past ``x_min``.
-    ``flagged``: ``hover_fraction > HOVER_FLAG``.
-    """
+    """One run's detached evaluation seen for hovering: ``hover_fraction`` pooled over episodes,
+    ``dwell_right_steps`` the mean per episode."""
 
     hover_fraction: float
     dwell_right_steps: float
@@ -83,11 +63,8 @@ def summarize_hovering(
     trajectories: Sequence[npt.ArrayLike], reached_flag: npt.ArrayLike, x_min: float,
     horizon: int = HOVER_HORIZON,
 ) -> HoverSummary:
-    """Hover fraction and mean dwell right of ``x_min`` over a run's episodes.
-
-    Args:
-        trajectories: one position array of shape ``(T_i,)`` per episode.
-        reached_flag: shape ``(episodes,)``, whether each episode ended at the flag.
+    """Hover fraction and mean dwell right of ``x_min`` over a run's episodes (one ``(T_i,)``
+    position array each, and whether each ended at the flag).
 
     Example:
         >>> s = summarize_hovering([[0.1, 0.4, 0.55], [0.35, 0.4, 0.45, 0.4]], [True, False], x_min=0.3)

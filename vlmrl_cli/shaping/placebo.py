@@ -1,18 +1,5 @@
-"""The placebo control (arm ``hybrid-shuffled``): the VLM's labels through a shuffled label map.
-
-The placebo keeps everything of the hybrid but what the labels *mean*: the same VLM answers the
-same queries on the same schedule (so the flicker, the parse failures and the query cost are
-the hybrid's), the same multiset of raw potentials is paid, the RBF and the lock run as usual,
-but each label's potential is another label's, by a permutation drawn once per seed and fixed
-within the run. One fixed permutation would not do, since a single map can be informative by
-accident (one that pays for the left peak pays for momentum). The permutations are balanced:
-seeds come in blocks of n (the number of labels), each block a random Latin square, so within
-a block every label takes every potential exactly once and its mean potential over the block is
-the mean of the map; the potential then carries no information about progress on average over
-seeds, exactly rather than only in expectation. The permutation is a pure function of the seed
-(sha256 ranks, no numpy stream), so it is the same on every machine and numpy version, and it
-is logged with the run (tag ``vlmrl.placebo_map``).
-"""
+"""The placebo control (arm ``hybrid-shuffled``): the VLM's labels through a label map shuffled
+per seed by a balanced Latin square, a pure function of the seed (see docs/method.md)."""
 
 from __future__ import annotations
 
@@ -60,10 +47,7 @@ def latin_permutation(n: int, seed: int) -> tuple[int, ...]:
 
 
 def placebo_map(label_potentials: LabelMap, seed: int) -> LabelMap:
-    """``label_potentials`` with the potentials permuted among the labels by ``latin_permutation``.
-
-    Labels keep their order; label ``i`` gets the potential of label ``latin_permutation[i]``.
-    The multiset of potentials is unchanged (dimensionless raw potentials, as the map's).
+    """``label_potentials`` with label ``i`` given the potential of label ``latin_permutation[i]``.
 
     Example:
         >>> m = (("BOTTOM", 0.0), ("LEFT_PEAK", 0.3), ("GOAL", 1.0))
@@ -77,8 +61,7 @@ def placebo_map(label_potentials: LabelMap, seed: int) -> LabelMap:
 
 
 def oracle_shaping(arm: ArmSpec, shaping: ShapingConfig, seed: int) -> ShapingConfig:
-    """The shaping config the arm's oracle maps labels with: ``shaping`` itself, or for a placebo
-    arm the same config with ``placebo_map(shaping.label_potentials, seed)``."""
+    """``shaping``, with ``placebo_map`` of its label map for a placebo arm."""
     if not arm.placebo:
         return shaping
     return dataclasses.replace(shaping, label_potentials=placebo_map(shaping.label_potentials, seed))

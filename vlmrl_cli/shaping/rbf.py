@@ -1,10 +1,5 @@
-"""RBF smoothing of discrete milestone potentials over a visual prototype cache (Section 3.2).
-
-With integer features (``features.darkness_counts``) every step is CPU-independent: squared
-distances are exact int64 sums, the kernel is ``core.fp.exp`` and the weighted sums are
-``math.fsum`` (exactly rounded, whatever the order). numpy's own ``exp`` and BLAS ``dot`` round
-differently on AVX-512 and AVX2 CPUs; they are not used here.
-"""
+"""RBF smoothing of milestone potentials over the visual prototype cache (Section 3.2), exact on
+every CPU for integer features (no numpy ``exp`` or BLAS ``dot``; see docs/method.md)."""
 
 from __future__ import annotations
 
@@ -21,11 +16,8 @@ def squared_distances(points: np.ndarray, feature: np.ndarray, unit: float = 1.0
                       spread: int | None = None) -> np.ndarray:
     """``||points_i - feature||^2 / unit^2`` for each row: ``(N, D)``, ``(D,)`` -> ``(N,)`` float64.
 
-    For integer arrays the sum is exact (int64) and only its conversion to float64 rounds, so
-    the result is the same on every CPU; ``unit`` converts counts to feature units (e.g.
-    ``FEATURE_UNIT``). Float arrays are summed in float64 (the tests' small examples). ``spread``
-    (integers only): the caller's guarantee that every entry of both lies within a range of that
-    width, so no difference exceeds it; the overflow check then needs no pass over the data.
+    Integer arrays are summed exactly in int64. ``spread`` (integers only): the caller's guarantee
+    that every entry lies within a range of that width, so the overflow check needs no pass.
 
     Example:
         >>> squared_distances(np.array([[0, 0], [3, 4]]), np.array([0, 0]), unit=5.0).tolist()
@@ -54,16 +46,11 @@ def rbf_potential(
     bandwidth: float,
     unit: float = 1.0,
 ) -> float:
-    """Kernel-weighted mean of prototype potentials (Nadaraya-Watson with a Gaussian kernel).
+    """``sum_i w_i phi_i / sum_i w_i`` with ``w_i = exp(-||f - f_i||^2 / (2 bandwidth^2))``
+    (Nadaraya-Watson), within ``[min phi_i, max phi_i]``; 0.0 with no prototype.
 
-    ``feature`` has shape ``(D,)``, ``proto_features`` ``(N, D)`` (the same feature units, see
-    ``features.frame_features``), ``proto_potentials`` ``(N,)`` (dimensionless potentials) and
-    ``bandwidth`` is in feature-distance units (integer features are divided by ``unit``, see
-    ``squared_distances``). Weights are
-    ``w_i = exp(-||f - f_i||^2 / (2 bandwidth^2))`` and the result is
-    ``sum_i w_i phi_i / sum_i w_i``, so it always lies within ``[min phi_i, max phi_i]``.
-    With no prototype (``N = 0``) the potential is 0.0. The exponent is shifted by the nearest
-    prototype's squared distance (which cancels in the ratio), so when every raw weight would
+    ``bandwidth`` is in feature-distance units (integer features are divided by ``unit``). The
+    exponent is shifted by the nearest prototype's distance, so when every raw weight would
     underflow the result is the nearest prototype's potential instead of 0/0.
 
     Example:
@@ -95,12 +82,8 @@ def rbf_potential(
 class RBFField:
     """``rbf_potential`` for many frames while prototypes arrive one at a time, at O(1) a query.
 
-    Each queried key keeps the numerator and denominator of its kernel-weighted mean relative
-    to its nearest prototype so far; a new prototype updates every stored key in one
-    vectorised step (cost (keys, D)) instead of invalidating them. ``value`` returns what
-    ``rbf_potential`` would over the current prototypes, up to floating-point rounding.
-    Features keep the dtype of the first one added (integer features: exact distances, see
-    ``squared_distances``; ``unit`` converts them to feature units).
+    Each queried key keeps the numerator and denominator of its weighted mean relative to its
+    nearest prototype so far; a new prototype updates every stored key in one vectorised step.
 
     Example:
         >>> field = RBFField(bandwidth=0.1, dim=1)
@@ -212,11 +195,6 @@ class RBFField:
         assert self._feat_buf is not None
         return self._distances(self._feat_buf[: self._k], self._knorm_buf[: self._k], proto)
 
-    def _proto_distances(self, feature: np.ndarray) -> np.ndarray:
-        """``squared_distances(prototypes, feature)``: see ``_distances``."""
-        assert self._proto_buf is not None
-        return self._distances(self._proto_buf[: self._n], self._pnorm_buf[: self._n], feature)
-
     def _distances(self, rows: np.ndarray, norms: np.ndarray, f: np.ndarray) -> np.ndarray:
         """``squared_distances(rows, f)``, the same numbers: for non-negative integer features small
         enough that no int64 sum can overflow, as ``|r|^2 - 2 r.f + |f|^2`` from the rows' stored
@@ -268,7 +246,7 @@ class RBFField:
         row = self._index.get(key)
         if row is None:
             f = self._row(feature)
-            sq = self._proto_distances(f[0])
+            sq = self._distances(self._proto_buf[: self._n], self._pnorm_buf[: self._n], f[0])
             ref = float(sq.min())
             num, den = _weighted_mean(exp(-(sq - ref) * self._scale), self._pot_buf[: self._n])
             row = self._k

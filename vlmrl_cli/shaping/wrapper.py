@@ -1,24 +1,6 @@
-"""An arm as an ordered stack of reward wrappers (paper Eq. 2), each validating its own arguments.
-
-``R_total = R_env [+ R_kin(x) | + (gamma Phi_kin(s') - Phi_kin(s))] [+ alpha (gamma Phi(s') - Phi(s))]``:
-
-==========================  ============================================================
-wrapper                     what it adds
-==========================  ============================================================
-``KinematicReward``         Eq. 1's dense term ``R_kin`` of the observation (proprioception)
-``KinematicPotential``      the same term paid as a potential, ``Phi_kin = horizon x R_kin``
-``SemanticPotential``       the VLM milestones' potential through the camera (exteroception)
-``EpisodeStatistics``       nothing: ``shaped_return`` and ``is_success`` at an episode's end
-==========================  ============================================================
-
-``arm_wrappers`` says which an arm stacks, innermost first; ``wrap_arm`` stacks them. Each reward
-wrapper keeps the reward it was given as ``info["native_reward"]`` when no wrapper below it has,
-so the env's own reward stays visible, as gymnasium's reward wrappers do.
-
-A ``RewardStage`` can also step in two halves, ``begin_step`` and ``finish_step`` (and
-``begin_reset``/``finish_reset``): ``LabelRoundVecEnv`` begins every env's step, lets the
-``SemanticOracle`` ask the VLM about all their frames in one call, then finishes them env by env
-(issue 53). The halves give the same rewards, bit for bit, as ``step``.
+"""An arm as an ordered stack of reward wrappers (paper Eq. 2), each checking its own arguments:
+``arm_wrappers`` says which an arm stacks, ``wrap_arm`` stacks them, ``LabelRoundVecEnv`` steps
+them in labelling rounds. See docs/method.md.
 """
 
 from __future__ import annotations
@@ -59,10 +41,9 @@ def _native(info: dict[str, Any], reward: SupportsFloat) -> dict[str, Any]:
 
 
 class RewardStage(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorArgs):
-    """A wrapper that changes what a step returns (``_after_step``) and what a reset returns
-    (``_after_reset``), whether the step runs at once (``step``) or in the two halves of a labelling
-    round (``begin_step``, ``finish_step``), which a stage passes down to the stage that splits
-    (``SemanticPotential``) and, below that, runs whole."""
+    """A wrapper that changes what a step and a reset return (``_after_step``, ``_after_reset``),
+    whether run whole or in the two halves of a labelling round (``begin_step``, ``finish_step``):
+    the same rewards, bit for bit."""
 
     def __init__(self, env: gym.Env, **recorded: Any) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, **recorded)
@@ -183,11 +164,9 @@ class KinematicPotential(RewardStage):
 
 
 class SemanticPotential(RewardStage):
-    """Adds ``alpha (gamma Phi(s') - Phi(s))``, ``Phi`` the VLM milestones' potential of what the
-    ``camera`` shows (the simulator imaged as ``env.render()`` would, never the observation), as
-    the arm's ``EpisodePotential`` (labelling schedule, lock, RBF) makes it from the run's shared
-    ``oracle``. In a labelling round (``begin_step``/``finish_step``) the frame is taken in the
-    first half and labelled in the second, once the oracle has fetched the round's answers."""
+    """Adds ``alpha (gamma Phi(s') - Phi(s))``, ``Phi`` the arm's ``EpisodePotential`` of what the
+    ``camera`` shows (never the observation), from the run's shared ``oracle``. In a labelling round
+    the frame is taken in the first half and labelled in the second."""
 
     def __init__(self, env: gym.Env, arm: ArmSpec, alpha: float, gamma: float, camera: SceneCamera,
                  oracle: SemanticOracle, sim_type: type) -> None:
@@ -250,10 +229,8 @@ class SemanticPotential(RewardStage):
 
 
 class EpisodeStatistics(RewardStage):
-    """Adds no reward: at an episode's end it puts ``shaped_return`` (the sum of the rewards it
-    saw) and ``is_success`` (the task's ``success(terminated, length)``, the length counted here)
-    in ``info``, and every step keeps the env's reward as ``native_reward`` (when no reward
-    wrapper below has). The outermost wrapper of every arm, baseline's only one.
+    """Adds no reward: puts ``shaped_return`` and ``is_success`` (the task's ``success`` rule) in an
+    episode's last ``info``, and ``native_reward`` in every step's. The outermost wrapper of every arm.
 
     Example:
         >>> env = EpisodeStatistics(gym.make("CartPole-v1"), success=lambda terminated, length: length >= 500)
@@ -290,10 +267,8 @@ class EpisodeStatistics(RewardStage):
 def arm_wrappers(arm: ArmSpec, shaping: ShapingConfig, gamma: float, scene: Scene, camera: SceneCamera | None = None,
                  oracle: SemanticOracle | None = None, horizon: int | None = None,
                  success: SuccessRule | None = None) -> list[Wrap]:
-    """The wrappers of ``arm``, innermost first: its dense term (as a reward or as a potential), its
-    semantic potential (``camera`` and ``oracle``, shared by the envs of one run), then
-    ``EpisodeStatistics`` with the task's success rule. ``horizon``: the task's time limit, which
-    the dense term paid as a potential needs.
+    """The wrappers of ``arm``, innermost first: its dense term (a reward or a potential, which needs
+    the task's time limit ``horizon``), its semantic potential, then ``EpisodeStatistics``.
 
     Example:
         >>> from vlmrl_cli.shaping.arms import ARMS
@@ -326,8 +301,7 @@ def arm_wrappers(arm: ArmSpec, shaping: ShapingConfig, gamma: float, scene: Scen
 def wrap_arm(env: gym.Env, arm: ArmSpec, shaping: ShapingConfig, gamma: float, scene: Scene,
              camera: SceneCamera | None = None, oracle: SemanticOracle | None = None, horizon: int | None = None,
              success: SuccessRule | None = None) -> EpisodeStatistics:
-    """``env`` (an env of ``scene``'s task, its observation of ``scene.obs_shape``) under ``arm``'s
-    wrappers (``arm_wrappers``); the outermost, ``EpisodeStatistics``, is returned."""
+    """``env`` (observations of ``scene.obs_shape``) under ``arm_wrappers``; returns the outermost."""
     shape = getattr(env.observation_space, "shape", None)
     if shape != scene.obs_shape:
         raise ValueError(f"the arm's wrappers read {scene.name}, observation shape {scene.obs_shape}; "
@@ -339,11 +313,9 @@ def wrap_arm(env: gym.Env, arm: ArmSpec, shaping: ShapingConfig, gamma: float, s
 
 
 class LabelRoundVecEnv(DummyVecEnv):
-    """SB3's ``DummyVecEnv`` with one labelling round per vector step: every env's step (and the
-    reset of an env whose episode ended) is begun, the run's ``oracle`` asks the VLM about the
-    frames in one call (``SemanticOracle.fetch``), and then each env's step is finished in env
-    order, exactly as ``DummyVecEnv`` would have stepped it (same labels, prototypes, rewards).
-    Every env must be a ``RewardStage`` stack holding a ``SemanticPotential`` on ``oracle``."""
+    """SB3's ``DummyVecEnv`` with one labelling round per vector step: every env's step is begun,
+    ``oracle`` asks the VLM about all their frames in one call, then each step is finished in env
+    order, exactly as ``DummyVecEnv`` would have stepped it. Every env is a ``RewardStage`` stack."""
 
     def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], oracle: SemanticOracle) -> None:
         super().__init__(list(env_fns))
