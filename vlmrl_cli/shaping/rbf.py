@@ -34,53 +34,12 @@ def squared_distances(points: np.ndarray, feature: np.ndarray, unit: float = 1.0
     return (fdiff * fdiff).sum(axis=1) / (unit * unit)
 
 
-def _weighted_mean(w: np.ndarray, potentials: np.ndarray) -> tuple[float, float]:
-    """(sum w_i phi_i, sum w_i), each exactly rounded."""
-    return math.fsum((w * potentials).tolist()), math.fsum(w.tolist())
-
-
-def rbf_potential(
-    feature: np.ndarray,
-    proto_features: np.ndarray,
-    proto_potentials: np.ndarray,
-    bandwidth: float,
-    unit: float = 1.0,
-) -> float:
-    """``sum_i w_i phi_i / sum_i w_i`` with ``w_i = exp(-||f - f_i||^2 / (2 bandwidth^2))``
-    (Nadaraya-Watson), within ``[min phi_i, max phi_i]``; 0.0 with no prototype.
-
-    ``bandwidth`` is in feature-distance units (integer features are divided by ``unit``). The
-    exponent is shifted by the nearest prototype's distance, so when every raw weight would
-    underflow the result is the nearest prototype's potential instead of 0/0.
-
-    Example:
-        >>> f = np.array([[0.0], [1.0]])
-        >>> round(rbf_potential(np.array([0.0]), f, np.array([0.0, 1.0]), bandwidth=0.1), 12)
-        0.0
-        >>> rbf_potential(np.array([0.5]), f, np.array([0.0, 1.0]), bandwidth=0.1)
-        0.5
-    """
-    if bandwidth <= 0:
-        raise ValueError(f"bandwidth must be > 0, got {bandwidth}")
-    protos = np.asarray(proto_features)
-    potentials = np.asarray(proto_potentials, dtype=np.float64)
-    if protos.shape[0] == 0:
-        return 0.0
-    if protos.ndim != 2 or potentials.shape != (protos.shape[0],):
-        raise ValueError(
-            f"expected proto_features (N, D) and proto_potentials (N,), got {protos.shape} and {potentials.shape}"
-        )
-    sq = squared_distances(protos, np.asarray(feature), unit)
-    logw = -(sq - sq.min()) * (1.0 / (2.0 * bandwidth * bandwidth))  # as RBFField: same bits
-    w = exp(logw)  # the nearest prototype has weight 1, so the sum is >= 1
-    num, den = _weighted_mean(w, potentials)
-    value = num / den
-    # Rounding can put the mean an ulp outside the hull; clip keeps the documented bound exact.
-    return float(np.clip(value, potentials.min(), potentials.max()))
-
-
 class RBFField:
-    """``rbf_potential`` for many frames while prototypes arrive one at a time, at O(1) a query.
+    """Gaussian-kernel-weighted mean of prototype potentials, ``sum_i w_i phi_i / sum_i w_i`` with
+    ``w_i = exp(-||f - f_i||^2 / (2 bandwidth^2))`` (Nadaraya-Watson), for many frames while
+    prototypes arrive one at a time, at O(1) a query. ``value`` lies within the prototypes'
+    potentials (0.0 before the first); weights are taken relative to the nearest prototype, so
+    when every raw weight would underflow the value is the nearest prototype's.
 
     Each queried key keeps the numerator and denominator of its weighted mean relative to its
     nearest prototype so far; a new prototype updates every stored key in one vectorised step.
@@ -127,8 +86,14 @@ class RBFField:
         return self._n
 
     @property
-    def _potentials(self) -> np.ndarray:
+    def potentials(self) -> np.ndarray:
+        """The prototypes' potentials, (N,), in insertion order (a view)."""
         return self._pot_buf[: self._n]
+
+    @property
+    def features(self) -> np.ndarray:
+        """The prototypes' features, (N, D), in insertion order (a view)."""
+        return np.empty((0, self._dim)) if self._proto_buf is None else self._proto_buf[: self._n]
 
     @staticmethod
     def _grown(buf: np.ndarray, used: int) -> np.ndarray:
@@ -230,7 +195,7 @@ class RBFField:
             return
         self._pot_buf[index] = new
         self._values.clear()
-        self._low, self._high = float(self._potentials.min()), float(self._potentials.max())
+        self._low, self._high = float(self.potentials.min()), float(self.potentials.max())
         if self._feat_buf is None:
             return
         k = self._k
@@ -248,7 +213,8 @@ class RBFField:
             f = self._row(feature)
             sq = self._distances(self._proto_buf[: self._n], self._pnorm_buf[: self._n], f[0])
             ref = float(sq.min())
-            num, den = _weighted_mean(exp(-(sq - ref) * self._scale), self._pot_buf[: self._n])
+            w = exp(-(sq - ref) * self._scale)
+            num, den = math.fsum((w * self._pot_buf[: self._n]).tolist()), math.fsum(w.tolist())  # exactly rounded
             row = self._k
             self._index[key] = row
             if self._feat_buf is None:

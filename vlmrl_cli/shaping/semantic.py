@@ -65,9 +65,6 @@ class SemanticOracle:
         self._prompt = milestones.prompt if numbers is None or source is PotentialSource.MCQ else numbers.float_prompt
         self._labels = milestones.labels
         self._potential_of = dict(cfg.label_potentials)
-        self._features = np.empty((0, 0), dtype=np.int64)
-        self._potentials = np.empty(0, dtype=np.float64)
-        self._n = 0
         self._label_of: dict[str, float] = {}
         self._row_of: dict[str, int] = {}
         # A stochastic VLM (a fresh draw per query) is asked every time: reusing a frame's label
@@ -92,7 +89,7 @@ class SemanticOracle:
 
     @property
     def prototypes(self) -> int:
-        return self._n
+        return self._field.prototypes
 
     def request(self, view: FrameView) -> None:
         """Say that ``view`` is labelled in this vector step; requests come in the order their
@@ -141,7 +138,7 @@ class SemanticOracle:
             nearest = self._nearby(view)
             if nearest is not None:
                 self._reuses += 1
-                return float(self._potentials[nearest])
+                return float(self._field.potentials[nearest])
         if self.max_queries is not None and self._queries >= self.max_queries:
             return self._past_budget(view)
         potential = self._ask(view)
@@ -156,19 +153,23 @@ class SemanticOracle:
     def _nearby(self, view: FrameView) -> int | None:
         """The row of the nearest prototype within ``reuse_radius`` of ``view`` (None: reuse is off,
         or none is that near)."""
-        if not self._n or self.cfg.reuse_radius <= 0:
+        if not self.prototypes or self.cfg.reuse_radius <= 0:
             return None
-        sq = squared_distances(self._features[: self._n], view.features, unit=FEATURE_UNIT)
-        nearest = int(np.argmin(sq))
-        return nearest if math.sqrt(float(sq[nearest])) < self.cfg.reuse_radius else None
+        nearest, sq = self._nearest(view)
+        return nearest if math.sqrt(sq) < self.cfg.reuse_radius else None
+
+    def _nearest(self, view: FrameView) -> tuple[int, float]:
+        """The row of the prototype nearest to ``view`` and its squared feature distance."""
+        sq = squared_distances(self._field.features, view.features, unit=FEATURE_UNIT)
+        row = int(np.argmin(sq))
+        return row, float(sq[row])
 
     def _past_budget(self, view: FrameView) -> float | None:
         """The label past the query budget: the nearest prototype's potential, or None (no prototype)."""
-        if not self._n:
+        if not self.prototypes:
             return None
         self._budget_labels += 1
-        sq = squared_distances(self._features[: self._n], view.features, unit=FEATURE_UNIT)
-        return float(self._potentials[int(np.argmin(sq))])
+        return float(self._field.potentials[self._nearest(view)[0]])
 
     def _answer(self, view: FrameView) -> Answer:
         """The VLM's answer about ``view``: the round's (``fetch``), else asked now."""
@@ -199,20 +200,10 @@ class SemanticOracle:
         row = self._row_of.get(view.key)
         if row is not None:  # only a stochastic VLM asks about a known frame again
             if self._stochastic and self._label_of[view.key] != potential:
-                self._potentials[row] = potential
                 self._label_of[view.key] = potential
                 self._field.set_potential(row, potential)
             return
-        if self._n == self._features.shape[0]:
-            grown = np.empty((max(64, 2 * self._n), view.features.shape[0]), dtype=np.int64)
-            if self._n:
-                grown[: self._n] = self._features[: self._n]
-            self._features = grown
-            self._potentials = np.resize(self._potentials, grown.shape[0])
-        self._features[self._n] = view.features
-        self._potentials[self._n] = potential
-        self._row_of[view.key] = self._n
-        self._n += 1
+        self._row_of[view.key] = self._field.prototypes
         self._label_of[view.key] = potential
         self._field.add_prototype(view.features, potential)
 
@@ -230,7 +221,7 @@ class SemanticOracle:
         return {
             schema.METRIC_VLM_QUERIES: float(self._queries),
             schema.METRIC_VLM_CACHE_HITS: float(self._cache_hits),
-            schema.METRIC_VLM_PROTOTYPES: float(self._n),
+            schema.METRIC_VLM_PROTOTYPES: float(self.prototypes),
             schema.METRIC_VLM_LABEL_REUSES: float(self._reuses),
             schema.METRIC_VLM_PARSE_FAILURES: float(self._parse_failures),
             schema.METRIC_VLM_BACKEND_CALLS: float(self.client.stats.backend_calls),
