@@ -1,14 +1,10 @@
-"""The configuration of `vlmrl run`: one frozen object, checked whole by ``training/validation.py``.
-
-It is resolved in layers, each overriding the one before: the PPO preset < a TOML config file <
-``--set KEY=VALUE`` < flags typed on the command line (``RunConfig.from_sources``), merged by
-``training/overrides.py``. Every key of a file is optional; ``vlmrl run --dry-run`` prints a
-complete one (``to_toml``), sections ``[ppo]``, ``[vlm]``, ``[vlm.sim]``, ``[shaping]`` included.
-"""
+"""The configuration of `vlmrl run`: one frozen ``RunConfig``, resolved from layers (preset < TOML
+file < ``--set`` < flags, ``training/overrides.py``) and checked whole (``training/validation.py``)."""
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import os
 import tomllib
@@ -30,7 +26,7 @@ from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.tasks.base import Task, TaskLookup
 from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.overrides import nest, parse_assignment, parse_value, resolve_raw, task_ref
-from vlmrl_cli.training.presets import PPOConfig, ppo_identity, preset_names, preset_of
+from vlmrl_cli.training.presets import PPOConfig, ppo_identity, preset_of
 from vlmrl_cli.vlm.config import VLMConfig, profile_problem, vlm_identity
 
 DEFAULT_EXPERIMENT = "vlmrl"
@@ -103,7 +99,7 @@ def _builtin_presets() -> list[str]:
             task = load()
         except BadInput:  # an optional extra missing (Pusher without MuJoCo): naming the task says why
             continue
-        known += [name for name in preset_names(task) if name not in known]
+        known += [name for name in task.presets if name not in known]
     return known
 
 
@@ -306,28 +302,22 @@ class TrainJob:
 def resolve(layers: Iterable[Mapping[str, Any]], tasks: TaskLookup | None = None) -> RunConfig:
     """The validated ``RunConfig`` of ``layers`` (lowest first: config file, ``--set``, flags): the
     one place a config's task name becomes its Task, looked up with ``tasks`` (the command's
-    registry, ``tasks.registry.get_task``; None: the built-in tasks alone), and carried from here."""
+    registry; None: the built-in tasks alone), and carried from here."""
+    from vlmrl_cli.tasks.registry import builtin_task
     from vlmrl_cli.training.validation import validate_as
 
     layers = list(layers)
-    ref = task_ref(layers, DEFAULT_TASK)
-    task = lookup_task(ref, tasks) if isinstance(ref, str) else None  # else the schema says what is wrong
+    ref, task = task_ref(layers, DEFAULT_TASK), None
+    if isinstance(ref, str):  # else the schema says what is wrong
+        try:
+            task = (tasks or builtin_task)(ref)
+        except BadInput as exc:
+            msg = str(exc).removesuffix(".")
+            raise BadInput(f"invalid task = {json.dumps(ref)}: {msg[:1].lower() + msg[1:]}.") from None
     raw = resolve_raw(layers, task)
     cfg: RunConfig = validate_as(RunConfig, raw) if task is None else validate_as(RunConfig, raw, plugin=task)
     cfg._check_task()
     return cfg
-
-
-def lookup_task(ref: str, tasks: TaskLookup | None = None) -> Task:
-    """The Task ``ref`` names, by ``tasks`` (None: the built-in tasks alone); ``BadInput`` in the
-    words of an invalid config value."""
-    from vlmrl_cli.tasks.registry import builtin_task
-
-    try:
-        return (tasks or builtin_task)(ref)
-    except BadInput as exc:
-        msg = str(exc).removesuffix(".")
-        raise BadInput(f"invalid task = {json.dumps(ref)}: {msg[:1].lower() + msg[1:]}.") from None
 
 
 def once(tasks: TaskLookup | None) -> TaskLookup:
@@ -341,15 +331,7 @@ def once(tasks: TaskLookup | None) -> TaskLookup:
     """
     from vlmrl_cli.tasks.registry import builtin_task
 
-    found: dict[str, Task] = {}
-    get = tasks or builtin_task
-
-    def lookup(ref: str) -> Task:
-        if ref not in found:
-            found[ref] = get(ref)
-        return found[ref]
-
-    return lookup
+    return functools.cache(tasks or builtin_task)
 
 
 def _check_plugin(task: str, plugin: Task) -> None:

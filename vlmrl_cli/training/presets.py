@@ -1,9 +1,5 @@
-"""PPO hyperparameters: one frozen ``PPOConfig`` and the named presets that fill it.
-
-A preset is only the bottom layer of a run's PPO configuration: a config file's ``[ppo]`` table
-and ``--set ppo.KEY=VALUE`` override any field (see ``training/overrides.py``). The ranges each
-field must respect are declared once, in ``training/validation.py``.
-"""
+"""PPO hyperparameters: one frozen ``PPOConfig`` and the task's named presets that fill it (the
+bottom layer of a run's ``[ppo]``)."""
 
 from __future__ import annotations
 
@@ -108,11 +104,6 @@ def ppo_identity(ppo: PPOConfig) -> dict[str, object]:
         if ident.get(key) == neutral:
             del ident[key]
     return ident
-
-
-def preset_names(task: Task) -> list[str]:
-    """The presets of ``task`` (``Task.presets``)."""
-    return list(task.presets)
 
 
 def preset_of(task: Task, name: str) -> PPOConfig:
