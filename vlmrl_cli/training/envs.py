@@ -29,20 +29,11 @@ def make_train_env(
     max_queries: int | None = None,
 ) -> tuple[VecEnv, SemanticOracle | None]:
     """The training VecEnv of one run of ``task`` and its oracle (None for arms without a VLM).
-    A ``shaping`` that names no label map takes the task's (``Task.shaping_for``).
 
-    Per env: ``task.make_env()`` -> ``as_float`` (a non-float Box observation cast to float32: SB3's
-    rollout buffer keeps the space's dtype, so a ``uint8`` one under ``VecNormalize`` would be
-    truncated to integers) -> ``Monitor`` (SB3's episode stats are the NATIVE
-    return and length) -> the arm's wrappers (``shaping.wrapper.arm_wrappers``: its dense term, its
-    semantic potential, then ``EpisodeStatistics`` with ``is_success`` by the task's rule,
-    ``task.success``; baseline's only one). Then ``DummyVecEnv`` of ``preset.n_envs`` (one
-    process, so the camera and oracle are shared by all envs; ``LabelRoundVecEnv`` for an arm with
-    a VLM: one labelling round per vector step, ``max_queries`` its labels' budget) ->
-    ``VecNormalize`` (observations if ``ppo.normalize_obs``, rewards if ``ppo.normalize_reward``,
-    with the learner's gamma; no wrapper when both are off). Env ``i`` is seeded ``seed + i``. A
-    placebo arm's oracle maps labels through ``placebo.oracle_shaping`` (the label map shuffled by
-    ``seed``). The PBRS discount is ``shaping.gamma``, or ``ppo.gamma`` when that is None.
+    Per env: ``task.make_env()`` -> ``as_float`` -> ``Monitor`` (episode stats are the NATIVE return
+    and length) -> the arm's wrappers; then ``DummyVecEnv`` (``LabelRoundVecEnv`` for an arm with a
+    VLM) of ``ppo.n_envs``, env ``i`` seeded ``seed + i`` -> ``VecNormalize`` unless both its
+    normalisations are off. The PBRS discount is ``shaping.gamma``, else ``ppo.gamma``.
     """
     if arm.uses_vlm and client is None:
         raise ValueError(f"arm '{arm.name}' queries a VLM; pass a VLMClient (e.g. the simulated one).")
@@ -70,8 +61,8 @@ def make_train_env(
 
 
 def as_float(env: gym.Env) -> gym.Env:
-    """``env`` with a non-float ``Box`` observation cast to float32 (gymnasium's
-    ``DtypeObservation``, which the env's spec can recreate); any other env as it is.
+    """``env`` with a non-float ``Box`` observation cast to float32 (SB3's rollout buffer keeps the
+    space's dtype, so ``VecNormalize`` would truncate a ``uint8`` one); any other env as it is.
 
     Example:
         >>> space = gym.spaces.Box(0, 255, (3,), np.uint8)

@@ -1,8 +1,5 @@
-"""SB3's own training diagnostics (``train/approx_kl``, ``train/value_loss``, ...) into MLflow.
-
-Tracking plugs in as an SB3 logger output format, so nothing in the training loop calls
-MLflow: ``model.set_logger(Logger(folder=None, output_formats=[MetricsOutputFormat(metrics)]))``.
-"""
+"""SB3's own training diagnostics (``train/approx_kl``, ...) into MLflow, as an SB3 logger output
+format: nothing in the training loop calls MLflow."""
 
 from __future__ import annotations
 
@@ -25,10 +22,8 @@ class MetricSink(Protocol):
 
 
 class MetricsOutputFormat(KVWriter):
-    """An SB3 ``KVWriter`` that forwards the numeric values under ``prefixes`` to ``metrics``,
-    keys unchanged, at ``step`` (SB3 dumps with ``step=num_timesteps``).
-
-    Non-numeric values (strings, videos, figures) and keys excluded for ``"mlflow"`` are skipped.
+    """An SB3 ``KVWriter`` that forwards the numeric values under ``prefixes`` to ``metrics`` at
+    ``step``, skipping keys excluded for ``"mlflow"``.
 
     Example:
         >>> class Sink:

@@ -1,17 +1,5 @@
-"""Merge a run's configuration layers: preset < config file < ``--set`` < flags.
-
-Every layer is a nested dict of plain values keyed like the TOML file (``{"ppo": {"n_envs": 1}}``).
-The preset named by the highest layer that names one fills ``[ppo]``; each layer then overrides
-the keys it sets; the simulated VLM's profile (``vlm.sim.profile``) fills the ``[vlm.sim]`` knobs
-that no layer set (an explicit knob, in any layer, beats the profile's value). The merged dict is
-plain data: ``training/config.py`` checks it whole (``training/validation.py``) and makes it the frozen
-``RunConfig``, so this module does not depend on that class. Nothing is read or written
-elsewhere: a bad value fails before any store, folder or run exists.
-
-``--set KEY=VALUE`` takes a dotted key and a TOML value (``3``, ``0.3``, ``false``,
-``[64, 64]``, ``"hf"``); a value that is not TOML is a string, and one with commas a list
-(``--set ppo.net_arch_pi=32,32``).
-"""
+"""Merge a run's configuration layers (preset < config file < ``--set`` < flags) into one raw
+nested dict, before ``training/validation.py`` checks it (docs/commands/run.md)."""
 
 from __future__ import annotations
 

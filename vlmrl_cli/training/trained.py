@@ -1,13 +1,5 @@
-"""A trained run read back from MLflow: its policy and configs, read without unpickling anything.
-
-A run keeps its policy in SB3's ``model.zip`` and its observation statistics in
-``vecnormalize.npz``. Both may come from an export file, so neither is loaded the way SB3 loads
-them (``PPO.load`` cloudpickles the zip's ``data``; ``VecNormalize.load`` unpickles a whole
-object): the policy is rebuilt from the run's own PPO config and given the zip's ``policy.pth``
-weights through ``torch.load(weights_only=True)``, and the statistics are plain arrays
-(``numpy.load(allow_pickle=False)``). Runs saved before the arrays existed keep a
-``vecnormalize.pkl``, which is read only with the user's explicit ``trust_pickle``.
-"""
+"""A trained run read back from MLflow: its policy and configs, without unpickling anything
+(docs/commands/export-import.md); an old run's ``vecnormalize.pkl`` only with ``trust_pickle``."""
 
 from __future__ import annotations
 

@@ -1,17 +1,6 @@
-"""The typed input schema of a run's configuration, checked whole before anything runs.
-
-Field names, types and defaults come from the frozen dataclasses themselves (``RunConfig``,
-``PPOConfig``, ``VLMConfig``, ``SimKnobs``, ``ShapingConfig``). Each field declares its ranges
-and value checks once, in its own metadata (``core.fields``: ``metadata={"rules": ..., "help":
-...}``); the rules over several fields of a section are ``CHECKS`` here. pydantic builds one
-model per dataclass from both and validates a raw configuration (the merged layers of preset,
-config file, ``--set`` and flags) with TOML's typing: strict JSON mode, so ``alpha = "big"`` or
-``n_envs = 1.5`` is an error, while an integer is a valid float.
-
-Every failure becomes one ``BadInput`` sentence that names the dotted key, e.g.
-``invalid ppo.gamma = 1.5: input should be less than or equal to 1.`` or
-``unknown key 'ppo.nenvs' (did you mean 'ppo.n_envs'?).``
-"""
+"""The typed input schema of a run's configuration, checked whole before anything runs: pydantic
+models built from the frozen dataclasses and their fields' ``rules`` (``core.fields``), strict
+TOML typing, every failure one ``BadInput`` sentence naming the dotted key."""
 
 from __future__ import annotations
 
