@@ -69,12 +69,7 @@ class ArmSpec:
 
     def identity(self) -> dict[str, object]:
         """The arm as it enters config hashes: every reward field, ``placebo`` only when set
-        (``compared_with`` and ``report_order`` never: they say how the arm is reported).
-
-        Example:
-            >>> "placebo" in ARMS["hybrid"].identity(), ARMS["hybrid-shuffled"].identity()["placebo"]
-            (False, True)
-        """
+        (``compared_with`` and ``report_order`` never: they say how the arm is reported)."""
         fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
                   if f.name not in ("compared_with", "report_order")}
         for late in ("placebo", "dense_potential"):  # fields added after results existed
@@ -117,12 +112,7 @@ ARMS: dict[str, ArmSpec] = {
 
 
 def report_order(registry: Mapping[str, ArmSpec] = ARMS) -> list[str]:
-    """The registry's arms in the report's order (``report_order``, ties in the registry's order).
-
-    Example:
-        >>> report_order()[:3]
-        ['hybrid', 'baseline', 'kinematic']
-    """
+    """The registry's arms in the report's order (``report_order``, ties in the registry's order)."""
     return sorted(registry, key=lambda name: registry[name].report_order)
 
 
@@ -130,24 +120,13 @@ def comparisons(registry: Mapping[str, ArmSpec] = ARMS, study: bool = False
                 ) -> list[tuple[str, str, str]]:
     """``(arm, reference, what the difference isolates)`` of every comparison in the registry, arms
     in the report's order and each arm's comparisons in its own order; ``study``: only those the
-    study's regime map makes too.
-
-    Example:
-        >>> [f"{a} vs {b}" for a, b, _ in comparisons(study=True)]  # doctest: +NORMALIZE_WHITESPACE
-        ['hybrid vs baseline', 'hybrid vs kinematic', 'hybrid vs hybrid-shuffled', 'kinematic vs baseline',
-         'hybrid-dense-pbrs vs baseline', 'hybrid-dense-pbrs vs hybrid']
-    """
+    study's regime map makes too."""
     return [(name, c.reference, c.isolates) for name in report_order(registry)
             for c in registry[name].compared_with if c.in_study or not study]
 
 
 def parse_arms(text: str, registry: Mapping[str, ArmSpec] = ARMS) -> tuple[ArmSpec, ...]:
-    """``"baseline,hybrid"`` -> the arm specs of ``registry``; unknown or repeated names are ``BadInput``.
-
-    Example:
-        >>> [a.name for a in parse_arms("baseline, hybrid")]
-        ['baseline', 'hybrid']
-    """
+    """``"baseline,hybrid"`` -> the arm specs of ``registry``; unknown or repeated names are ``BadInput``."""
     names = [n.strip() for n in text.split(",") if n.strip()]
     if not names:
         raise BadInput(f"no arm given; choose from {', '.join(registry)}.")

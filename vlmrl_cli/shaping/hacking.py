@@ -19,14 +19,7 @@ HOVER_FLAG = 0.1
 def hover_steps(xs: npt.ArrayLike, reached_flag: bool, x_min: float, horizon: int = HOVER_HORIZON
                 ) -> np.ndarray:
     """Which steps of one episode (``xs``: ``(T,)`` positions after each step) hover, as a ``(T,)``
-    bool array: right of ``x_min`` without reaching the flag within ``horizon`` more steps.
-
-    Example:
-        >>> hover_steps([0.1, 0.35, 0.45, 0.55], reached_flag=True, x_min=0.3, horizon=2).tolist()
-        [False, False, False, False]
-        >>> hover_steps([0.1, 0.35, 0.45, 0.4], reached_flag=False, x_min=0.3).tolist()
-        [False, True, True, True]
-    """
+    bool array: right of ``x_min`` without reaching the flag within ``horizon`` more steps."""
     x = np.asarray(xs, dtype=float).reshape(-1)
     if horizon < 0:
         raise ValueError(f"horizon must be >= 0 steps, got {horizon}.")
@@ -64,13 +57,7 @@ def summarize_hovering(
     horizon: int = HOVER_HORIZON,
 ) -> HoverSummary:
     """Hover fraction and mean dwell right of ``x_min`` over a run's episodes (one ``(T_i,)``
-    position array each, and whether each ended at the flag).
-
-    Example:
-        >>> s = summarize_hovering([[0.1, 0.4, 0.55], [0.35, 0.4, 0.45, 0.4]], [True, False], x_min=0.3)
-        >>> s.hover_fraction, s.dwell_right_steps, s.flagged
-        (0.5714285714285714, 3.0, True)
-    """
+    position array each, and whether each ended at the flag)."""
     reached = np.asarray(reached_flag, dtype=bool).reshape(-1)
     if reached.size != len(trajectories):
         raise ValueError(f"{len(trajectories)} trajectories but {reached.size} reached_flag values.")

@@ -21,15 +21,7 @@ def lock_step(state: LockState, label_potential: float, confirm: int) -> LockSta
     Labels agree when their raw potentials are equal (two labels with one potential are one
     milestone). A potential is confirmed once ``confirm`` consecutive labels agreed on it; a
     confirmed potential above ``level`` becomes the new level, and the level never drops
-    within the episode, whatever the VLM says afterwards (flicker cannot undo a milestone).
-
-    Example:
-        >>> s = LockState()
-        >>> for p in (0.3, 0.3, 0.0, 0.1):
-        ...     s = lock_step(s, p, confirm=2)
-        >>> s.level
-        0.3
-    """
+    within the episode, whatever the VLM says afterwards (flicker cannot undo a milestone)."""
     if confirm < 1:
         raise ValueError(f"confirm must be >= 1, got {confirm}")
     p = float(label_potential)

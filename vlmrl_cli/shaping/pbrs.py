@@ -8,13 +8,6 @@ def pbrs_term(phi: float, phi_next: float, gamma: float, alpha: float, terminate
 
     ``phi_next`` counts as 0 when the episode ``terminated`` (an absorbing state), and is kept on
     a truncation (the learner bootstraps from it). Along any episode the discounted sum telescopes
-    to ``alpha (gamma^T Phi_T - Phi_0)``, whatever the potentials (docs/method.md).
-
-    Example:
-        >>> pbrs_term(0.0, 0.5, gamma=1.0, alpha=4.0, terminated=False)
-        2.0
-        >>> pbrs_term(0.6, 1.0, gamma=1.0, alpha=5.0, terminated=True)
-        -3.0
-    """
+    to ``alpha (gamma^T Phi_T - Phi_0)``, whatever the potentials (docs/method.md)."""
     target = 0.0 if terminated else float(phi_next)
     return float(alpha) * (float(gamma) * target - float(phi))

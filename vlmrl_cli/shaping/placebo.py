@@ -14,14 +14,7 @@ LabelMap = tuple[tuple[str, float], ...]  # (label, raw potential), in the task'
 
 def permutation(n: int, seed: int, salt: str = "vlmrl-placebo") -> tuple[int, ...]:
     """A permutation of ``range(n)``, a pure function of ``(seed, salt)``: index ``i`` goes to rank
-    ``i`` of the sha256 digests of ``f"{salt}:{seed}:{j}"``.
-
-    Example:
-        >>> sorted(permutation(6, seed=3)) == list(range(6))
-        True
-        >>> permutation(6, seed=3) == permutation(6, seed=3)
-        True
-    """
+    ``i`` of the sha256 digests of ``f"{salt}:{seed}:{j}"``."""
     if n < 0:
         raise ValueError(f"n must be >= 0, got {n}")
     digests = [hashlib.sha256(f"{salt}:{seed}:{j}".encode()).digest() for j in range(n)]
@@ -31,13 +24,7 @@ def permutation(n: int, seed: int, salt: str = "vlmrl-placebo") -> tuple[int, ..
 def latin_permutation(n: int, seed: int) -> tuple[int, ...]:
     """Seed ``seed``'s row of a random Latin square: block ``b = seed // n`` draws row and column
     orders ``r, c`` (``permutation`` with two salts), and row ``k = seed % n`` maps ``i`` to
-    ``c[(r[i] + k) % n]``. Over the ``n`` seeds of a block, every ``i`` meets every value once.
-
-    Example:
-        >>> rows = [latin_permutation(4, s) for s in range(4, 8)]   # one block
-        >>> all(sorted(r[i] for r in rows) == [0, 1, 2, 3] for i in range(4))
-        True
-    """
+    ``c[(r[i] + k) % n]``. Over the ``n`` seeds of a block, every ``i`` meets every value once."""
     if n == 0:
         return ()
     block, k = divmod(seed, n)
@@ -47,14 +34,7 @@ def latin_permutation(n: int, seed: int) -> tuple[int, ...]:
 
 
 def placebo_map(label_potentials: LabelMap, seed: int) -> LabelMap:
-    """``label_potentials`` with label ``i`` given the potential of label ``latin_permutation[i]``.
-
-    Example:
-        >>> m = (("BOTTOM", 0.0), ("LEFT_PEAK", 0.3), ("GOAL", 1.0))
-        >>> shuffled = placebo_map(m, seed=0)
-        >>> [z for z, _ in shuffled] == [z for z, _ in m], sorted(p for _, p in shuffled)
-        (True, [0.0, 0.3, 1.0])
-    """
+    """``label_potentials`` with label ``i`` given the potential of label ``latin_permutation[i]``."""
     order = latin_permutation(len(label_potentials), seed)
     values = [p for _, p in label_potentials]
     return tuple((zone, values[j]) for (zone, _), j in zip(label_potentials, order, strict=True))
@@ -68,10 +48,5 @@ def oracle_shaping(arm: ArmSpec, shaping: ShapingConfig, seed: int) -> ShapingCo
 
 
 def describe_map(label_potentials: LabelMap) -> str:
-    """``"HANGING=0 LOW_SWING=0.2 ..."``: a label map as one loggable line.
-
-    Example:
-        >>> describe_map((("BOTTOM", 0.0), ("GOAL", 1.0)))
-        'BOTTOM=0 GOAL=1'
-    """
+    """``"HANGING=0 LOW_SWING=0.2 ..."``: a label map as one loggable line."""
     return " ".join(f"{label}={p:g}" for label, p in label_potentials)

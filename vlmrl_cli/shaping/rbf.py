@@ -42,16 +42,7 @@ class RBFField:
     when every raw weight would underflow the value is the nearest prototype's.
 
     Each queried key keeps the numerator and denominator of its weighted mean relative to its
-    nearest prototype so far; a new prototype updates every stored key in one vectorised step.
-
-    Example:
-        >>> field = RBFField(bandwidth=0.1, dim=1)
-        >>> field.value("a", np.array([0.5]))
-        0.0
-        >>> field.add_prototype(np.array([0.0]), 0.0); field.add_prototype(np.array([1.0]), 1.0)
-        >>> field.value("a", np.array([0.5]))
-        0.5
-    """
+    nearest prototype so far; a new prototype updates every stored key in one vectorised step."""
 
     def __init__(self, bandwidth: float, dim: int, unit: float = 1.0) -> None:
         if bandwidth <= 0:
@@ -178,15 +169,7 @@ class RBFField:
 
     def set_potential(self, index: int, potential: float) -> None:
         """Give prototype ``index`` (insertion order) a new potential, updating every stored key:
-        a stochastic VLM's newest answer about a frame replaces its older one.
-
-        Example:
-            >>> field = RBFField(bandwidth=0.1, dim=1)
-            >>> field.add_prototype(np.array([0.0]), 0.0); field.add_prototype(np.array([1.0]), 1.0)
-            >>> field.value("a", np.array([0.5])); field.set_potential(1, 0.0); field.value("a", np.array([0.5]))
-            0.5
-            0.0
-        """
+        a stochastic VLM's newest answer about a frame replaces its older one."""
         if self._proto_buf is None or not 0 <= index < self._n:
             raise IndexError(f"no prototype {index}; the field holds {self.prototypes}")
         old = float(self._pot_buf[index])

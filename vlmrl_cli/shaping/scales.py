@@ -40,15 +40,7 @@ class TaskScales:
 def task_scales(goal_return: float, potential_span: float, dense_peak: float, horizon: int,
                 potential_share: float = POTENTIAL_SHARE, dense_share: float = DENSE_SHARE,
                 kin_offset: float | None = None) -> TaskScales:
-    """alpha and kin_scale by the module's rule, to 3 significant figures.
-
-    Example:
-        >>> s = task_scales(goal_return=0.964, potential_span=1.0, dense_peak=1.4 / 250, horizon=250)
-        >>> s.alpha, s.kin_scale
-        (0.241, 0.172)
-        >>> round(s.alpha * 1.0 / 0.964, 3), round(s.kin_scale * 1.4 / 0.964, 3)  # each a quarter of the goal
-        (0.25, 0.25)
-    """
+    """alpha and kin_scale by the module's rule, to 3 significant figures."""
     for name, value in (("goal_return", goal_return), ("potential_span", potential_span),
                         ("dense_peak", dense_peak), ("horizon", horizon)):
         if not (math.isfinite(value) and value > 0):

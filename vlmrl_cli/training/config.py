@@ -162,13 +162,7 @@ class RunConfig:
         ``"ppo.n_envs=4"``) and ``flags`` typed on the command line (dotted keys, ``{"arms":
         ["baseline"], "ppo.timesteps": 512}``), in the order preset < file < overrides < flags; the
         task they name is looked up by ``tasks`` (the command's registry; None: the built-in tasks).
-        ``BadInput`` for an unreadable file, a malformed assignment or an invalid value.
-
-        Example:
-            >>> cfg = RunConfig.from_sources(None, {"seeds": [0]}, ["preset=smoke", "seeds=[1, 2]"])
-            >>> cfg.preset, cfg.seeds, cfg.budget
-            ('smoke', (0,), 1024)
-        """
+        ``BadInput`` for an unreadable file, a malformed assignment or an invalid value."""
         return resolve(source_layers(file, flags or {}, overrides), tasks)
 
     def validate(self) -> None:

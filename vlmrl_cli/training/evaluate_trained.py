@@ -85,15 +85,7 @@ class PlayedStep:
 def play_episode(policy: Policy, seed: int, shaping: ShapingConfig, task: Task, frame_every: int = 2,
                  camera: SceneCamera | None = None) -> list[PlayedStep]:
     """Play one native episode of ``task`` reset with ``seed``, rendering every ``frame_every``-th
-    state and the last (with ``camera``, the training camera's views of them too).
-
-    Example:
-        >>> from vlmrl_cli.tasks.registry import get_task
-        >>> steps = play_episode(lambda obs: 2 if obs[1] >= 0 else 0, seed=0, shaping=ShapingConfig(),
-        ...                      task=get_task("mountain-car"), frame_every=50)
-        >>> steps[-1].terminated, [s.t for s in steps if s.pixels is not None][:2]
-        (True, [0, 50])
-    """
+    state and the last (with ``camera``, the training camera's views of them too)."""
     env: Any = task.make_env(render_mode="rgb_array")  # gymnasium's rgb_array renderer, headless
 
     def step_of(t: int, obs: np.ndarray, action: Any, r_kin: float, total: float, terminated: bool,

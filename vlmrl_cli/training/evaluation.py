@@ -55,14 +55,7 @@ def evaluate_detached(policy: Policy, episodes: int, seed: int, task: Task) -> E
     ``policy`` maps a raw observation (MountainCar's [x, v]) to an action (it applies any
     observation normalisation itself). Success is the task's rule (``Task.success``: terminated
     at the goal within the time limit). ``positions`` records the task's hovering coordinate
-    (MountainCar's x) when it has one.
-
-    Example:
-        >>> from vlmrl_cli.tasks.registry import get_task
-        >>> r = evaluate_detached(lambda obs: 2 if obs[1] >= 0 else 0, 3, 0, get_task("mountain-car"))
-        >>> r.success_rate, bool(r.mean_length < 200)
-        (1.0, True)
-    """
+    (MountainCar's x) when it has one."""
     env = task.make_env()
     position = None if task.hover is None else task.hover.position
     returns, lengths, successes, positions = [], [], [], []

@@ -23,14 +23,7 @@ class MetricSink(Protocol):
 
 class MetricsOutputFormat(KVWriter):
     """An SB3 ``KVWriter`` that forwards the numeric values under ``prefixes`` to ``metrics`` at
-    ``step``, skipping keys excluded for ``"mlflow"``.
-
-    Example:
-        >>> class Sink:
-        ...     def log(self, metrics, step): print(step, dict(metrics))
-        >>> MetricsOutputFormat(Sink()).write({"train/approx_kl": 0.01, "time/fps": 900, "train/n": "x"}, {}, step=128)
-        128 {'train/approx_kl': 0.01}
-    """
+    ``step``, skipping keys excluded for ``"mlflow"``."""
 
     def __init__(self, metrics: MetricSink, prefixes: tuple[str, ...] = TRAIN_PREFIXES) -> None:
         self.metrics = metrics

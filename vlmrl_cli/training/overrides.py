@@ -20,14 +20,7 @@ MOVED_TO_PPO = ("timesteps", "eval_episodes")
 
 
 def parse_value(text: str) -> Any:
-    """A ``--set`` value: a TOML value if it parses as one, else a list if it has commas, else a string.
-
-    Example:
-        >>> parse_value("3"), parse_value("0.3"), parse_value("false"), parse_value("[64, 64]")
-        (3, 0.3, False, [64, 64])
-        >>> parse_value("hf"), parse_value("32,32"), parse_value("big")
-        ('hf', [32, 32], 'big')
-    """
+    """A ``--set`` value: a TOML value if it parses as one, else a list if it has commas, else a string."""
     text = text.strip()
     try:
         return tomllib.loads(f"v = {text}")["v"]
@@ -40,12 +33,7 @@ def parse_value(text: str) -> Any:
 
 def parse_values(text: str) -> list[Any]:
     """A ``--grid`` value list: comma-separated TOML values (``1,4,16``; ``true,false``;
-    ``[64,64],[256,256]``), bare words as strings.
-
-    Example:
-        >>> parse_values("1,4,16"), parse_values("[64,64],[8]"), parse_values("hf,sim")
-        ([1, 4, 16], [[64, 64], [8]], ['hf', 'sim'])
-    """
+    ``[64,64],[256,256]``), bare words as strings."""
     try:
         values = tomllib.loads(f"v = [{text}]")["v"]
         return list(values)
@@ -63,12 +51,7 @@ def parse_assignment(text: str, flag: str = "--set") -> tuple[str, str]:
 
 
 def nest(assignments: Iterable[tuple[str, Any]]) -> dict[str, Any]:
-    """Dotted keys -> a nested dict; later assignments win.
-
-    Example:
-        >>> nest([("ppo.n_envs", 1), ("shaping.alpha", 3), ("ppo.n_envs", 4)])
-        {'ppo': {'n_envs': 4}, 'shaping': {'alpha': 3}}
-    """
+    """Dotted keys -> a nested dict; later assignments win."""
     tree: dict[str, Any] = {}
     for key, value in assignments:
         *path, leaf = key.split(".")
@@ -85,12 +68,7 @@ def nest(assignments: Iterable[tuple[str, Any]]) -> dict[str, Any]:
 
 
 def dotted(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
-    """A nested table -> ``{dotted key: value}`` (``nest``'s inverse; an empty table sets nothing).
-
-    Example:
-        >>> dotted({"ppo": {"n_envs": 4, "gamma": 0.99}, "preset": "smoke", "shaping": {}})
-        {'ppo.n_envs': 4, 'ppo.gamma': 0.99, 'preset': 'smoke'}
-    """
+    """A nested table -> ``{dotted key: value}`` (``nest``'s inverse; an empty table sets nothing)."""
     out: dict[str, Any] = {}
     for key, value in table.items():
         if isinstance(value, Mapping):
@@ -101,12 +79,7 @@ def dotted(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
 
 
 def merge(base: Mapping[str, Any], top: Mapping[str, Any]) -> dict[str, Any]:
-    """``top`` laid over ``base``: tables merge key by key, any other value replaces.
-
-    Example:
-        >>> merge({"ppo": {"n_envs": 16, "gamma": 0.99}, "seeds": [0]}, {"ppo": {"n_envs": 1}})
-        {'ppo': {'n_envs': 1, 'gamma': 0.99}, 'seeds': [0]}
-    """
+    """``top`` laid over ``base``: tables merge key by key, any other value replaces."""
     out = dict(base)
     for key, value in top.items():
         if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):

@@ -14,13 +14,7 @@ EPISODES, SEED = 200, 0
 
 
 def random_policy_score(task: Task, episodes: int = EPISODES, seed: int = SEED) -> EvalResult:
-    """``evaluate_detached`` under uniform random actions from the action space seeded ``seed``.
-
-    Example:
-        >>> from vlmrl_cli.tasks.registry import get_task
-        >>> random_policy_score(get_task("mountain-car"), episodes=3).mean_return
-        -200.0
-    """
+    """``evaluate_detached`` under uniform random actions from the action space seeded ``seed``."""
     env = task.make_env()
     space = copy.deepcopy(env.action_space)
     env.close()
