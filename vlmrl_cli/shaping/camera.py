@@ -43,10 +43,8 @@ class FrameView:
 
 
 class CellCamera(Generic[Cell]):
-    """A camera of grid ``Cell`` s: each cell's ``FrameView`` is memoised for good, its pixels
-    kept in an LRU of ``pixel_cache`` frames and drawn again on demand (same pixels, same key).
-    A subclass draws a cell (``_draw``, with a ``_renderer`` it opens on demand); ``renders``
-    counts the draws."""
+    """A camera of grid ``Cell`` s: each cell's ``FrameView`` memoised, its pixels in an LRU of
+    ``pixel_cache`` frames; a subclass draws a cell (``_draw``, opening ``_renderer`` on demand)."""
 
     def __init__(self, pixel_cache: int = 256) -> None:
         if pixel_cache < 1:
@@ -66,16 +64,12 @@ class CellCamera(Generic[Cell]):
             self._renderer.close()
             self._renderer = None
 
-    def _render(self, cell: Cell) -> Frame:
-        self.renders += 1
-        known = self._views.get(cell)
-        # drawn again after the pixel cache dropped it: same pixels, same key (not hashed again)
-        return self._draw(cell, known.key if known is not None else None)
-
     def _frame(self, cell: Cell) -> Frame:
         frame = self._frames.get(cell)
         if frame is None:
-            frame = self._render(cell)
+            self.renders += 1
+            known = self._views.get(cell)  # drawn again after the pixel cache dropped it: the key is known
+            frame = self._draw(cell, known.key if known is not None else None)
             self._frames[cell] = frame
             if len(self._frames) > self.pixel_cache:
                 self._frames.popitem(last=False)

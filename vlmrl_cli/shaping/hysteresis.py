@@ -16,12 +16,8 @@ class LockState:
 
 
 def lock_step(state: LockState, label_potential: float, confirm: int) -> LockState:
-    """Feed one label's raw potential to the lock and return the next state.
-
-    Labels agree when their raw potentials are equal (two labels with one potential are one
-    milestone). A potential is confirmed once ``confirm`` consecutive labels agreed on it; a
-    confirmed potential above ``level`` becomes the new level, and the level never drops
-    within the episode, whatever the VLM says afterwards (flicker cannot undo a milestone)."""
+    """The lock after one more label's raw potential: a potential that ``confirm`` labels in a row
+    agree on (equal potentials) and above ``level`` becomes the level, which never drops."""
     if confirm < 1:
         raise ValueError(f"confirm must be >= 1, got {confirm}")
     p = float(label_potential)

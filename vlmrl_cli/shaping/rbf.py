@@ -35,14 +35,9 @@ def squared_distances(points: np.ndarray, feature: np.ndarray, unit: float = 1.0
 
 
 class RBFField:
-    """Gaussian-kernel-weighted mean of prototype potentials, ``sum_i w_i phi_i / sum_i w_i`` with
-    ``w_i = exp(-||f - f_i||^2 / (2 bandwidth^2))`` (Nadaraya-Watson), for many frames while
-    prototypes arrive one at a time, at O(1) a query. ``value`` lies within the prototypes'
-    potentials (0.0 before the first); weights are taken relative to the nearest prototype, so
-    when every raw weight would underflow the value is the nearest prototype's.
-
-    Each queried key keeps the numerator and denominator of its weighted mean relative to its
-    nearest prototype so far; a new prototype updates every stored key in one vectorised step."""
+    """``sum_i w_i phi_i / sum_i w_i``, ``w_i = exp(-||f - f_i||^2 / (2 bandwidth^2))``, per frame key
+    as prototypes arrive (each a vectorised update of every stored key), within the prototypes'
+    potentials (0.0 before the first; the nearest prototype's when every weight would underflow)."""
 
     def __init__(self, bandwidth: float, dim: int, unit: float = 1.0) -> None:
         if bandwidth <= 0:

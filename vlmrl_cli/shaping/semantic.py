@@ -27,12 +27,8 @@ from vlmrl_cli.vlm.prompts import Milestones, NumberQuestions
 
 
 class SemanticOracle:
-    """The VLM behind a visual prototype cache, shared by the envs of one run.
-
-    ``source`` picks the prompt: ``MCQ`` (label -> ``cfg.potential_of(label)``) or ``FLOAT`` (the
-    parsed number through ``numbers.potential``, the task's float question). Unparsed answers count
-    as parse failures and add no prototype.
-    """
+    """The VLM behind a visual prototype cache, shared by the envs of one run: ``source`` picks the
+    prompt, ``MCQ`` (the task's milestones) or ``FLOAT`` (its float question, ``numbers``)."""
 
     def __init__(self, client: VLMClient, cfg: ShapingConfig, source: PotentialSource, milestones: Milestones,
                  feature_dim: int, rbf: bool = True, numbers: NumberQuestions | None = None,
@@ -123,13 +119,8 @@ class SemanticOracle:
             self._fetched.update((view.key, answer) for view, answer in zip(need, answers, strict=True))
 
     def label(self, view: FrameView) -> float | None:
-        """The raw potential of the view's label (reused or asked), or None if unparsed.
-
-        A deterministic VLM's label of a frame is reused (and, with ``reuse_radius > 0``, the
-        nearest prototype's within that distance); a stochastic VLM is asked every time and its
-        newest answer replaces the prototype's potential. Past ``max_queries`` the label is the
-        nearest prototype's, at any distance (None before the first prototype).
-        """
+        """The raw potential of the view's label (reused or asked), or None if unparsed; a
+        stochastic VLM is asked every time, its newest answer replacing the prototype's potential."""
         known = self._label_of.get(view.key)
         if known is not None and not self._stochastic:
             self._reuses += 1
@@ -139,8 +130,11 @@ class SemanticOracle:
             if nearest is not None:
                 self._reuses += 1
                 return float(self._field.potentials[nearest])
-        if self.max_queries is not None and self._queries >= self.max_queries:
-            return self._past_budget(view)
+        if self.max_queries is not None and self._queries >= self.max_queries:  # the nearest prototype's
+            if not self.prototypes:
+                return None
+            self._budget_labels += 1
+            return float(self._field.potentials[self._nearest(view)[0]])
         potential = self._ask(view)
         if potential is None:
             self._parse_failures += 1
@@ -163,13 +157,6 @@ class SemanticOracle:
         sq = squared_distances(self._field.features, view.features, unit=FEATURE_UNIT)
         row = int(np.argmin(sq))
         return row, float(sq[row])
-
-    def _past_budget(self, view: FrameView) -> float | None:
-        """The label past the query budget: the nearest prototype's potential, or None (no prototype)."""
-        if not self.prototypes:
-            return None
-        self._budget_labels += 1
-        return float(self._field.potentials[self._nearest(view)[0]])
 
     def _answer(self, view: FrameView) -> Answer:
         """The VLM's answer about ``view``: the round's (``fetch``), else asked now."""

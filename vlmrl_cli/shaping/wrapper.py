@@ -137,10 +137,10 @@ class KinematicPotential(RewardStage):
         True
     """
 
-    def __init__(self, env: gym.Env, dense: DenseTerm, scale: float, offset: float, horizon: int,
+    def __init__(self, env: gym.Env, dense: DenseTerm, scale: float, offset: float, horizon: int | None,
                  gamma: float) -> None:
         super().__init__(env, dense=dense, scale=scale, offset=offset, horizon=horizon, gamma=gamma)
-        if not (isinstance(horizon, int) and horizon >= 1):
+        if not isinstance(horizon, int) or horizon < 1:
             raise ValueError(f"the dense term paid as a potential needs the task's time limit as horizon (got "
                              f"{horizon}).")
         self._dense, self._scale, self._offset = dense, float(scale), float(offset)
@@ -281,11 +281,7 @@ def arm_wrappers(arm: ArmSpec, shaping: ShapingConfig, gamma: float, scene: Scen
     gamma = _gamma(gamma)
     stack: list[Wrap] = []
     if arm.dense_potential:
-        if not (isinstance(horizon, int) and horizon >= 1):
-            raise ValueError(f"arm '{arm.name}' pays the dense term as a potential; pass the task's time limit "
-                             f"as horizon (got {horizon}).")
-        steps = horizon
-        stack.append(lambda env: KinematicPotential(env, scene.dense, shaping.kin_scale, shaping.kin_offset, steps,
+        stack.append(lambda env: KinematicPotential(env, scene.dense, shaping.kin_scale, shaping.kin_offset, horizon,
                                                     gamma))
     elif arm.kinematic:
         stack.append(lambda env: KinematicReward(env, scene.dense, shaping.kin_scale, shaping.kin_offset))

@@ -17,12 +17,9 @@ from vlmrl_cli.training.events import ProgressEvent
 
 
 class EpisodeTracker(BaseCallback):
-    """Logs every completed episode (native return, length, success, shaped return) at the global
-    timestep; at each rollout end ``rollout/return_100``, VLM and throughput figures; sends progress.
-
-    ``should_stop`` is polled every step (True ends training cleanly). ``success`` (the task's rule)
-    is applied here to Monitor's length and SB3's ``TimeLimit.truncated``, so no other rule decides.
-    """
+    """Logs every completed episode at the global timestep, and at each rollout end
+    ``rollout/return_100``, VLM and throughput figures; sends progress; stops when ``should_stop``.
+    ``success`` (the task's rule) is applied to Monitor's length and SB3's ``TimeLimit.truncated``."""
 
     def __init__(
         self,

@@ -158,11 +158,8 @@ class RunConfig:
     @classmethod
     def from_sources(cls, file: Path | None, flags: Mapping[str, Any] | None = None, overrides: Iterable[str] = (),
                      tasks: TaskLookup | None = None) -> RunConfig:
-        """The validated config of a TOML ``file`` (or None), ``overrides`` (``--set`` strings,
-        ``"ppo.n_envs=4"``) and ``flags`` typed on the command line (dotted keys, ``{"arms":
-        ["baseline"], "ppo.timesteps": 512}``), in the order preset < file < overrides < flags; the
-        task they name is looked up by ``tasks`` (the command's registry; None: the built-in tasks).
-        ``BadInput`` for an unreadable file, a malformed assignment or an invalid value."""
+        """The validated config of a TOML ``file``, ``--set`` ``overrides`` and dotted-key ``flags``
+        (preset < file < overrides < flags), its task looked up by ``tasks`` (None: the built-ins)."""
         return resolve(source_layers(file, flags or {}, overrides), tasks)
 
     def validate(self) -> None:
@@ -294,9 +291,8 @@ class TrainJob:
 
 
 def resolve(layers: Iterable[Mapping[str, Any]], tasks: TaskLookup | None = None) -> RunConfig:
-    """The validated ``RunConfig`` of ``layers`` (lowest first: config file, ``--set``, flags): the
-    one place a config's task name becomes its Task, looked up with ``tasks`` (the command's
-    registry; None: the built-in tasks alone), and carried from here."""
+    """The validated ``RunConfig`` of ``layers`` (lowest first): the one place a config's task name
+    becomes its Task, looked up with ``tasks`` (None: the built-in tasks alone)."""
     from vlmrl_cli.tasks.registry import builtin_task
     from vlmrl_cli.training.validation import validate_as
 
@@ -340,8 +336,7 @@ def _check_plugin(task: str, plugin: Task) -> None:
 
 def source_layers(file: Path | None, flags: Mapping[str, Any], sets: Iterable[str]) -> list[dict[str, Any]]:
     """The raw layers above the preset, lowest first: the config ``file`` (or none), the ``--set``
-    assignments ``sets``, then ``flags`` (dotted keys). Commands with sections of their own
-    (``[calibrate]``, ``[study]``) take these before resolving."""
+    assignments ``sets``, then ``flags`` (dotted keys)."""
     file_layer = load_config_file(file) if file is not None else {}
     assignments = [parse_assignment(text) for text in sets]
     twice = first_repeated([key for key, _ in assignments])

@@ -28,13 +28,8 @@ def make_train_env(
     task: Task,
     max_queries: int | None = None,
 ) -> tuple[VecEnv, SemanticOracle | None]:
-    """The training VecEnv of one run of ``task`` and its oracle (None for arms without a VLM).
-
-    Per env: ``task.make_env()`` -> ``as_float`` -> ``Monitor`` (episode stats are the NATIVE return
-    and length) -> the arm's wrappers; then ``DummyVecEnv`` (``LabelRoundVecEnv`` for an arm with a
-    VLM) of ``ppo.n_envs``, env ``i`` seeded ``seed + i`` -> ``VecNormalize`` unless both its
-    normalisations are off. The PBRS discount is ``shaping.gamma``, else ``ppo.gamma``.
-    """
+    """The training VecEnv of one run of ``task`` (env ``i`` seeded ``seed + i``; ``Monitor`` below the
+    arm's wrappers, so episode stats are NATIVE) and its oracle (None for arms without a VLM)."""
     if arm.uses_vlm and client is None:
         raise ValueError(f"arm '{arm.name}' queries a VLM; pass a VLMClient (e.g. the simulated one).")
     if ppo.n_envs < 1:

@@ -186,9 +186,8 @@ class EvaluateResult:
 
 
 def evaluate_run(cfg: EvaluateConfig, tasks: TaskLookup) -> EvaluateResult:
-    """Evaluate run ``cfg.run_id`` and write ``episode-<i>.gif`` and ``evaluation.json`` to
-    ``cfg.out_dir``, logged as the run's artifacts under ``evaluate/``; ``BadInput`` before any
-    folder is made for a missing store, an unknown run or model, or an unavailable VLM backend."""
+    """Evaluate run ``cfg.run_id``; write ``episode-<i>.gif`` and ``evaluation.json`` to ``cfg.out_dir``
+    and log them as the run's artifacts (``BadInput`` before any folder is made)."""
     cfg.validate()
     client = store.connect_existing(cfg.tracking_uri)
     with tempfile.TemporaryDirectory(prefix="vlmrl-evaluate-") as tmp:

@@ -118,9 +118,8 @@ def task_ref(layers: Iterable[Mapping[str, Any]], default: str) -> Any:
 
 
 def resolve_raw(layers: Iterable[Mapping[str, Any]], task: Task | None) -> dict[str, Any]:
-    """The merged raw configuration of ``layers`` (lowest first) over the named preset's ``[ppo]``
-    (the task's default preset when none is named), ``task`` the Task the layers name (None when
-    they name none that resolves: the schema then says what is wrong)."""
+    """The merged raw configuration of ``layers`` (lowest first) over the named preset's ``[ppo]``,
+    for ``task`` (None when the layers name none that resolves: the schema says what is wrong)."""
     lifted = [_lift_moved(layer) for layer in layers]
     preset: Any = None
     for layer in lifted:

@@ -12,6 +12,7 @@ from pydantic import AfterValidator
 
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.core.fields import AtMost
+from vlmrl_cli.core.provenance import to_jsonable
 
 if TYPE_CHECKING:
     from vlmrl_cli.tasks.base import Task
@@ -97,8 +98,6 @@ def ppo_identity(ppo: PPOConfig) -> dict[str, object]:
         >>> "use_sde" in ppo_identity(PPOConfig()), ppo_identity(PPOConfig(use_sde=True))["use_sde"]
         (False, True)
     """
-    from vlmrl_cli.core.provenance import to_jsonable
-
     ident: dict[str, object] = to_jsonable(ppo)
     for key, neutral in NEUTRAL_PPO_KNOBS.items():
         if ident.get(key) == neutral:

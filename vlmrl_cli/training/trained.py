@@ -71,13 +71,8 @@ class TrainedRun:
 
 def load_trained_run(client: Any, run_id: str, workdir: Path, tasks: TaskLookup,
                      trust_pickle: bool = False) -> TrainedRun:
-    """Download run ``run_id``'s model, normaliser and config into ``workdir`` and load them, without
-    unpickling (see the module's docstring; ``trust_pickle`` lets an old run's pickled normaliser
-    load); the task its config names is resolved once, by the command's ``tasks``.
-
-    ``BadInput`` when the store has no such run, the run saved no model (it failed, was stopped,
-    or is not a training run), or its files do not fit its config.
-    """
+    """Download run ``run_id``'s model, normaliser and config into ``workdir`` and load them without
+    unpickling; ``BadInput`` for no such run, no model, or files that do not fit its config."""
     from mlflow.exceptions import MlflowException
 
     try:
@@ -116,10 +111,8 @@ def load_trained_run(client: Any, run_id: str, workdir: Path, tasks: TaskLookup,
 
 
 def _load_policy(workdir: Path, task: Task, ppo: PPOConfig, run_id: str) -> Policy:
-    """The run's deterministic policy: an ``ActorCriticPolicy`` built from its PPO config (as
-    ``PPO("MlpPolicy")`` builds it) holding the weights of ``policy.pth`` (the artifact, else the
-    entry of ``model.zip``), read with ``torch.load(weights_only=True)``, on the observation
-    statistics of ``load_normalizer``."""
+    """The run's deterministic policy: an ``ActorCriticPolicy`` built from its PPO config holding the
+    weights of ``policy.pth`` (the artifact, else ``model.zip``'s), read with ``weights_only``."""
     import io
     import pickle
     import zipfile
@@ -161,9 +154,8 @@ def save_normalizer(env: Any, path: Path) -> None:
 
 
 def load_normalizer(workdir: Path, task: Task) -> Any:
-    """The run's observation normaliser (a ``VecNormalize`` that no longer updates), or None for a run
-    without one: from ``vecnormalize.npz`` (``numpy.load(allow_pickle=False)``), else from the
-    pickle of an older run, which ``load_trained_run`` downloads only when trusted."""
+    """The run's frozen ``VecNormalize`` (None without one), from ``vecnormalize.npz``, else from an
+    older run's pickle (downloaded only when trusted)."""
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     arrays, pickled = workdir / NORMALIZER, workdir / PICKLED_NORMALIZER

@@ -16,6 +16,7 @@ from pydantic import model_validator as _model_validator
 
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.core.fields import is_carried, rules_of
+from vlmrl_cli.core.provenance import to_jsonable
 
 
 def batch_sizes_near(rollout: int, batch_size: int) -> list[int]:
@@ -33,9 +34,8 @@ def batch_sizes_near(rollout: int, batch_size: int) -> list[int]:
 
 
 def _ppo_consistent(ppo: Any) -> Any:
-    """The rules SB3's PPO sets over several knobs, refused here rather than warned about or
-    asserted once a run has started: its rollout (n_envs x n_steps samples) must be at least 2,
-    and its minibatches (it normalises the advantages of each) at least 2 samples each, all whole."""
+    """SB3's PPO's rules over several knobs, refused before a run starts: a rollout of at least 2
+    samples, cut into whole minibatches of at least 2 (it normalises each one's advantages)."""
     rollout = ppo.n_envs * ppo.n_steps
     product = f"ppo.n_envs x ppo.n_steps ({ppo.n_envs} x {ppo.n_steps} = {rollout})"
     if ppo.batch_size > rollout:
@@ -82,7 +82,7 @@ def _model(cls: type, prefix: str = "") -> type[BaseModel]:
         else:
             default = ...
         if dataclasses.is_dataclass(default) and not isinstance(default, type):
-            default = _model(type(default), f"{key}.").model_validate_json(json.dumps(_jsonable(default)))
+            default = _model(type(default), f"{key}.").model_validate_json(json.dumps(to_jsonable(default)))
         fields[f.name] = (tp, default)
     validators: dict[str, Any] = {}
     check = CHECKS.get(prefix.removesuffix("."))
@@ -103,12 +103,6 @@ def _dataclass_in(tp: Any) -> type | None:
         if isinstance(t, type) and dataclasses.is_dataclass(t):
             return t
     return None
-
-
-def _jsonable(obj: Any) -> Any:
-    from vlmrl_cli.core.provenance import to_jsonable
-
-    return to_jsonable(obj)
 
 
 def _to_dataclass(cls: type, model: BaseModel, carried: dict[str, Any] | None = None) -> Any:
@@ -161,12 +155,10 @@ def _section_fields(cls: type, section: list[str]) -> list[str]:
 
 
 def validate_as(cls: type, raw: dict[str, Any], at: str = "", **carried: Any) -> Any:
-    """``raw`` (nested plain values, as TOML gives them) checked against the schema of dataclass
-    ``cls`` and built into it, with the values of its ``CARRIED`` fields given as ``carried``;
-    ``BadInput`` naming the first wrong key otherwise (under ``at``, the table ``raw`` is, e.g.
-    ``study``)."""
+    """``raw`` (plain values, as TOML gives them) checked against dataclass ``cls`` and built into it
+    with its ``CARRIED`` fields from ``carried``; else ``BadInput`` naming the first wrong key."""
     try:
-        blob = json.dumps(_jsonable(raw))
+        blob = json.dumps(to_jsonable(raw))
     except (TypeError, ValueError) as exc:
         raise BadInput(f"the configuration holds a value that is no number, string, boolean or list ({exc}).") from exc
     try:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import random
 from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -51,10 +51,10 @@ class Outcome:
     run: RecordedRun
     returns: list[float]
     wall_s: float
-    first_difference: int | None = field(init=False)
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "first_difference", first_difference(self.run.native_returns, self.returns))
+    @property
+    def first_difference(self) -> int | None:
+        return first_difference(self.run.native_returns, self.returns)
 
     @property
     def identical(self) -> bool:
