@@ -40,8 +40,8 @@ class RBFField:
     potentials (0.0 before the first; the nearest prototype's when every weight would underflow)."""
 
     def __init__(self, bandwidth: float, dim: int, unit: float = 1.0) -> None:
-        if bandwidth <= 0:
-            raise ValueError(f"bandwidth must be > 0, got {bandwidth}")
+        if not (math.isfinite(bandwidth) and bandwidth > 0):
+            raise ValueError(f"bandwidth must be > 0 (feature-distance units), got {bandwidth}")
         if not (math.isfinite(unit) and unit > 0):
             raise ValueError(f"unit must be > 0, got {unit}")
         self.bandwidth = float(bandwidth)
@@ -163,8 +163,7 @@ class RBFField:
         return int(np.einsum("i,i->", row, row)) if np.issubdtype(row.dtype, np.integer) else 0
 
     def set_potential(self, index: int, potential: float) -> None:
-        """Give prototype ``index`` (insertion order) a new potential, updating every stored key:
-        a stochastic VLM's newest answer about a frame replaces its older one."""
+        """Give prototype ``index`` (insertion order) a new potential, updating every stored key."""
         if self._proto_buf is None or not 0 <= index < self._n:
             raise IndexError(f"no prototype {index}; the field holds {self.prototypes}")
         old = float(self._pot_buf[index])

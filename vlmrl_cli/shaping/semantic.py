@@ -1,9 +1,6 @@
-"""The macro-semantic potential Phi(s) (paper Section 3.2), built from camera views only.
-
-``SemanticOracle`` (one per run) holds the visual prototype cache and asks the VLM, one
-labelling round per vector step; ``EpisodePotential`` (one per env) holds the labelling schedule,
-the lock and the arm's combination. See docs/method.md for both.
-"""
+"""The macro-semantic potential Phi(s) (paper Section 3.2), from camera views only: one
+``SemanticOracle`` per run (the prototype cache, the VLM), one ``EpisodePotential`` per env (the
+labelling schedule, the lock). See docs/method.md."""
 
 from __future__ import annotations
 
@@ -35,8 +32,6 @@ class SemanticOracle:
                  max_queries: int | None = None) -> None:
         if source is PotentialSource.NONE:
             raise ValueError("a SemanticOracle needs a potential source (MCQ or FLOAT); arms without one need none.")
-        if not (math.isfinite(cfg.bandwidth) and cfg.bandwidth > 0):
-            raise ValueError(f"ShapingConfig.bandwidth must be > 0 (feature-distance units), got {cfg.bandwidth}.")
         if not (math.isfinite(cfg.reuse_radius) and cfg.reuse_radius >= 0):
             raise ValueError(f"ShapingConfig.reuse_radius must be >= 0 (0 disables reuse), got {cfg.reuse_radius}.")
         if cfg.query_every < 1 or cfg.confirm < 1:
@@ -145,8 +140,7 @@ class SemanticOracle:
         return potential
 
     def _nearby(self, view: FrameView) -> int | None:
-        """The row of the nearest prototype within ``reuse_radius`` of ``view`` (None: reuse is off,
-        or none is that near)."""
+        """The row of the nearest prototype within ``reuse_radius`` of ``view``, else None."""
         if not self.prototypes or self.cfg.reuse_radius <= 0:
             return None
         nearest, sq = self._nearest(view)
@@ -235,10 +229,6 @@ class EpisodePotential:
         self.steps_since_label = 0
         # the oracle's RBF field's value(key, features), looked up once (None without the RBF)
         self._rbf_value = oracle.field_value if oracle.rbf else None
-
-    def request_reset(self, view: FrameView) -> None:
-        """Register the reset's label with the oracle's round (``reset`` then takes it)."""
-        self.oracle.request(view)
 
     def request_step(self, view: FrameView) -> None:
         """Register the next step's label with the oracle's round, when that step labels."""

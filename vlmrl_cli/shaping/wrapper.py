@@ -1,7 +1,5 @@
-"""An arm as an ordered stack of reward wrappers (paper Eq. 2), each checking its own arguments:
-``arm_wrappers`` says which an arm stacks, ``wrap_arm`` stacks them, ``LabelRoundVecEnv`` steps
-them in labelling rounds. See docs/method.md.
-"""
+"""An arm as an ordered stack of reward wrappers (paper Eq. 2), each checking its own arguments,
+stepped whole or in labelling rounds (``LabelRoundVecEnv``). See docs/method.md."""
 
 from __future__ import annotations
 
@@ -24,7 +22,6 @@ from vlmrl_cli.shaping.semantic import EpisodePotential, SemanticOracle
 
 StepResult = tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]
 ResetResult = tuple[Any, dict[str, Any]]
-Wrap = Callable[[gym.Env], gym.Env]
 
 
 def _gamma(gamma: float) -> float:
@@ -193,11 +190,6 @@ class SemanticPotential(RewardStage):
         """Phi of the current state."""
         return self._phi
 
-    @property
-    def lock_level(self) -> float:
-        """The hysteresis lock's level in this episode (0.0 without a lock)."""
-        return self.episode.lock_state.level
-
     def _after_reset(self, obs: Any, info: dict[str, Any]) -> ResetResult:
         view, self._reset_view = self._reset_view, None
         self._phi = self.episode.reset(view if view is not None else self.camera.look(self._sim))
@@ -221,7 +213,7 @@ class SemanticPotential(RewardStage):
     def begin_reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
         super().begin_reset(seed=seed, options=options)
         self._reset_view = self.camera.look(self._sim)
-        self.episode.request_reset(self._reset_view)
+        self.episode.oracle.request(self._reset_view)  # a reset always labels
 
     def close(self) -> None:
         self.camera.close()  # idempotent; a camera shared by other envs reopens on demand
@@ -264,48 +256,35 @@ class EpisodeStatistics(RewardStage):
         return obs, reward, terminated, truncated, info
 
 
-def arm_wrappers(arm: ArmSpec, shaping: ShapingConfig, gamma: float, scene: Scene, camera: SceneCamera | None = None,
-                 oracle: SemanticOracle | None = None, horizon: int | None = None,
-                 success: SuccessRule | None = None) -> list[Wrap]:
-    """The wrappers of ``arm``, innermost first: its dense term (a reward or a potential, which needs
-    the task's time limit ``horizon``), its semantic potential, then ``EpisodeStatistics``.
+def wrap_arm(env: gym.Env, arm: ArmSpec, shaping: ShapingConfig, gamma: float, scene: Scene,
+             camera: SceneCamera | None = None, oracle: SemanticOracle | None = None, horizon: int | None = None,
+             success: SuccessRule | None = None) -> EpisodeStatistics:
+    """``env`` (observations of ``scene.obs_shape``) under ``arm``'s wrappers, innermost first: its
+    dense term (a reward, or a potential that needs the task's time limit ``horizon``), its semantic
+    potential, then ``EpisodeStatistics``, which is returned.
 
     Example:
         >>> from vlmrl_cli.shaping.arms import ARMS
         >>> from vlmrl_cli.tasks.registry import get_task
-        >>> car = get_task("mountain-car")
-        >>> stack = arm_wrappers(ARMS["kinematic"], ShapingConfig(), 0.99, car.scene, horizon=200)
-        >>> [type(wrap(gym.make("MountainCar-v0"))).__name__ for wrap in stack]
-        ['KinematicReward', 'EpisodeStatistics']
+        >>> env = wrap_arm(gym.make("MountainCar-v0"), ARMS["kinematic"], ShapingConfig(), 0.99,
+        ...                get_task("mountain-car").scene, horizon=200)
+        >>> type(env).__name__, type(env.env).__name__
+        ('EpisodeStatistics', 'KinematicReward')
     """
-    gamma = _gamma(gamma)
-    stack: list[Wrap] = []
-    if arm.dense_potential:
-        stack.append(lambda env: KinematicPotential(env, scene.dense, shaping.kin_scale, shaping.kin_offset, horizon,
-                                                    gamma))
-    elif arm.kinematic:
-        stack.append(lambda env: KinematicReward(env, scene.dense, shaping.kin_scale, shaping.kin_offset))
-    if arm.uses_vlm:
-        if camera is None or oracle is None:
-            raise ValueError(f"arm '{arm.name}' shapes with the VLM; pass the run's camera and oracle.")
-        lens, seer = camera, oracle
-        stack.append(lambda env: SemanticPotential(env, arm, shaping.alpha, gamma, lens, seer, scene.sim_type))
-    stack.append(lambda env: EpisodeStatistics(env, success))
-    return stack
-
-
-def wrap_arm(env: gym.Env, arm: ArmSpec, shaping: ShapingConfig, gamma: float, scene: Scene,
-             camera: SceneCamera | None = None, oracle: SemanticOracle | None = None, horizon: int | None = None,
-             success: SuccessRule | None = None) -> EpisodeStatistics:
-    """``env`` (observations of ``scene.obs_shape``) under ``arm_wrappers``; returns the outermost."""
     shape = getattr(env.observation_space, "shape", None)
     if shape != scene.obs_shape:
         raise ValueError(f"the arm's wrappers read {scene.name}, observation shape {scene.obs_shape}; "
                          f"got shape {shape}.")
-    for wrap in arm_wrappers(arm, shaping, gamma, scene, camera, oracle, horizon, success):
-        env = wrap(env)
-    assert isinstance(env, EpisodeStatistics)
-    return env
+    gamma = _gamma(gamma)
+    if arm.dense_potential:
+        env = KinematicPotential(env, scene.dense, shaping.kin_scale, shaping.kin_offset, horizon, gamma)
+    elif arm.kinematic:
+        env = KinematicReward(env, scene.dense, shaping.kin_scale, shaping.kin_offset)
+    if arm.uses_vlm:
+        if camera is None or oracle is None:
+            raise ValueError(f"arm '{arm.name}' shapes with the VLM; pass the run's camera and oracle.")
+        env = SemanticPotential(env, arm, shaping.alpha, gamma, camera, oracle, scene.sim_type)
+    return EpisodeStatistics(env, success)
 
 
 class LabelRoundVecEnv(DummyVecEnv):
