@@ -1,6 +1,5 @@
-"""The arms of the experiment, in one registry: which reward terms each one uses, which arm each
-one is compared with in the report and the study (and what that difference isolates), and the
-order in which the report lists them."""
+"""The arms of the experiment, in one registry: each one's reward terms, its comparisons in the
+report and the study, and its place in the report's order."""
 
 from __future__ import annotations
 
@@ -29,14 +28,11 @@ PLACEBO = "hybrid-shuffled"  # the method with its label map shuffled per seed
 DENSE_POTENTIAL = "hybrid-dense-pbrs"  # the method with Eq. 1's dense term in potential form
 #: The placebo of each arm that has one.
 PLACEBO_OF: Mapping[str, str] = {METHOD: PLACEBO}
-#: Position in the report of an arm that gives none: after every arm that does.
-LAST = 100
 
 
 @dataclass(frozen=True)
 class Comparison:
-    """One comparison of the report (and of the study's regime map unless ``in_study`` is False):
-    the arm that holds it against ``reference``, and what the difference ``isolates``."""
+    """One comparison of the report (and of the study's regime map unless ``in_study`` is False)."""
 
     reference: str
     isolates: str
@@ -61,7 +57,7 @@ class ArmSpec:
     dense_potential: bool = False
     # How the arm is reported, not how it is rewarded: ``identity`` always leaves these out.
     compared_with: tuple[Comparison, ...] = ()  # this arm against each reference, in the report's order
-    report_order: int = LAST  # position in the report's tables and figures (lower first; ties: registry order)
+    report_order: int = 100  # position in the report's tables and figures (lower first; ties: registry order)
 
     @property
     def uses_vlm(self) -> bool:

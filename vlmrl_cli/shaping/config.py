@@ -19,8 +19,7 @@ _SCALE_LIMIT = AtMost(1e6, "a larger scale makes the shaped term dwarf the task'
 
 
 def _label_table(value: Any) -> Any:
-    """A label map as ``(label, potential)`` pairs, from a TOML table or a full config's
-    ``[[label, potential], ...]``; the run's task checks the labels."""
+    """A label map as ``(label, potential)`` pairs, from a TOML table or ``[[label, potential], ...]``."""
     if isinstance(value, dict):
         value = list(value.items())
     if not isinstance(value, (list, tuple)) or not all(isinstance(p, (list, tuple)) and len(p) == 2 for p in value):

@@ -1,8 +1,5 @@
-"""Exact integer block-darkness features of a frame, from its pixels only.
-
-Integers round nowhere, so every CPU gives the same features; see docs/method.md for how the
-feature distance grows with the car's displacement.
-"""
+"""Exact integer block-darkness features of a frame, from its pixels only: the same on every CPU
+(docs/method.md)."""
 
 from __future__ import annotations
 

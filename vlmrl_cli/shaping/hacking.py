@@ -40,8 +40,7 @@ def dwell_right_steps(xs: npt.ArrayLike, x_min: float) -> int:
 
 @dataclass(frozen=True)
 class HoverSummary:
-    """One run's detached evaluation seen for hovering: ``hover_fraction`` pooled over episodes,
-    ``dwell_right_steps`` the mean per episode."""
+    """One run's detached evaluation seen for hovering (``dwell_right_steps``: the mean per episode)."""
 
     hover_fraction: float
     dwell_right_steps: float
@@ -56,8 +55,7 @@ def summarize_hovering(
     trajectories: Sequence[npt.ArrayLike], reached_flag: npt.ArrayLike, x_min: float,
     horizon: int = HOVER_HORIZON,
 ) -> HoverSummary:
-    """Hover fraction and mean dwell right of ``x_min`` over a run's episodes (one ``(T_i,)``
-    position array each, and whether each ended at the flag)."""
+    """Hover fraction and mean dwell right of ``x_min`` over a run's episodes' position arrays."""
     reached = np.asarray(reached_flag, dtype=bool).reshape(-1)
     if reached.size != len(trajectories):
         raise ValueError(f"{len(trajectories)} trajectories but {reached.size} reached_flag values.")

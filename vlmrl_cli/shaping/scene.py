@@ -31,8 +31,7 @@ def ended_by_env(terminated: bool, length: int) -> bool:
 
 
 class SceneCamera(Protocol):
-    """A run's camera: the one component that reads the simulator (``sim``, the unwrapped env)
-    and turns its state into a ``FrameView`` (quantised, so that distinct frames are bounded)."""
+    """A run's camera: the one component that reads the simulator (``sim``, the unwrapped env)."""
 
     renders: int
 

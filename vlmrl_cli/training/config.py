@@ -89,8 +89,7 @@ def _no_problem(problem: Callable[[Any], str | None]) -> Callable[[Any], Any]:
 
 
 def _builtin_presets() -> list[str]:
-    """The presets of the built-in tasks this machine can run: those ``preset`` takes (the run's own
-    task's are checked against its plug-in in training/overrides.py and ``RunConfig.validate``)."""
+    """The presets of the built-in tasks this machine can run (the run's task checks its own)."""
     from vlmrl_cli.tasks.registry import BUILTIN
 
     known: list[str] = []
@@ -163,8 +162,7 @@ class RunConfig:
         return resolve(source_layers(file, flags or {}, overrides), tasks)
 
     def validate(self) -> None:
-        """Raise ``BadInput`` for anything that would fail later; nothing is trained before. For a
-        config built by hand: one built from its sources (``from_sources``, ``resolve``) is valid."""
+        """Raise ``BadInput`` for anything that would fail later (for a config built by hand)."""
         from vlmrl_cli.training.validation import validate_as
 
         validate_as(RunConfig, to_jsonable(self), plugin=self.plugin)
@@ -279,8 +277,7 @@ class TrainJob:
         return {"seed": self.seed, "preset": self.preset, **self.identity()}
 
     def overrides(self) -> dict[str, str]:
-        """The knobs of this job that differ from its preset and the shaping/VLM defaults, as
-        dotted keys (``{"ppo.n_envs": "1"}``); only knobs the job's identity depends on count."""
+        """The identity's knobs that differ from the preset's and the defaults, as dotted keys."""
         reference = dataclasses.replace(self, ppo=preset_of(self.task_plugin, self.preset), vlm=VLMConfig(),
                                         shaping=self.task_plugin.default_shaping())
         ref = flatten(reference.identity())
@@ -325,8 +322,7 @@ def once(tasks: TaskLookup | None) -> TaskLookup:
 
 
 def _check_plugin(task: str, plugin: Task) -> None:
-    """A config's ``plugin`` is the Task its ``task`` names (a built-in name is checked; a user's
-    ``module:NAME`` or entry point may name a Task of another name)."""
+    """A config's ``plugin`` is the Task its ``task`` names (checked for a built-in name)."""
     from vlmrl_cli.tasks.registry import BUILTIN
 
     if task in BUILTIN and plugin.name != task:

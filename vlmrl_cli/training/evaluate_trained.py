@@ -84,8 +84,7 @@ class PlayedStep:
 
 def play_episode(policy: Policy, seed: int, shaping: ShapingConfig, task: Task, frame_every: int = 2,
                  camera: SceneCamera | None = None) -> list[PlayedStep]:
-    """Play one native episode of ``task`` reset with ``seed``, rendering every ``frame_every``-th
-    state and the last (with ``camera``, the training camera's views of them too)."""
+    """One native episode of ``task`` from ``seed``, every ``frame_every``-th state and the last rendered."""
     env: Any = task.make_env(render_mode="rgb_array")  # gymnasium's rgb_array renderer, headless
 
     def step_of(t: int, obs: np.ndarray, action: Any, r_kin: float, total: float, terminated: bool,

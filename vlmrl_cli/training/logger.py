@@ -1,5 +1,4 @@
-"""SB3's own training diagnostics (``train/approx_kl``, ...) into MLflow, as an SB3 logger output
-format: nothing in the training loop calls MLflow."""
+"""SB3's own training diagnostics (``train/approx_kl``, ...) into MLflow, as an SB3 output format."""
 
 from __future__ import annotations
 
@@ -22,8 +21,7 @@ class MetricSink(Protocol):
 
 
 class MetricsOutputFormat(KVWriter):
-    """An SB3 ``KVWriter`` that forwards the numeric values under ``prefixes`` to ``metrics`` at
-    ``step``, skipping keys excluded for ``"mlflow"``."""
+    """An SB3 ``KVWriter`` forwarding the numeric values under ``prefixes`` to ``metrics``."""
 
     def __init__(self, metrics: MetricSink, prefixes: tuple[str, ...] = TRAIN_PREFIXES) -> None:
         self.metrics = metrics

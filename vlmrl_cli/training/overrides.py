@@ -32,8 +32,7 @@ def parse_value(text: str) -> Any:
 
 
 def parse_values(text: str) -> list[Any]:
-    """A ``--grid`` value list: comma-separated TOML values (``1,4,16``; ``true,false``;
-    ``[64,64],[256,256]``), bare words as strings."""
+    """A ``--grid`` value list: comma-separated TOML values (``1,4,16``), bare words as strings."""
     try:
         values = tomllib.loads(f"v = [{text}]")["v"]
         return list(values)

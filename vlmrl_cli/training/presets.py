@@ -1,5 +1,4 @@
-"""PPO hyperparameters: one frozen ``PPOConfig`` and the task's named presets that fill it (the
-bottom layer of a run's ``[ppo]``)."""
+"""PPO hyperparameters: one frozen ``PPOConfig`` and the task's named presets that fill it."""
 
 from __future__ import annotations
 
@@ -106,8 +105,7 @@ def ppo_identity(ppo: PPOConfig) -> dict[str, object]:
 
 
 def preset_of(task: Task, name: str) -> PPOConfig:
-    """The PPO preset ``name`` of ``task`` (``Task.presets``), checked like a config file; an
-    unknown one is a ``BadInput`` naming the task's presets."""
+    """The PPO preset ``name`` of ``task``, checked like a config file (``BadInput`` if unknown)."""
     table = task.presets
     if name not in table:
         raise BadInput(f"unknown preset '{name}' for task {task.name}{did_you_mean(name, table)}; "

@@ -1,5 +1,4 @@
-"""What training one job needs, built the one way every run (``sweep/worker.py``, ``trace.py``)
-builds it: its VLM client, its env stack and its PPO learner."""
+"""What training one job needs, built the one way every run builds it: VLM client, envs, learner."""
 
 from __future__ import annotations
 

@@ -32,8 +32,7 @@ PICKLE_WARNING = ("a pickle, and loading a pickle runs whatever code it holds; p
 
 
 def deterministic_policy(model: Any, env: Any) -> Policy:
-    """The trained policy on raw observations, applying the training obs normalisation
-    (when ``env`` is a ``VecNormalize``)."""
+    """The trained policy on raw observations (normalised when ``env`` is a ``VecNormalize``)."""
     from gymnasium.spaces import Discrete
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -145,8 +144,7 @@ def _load_policy(workdir: Path, task: Task, ppo: PPOConfig, run_id: str) -> Poli
 
 
 def save_normalizer(env: Any, path: Path) -> None:
-    """Write the observation statistics of the ``VecNormalize`` ``env`` to ``path`` as plain arrays
-    (``numpy.savez``): what evaluation needs, with nothing to unpickle."""
+    """Write the observation statistics of the ``VecNormalize`` ``env`` to ``path`` as plain arrays."""
     rms = env.obs_rms
     np.savez(path, obs_mean=np.asarray(rms.mean, dtype=np.float64), obs_var=np.asarray(rms.var, dtype=np.float64),
              obs_count=np.float64(rms.count), clip_obs=np.float64(env.clip_obs), epsilon=np.float64(env.epsilon),

@@ -59,8 +59,7 @@ CHECKS: dict[str, Callable[[Any], Any]] = {"ppo": _ppo_consistent}
 
 @functools.cache
 def _model(cls: type, prefix: str = "") -> type[BaseModel]:
-    """A pydantic model with the fields of dataclass ``cls``, its nested dataclasses as nested
-    models, each field's own rules (``rules_of``) and the ``CHECKS`` of keys under ``prefix``."""
+    """A pydantic model of dataclass ``cls`` (nested ones nested), its fields' rules and ``CHECKS``."""
     hints = typing.get_type_hints(cls)
     fields: dict[str, Any] = {}
     for f in dataclasses.fields(cls):

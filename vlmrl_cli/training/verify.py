@@ -260,8 +260,7 @@ def describe_paths(tags: dict[str, str]) -> str:
 
 
 def verify_many(runs: Sequence[RecordedRun], tasks: TaskLookup, workers: int = 1) -> Iterator[Outcome]:
-    """Verify ``runs`` in ``workers`` spawned processes (inheriting the numeric pin), yielding each
-    outcome as it finishes."""
+    """Verify ``runs`` in ``workers`` spawned processes, yielding each outcome as it finishes."""
     if workers <= 1:
         yield from (verify_run(run, tasks) for run in runs)
         return
