@@ -30,13 +30,6 @@ def _gamma(gamma: float) -> float:
     return float(gamma)
 
 
-def _native(info: dict[str, Any], reward: SupportsFloat) -> dict[str, Any]:
-    """``info`` (copied) with ``native_reward``: the reward of the env below the first reward wrapper."""
-    info = dict(info)
-    info.setdefault("native_reward", float(reward))
-    return info
-
-
 class RewardStage(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorArgs):
     """A wrapper that changes what a step and a reset return (``_after_step``, ``_after_reset``),
     whether run whole or in the two halves of a labelling round (``begin_step``, ``finish_step``):
@@ -53,11 +46,18 @@ class RewardStage(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorAr
                     info: dict[str, Any]) -> StepResult:
         return obs, reward, terminated, truncated, info
 
+    def _stepped(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
+                 info: dict[str, Any]) -> StepResult:
+        """``_after_step`` of a copy of ``info`` that keeps the reward from below the first reward
+        wrapper as ``native_reward``."""
+        native = info.get("native_reward", float(reward))
+        return self._after_step(obs, reward, terminated, truncated, info | {"native_reward": native})
+
     def _after_reset(self, obs: Any, info: dict[str, Any]) -> ResetResult:
         return obs, info
 
     def step(self, action: Any) -> StepResult:
-        return self._after_step(*self.env.step(action))
+        return self._stepped(*self.env.step(action))
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> ResetResult:
         return self._after_reset(*self.env.reset(seed=seed, options=options))
@@ -73,10 +73,10 @@ class RewardStage(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorAr
     def finish_step(self) -> StepResult:
         """The second half of ``step``: what ``step`` would have returned."""
         if isinstance(self.env, RewardStage):
-            return self._after_step(*self.env.finish_step())
+            return self._stepped(*self.env.finish_step())
         result, self._begun_step = self._begun_step, None
         assert result is not None, "finish_step without begin_step"
-        return self._after_step(*result)
+        return self._stepped(*result)
 
     def begin_reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
         """The first half of ``reset``."""
@@ -115,7 +115,6 @@ class KinematicReward(RewardStage):
 
     def _after_step(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
                     info: dict[str, Any]) -> StepResult:
-        info = _native(info, reward)
         return obs, float(reward) + self._dense(obs, self._scale, self._offset), terminated, truncated, info
 
 
@@ -153,7 +152,6 @@ class KinematicPotential(RewardStage):
 
     def _after_step(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
                     info: dict[str, Any]) -> StepResult:
-        info = _native(info, reward)
         phi = self._potential(obs)
         reward = float(reward) + pbrs_term(self._phi, phi, self._gamma, 1.0, terminated)
         self._phi = phi
@@ -197,7 +195,6 @@ class SemanticPotential(RewardStage):
 
     def _after_step(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
                     info: dict[str, Any]) -> StepResult:
-        info = _native(info, reward)
         view, self._step_view = self._step_view, None
         phi_next = self.episode.step(view if view is not None else self.camera.look(self._sim))
         reward = float(reward) + pbrs_term(self._phi, phi_next, self._gamma, self._alpha, terminated)
@@ -247,7 +244,6 @@ class EpisodeStatistics(RewardStage):
 
     def _after_step(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
                     info: dict[str, Any]) -> StepResult:
-        info = _native(info, reward)
         self._return += float(reward)
         self._length += 1
         if terminated or truncated:
