@@ -58,8 +58,7 @@ class SemanticOracle:
         self._potential_of = dict(cfg.label_potentials)
         self._label_of: dict[str, float] = {}
         self._row_of: dict[str, int] = {}
-        # A stochastic VLM (a fresh draw per query) is asked every time: reusing a frame's label
-        # would freeze its first draw, and its newest answer replaces the prototype's potential.
+        # A stochastic VLM is asked every time: reusing a frame's label would freeze its first draw.
         self._stochastic = bool(getattr(client, "stochastic", False))
         self._field = RBFField(cfg.bandwidth, feature_dim, unit=FEATURE_UNIT)
         self._queries = 0
@@ -73,9 +72,7 @@ class SemanticOracle:
         self._fetched_in_order: deque[tuple[str, Answer]] = deque()
 
     def __deepcopy__(self, memo: dict[int, object]) -> SemanticOracle:
-        # One oracle (its VLM client, response cache and prototypes) is shared by the envs of a
-        # run; gymnasium's RecordConstructorArgs deep-copies wrapper arguments, and a copied env
-        # must keep sharing it rather than clone an open sqlite connection.
+        # gymnasium's RecordConstructorArgs deep-copies wrapper arguments: a copied env shares the oracle
         return self
 
     @property
@@ -93,16 +90,8 @@ class SemanticOracle:
         views, self._requests = self._requests, []
         self._fetched.clear()  # what an earlier round fetched and no label took
         self._fetched_in_order.clear()
-        if self._stochastic:
-            need = views
-        else:
-            known: set[str] = set()
-            need = []
-            for view in views:
-                if view.key in self._label_of or view.key in known or self._nearby(view) is not None:
-                    continue
-                known.add(view.key)
-                need.append(view)
+        need = views if self._stochastic else list({  # each new frame once, in the order first requested
+            v.key: v for v in views if v.key not in self._label_of and self._nearby(v) is None}.values())
         if self.max_queries is not None:
             need = need[: max(self.max_queries - self._queries, 0)]
         if not need:
