@@ -50,7 +50,7 @@ def make_train_env(
     fns: list[Callable[[], gym.Env]] = [make_one] * ppo.n_envs
     venv: VecEnv = LabelRoundVecEnv(fns, oracle) if oracle is not None else DummyVecEnv(fns)
     venv.seed(seed)
-    if ppo.vec_normalize:
+    if ppo.normalize_obs or ppo.normalize_reward:
         venv = VecNormalize(venv, norm_obs=ppo.normalize_obs, norm_reward=ppo.normalize_reward, gamma=ppo.gamma)
     return venv, oracle
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+import operator
 from collections.abc import Callable
 from typing import Any
 
@@ -18,13 +20,8 @@ def learning_rate(ppo: PPOConfig) -> float | Callable[[float], float]:
         >>> lr(1.0), lr(0.25)
         (0.001, 0.00025)
     """
-    if ppo.lr_schedule == "linear":
-        initial = ppo.learning_rate
-
-        def linear(progress_remaining: float) -> float:
-            return progress_remaining * initial
-
-        return linear
+    if ppo.lr_schedule == "linear":  # the rate times the remaining progress
+        return functools.partial(operator.mul, ppo.learning_rate)
     return ppo.learning_rate
 
 

@@ -63,8 +63,7 @@ class PPOConfig:
     eval_episodes: int = field(default=100, metadata={"rules": (Ge(1), AtMost(10_000, (
         "each is a whole episode after training; 100 give a success rate to within about 0.1"))),
         "help": "detached evaluation episodes"})
-    # Added with the continuous tasks (rl-baselines3-zoo's MountainCarContinuous-v0 uses them);
-    # ``ppo_identity`` leaves them out at these neutral values, so older runs keep their hashes.
+    # Added with the continuous tasks: ``ppo_identity`` leaves them out at these neutral values (older hashes).
     use_sde: bool = field(default=False, metadata={"help": "generalised state-dependent exploration "
                                                            "(continuous actions only)"})
     log_std_init: float = field(default=0.0, metadata={"help": "initial log std of a continuous policy"})
@@ -79,11 +78,6 @@ class PPOConfig:
         if not self.ortho_init:
             kwargs["ortho_init"] = False
         return kwargs
-
-    @property
-    def vec_normalize(self) -> bool:
-        """Whether the env stack has a ``VecNormalize`` at all."""
-        return self.normalize_obs or self.normalize_reward
 
 
 #: Knobs added after runs existed, with the value that leaves training as it was.

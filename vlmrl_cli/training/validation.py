@@ -140,17 +140,13 @@ def _sentence(err: Any, cls: type, at: str = "") -> str:
 
 
 def _section_fields(cls: type, section: list[str]) -> list[str]:
-    model = _model(cls)
+    """The keys of the table ``section`` of ``cls`` (none when it is no table)."""
     for part in section:
-        annotation = model.model_fields[part].annotation
-        sub = next(
-            (t for t in (annotation, *typing.get_args(annotation)) if isinstance(t, type) and issubclass(t, BaseModel)),
-            None,
-        )
-        if sub is None:
+        nested = _dataclass_in(typing.get_type_hints(cls)[part])
+        if nested is None:
             return []
-        model = sub
-    return list(model.model_fields)
+        cls = nested
+    return [f.name for f in dataclasses.fields(cls) if not is_carried(f)]
 
 
 def validate_as(cls: type, raw: dict[str, Any], at: str = "", **carried: Any) -> Any:
