@@ -49,12 +49,9 @@ class ArmSpec:
     potential: PotentialSource
     rbf: bool = True
     lock: bool = True
-    # Added after results existed: ``identity`` below leaves it out while False, so the seven
-    # original arms keep their config hashes (tests/training/test_pinned_hashes.py).
+    # Added after results existed: ``identity`` leaves these out while False, so older arms keep their hashes.
     placebo: bool = False  # labels mapped through a per-seed shuffled label map (shaping/placebo.py)
-    # Added with issue 41, left out of ``identity`` while False as ``placebo`` is: the dense term
-    # as a potential, ``gamma Phi_kin(s') - Phi_kin(s)`` with ``Phi_kin = horizon x R_kin`` (shaping/wrapper.py)
-    dense_potential: bool = False
+    dense_potential: bool = False  # the dense term paid as a potential (shaping/wrapper.py, issue 41)
     # How the arm is reported, not how it is rewarded: ``identity`` always leaves these out.
     compared_with: tuple[Comparison, ...] = ()  # this arm against each reference, in the report's order
     report_order: int = 100  # position in the report's tables and figures (lower first; ties: registry order)

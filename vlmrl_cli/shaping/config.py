@@ -61,7 +61,6 @@ class ShapingConfig:
     """Knobs of the semantic potential and the reward fusion; each field says its unit."""
 
     # empty: the task's own map (Task.label_potentials), filled in when a run's jobs are built
-    # (training/config.py); any map given is checked against the task's labels
     label_potentials: tuple[tuple[str, float], ...] = field(
         default=(),
         metadata={"rules": (BeforeValidator(_label_table),),
@@ -87,8 +86,7 @@ class ShapingConfig:
     kin_scale: float = field(default=2.0, metadata={
         "rules": (Ge(0), _SCALE_LIMIT), "help": "the dense term's scale (Eq. 1: max(0, scale (x + offset)))"})
     kin_offset: float = field(default=0.4, metadata={"help": "the dense term's offset (see kin_scale)"})
-    # A camera that renders a position snaps it to this grid (MountainCar: one pixel of car
-    # motion, so at most 601 distinct frames per run); a camera of its own grid ignores it.
+    # MountainCar's: one pixel of car motion, so at most 601 distinct frames per run
     render_quantum: float = field(
         default=0.003, metadata={"rules": (Gt(0),), "help": "render positions on this grid (the task's units)"}
     )

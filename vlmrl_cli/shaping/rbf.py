@@ -48,8 +48,7 @@ class RBFField:
         self.unit = float(unit)
         self._scale = 1.0 / (2.0 * self.bandwidth * self.bandwidth)
         self._dim = dim
-        # Rows grow into buffers of doubling capacity (no O(N^2) copying as prototypes and keys
-        # arrive one at a time); only the first ``_n`` prototype rows and ``_k`` key rows are live.
+        # buffers of doubling capacity; only the first ``_n`` prototype rows and ``_k`` key rows are live
         self._n = 0
         self._k = 0
         self._proto_buf: np.ndarray | None = None  # (capacity, D), the dtype of the first feature
@@ -62,8 +61,7 @@ class RBFField:
         self._den_buf = np.empty(0, dtype=np.float64)
         self._ref_buf = np.empty(0, dtype=np.float64)  # squared distance the weights are relative to
         self._low, self._high = math.inf, -math.inf  # range of the prototype potentials
-        # each key's value as ``value`` returns it, until the next prototype or potential change:
-        # a plain dict lookup per env step instead of two numpy scalar reads
+        # each key's value until the next prototype or potential change: a dict lookup per env step
         self._values: dict[str, float] = {}
         self._entry_low, self._entry_high = 0, 0  # range of every integer feature entry seen
 

@@ -144,8 +144,7 @@ class RunConfig:
                                                        "help": "how often a training run refreshes its heartbeat"})
     stale_after_s: float = field(default=300.0, metadata={"rules": (Gt(0),),
         "help": "a RUNNING run whose heartbeat is older is taken as dead and its job redone"})
-    # the Task that ``task`` names, resolved once where the config is built (``resolve``): carried
-    # whole from there, never looked up again; ``task`` stays the name that is hashed and logged
+    # the Task ``task`` names, resolved once where the config is built (``resolve``), never again
     plugin: Task = field(default_factory=_default_plugin, compare=False, repr=False, metadata=CARRIED)
 
     def __post_init__(self) -> None:
@@ -223,8 +222,7 @@ class TrainJob:
     shaping: ShapingConfig
     regime: str | None = None
     task: str = field(kw_only=True)  # the run's task (tasks/registry.py), as it is hashed and logged
-    # the Task ``task`` names, carried from the RunConfig; None after pickling (a job crosses to a
-    # worker as its name, and the worker resolves it once at its entry: ``sweep.worker.with_task``)
+    # the RunConfig's; None after pickling (a worker resolves it at its entry: ``sweep.worker.with_task``)
     plugin: Task | None = field(default=None, kw_only=True, compare=False, repr=False, metadata=CARRIED)
 
     def __post_init__(self) -> None:
