@@ -28,16 +28,6 @@ def hover_steps(xs: npt.ArrayLike, reached_flag: bool, x_min: float, horizon: in
     return np.asarray((x > x_min) & ~arriving)
 
 
-def dwell_right_steps(xs: npt.ArrayLike, x_min: float) -> int:
-    """Steps one episode spends right of ``x_min`` (shape ``(T,)`` positions; the flag ends the episode).
-
-    Example:
-        >>> dwell_right_steps([0.1, 0.35, 0.2, 0.4, 0.55], x_min=0.3)
-        3
-    """
-    return int(np.count_nonzero(np.asarray(xs, dtype=float) > x_min))
-
-
 @dataclass(frozen=True)
 class HoverSummary:
     """One run's detached evaluation seen for hovering (``dwell_right_steps``: the mean per episode)."""
@@ -64,5 +54,5 @@ def summarize_hovering(
     hovering = sum(int(hover_steps(xs, bool(r), x_min, horizon).sum()) for xs, r in zip(trajectories, reached,
                                                                                           strict=True))
     total = sum(np.asarray(xs).size for xs in trajectories)
-    dwell = float(np.mean([dwell_right_steps(xs, x_min) for xs in trajectories]))
+    dwell = float(np.mean([np.count_nonzero(np.asarray(xs, dtype=float) > x_min) for xs in trajectories]))
     return HoverSummary(hovering / total if total else float("nan"), dwell, len(trajectories))
