@@ -56,8 +56,7 @@ class SemanticOracle:
         self._prompt = milestones.prompt if numbers is None or source is PotentialSource.MCQ else numbers.float_prompt
         self._labels = milestones.labels
         self._potential_of = dict(cfg.label_potentials)
-        self._label_of: dict[str, float] = {}
-        self._row_of: dict[str, int] = {}
+        self._row_of: dict[str, int] = {}  # each labelled frame's prototype
         # A stochastic VLM is asked every time: reusing a frame's label would freeze its first draw.
         self._stochastic = bool(getattr(client, "stochastic", False))
         self._field = RBFField(cfg.bandwidth, feature_dim, unit=FEATURE_UNIT)
@@ -91,7 +90,7 @@ class SemanticOracle:
         self._fetched.clear()  # what an earlier round fetched and no label took
         self._fetched_in_order.clear()
         need = views if self._stochastic else list({  # each new frame once, in the order first requested
-            v.key: v for v in views if v.key not in self._label_of and self._nearby(v) is None}.values())
+            v.key: v for v in views if v.key not in self._row_of and self._nearby(v) is None}.values())
         if self.max_queries is not None:
             need = need[: max(self.max_queries - self._queries, 0)]
         if not need:
@@ -105,15 +104,12 @@ class SemanticOracle:
     def label(self, view: FrameView) -> float | None:
         """The raw potential of the view's label (reused or asked), or None if unparsed; a
         stochastic VLM is asked every time, its newest answer replacing the prototype's potential."""
-        known = self._label_of.get(view.key)
-        if known is not None and not self._stochastic:
-            self._reuses += 1
-            return known
-        if not self._stochastic:
-            nearest = self._nearby(view)
-            if nearest is not None:
+        if not self._stochastic:  # the frame's own label, else (reuse_radius > 0) a near prototype's
+            row = self._row_of.get(view.key)
+            row = self._nearby(view) if row is None else row
+            if row is not None:
                 self._reuses += 1
-                return float(self._field.potentials[nearest])
+                return float(self._field.potentials[row])
         if self.max_queries is not None and self._queries >= self.max_queries:  # the nearest prototype's
             if not self.prototypes:
                 return None
@@ -168,13 +164,10 @@ class SemanticOracle:
 
     def _add(self, view: FrameView, potential: float) -> None:
         row = self._row_of.get(view.key)
-        if row is not None:  # only a stochastic VLM asks about a known frame again
-            if self._stochastic and self._label_of[view.key] != potential:
-                self._label_of[view.key] = potential
-                self._field.set_potential(row, potential)
+        if row is not None:  # only a stochastic VLM asks about a known frame again: its newest answer wins
+            self._field.set_potential(row, potential)
             return
         self._row_of[view.key] = self._field.prototypes
-        self._label_of[view.key] = potential
         self._field.add_prototype(view.features, potential)
 
     def phi_rbf(self, view: FrameView) -> float:
