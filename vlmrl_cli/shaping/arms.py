@@ -111,9 +111,8 @@ def report_order(registry: Mapping[str, ArmSpec] = ARMS) -> list[str]:
 
 def comparisons(registry: Mapping[str, ArmSpec] = ARMS, study: bool = False
                 ) -> list[tuple[str, str, str]]:
-    """``(arm, reference, what the difference isolates)`` of every comparison in the registry, arms
-    in the report's order and each arm's comparisons in its own order; ``study``: only those the
-    study's regime map makes too."""
+    """``(arm, reference, what the difference isolates)`` of every comparison, in the report's order
+    (``study``: only those the study's regime map makes too)."""
     return [(name, c.reference, c.isolates) for name in report_order(registry)
             for c in registry[name].compared_with if c.in_study or not study]
 

@@ -1,6 +1,5 @@
-"""The simulator's camera: the only part of the visual pipeline that reads the state (paper
-Section 3.3). A ``CellCamera`` renders each grid cell once and hands on ``FrameView`` s, which
-carry no state; MountainCar's is ``tasks/mountain_car/camera.py``."""
+"""The simulator's camera, the only part of the visual pipeline that reads the state (paper Section
+3.3): a ``CellCamera`` renders each grid cell once and hands on stateless ``FrameView`` s."""
 
 from __future__ import annotations
 

@@ -13,10 +13,8 @@ FEATURE_UNIT = 255 * sum(LUMA_WEIGHTS) * BLOCK * BLOCK  # the darkness count of 
 
 
 def darkness_counts(pixels: np.ndarray) -> np.ndarray:
-    """Block darkness of an RGB frame: ``(400, 600, 3)`` uint8 -> ``(600,)`` int64, row-major blocks.
-
-    Entry ``b`` is ``sum over the block's pixels of (255 * 1000 - (299 r + 587 g + 114 b))``, in
-    ``[0, FEATURE_UNIT]``; divided by ``FEATURE_UNIT`` it is the block's mean darkness in [0, 1]."""
+    """Block darkness of an RGB frame: ``(400, 600, 3)`` uint8 -> ``(600,)`` int64, row-major blocks,
+    each ``sum(255 * 1000 - (299 r + 587 g + 114 b))`` over the block, in ``[0, FEATURE_UNIT]``."""
     if pixels.ndim != 3 or pixels.shape[2] != 3 or pixels.shape[0] % BLOCK or pixels.shape[1] % BLOCK:
         raise ValueError(f"expected an RGB frame whose sides are multiples of {BLOCK} px (MountainCar: "
                          f"{FRAME_SHAPE}), got {pixels.shape}")

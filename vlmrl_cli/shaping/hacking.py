@@ -18,11 +18,8 @@ HOVER_FLAG = 0.1
 
 def hover_steps(xs: npt.ArrayLike, reached_flag: bool, x_min: float, horizon: int = HOVER_HORIZON
                 ) -> np.ndarray:
-    """Which steps of one episode (``xs``: ``(T,)`` positions after each step) hover, as a ``(T,)``
-    bool array: right of ``x_min`` without reaching the flag within ``horizon`` more steps."""
+    """Which of an episode's ``(T,)`` positions hover: right of ``x_min``, the flag not within ``horizon``."""
     x = np.asarray(xs, dtype=float).reshape(-1)
-    if horizon < 0:
-        raise ValueError(f"horizon must be >= 0 steps, got {horizon}.")
     steps_left = x.size - 1 - np.arange(x.size)  # steps from each step to the episode's last one
     arriving = reached_flag & (steps_left <= horizon)
     return np.asarray((x > x_min) & ~arriving)

@@ -15,16 +15,13 @@ LabelMap = tuple[tuple[str, float], ...]  # (label, raw potential), in the task'
 def permutation(n: int, seed: int, salt: str = "vlmrl-placebo") -> tuple[int, ...]:
     """A permutation of ``range(n)``, a pure function of ``(seed, salt)``: index ``i`` goes to rank
     ``i`` of the sha256 digests of ``f"{salt}:{seed}:{j}"``."""
-    if n < 0:
-        raise ValueError(f"n must be >= 0, got {n}")
     digests = [hashlib.sha256(f"{salt}:{seed}:{j}".encode()).digest() for j in range(n)]
     return tuple(sorted(range(n), key=lambda j: digests[j]))
 
 
 def latin_permutation(n: int, seed: int) -> tuple[int, ...]:
-    """Seed ``seed``'s row of a random Latin square: block ``b = seed // n`` draws row and column
-    orders ``r, c`` (``permutation`` with two salts), and row ``k = seed % n`` maps ``i`` to
-    ``c[(r[i] + k) % n]``. Over the ``n`` seeds of a block, every ``i`` meets every value once."""
+    """Seed ``seed``'s row of a random Latin square (block ``seed // n``, row ``seed % n``): over the
+    ``n`` seeds of a block, every ``i`` meets every value once."""
     if n == 0:
         return ()
     block, k = divmod(seed, n)

@@ -14,10 +14,8 @@ _INT64_MAX = np.iinfo(np.int64).max
 
 def squared_distances(points: np.ndarray, feature: np.ndarray, unit: float = 1.0,
                       spread: int | None = None) -> np.ndarray:
-    """``||points_i - feature||^2 / unit^2`` for each row: ``(N, D)``, ``(D,)`` -> ``(N,)`` float64.
-
-    Integer arrays are summed exactly in int64. ``spread`` (integers only): the caller's guarantee
-    that every entry lies within a range of that width, so the overflow check needs no pass.
+    """``||points_i - feature||^2 / unit^2`` for each row: ``(N, D)``, ``(D,)`` -> ``(N,)`` float64,
+    exact for integers; ``spread``: the width every integer entry lies within (skips a check).
 
     Example:
         >>> squared_distances(np.array([[0, 0], [3, 4]]), np.array([0, 0]), unit=5.0).tolist()
@@ -36,14 +34,11 @@ def squared_distances(points: np.ndarray, feature: np.ndarray, unit: float = 1.0
 
 class RBFField:
     """``sum_i w_i phi_i / sum_i w_i``, ``w_i = exp(-||f - f_i||^2 / (2 bandwidth^2))``, per frame key
-    as prototypes arrive (each a vectorised update of every stored key), within the prototypes'
-    potentials (0.0 before the first; the nearest prototype's when every weight would underflow)."""
+    as prototypes arrive (0.0 before the first; the nearest's when every weight would underflow)."""
 
     def __init__(self, bandwidth: float, dim: int, unit: float = 1.0) -> None:
         if not (math.isfinite(bandwidth) and bandwidth > 0):
             raise ValueError(f"bandwidth must be > 0 (feature-distance units), got {bandwidth}")
-        if not (math.isfinite(unit) and unit > 0):
-            raise ValueError(f"unit must be > 0, got {unit}")
         self.bandwidth = float(bandwidth)
         self.unit = float(unit)
         self._scale = 1.0 / (2.0 * self.bandwidth * self.bandwidth)
@@ -145,9 +140,8 @@ class RBFField:
         return self._distances(self._feat_buf[: self._k], self._knorm_buf[: self._k], proto)
 
     def _distances(self, rows: np.ndarray, norms: np.ndarray, f: np.ndarray) -> np.ndarray:
-        """``squared_distances(rows, f)``, the same numbers: for non-negative integer features small
-        enough that no int64 sum can overflow, as ``|r|^2 - 2 r.f + |f|^2`` from the rows' stored
-        squared ``norms`` (one product per entry instead of a difference and a product)."""
+        """``squared_distances(rows, f)``, the same numbers: as ``|r|^2 - 2 r.f + |f|^2`` from the stored
+        ``norms`` for non-negative integer features too small for an int64 sum to overflow."""
         if (np.issubdtype(rows.dtype, np.integer) and self._entry_low >= 0
                 and 2 * self._dim * self._entry_high**2 <= _INT64_MAX):
             g = f.astype(np.int64, copy=False)

@@ -1,6 +1,5 @@
-"""The macro-semantic potential Phi(s) (paper Section 3.2), from camera views only: one
-``SemanticOracle`` per run (the prototype cache, the VLM), one ``EpisodePotential`` per env (the
-labelling schedule, the lock). See docs/method.md."""
+"""The macro-semantic potential Phi(s) (paper Section 3.2), from camera views only: one oracle per
+run (prototype cache, VLM), one ``EpisodePotential`` per env (schedule, lock). See docs/method.md."""
 
 from __future__ import annotations
 
@@ -38,8 +37,6 @@ class SemanticOracle:
             raise ValueError(
                 f"ShapingConfig.query_every and confirm must be >= 1, got {cfg.query_every} and {cfg.confirm}."
             )
-        if max_queries is not None and max_queries < 0:
-            raise ValueError(f"max_queries must be >= 0 labels (None: no budget), got {max_queries}.")
         self.client = client
         self.cfg = cfg
         self.source = source
@@ -79,8 +76,7 @@ class SemanticOracle:
         return self._field.prototypes
 
     def request(self, view: FrameView) -> None:
-        """Say that ``view`` is labelled in this vector step; requests come in the order their
-        labels are then taken (env by env; an env's step before its reset)."""
+        """Say that ``view`` is labelled in this vector step, in the order labels are then taken."""
         self._requests.append(view)
 
     def fetch(self) -> None:

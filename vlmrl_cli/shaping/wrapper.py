@@ -31,9 +31,8 @@ def _gamma(gamma: float) -> float:
 
 
 class RewardStage(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorArgs):
-    """A wrapper that changes what a step and a reset return (``_after_step``, ``_after_reset``),
-    whether run whole or in the two halves of a labelling round (``begin_step``, ``finish_step``):
-    the same rewards, bit for bit."""
+    """A wrapper that changes what a step and a reset return, whether run whole or in the two halves
+    of a labelling round (``begin_step``, ``finish_step``): the same rewards, bit for bit."""
 
     def __init__(self, env: gym.Env, **recorded: Any) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, **recorded)
@@ -48,8 +47,7 @@ class RewardStage(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorAr
 
     def _stepped(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
                  info: dict[str, Any]) -> StepResult:
-        """``_after_step`` of a copy of ``info`` that keeps the reward from below the first reward
-        wrapper as ``native_reward``."""
+        """``_after_step``, the reward below the first reward wrapper kept as ``native_reward``."""
         native = info.get("native_reward", float(reward))
         return self._after_step(obs, reward, terminated, truncated, info | {"native_reward": native})
 
@@ -160,8 +158,7 @@ class KinematicPotential(RewardStage):
 
 class SemanticPotential(RewardStage):
     """Adds ``alpha (gamma Phi(s') - Phi(s))``, ``Phi`` the arm's ``EpisodePotential`` of what the
-    ``camera`` shows (never the observation), from the run's shared ``oracle``. In a labelling round
-    the frame is taken in the first half and labelled in the second."""
+    ``camera`` shows (never the observation), from the run's shared ``oracle``."""
 
     def __init__(self, env: gym.Env, arm: ArmSpec, alpha: float, gamma: float, camera: SceneCamera,
                  oracle: SemanticOracle, sim_type: type) -> None:
@@ -284,9 +281,8 @@ def wrap_arm(env: gym.Env, arm: ArmSpec, shaping: ShapingConfig, gamma: float, s
 
 
 class LabelRoundVecEnv(DummyVecEnv):
-    """SB3's ``DummyVecEnv`` with one labelling round per vector step: every env's step is begun,
-    ``oracle`` asks the VLM about all their frames in one call, then each step is finished in env
-    order, exactly as ``DummyVecEnv`` would have stepped it. Every env is a ``RewardStage`` stack."""
+    """SB3's ``DummyVecEnv`` with one labelling round per vector step: every env's step is begun, the
+    VLM asked about all their frames in one call, then each step finished, exactly as it would be."""
 
     def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], oracle: SemanticOracle) -> None:
         super().__init__(list(env_fns))

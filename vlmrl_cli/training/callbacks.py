@@ -17,9 +17,8 @@ from vlmrl_cli.training.events import ProgressEvent
 
 
 class EpisodeTracker(BaseCallback):
-    """Logs every completed episode at the global timestep, and at each rollout end
-    ``rollout/return_100``, VLM and throughput figures; sends progress; stops when ``should_stop``.
-    ``success`` (the task's rule) is applied to Monitor's length and SB3's ``TimeLimit.truncated``."""
+    """Logs every completed episode (success by the task's rule) and, at each rollout end,
+    ``rollout/return_100``, VLM and throughput figures; sends progress; stops when ``should_stop``."""
 
     def __init__(
         self,

@@ -253,10 +253,8 @@ class TrainJob:
         return self.ppo.eval_episodes
 
     def identity(self) -> dict[str, Any]:
-        """What makes two runs the same experiment cell, seed excluded: the resolved values, not
-        the preset's name, so two routes to the same knobs share runs and any changed knob is a
-        new cell. The VLM and the shaping knobs count only for arms that use them, so tuning the
-        VLM does not redo the baseline. Cache settings never count: they change speed, not answers."""
+        """What makes two runs the same experiment cell, seed excluded: the resolved values, not the
+        preset's name; the VLM and shaping knobs only for arms that use them; never cache settings."""
         ident: dict[str, Any] = {"arm": self.arm.identity(), "ppo": ppo_identity(self.ppo), "eval_seed": EVAL_SEED}
         if self.task_plugin.name_in_identity:  # False for MountainCar-v0: its runs predate tasks
             ident["task"] = self.task
@@ -306,8 +304,7 @@ def resolve(layers: Iterable[Mapping[str, Any]], tasks: TaskLookup | None = None
 
 
 def once(tasks: TaskLookup | None) -> TaskLookup:
-    """``tasks`` (None: the built-in tasks alone) looking each name up once: the lookup of a command
-    that builds many configs of one task (a calibration's or a study's regimes).
+    """``tasks`` (None: the built-in tasks alone) looking each name up once.
 
     Example:
         >>> lookup = once(None)

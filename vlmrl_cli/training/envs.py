@@ -32,8 +32,6 @@ def make_train_env(
     arm's wrappers, so episode stats are NATIVE) and its oracle (None for arms without a VLM)."""
     if arm.uses_vlm and client is None:
         raise ValueError(f"arm '{arm.name}' queries a VLM; pass a VLMClient (e.g. the simulated one).")
-    if ppo.n_envs < 1:
-        raise ValueError(f"n_envs={ppo.n_envs}; a run needs at least one env.")
     shaping = task.shaping_for(shaping)
     gamma = shaping.gamma if shaping.gamma is not None else ppo.gamma
     camera = task.camera.make(shaping) if arm.uses_vlm else None

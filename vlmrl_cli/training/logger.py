@@ -10,9 +10,6 @@ from stable_baselines3.common.logger import KVWriter
 
 from vlmrl_cli.tracking import schema
 
-#: The SB3 key prefixes forwarded by default: the PPO update's diagnostics.
-TRAIN_PREFIXES: tuple[str, ...] = (schema.TRAIN_METRIC_PREFIX,)
-
 
 class MetricSink(Protocol):
     """Where the metrics go: ``tracking.store.BatchLogger`` or a test double."""
@@ -21,9 +18,10 @@ class MetricSink(Protocol):
 
 
 class MetricsOutputFormat(KVWriter):
-    """An SB3 ``KVWriter`` forwarding the numeric values under ``prefixes`` to ``metrics``."""
+    """An SB3 ``KVWriter`` forwarding the numeric values under ``prefixes`` (by default the PPO update's
+    diagnostics) to ``metrics``."""
 
-    def __init__(self, metrics: MetricSink, prefixes: tuple[str, ...] = TRAIN_PREFIXES) -> None:
+    def __init__(self, metrics: MetricSink, prefixes: tuple[str, ...] = (schema.TRAIN_METRIC_PREFIX,)) -> None:
         self.metrics = metrics
         self.prefixes = prefixes
 

@@ -34,8 +34,7 @@ def parse_value(text: str) -> Any:
 def parse_values(text: str) -> list[Any]:
     """A ``--grid`` value list: comma-separated TOML values (``1,4,16``), bare words as strings."""
     try:
-        values = tomllib.loads(f"v = [{text}]")["v"]
-        return list(values)
+        return list(tomllib.loads(f"v = [{text}]")["v"])
     except tomllib.TOMLDecodeError:
         return [parse_value(part) for part in text.split(",")]
 

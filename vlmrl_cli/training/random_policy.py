@@ -4,7 +4,6 @@ compare`), measured by ``scripts/random_scores.py``."""
 from __future__ import annotations
 
 import copy
-from typing import Any
 
 from vlmrl_cli.tasks.base import Task
 from vlmrl_cli.training.evaluation import EvalResult, evaluate_detached
@@ -19,8 +18,4 @@ def random_policy_score(task: Task, episodes: int = EPISODES, seed: int = SEED) 
     space = copy.deepcopy(env.action_space)
     env.close()
     space.seed(seed)
-
-    def act(_obs: Any) -> Any:
-        return space.sample()
-
-    return evaluate_detached(act, episodes, seed, task)
+    return evaluate_detached(lambda _obs: space.sample(), episodes, seed, task)

@@ -23,9 +23,8 @@ class Session:
 
 @contextmanager
 def session(job: TrainJob, transcript: Path | None = None) -> Iterator[Session]:
-    """``job``'s learner, env stack and oracle; the env stack and the VLM client (writing
-    ``transcript`` when given) are closed when the block ends, not at the interpreter's exit, where
-    a MuJoCo renderer outliving its EGL display prints errors."""
+    """``job``'s learner, env stack and oracle, closed when the block ends (a MuJoCo renderer that
+    outlives its EGL display prints errors at the interpreter's exit)."""
     from vlmrl_cli.training.envs import make_train_env
     from vlmrl_cli.training.model import make_model
     from vlmrl_cli.vlm.registry import build_client

@@ -1,6 +1,5 @@
-"""The typed input schema of a run's configuration, checked whole before anything runs: pydantic
-models built from the frozen dataclasses and their fields' ``rules`` (``core.fields``), strict
-TOML typing, every failure one ``BadInput`` sentence naming the dotted key."""
+"""The typed input schema of a run's configuration (pydantic models of the frozen dataclasses and
+their fields' ``rules``), checked whole before anything runs: one ``BadInput`` naming the key."""
 
 from __future__ import annotations
 
@@ -74,12 +73,8 @@ def _model(cls: type, prefix: str = "") -> type[BaseModel]:
         rules = rules_of(f)
         if rules:
             tp = Annotated[tp, *rules]
-        if f.default is not dataclasses.MISSING:
-            default = f.default
-        elif f.default_factory is not dataclasses.MISSING:
-            default = f.default_factory()
-        else:
-            default = ...
+        default: Any = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
+        default = ... if default is dataclasses.MISSING else default
         if dataclasses.is_dataclass(default) and not isinstance(default, type):
             default = _model(type(default), f"{key}.").model_validate_json(json.dumps(to_jsonable(default)))
         fields[f.name] = (tp, default)

@@ -161,8 +161,7 @@ def choose(runs: Sequence[RecordedRun], *, run_ids: Iterable[str] = (), seeds: I
            arms: Iterable[str] = (), sample: int | None = None, sample_seed: int = 0,
            source: str = "the source") -> list[RecordedRun]:
     """The runs to verify: those named by id (a prefix of 8+ characters will do), else those of the
-    given seeds and arms; then ``sample`` of them drawn with ``sample_seed``, in recorded order (a
-    ``sample`` larger than what there is is ``BadInput``: never a silent order of cost more).
+    given seeds and arms; then ``sample`` of them drawn with ``sample_seed``, in recorded order.
 
     Example:
         >>> rs = [RecordedRun(f"id{i}", f"r{i}", {"seed": i % 2, "arm": {"name": "a"}}, {}, []) for i in range(6)]
@@ -200,9 +199,8 @@ def choose(runs: Sequence[RecordedRun], *, run_ids: Iterable[str] = (), seeds: I
 
 
 def job_of(config: Mapping[str, Any], tags: Mapping[str, str], tasks: TaskLookup, where: str) -> TrainJob:
-    """The ``TrainJob`` a run's ``config.json`` describes (the one way a recorded run becomes a job
-    again), its task resolved by ``tasks``; missing ``shaping``/``vlm`` take the task's and the
-    default, the response cache is off. ``BadInput`` naming ``where`` when it cannot be rebuilt."""
+    """The ``TrainJob`` a run's ``config.json`` describes (response cache off), its task resolved by
+    ``tasks``; ``BadInput`` naming ``where`` when it cannot be rebuilt."""
     from vlmrl_cli.shaping.arms import ARMS
     from vlmrl_cli.shaping.config import ShapingConfig
     from vlmrl_cli.tasks.registry import recorded_task
