@@ -20,25 +20,18 @@ Cell = TypeVar("Cell")  # a camera's grid cell: MountainCar's position index, Ac
 @dataclass(frozen=True, eq=False)
 class FrameView:
     """What the camera shows: ``key`` (SHA-256 of the pixels), ``features`` ((D,) int64
-    ``darkness_counts``) and the frame itself, loaded lazily by ``frame()``."""
+    ``darkness_counts``); ``frame()`` draws the frame (again if the camera's pixel cache dropped it),
+    ``release()`` drops its pixels from that cache (a deterministic VLM has labelled it)."""
 
     key: str
     features: np.ndarray = field(repr=False)
-    _load: Callable[[], Frame] = field(repr=False)
-    _release: Callable[[], None] = field(default=lambda: None, repr=False)
-
-    def frame(self) -> Frame:
-        """The full frame (rendered again if the camera's pixel cache dropped it)."""
-        return self._load()
-
-    def release(self) -> None:
-        """Drop this frame's pixels from the camera's cache (a deterministic VLM has labelled it)."""
-        self._release()
+    frame: Callable[[], Frame] = field(repr=False)
+    release: Callable[[], None] = field(default=lambda: None, repr=False)
 
     @classmethod
     def of_frame(cls, frame: Frame) -> FrameView:
         """A view of an already rendered frame (e.g. from ``FrameRenderer``)."""
-        return cls(key=frame.sha256, features=darkness_counts(frame.pixels), _load=lambda: frame)
+        return cls(key=frame.sha256, features=darkness_counts(frame.pixels), frame=lambda: frame)
 
 
 class CellCamera(Generic[Cell]):
@@ -86,8 +79,8 @@ class CellCamera(Generic[Cell]):
             frame = self._frame(cell)
             features = darkness_counts(frame.pixels)
             features.setflags(write=False)
-            view = FrameView(key=frame.sha256, features=features, _load=functools.partial(self._frame, cell),
-                             _release=functools.partial(self._drop, cell))
+            view = FrameView(key=frame.sha256, features=features, frame=functools.partial(self._frame, cell),
+                             release=functools.partial(self._drop, cell))
             self._views[cell] = view
         return view
 
