@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from vlmrl_cli.shaping.features import BLOCK, FEATURE_DIM, FEATURE_UNIT, darkness_counts, feature_dim, frame_features
+from vlmrl_cli.shaping.features import BLOCK, FEATURE_DIM, FEATURE_UNIT, darkness_counts, feature_dim
 from vlmrl_cli.tasks.mountain_car.geometry import SCALE
 from vlmrl_cli.tasks.mountain_car.render import FrameRenderer
 
@@ -20,7 +20,7 @@ def renderer():
 @settings(max_examples=25, deadline=None)
 @given(arrays(np.uint8, (400, 600, 3), elements=st.integers(0, 255), fill=st.integers(0, 255)))
 def test_features_are_block_means_of_darkness(pixels: np.ndarray) -> None:
-    f = frame_features(pixels)
+    f = darkness_counts(pixels) / FEATURE_UNIT
     assert f.shape == (FEATURE_DIM,) and f.dtype == np.float64
     assert np.all((f >= 0) & (f <= 1))
     grey = pixels.astype(np.float64) @ np.array([0.299, 0.587, 0.114])
@@ -37,26 +37,26 @@ def test_counts_equal_a_scalar_integer_sum(pixels: np.ndarray, data: st.DataObje
     r0, c0 = (b // (600 // BLOCK)) * BLOCK, (b % (600 // BLOCK)) * BLOCK
     block = pixels[r0 : r0 + BLOCK, c0 : c0 + BLOCK].reshape(-1, 3).tolist()
     assert int(counts[b]) == sum(255_000 - (299 * r + 587 * g + 114 * bl) for r, g, bl in block)
-    assert frame_features(pixels)[b] == int(counts[b]) / FEATURE_UNIT
 
 
 def test_rejects_a_frame_of_the_wrong_shape() -> None:
     with pytest.raises(ValueError, match="multiples of 20 px"):
-        frame_features(np.zeros((10, 10, 3), dtype=np.uint8))
+        darkness_counts(np.zeros((10, 10, 3), dtype=np.uint8))
 
 
 @pytest.mark.parametrize("x", [-1.0, -0.52, -0.2, 0.3])
 def test_distance_grows_smoothly_with_small_displacements(renderer: FrameRenderer, x: float) -> None:
     """Block averaging: d(1 px) < d(5 px) < d(20 px), about 0.075 per pixel, and no jump at 1 px."""
-    f0 = frame_features(renderer.render(x).pixels)
-    d = {px: float(np.linalg.norm(frame_features(renderer.render(x + px / SCALE).pixels) - f0)) for px in (1, 5, 20)}
+    f0 = darkness_counts(renderer.render(x).pixels) / FEATURE_UNIT
+    d = {px: float(np.linalg.norm(darkness_counts(renderer.render(x + px / SCALE).pixels) / FEATURE_UNIT - f0))
+         for px in (1, 5, 20)}
     assert 0 < d[1] < d[5] < d[20]
     assert d[1] < 0.15
     assert 0.2 < d[5] < 0.6
 
 
 def test_far_apart_frames_are_at_the_saturated_distance(renderer: FrameRenderer) -> None:
-    a, b = (frame_features(renderer.render(x).pixels) for x in (-1.0, -0.2))
+    a, b = (darkness_counts(renderer.render(x).pixels) / FEATURE_UNIT for x in (-1.0, -0.2))
     assert 1.2 < float(np.linalg.norm(a - b)) < 1.7
 
 

@@ -13,7 +13,7 @@ confirms = st.integers(1, 4)
 
 
 def run(seq: list[float], confirm: int) -> list[LockState]:
-    states, s = [], LockState.reset()
+    states, s = [], LockState()
     for p in seq:
         s = lock_step(s, p, confirm)
         states.append(s)
@@ -46,10 +46,6 @@ def test_a_single_flicker_does_not_lock_and_a_confirmed_milestone_survives_flick
     assert [s.level for s in states] == [0.0, 0.0, 0.0, 0.0, 0.3, 0.3, 0.3, 0.3]
 
 
-def test_reset_starts_the_episode_unlocked() -> None:
-    assert LockState.reset() == LockState(level=0.0, candidate=None, count=0)
-
-
 def test_confirm_must_be_positive() -> None:
     with pytest.raises(ValueError, match="confirm"):
-        lock_step(LockState.reset(), 0.3, 0)
+        lock_step(LockState(), 0.3, 0)

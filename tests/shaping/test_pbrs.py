@@ -38,7 +38,7 @@ def test_telescoping_for_any_potential_sequence(phis: list[float], gamma: float,
 def test_telescoping_with_the_history_dependent_lock(labels: list[float], rbf: list[float], gamma: float,
                                                       alpha: float, terminated: bool) -> None:
     """The same identity holds for Phi = max(lock level, Phi_rbf), which depends on the history."""
-    state, phis = LockState.reset(), []
+    state, phis = LockState(), []
     for label, smooth in zip(labels, rbf, strict=False):
         state = lock_step(state, label, confirm=2)
         phis.append(max(state.level, smooth))

@@ -10,12 +10,20 @@ from hypothesis.extra.numpy import arrays
 
 from vlmrl_cli.core.fp import exp_scalar
 from vlmrl_cli.shaping.features import FEATURE_DIM, FEATURE_UNIT
-from vlmrl_cli.shaping.rbf import RBFField, rbf_potential
+from vlmrl_cli.shaping.rbf import RBFField
 from vlmrl_cli.tasks.mountain_car.camera import Camera
 
 D = 4
 coords = st.floats(-5.0, 5.0)
 bandwidths = st.floats(0.01, 10.0)
+
+
+def fresh_value(f: np.ndarray, feats: np.ndarray, pots: np.ndarray, h: float) -> float:
+    """The value of a field that held every prototype before the query: computed from scratch."""
+    field = RBFField(h, feats.shape[1])
+    for row, p in zip(feats, pots, strict=True):
+        field.add_prototype(row, float(p))
+    return field.value("query", f)
 
 
 @st.composite
@@ -31,7 +39,7 @@ def test_result_lies_within_the_prototype_potentials(
     f: np.ndarray, protos: tuple[np.ndarray, np.ndarray], h: float
 ) -> None:
     feats, pots = protos
-    value = rbf_potential(f, feats, pots, h)
+    value = fresh_value(f, feats, pots, h)
     assert math.isfinite(value)
     assert pots.min() <= value <= pots.max()
 
@@ -47,7 +55,7 @@ def test_equals_the_prototype_potential_on_a_prototype_when_the_others_are_far(
     for j in range(len(far)):
         if j != i:
             far[j] = feats[i] + 40.0 * h + 1.0 + j
-    assert rbf_potential(far[i], far, pots, h) == pytest.approx(pots[i], abs=1e-12)
+    assert fresh_value(far[i], far, pots, h) == pytest.approx(pots[i], abs=1e-12)
 
 
 @given(arrays(np.float64, (D,), elements=coords), prototype_sets(), bandwidths, st.randoms())
@@ -55,28 +63,28 @@ def test_permutation_invariant(f: np.ndarray, protos: tuple[np.ndarray, np.ndarr
     feats, pots = protos
     order = list(range(len(pots)))
     rnd.shuffle(order)
-    assert rbf_potential(f, feats[order], pots[order], h) == pytest.approx(rbf_potential(f, feats, pots, h), abs=1e-12)
+    assert fresh_value(f, feats[order], pots[order], h) == pytest.approx(fresh_value(f, feats, pots, h), abs=1e-12)
 
 
 def test_no_prototype_means_zero_potential() -> None:
-    assert rbf_potential(np.zeros(D), np.empty((0, D)), np.empty(0), 0.5) == 0.0
+    assert fresh_value(np.zeros(D), np.empty((0, D)), np.empty(0), 0.5) == 0.0
 
 
 def test_underflowing_weights_fall_back_to_the_nearest_prototype() -> None:
     feats = np.array([[100.0, 0.0], [0.0, 130.0]])
     # raw weights exp(-100^2 / 2e-6) underflow to 0 for both; the nearest (first) wins
-    assert rbf_potential(np.zeros(2), feats, np.array([0.3, 1.0]), bandwidth=1e-3) == 0.3
+    assert fresh_value(np.zeros(2), feats, np.array([0.3, 1.0]), 1e-3) == 0.3
 
 
 def test_midpoint_of_two_prototypes_is_their_mean() -> None:
     feats = np.array([[0.0], [1.0]])
-    assert rbf_potential(np.array([0.5]), feats, np.array([0.0, 0.6]), 0.3) == pytest.approx(0.3)
+    assert fresh_value(np.array([0.5]), feats, np.array([0.0, 0.6]), 0.3) == pytest.approx(0.3)
 
 
 @pytest.mark.parametrize("h", [0.0, -1.0])
 def test_bandwidth_must_be_positive(h: float) -> None:
     with pytest.raises(ValueError, match="bandwidth"):
-        rbf_potential(np.zeros(1), np.zeros((1, 1)), np.zeros(1), h)
+        RBFField(h, 1)
 
 
 @settings(deadline=None, max_examples=60)
@@ -89,8 +97,8 @@ def test_bandwidth_must_be_positive(h: float) -> None:
     st.floats(0.05, 3.0),
 )
 def test_incremental_field_matches_recomputing_from_scratch(ops, bandwidth: float) -> None:  # type: ignore[no-untyped-def]
-    """Any interleaving of prototype additions and queries gives what ``rbf_potential`` gives
-    over the prototypes present at query time."""
+    """Any interleaving of prototype additions and queries gives what a field built from scratch
+    gives over the prototypes present at query time."""
     field = RBFField(bandwidth, D)
     frames: dict[int, np.ndarray] = {}
     protos: list[np.ndarray] = []
@@ -102,7 +110,7 @@ def test_incremental_field_matches_recomputing_from_scratch(ops, bandwidth: floa
             potentials.append(potential)
         else:
             frames.setdefault(key, feature)
-            expected = rbf_potential(frames[key], np.array(protos).reshape(-1, D), np.array(potentials), bandwidth)
+            expected = fresh_value(frames[key], np.array(protos).reshape(-1, D), np.array(potentials), bandwidth)
             assert math.isclose(field.value(str(key), frames[key]), expected, rel_tol=1e-9, abs_tol=1e-9)
 
 
@@ -148,8 +156,8 @@ class _ScalarField:
 
 
 def test_field_on_recorded_frames_equals_a_scalar_reference_bit_for_bit() -> None:
-    """300 camera frames along a random walk, a prototype every 7th: the vectorised field, the
-    batch ``rbf_potential`` and the scalar reference agree exactly (not approximately)."""
+    """300 camera frames along a random walk, a prototype every 7th: the vectorised field and the
+    scalar reference agree exactly (not approximately)."""
     rng = np.random.default_rng(0)
     xs = np.clip(np.cumsum(rng.normal(0, 0.04, 300)) - 0.5, -1.2, 0.6)
     camera = Camera(render_quantum=0.003)
@@ -157,21 +165,13 @@ def test_field_on_recorded_frames_equals_a_scalar_reference_bit_for_bit() -> Non
     camera.close()
     field = RBFField(0.3, FEATURE_DIM, unit=FEATURE_UNIT)
     ref = _ScalarField(0.3, FEATURE_UNIT)
-    protos: list[np.ndarray] = []
-    pots: list[float] = []
     for i, view in enumerate(views):
         counts = view.features.tolist()
         if i % 7 == 0:
             potential = float(rng.choice([0.0, 0.3, 0.5, 0.7, 1.0]))
             field.add_prototype(view.features, potential)
             ref.add(counts, potential)
-            protos.append(view.features)
-            pots.append(potential)
-        got = field.value(view.key, view.features)
-        assert got == ref.value(view.key, counts)
-        if view.key not in ref.feats or ref.feats[view.key] is counts:  # first query of this key
-            batch = rbf_potential(view.features, np.array(protos), np.array(pots), 0.3, unit=FEATURE_UNIT)
-            assert batch == got
+        assert field.value(view.key, view.features) == ref.value(view.key, counts)
 
 
 @given(prototype_sets(), bandwidths, st.data())
@@ -193,7 +193,7 @@ def test_set_potential_equals_a_field_built_with_the_new_potential(
     changed = pots.copy()
     changed[index] = new
     for i, q in enumerate(queries):
-        assert field.value(str(i), q) == pytest.approx(rbf_potential(q, feats, changed, h), abs=1e-9)
+        assert field.value(str(i), q) == pytest.approx(fresh_value(q, feats, changed, h), abs=1e-9)
 
 
 def test_set_potential_refuses_an_unknown_prototype() -> None:

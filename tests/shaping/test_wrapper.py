@@ -188,10 +188,10 @@ def test_lock_resets_at_episode_start() -> None:
     env = wrap(ARMS["hybrid-no-rbf"], cfg, client=client)
     env.reset(seed=0)
     env.step(1)
-    assert env.get_wrapper_attr("lock_level") == 1.0  # GOAL confirmed twice
+    assert env.get_wrapper_attr("episode").lock_state.level == 1.0  # GOAL confirmed twice
     env.reset(seed=0)
     # unlocked; the held label is the new one
-    assert env.get_wrapper_attr("lock_level") == 0.0 and env.get_wrapper_attr("potential") == 1.0
+    assert env.get_wrapper_attr("episode").lock_state.level == 0.0 and env.get_wrapper_attr("potential") == 1.0
     env.close()
 
 

@@ -37,8 +37,8 @@ def test_played_steps_add_up_and_keep_every_kth_frame_and_the_last() -> None:
     assert [s.t for s in steps] == list(range(len(steps)))
     assert steps[0].action is None and steps[0].native_return == 0.0
     assert all(s.native_return == -s.t for s in steps)  # native reward is -1 per step
-    assert all(s.r_kin == kinematic_reward(s.x) for s in steps[1:])
-    assert steps[-1].terminated and steps[-1].x >= 0.5
+    assert all(s.r_kin == kinematic_reward(s.obs[0]) for s in steps[1:])
+    assert steps[-1].terminated and steps[-1].obs[0] >= 0.5
     kept = [s.t for s in steps if s.pixels is not None]
     assert kept[:3] == [0, 4, 8] and kept[-1] == steps[-1].t
     pixels = steps[0].pixels

@@ -22,7 +22,7 @@ from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.training.config import DEFAULT_PRESET, DEFAULT_TASK, RunConfig, seed_count_problem, source_layers
 from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.overrides import nest
-from vlmrl_cli.training.presets import PPOConfig, preset_names
+from vlmrl_cli.training.presets import PPOConfig
 from vlmrl_cli.vlm.config import SimKnobs, VLMConfig, resolve_sim_profile
 
 TrackingUri = Annotated[
@@ -210,7 +210,7 @@ Timesteps = field_option(_field(PPOConfig, "timesteps"), int | None, "--timestep
 # No default of its own: a run that names no preset takes its task's (``Task.default_preset``), so
 # the help states that rather than one task's name (``[default: paper]`` is false for Acrobot).
 Preset = Annotated[str | None, typer.Option(
-    "--preset", metavar=choices(preset_names(get_task(DEFAULT_TASK))), show_default=False,
+    "--preset", metavar=choices(list(get_task(DEFAULT_TASK).presets)), show_default=False,
     help=f"PPO preset, the bottom layer of [ppo]: one of the task's own presets (listed: {DEFAULT_TASK}'s) "
          f"[default: the task's default preset; {DEFAULT_TASK}'s is {DEFAULT_PRESET}].")]
 TaskOpt = Annotated[str | None, typer.Option(

@@ -1,6 +1,5 @@
-"""The arms of the experiment, in one registry: which reward terms each one uses, which arm each
-one is compared with in the report and the study (and what that difference isolates), and the
-order in which the report lists them."""
+"""The arms of the experiment, in one registry: each one's reward terms, its comparisons in the
+report and the study, and its place in the report's order."""
 
 from __future__ import annotations
 
@@ -29,14 +28,11 @@ PLACEBO = "hybrid-shuffled"  # the method with its label map shuffled per seed
 DENSE_POTENTIAL = "hybrid-dense-pbrs"  # the method with Eq. 1's dense term in potential form
 #: The placebo of each arm that has one.
 PLACEBO_OF: Mapping[str, str] = {METHOD: PLACEBO}
-#: Position in the report of an arm that gives none: after every arm that does.
-LAST = 100
 
 
 @dataclass(frozen=True)
 class Comparison:
-    """One comparison of the report (and of the study's regime map unless ``in_study`` is False):
-    the arm that holds it against ``reference``, and what the difference ``isolates``."""
+    """One comparison of the report (and of the study's regime map unless ``in_study`` is False)."""
 
     reference: str
     isolates: str
@@ -53,15 +49,12 @@ class ArmSpec:
     potential: PotentialSource
     rbf: bool = True
     lock: bool = True
-    # Added after results existed: ``identity`` below leaves it out while False, so the seven
-    # original arms keep their config hashes (tests/training/test_pinned_hashes.py).
+    # Added after results existed: ``identity`` leaves these out while False, so older arms keep their hashes.
     placebo: bool = False  # labels mapped through a per-seed shuffled label map (shaping/placebo.py)
-    # Added with issue 41, left out of ``identity`` while False as ``placebo`` is: the dense term
-    # as a potential, ``gamma Phi_kin(s') - Phi_kin(s)`` with ``Phi_kin = horizon x R_kin`` (shaping/wrapper.py)
-    dense_potential: bool = False
+    dense_potential: bool = False  # the dense term paid as a potential (shaping/wrapper.py, issue 41)
     # How the arm is reported, not how it is rewarded: ``identity`` always leaves these out.
     compared_with: tuple[Comparison, ...] = ()  # this arm against each reference, in the report's order
-    report_order: int = LAST  # position in the report's tables and figures (lower first; ties: registry order)
+    report_order: int = 100  # position in the report's tables and figures (lower first; ties: registry order)
 
     @property
     def uses_vlm(self) -> bool:
@@ -69,12 +62,7 @@ class ArmSpec:
 
     def identity(self) -> dict[str, object]:
         """The arm as it enters config hashes: every reward field, ``placebo`` only when set
-        (``compared_with`` and ``report_order`` never: they say how the arm is reported).
-
-        Example:
-            >>> "placebo" in ARMS["hybrid"].identity(), ARMS["hybrid-shuffled"].identity()["placebo"]
-            (False, True)
-        """
+        (``compared_with`` and ``report_order`` never: they say how the arm is reported)."""
         fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
                   if f.name not in ("compared_with", "report_order")}
         for late in ("placebo", "dense_potential"):  # fields added after results existed
@@ -117,37 +105,20 @@ ARMS: dict[str, ArmSpec] = {
 
 
 def report_order(registry: Mapping[str, ArmSpec] = ARMS) -> list[str]:
-    """The registry's arms in the report's order (``report_order``, ties in the registry's order).
-
-    Example:
-        >>> report_order()[:3]
-        ['hybrid', 'baseline', 'kinematic']
-    """
+    """The registry's arms in the report's order (``report_order``, ties in the registry's order)."""
     return sorted(registry, key=lambda name: registry[name].report_order)
 
 
 def comparisons(registry: Mapping[str, ArmSpec] = ARMS, study: bool = False
                 ) -> list[tuple[str, str, str]]:
-    """``(arm, reference, what the difference isolates)`` of every comparison in the registry, arms
-    in the report's order and each arm's comparisons in its own order; ``study``: only those the
-    study's regime map makes too.
-
-    Example:
-        >>> [f"{a} vs {b}" for a, b, _ in comparisons(study=True)]  # doctest: +NORMALIZE_WHITESPACE
-        ['hybrid vs baseline', 'hybrid vs kinematic', 'hybrid vs hybrid-shuffled', 'kinematic vs baseline',
-         'hybrid-dense-pbrs vs baseline', 'hybrid-dense-pbrs vs hybrid']
-    """
+    """``(arm, reference, what the difference isolates)`` of every comparison, in the report's order
+    (``study``: only those the study's regime map makes too)."""
     return [(name, c.reference, c.isolates) for name in report_order(registry)
             for c in registry[name].compared_with if c.in_study or not study]
 
 
 def parse_arms(text: str, registry: Mapping[str, ArmSpec] = ARMS) -> tuple[ArmSpec, ...]:
-    """``"baseline,hybrid"`` -> the arm specs of ``registry``; unknown or repeated names are ``BadInput``.
-
-    Example:
-        >>> [a.name for a in parse_arms("baseline, hybrid")]
-        ['baseline', 'hybrid']
-    """
+    """``"baseline,hybrid"`` -> the arm specs of ``registry``; unknown or repeated names are ``BadInput``."""
     names = [n.strip() for n in text.split(",") if n.strip()]
     if not names:
         raise BadInput(f"no arm given; choose from {', '.join(registry)}.")

@@ -1,11 +1,5 @@
-"""The simulator's camera: the only component of the visual pipeline that knows the state.
-
-A task's camera (``Task.camera``) snaps the simulator's state to a grid of cells, renders
-each cell once and memoises the cell's SHA-256 and features (``CellCamera``). Pixels are kept
-in a small LRU and re-rendered on demand. Everything downstream (features, VLM, RBF, lock)
-receives a ``FrameView`` that carries no state: this is the modality separation of paper
-Section 3.3. MountainCar's camera is ``tasks/mountain_car/camera.py``.
-"""
+"""The simulator's camera, the only part of the visual pipeline that reads the state (paper Section
+3.3): a ``CellCamera`` renders each grid cell once and hands on stateless ``FrameView`` s."""
 
 from __future__ import annotations
 
@@ -25,40 +19,24 @@ Cell = TypeVar("Cell")  # a camera's grid cell: MountainCar's position index, Ac
 
 @dataclass(frozen=True, eq=False)
 class FrameView:
-    """What the camera shows: a frame's ``key`` (SHA-256 of its pixels), its ``features``
-    ((D,) int64 exact darkness counts, see ``darkness_counts``; divide by ``FEATURE_UNIT`` for
-    the [0, 1] features) and the frame itself, loaded lazily by ``frame()``.
-    """
+    """What the camera shows: ``key`` (SHA-256 of the pixels), ``features`` ((D,) int64
+    ``darkness_counts``); ``frame()`` draws the frame (again if the camera's pixel cache dropped it),
+    ``release()`` drops its pixels from that cache (a deterministic VLM has labelled it)."""
 
     key: str
     features: np.ndarray = field(repr=False)
-    _load: Callable[[], Frame] = field(repr=False)
-    _release: Callable[[], None] = field(default=lambda: None, repr=False)
-
-    def frame(self) -> Frame:
-        """The full frame (rendered again if the camera's pixel cache dropped it)."""
-        return self._load()
-
-    def release(self) -> None:
-        """Say that this frame's pixels are not needed again soon (a deterministic VLM has
-        answered about it): the camera drops them first, so its pixel cache keeps the frames
-        still waiting for their first label instead of drawing those again."""
-        self._release()
+    frame: Callable[[], Frame] = field(repr=False)
+    release: Callable[[], None] = field(default=lambda: None, repr=False)
 
     @classmethod
     def of_frame(cls, frame: Frame) -> FrameView:
         """A view of an already rendered frame (e.g. from ``FrameRenderer``)."""
-        return cls(key=frame.sha256, features=darkness_counts(frame.pixels), _load=lambda: frame)
+        return cls(key=frame.sha256, features=darkness_counts(frame.pixels), frame=lambda: frame)
 
 
 class CellCamera(Generic[Cell]):
-    """What every camera shares: a state snapped to a grid ``Cell`` is rendered at most once per
-    cell, its ``FrameView`` (key, features) memoised for good, its pixels kept in an LRU of
-    ``pixel_cache`` frames and drawn again on demand (same pixels, same key). A subclass says how a
-    cell is drawn (``_draw``, with a ``_renderer`` it opens on demand: ``_release`` closes it).
-
-    ``renders`` counts calls to the renderer; ``cells`` how many cells have been seen.
-    """
+    """A camera of grid ``Cell`` s: each cell's ``FrameView`` memoised, its pixels in an LRU of
+    ``pixel_cache`` frames; a subclass draws a cell (``_draw``, opening ``_renderer`` on demand)."""
 
     def __init__(self, pixel_cache: int = 256) -> None:
         if pixel_cache < 1:
@@ -78,16 +56,12 @@ class CellCamera(Generic[Cell]):
             self._renderer.close()
             self._renderer = None
 
-    def _render(self, cell: Cell) -> Frame:
-        self.renders += 1
-        known = self._views.get(cell)
-        # drawn again after the pixel cache dropped it: same pixels, same key (not hashed again)
-        return self._draw(cell, known.key if known is not None else None)
-
     def _frame(self, cell: Cell) -> Frame:
         frame = self._frames.get(cell)
         if frame is None:
-            frame = self._render(cell)
+            self.renders += 1
+            known = self._views.get(cell)  # drawn again after the pixel cache dropped it: the key is known
+            frame = self._draw(cell, known.key if known is not None else None)
             self._frames[cell] = frame
             if len(self._frames) > self.pixel_cache:
                 self._frames.popitem(last=False)
@@ -105,8 +79,8 @@ class CellCamera(Generic[Cell]):
             frame = self._frame(cell)
             features = darkness_counts(frame.pixels)
             features.setflags(write=False)
-            view = FrameView(key=frame.sha256, features=features, _load=functools.partial(self._frame, cell),
-                             _release=functools.partial(self._drop, cell))
+            view = FrameView(key=frame.sha256, features=features, frame=functools.partial(self._frame, cell),
+                             release=functools.partial(self._drop, cell))
             self._views[cell] = view
         return view
 

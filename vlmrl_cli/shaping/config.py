@@ -19,9 +19,7 @@ _SCALE_LIMIT = AtMost(1e6, "a larger scale makes the shaped term dwarf the task'
 
 
 def _label_table(value: Any) -> Any:
-    """A label map as a tuple of ``(label, potential)`` pairs, from a TOML table (``{label =
-    potential}``, the labels it changes: the configuration's resolution fills in the task's other
-    labels first) or a full config's ``[[label, potential], ...]``; the run's task checks it."""
+    """A label map as ``(label, potential)`` pairs, from a TOML table or ``[[label, potential], ...]``."""
     if isinstance(value, dict):
         value = list(value.items())
     if not isinstance(value, (list, tuple)) or not all(isinstance(p, (list, tuple)) and len(p) == 2 for p in value):
@@ -63,7 +61,6 @@ class ShapingConfig:
     """Knobs of the semantic potential and the reward fusion; each field says its unit."""
 
     # empty: the task's own map (Task.label_potentials), filled in when a run's jobs are built
-    # (training/config.py); any map given is checked against the task's labels
     label_potentials: tuple[tuple[str, float], ...] = field(
         default=(),
         metadata={"rules": (BeforeValidator(_label_table),),
@@ -78,24 +75,18 @@ class ShapingConfig:
         "a milestone is confirmed by that many agreeing labels in a row, and an episode holds few queries "
         "(MountainCar's 200 steps, 20 at query_every 10): a larger value would never confirm one"))),
         "help": "agreeing labels that confirm a milestone"})
-    # On MountainCar, feature distance grows ~0.075 per pixel of car shift and saturates (~1.4)
-    # beyond ~40 px (measured, see shaping/features.py): 0.3 keeps far prototypes from pulling Phi
-    # to the mean.
+    # MountainCar's feature distance is ~0.075 per pixel of car shift, ~1.4 saturated (docs/method.md)
     bandwidth: float = field(default=0.3, metadata={"rules": (Gt(0),),
                                                     "help": "RBF kernel width, feature-distance units"})
-    # 0 = reuse only an identical frame's label: a deterministic VLM answers it identically, so
-    # the cache changes no label; > 0 also reuses the nearest prototype within this distance.
     reuse_radius: float = field(
         default=0.0, metadata={"rules": (Ge(0),),
                                "help": "also reuse a prototype's label within this feature distance (~0.075/px)"}
     )
-    # the same rule as alpha: a scale weighs a term, and a negative one would pay for the opposite
     # Eq. 1's knobs (the paper's 2.0 and 0.4); each task's dense term reads them (Task.scene.dense)
     kin_scale: float = field(default=2.0, metadata={
         "rules": (Ge(0), _SCALE_LIMIT), "help": "the dense term's scale (Eq. 1: max(0, scale (x + offset)))"})
     kin_offset: float = field(default=0.4, metadata={"help": "the dense term's offset (see kin_scale)"})
-    # A camera that renders a position snaps it to this grid (MountainCar: one pixel of car
-    # motion, so at most 601 distinct frames per run); a camera of its own grid ignores it.
+    # MountainCar's: one pixel of car motion, so at most 601 distinct frames per run
     render_quantum: float = field(
         default=0.003, metadata={"rules": (Gt(0),), "help": "render positions on this grid (the task's units)"}
     )

@@ -1,12 +1,5 @@
-"""Reward-hacking diagnostic for a dense term: does a policy hover short of the goal?
-
-A dense term that grows towards the goal can pay more per step near it than the native step
-cost, so an agent can earn more by parking there than by finishing the episode (MountainCar's
-Eq. 1 is the paper's case). These pure functions measure that on recorded trajectories of the
-task's position (``Task.hover``'s position: one array per episode, the position after each step) against
-``x_min``, where hovering starts (``Hover.start``). A policy that drives to the goal spends
-only its last few steps past ``x_min``; one that hovers stays there without finishing.
-"""
+"""Reward-hacking diagnostic: does a policy hover short of the goal, where a dense term pays
+more per step than finishing (``Task.hover``: the position, and ``x_min`` where hovering starts)?"""
 
 from __future__ import annotations
 
@@ -25,50 +18,16 @@ HOVER_FLAG = 0.1
 
 def hover_steps(xs: npt.ArrayLike, reached_flag: bool, x_min: float, horizon: int = HOVER_HORIZON
                 ) -> np.ndarray:
-    """Which steps of one episode hover: right of ``x_min`` without reaching the flag within ``horizon`` steps.
-
-    Args:
-        xs: shape ``(T,)``, the car's position after each of the episode's ``T`` steps.
-        reached_flag: whether the episode ended at the flag (terminated), not by the time limit.
-        x_min: the position (track units) right of which a step may hover.
-        horizon: steps; a step right of ``x_min`` with the flag reached at most ``horizon`` steps
-            later is on its way in, not hovering.
-
-    Returns:
-        Bool array of shape ``(T,)``.
-
-    Example:
-        >>> hover_steps([0.1, 0.35, 0.45, 0.55], reached_flag=True, x_min=0.3, horizon=2).tolist()
-        [False, False, False, False]
-        >>> hover_steps([0.1, 0.35, 0.45, 0.4], reached_flag=False, x_min=0.3).tolist()
-        [False, True, True, True]
-    """
+    """Which of an episode's ``(T,)`` positions hover: right of ``x_min``, the flag not within ``horizon``."""
     x = np.asarray(xs, dtype=float).reshape(-1)
-    if horizon < 0:
-        raise ValueError(f"horizon must be >= 0 steps, got {horizon}.")
     steps_left = x.size - 1 - np.arange(x.size)  # steps from each step to the episode's last one
     arriving = reached_flag & (steps_left <= horizon)
     return np.asarray((x > x_min) & ~arriving)
 
 
-def dwell_right_steps(xs: npt.ArrayLike, x_min: float) -> int:
-    """Steps one episode spends right of ``x_min`` (shape ``(T,)`` positions; the flag ends the episode).
-
-    Example:
-        >>> dwell_right_steps([0.1, 0.35, 0.2, 0.4, 0.55], x_min=0.3)
-        3
-    """
-    return int(np.count_nonzero(np.asarray(xs, dtype=float) > x_min))
-
-
 @dataclass(frozen=True)
 class HoverSummary:
-    """One run's detached evaluation, seen for hovering.
-
-    ``hover_fraction``: hovering steps / all steps, pooled over episodes (in [0, 1]).
-    ``dwell_right_steps``: mean over episodes of the steps spent past ``x_min``.
-    ``flagged``: ``hover_fraction > HOVER_FLAG``.
-    """
+    """One run's detached evaluation seen for hovering (``dwell_right_steps``: the mean per episode)."""
 
     hover_fraction: float
     dwell_right_steps: float
@@ -83,17 +42,7 @@ def summarize_hovering(
     trajectories: Sequence[npt.ArrayLike], reached_flag: npt.ArrayLike, x_min: float,
     horizon: int = HOVER_HORIZON,
 ) -> HoverSummary:
-    """Hover fraction and mean dwell right of ``x_min`` over a run's episodes.
-
-    Args:
-        trajectories: one position array of shape ``(T_i,)`` per episode.
-        reached_flag: shape ``(episodes,)``, whether each episode ended at the flag.
-
-    Example:
-        >>> s = summarize_hovering([[0.1, 0.4, 0.55], [0.35, 0.4, 0.45, 0.4]], [True, False], x_min=0.3)
-        >>> s.hover_fraction, s.dwell_right_steps, s.flagged
-        (0.5714285714285714, 3.0, True)
-    """
+    """Hover fraction and mean dwell right of ``x_min`` over a run's episodes' position arrays."""
     reached = np.asarray(reached_flag, dtype=bool).reshape(-1)
     if reached.size != len(trajectories):
         raise ValueError(f"{len(trajectories)} trajectories but {reached.size} reached_flag values.")
@@ -102,5 +51,5 @@ def summarize_hovering(
     hovering = sum(int(hover_steps(xs, bool(r), x_min, horizon).sum()) for xs, r in zip(trajectories, reached,
                                                                                           strict=True))
     total = sum(np.asarray(xs).size for xs in trajectories)
-    dwell = float(np.mean([dwell_right_steps(xs, x_min) for xs in trajectories]))
+    dwell = float(np.mean([np.count_nonzero(np.asarray(xs, dtype=float) > x_min) for xs in trajectories]))
     return HoverSummary(hovering / total if total else float("nan"), dwell, len(trajectories))

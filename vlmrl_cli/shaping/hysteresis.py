@@ -7,37 +7,17 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class LockState:
-    """The lock of one episode.
-
-    ``level`` is the locked baseline potential (dimensionless, starts at 0); ``candidate`` the
-    raw potential of the latest label and ``count`` how many consecutive labels agreed on it.
-    """
+    """The lock of one episode (the default: its start): ``level`` the locked potential,
+    ``candidate`` the latest label's raw potential, ``count`` how many labels in a row agreed on it."""
 
     level: float = 0.0
     candidate: float | None = None
     count: int = 0
 
-    @classmethod
-    def reset(cls) -> LockState:
-        """The state at the start of an episode: nothing confirmed, level 0."""
-        return cls()
-
 
 def lock_step(state: LockState, label_potential: float, confirm: int) -> LockState:
-    """Feed one label's raw potential to the lock and return the next state.
-
-    Labels agree when their raw potentials are equal (two labels with one potential are one
-    milestone). A potential is confirmed once ``confirm`` consecutive labels agreed on it; a
-    confirmed potential above ``level`` becomes the new level, and the level never drops
-    within the episode, whatever the VLM says afterwards (flicker cannot undo a milestone).
-
-    Example:
-        >>> s = LockState.reset()
-        >>> for p in (0.3, 0.3, 0.0, 0.1):
-        ...     s = lock_step(s, p, confirm=2)
-        >>> s.level
-        0.3
-    """
+    """The lock after one more label's raw potential: a potential that ``confirm`` labels in a row
+    agree on (equal potentials) and above ``level`` becomes the level, which never drops."""
     if confirm < 1:
         raise ValueError(f"confirm must be >= 1, got {confirm}")
     p = float(label_potential)

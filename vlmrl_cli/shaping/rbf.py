@@ -1,10 +1,5 @@
-"""RBF smoothing of discrete milestone potentials over a visual prototype cache (Section 3.2).
-
-With integer features (``features.darkness_counts``) every step is CPU-independent: squared
-distances are exact int64 sums, the kernel is ``core.fp.exp`` and the weighted sums are
-``math.fsum`` (exactly rounded, whatever the order). numpy's own ``exp`` and BLAS ``dot`` round
-differently on AVX-512 and AVX2 CPUs; they are not used here.
-"""
+"""RBF smoothing of milestone potentials over the visual prototype cache (Section 3.2), exact on
+every CPU for integer features (no numpy ``exp`` or BLAS ``dot``; see docs/method.md)."""
 
 from __future__ import annotations
 
@@ -19,13 +14,8 @@ _INT64_MAX = np.iinfo(np.int64).max
 
 def squared_distances(points: np.ndarray, feature: np.ndarray, unit: float = 1.0,
                       spread: int | None = None) -> np.ndarray:
-    """``||points_i - feature||^2 / unit^2`` for each row: ``(N, D)``, ``(D,)`` -> ``(N,)`` float64.
-
-    For integer arrays the sum is exact (int64) and only its conversion to float64 rounds, so
-    the result is the same on every CPU; ``unit`` converts counts to feature units (e.g.
-    ``FEATURE_UNIT``). Float arrays are summed in float64 (the tests' small examples). ``spread``
-    (integers only): the caller's guarantee that every entry of both lies within a range of that
-    width, so no difference exceeds it; the overflow check then needs no pass over the data.
+    """``||points_i - feature||^2 / unit^2`` for each row: ``(N, D)``, ``(D,)`` -> ``(N,)`` float64,
+    exact for integers; ``spread``: the width every integer entry lies within (skips a check).
 
     Example:
         >>> squared_distances(np.array([[0, 0], [3, 4]]), np.array([0, 0]), unit=5.0).tolist()
@@ -42,86 +32,18 @@ def squared_distances(points: np.ndarray, feature: np.ndarray, unit: float = 1.0
     return (fdiff * fdiff).sum(axis=1) / (unit * unit)
 
 
-def _weighted_mean(w: np.ndarray, potentials: np.ndarray) -> tuple[float, float]:
-    """(sum w_i phi_i, sum w_i), each exactly rounded."""
-    return math.fsum((w * potentials).tolist()), math.fsum(w.tolist())
-
-
-def rbf_potential(
-    feature: np.ndarray,
-    proto_features: np.ndarray,
-    proto_potentials: np.ndarray,
-    bandwidth: float,
-    unit: float = 1.0,
-) -> float:
-    """Kernel-weighted mean of prototype potentials (Nadaraya-Watson with a Gaussian kernel).
-
-    ``feature`` has shape ``(D,)``, ``proto_features`` ``(N, D)`` (the same feature units, see
-    ``features.frame_features``), ``proto_potentials`` ``(N,)`` (dimensionless potentials) and
-    ``bandwidth`` is in feature-distance units (integer features are divided by ``unit``, see
-    ``squared_distances``). Weights are
-    ``w_i = exp(-||f - f_i||^2 / (2 bandwidth^2))`` and the result is
-    ``sum_i w_i phi_i / sum_i w_i``, so it always lies within ``[min phi_i, max phi_i]``.
-    With no prototype (``N = 0``) the potential is 0.0. The exponent is shifted by the nearest
-    prototype's squared distance (which cancels in the ratio), so when every raw weight would
-    underflow the result is the nearest prototype's potential instead of 0/0.
-
-    Example:
-        >>> f = np.array([[0.0], [1.0]])
-        >>> round(rbf_potential(np.array([0.0]), f, np.array([0.0, 1.0]), bandwidth=0.1), 12)
-        0.0
-        >>> rbf_potential(np.array([0.5]), f, np.array([0.0, 1.0]), bandwidth=0.1)
-        0.5
-    """
-    if bandwidth <= 0:
-        raise ValueError(f"bandwidth must be > 0, got {bandwidth}")
-    protos = np.asarray(proto_features)
-    potentials = np.asarray(proto_potentials, dtype=np.float64)
-    if protos.shape[0] == 0:
-        return 0.0
-    if protos.ndim != 2 or potentials.shape != (protos.shape[0],):
-        raise ValueError(
-            f"expected proto_features (N, D) and proto_potentials (N,), got {protos.shape} and {potentials.shape}"
-        )
-    sq = squared_distances(protos, np.asarray(feature), unit)
-    logw = -(sq - sq.min()) * (1.0 / (2.0 * bandwidth * bandwidth))  # as RBFField: same bits
-    w = exp(logw)  # the nearest prototype has weight 1, so the sum is >= 1
-    num, den = _weighted_mean(w, potentials)
-    value = num / den
-    # Rounding can put the mean an ulp outside the hull; clip keeps the documented bound exact.
-    return float(np.clip(value, potentials.min(), potentials.max()))
-
-
 class RBFField:
-    """``rbf_potential`` for many frames while prototypes arrive one at a time, at O(1) a query.
-
-    Each queried key keeps the numerator and denominator of its kernel-weighted mean relative
-    to its nearest prototype so far; a new prototype updates every stored key in one
-    vectorised step (cost (keys, D)) instead of invalidating them. ``value`` returns what
-    ``rbf_potential`` would over the current prototypes, up to floating-point rounding.
-    Features keep the dtype of the first one added (integer features: exact distances, see
-    ``squared_distances``; ``unit`` converts them to feature units).
-
-    Example:
-        >>> field = RBFField(bandwidth=0.1, dim=1)
-        >>> field.value("a", np.array([0.5]))
-        0.0
-        >>> field.add_prototype(np.array([0.0]), 0.0); field.add_prototype(np.array([1.0]), 1.0)
-        >>> field.value("a", np.array([0.5]))
-        0.5
-    """
+    """``sum_i w_i phi_i / sum_i w_i``, ``w_i = exp(-||f - f_i||^2 / (2 bandwidth^2))``, per frame key
+    as prototypes arrive (0.0 before the first; the nearest's when every weight would underflow)."""
 
     def __init__(self, bandwidth: float, dim: int, unit: float = 1.0) -> None:
-        if bandwidth <= 0:
-            raise ValueError(f"bandwidth must be > 0, got {bandwidth}")
-        if not (math.isfinite(unit) and unit > 0):
-            raise ValueError(f"unit must be > 0, got {unit}")
+        if not (math.isfinite(bandwidth) and bandwidth > 0):
+            raise ValueError(f"bandwidth must be > 0 (feature-distance units), got {bandwidth}")
         self.bandwidth = float(bandwidth)
         self.unit = float(unit)
         self._scale = 1.0 / (2.0 * self.bandwidth * self.bandwidth)
         self._dim = dim
-        # Rows grow into buffers of doubling capacity (no O(N^2) copying as prototypes and keys
-        # arrive one at a time); only the first ``_n`` prototype rows and ``_k`` key rows are live.
+        # buffers of doubling capacity; only the first ``_n`` prototype rows and ``_k`` key rows are live
         self._n = 0
         self._k = 0
         self._proto_buf: np.ndarray | None = None  # (capacity, D), the dtype of the first feature
@@ -134,8 +56,7 @@ class RBFField:
         self._den_buf = np.empty(0, dtype=np.float64)
         self._ref_buf = np.empty(0, dtype=np.float64)  # squared distance the weights are relative to
         self._low, self._high = math.inf, -math.inf  # range of the prototype potentials
-        # each key's value as ``value`` returns it, until the next prototype or potential change:
-        # a plain dict lookup per env step instead of two numpy scalar reads
+        # each key's value until the next prototype or potential change: a dict lookup per env step
         self._values: dict[str, float] = {}
         self._entry_low, self._entry_high = 0, 0  # range of every integer feature entry seen
 
@@ -144,8 +65,14 @@ class RBFField:
         return self._n
 
     @property
-    def _potentials(self) -> np.ndarray:
+    def potentials(self) -> np.ndarray:
+        """The prototypes' potentials, (N,), in insertion order (a view)."""
         return self._pot_buf[: self._n]
+
+    @property
+    def features(self) -> np.ndarray:
+        """The prototypes' features, (N, D), in insertion order (a view)."""
+        return np.empty((0, self._dim)) if self._proto_buf is None else self._proto_buf[: self._n]
 
     @staticmethod
     def _grown(buf: np.ndarray, used: int) -> np.ndarray:
@@ -212,15 +139,9 @@ class RBFField:
         assert self._feat_buf is not None
         return self._distances(self._feat_buf[: self._k], self._knorm_buf[: self._k], proto)
 
-    def _proto_distances(self, feature: np.ndarray) -> np.ndarray:
-        """``squared_distances(prototypes, feature)``: see ``_distances``."""
-        assert self._proto_buf is not None
-        return self._distances(self._proto_buf[: self._n], self._pnorm_buf[: self._n], feature)
-
     def _distances(self, rows: np.ndarray, norms: np.ndarray, f: np.ndarray) -> np.ndarray:
-        """``squared_distances(rows, f)``, the same numbers: for non-negative integer features small
-        enough that no int64 sum can overflow, as ``|r|^2 - 2 r.f + |f|^2`` from the rows' stored
-        squared ``norms`` (one product per entry instead of a difference and a product)."""
+        """``squared_distances(rows, f)``, the same numbers: as ``|r|^2 - 2 r.f + |f|^2`` from the stored
+        ``norms`` for non-negative integer features too small for an int64 sum to overflow."""
         if (np.issubdtype(rows.dtype, np.integer) and self._entry_low >= 0
                 and 2 * self._dim * self._entry_high**2 <= _INT64_MAX):
             g = f.astype(np.int64, copy=False)
@@ -234,16 +155,7 @@ class RBFField:
         return int(np.einsum("i,i->", row, row)) if np.issubdtype(row.dtype, np.integer) else 0
 
     def set_potential(self, index: int, potential: float) -> None:
-        """Give prototype ``index`` (insertion order) a new potential, updating every stored key:
-        a stochastic VLM's newest answer about a frame replaces its older one.
-
-        Example:
-            >>> field = RBFField(bandwidth=0.1, dim=1)
-            >>> field.add_prototype(np.array([0.0]), 0.0); field.add_prototype(np.array([1.0]), 1.0)
-            >>> field.value("a", np.array([0.5])); field.set_potential(1, 0.0); field.value("a", np.array([0.5]))
-            0.5
-            0.0
-        """
+        """Give prototype ``index`` (insertion order) a new potential, updating every stored key."""
         if self._proto_buf is None or not 0 <= index < self._n:
             raise IndexError(f"no prototype {index}; the field holds {self.prototypes}")
         old = float(self._pot_buf[index])
@@ -252,7 +164,7 @@ class RBFField:
             return
         self._pot_buf[index] = new
         self._values.clear()
-        self._low, self._high = float(self._potentials.min()), float(self._potentials.max())
+        self._low, self._high = float(self.potentials.min()), float(self.potentials.max())
         if self._feat_buf is None:
             return
         k = self._k
@@ -268,9 +180,10 @@ class RBFField:
         row = self._index.get(key)
         if row is None:
             f = self._row(feature)
-            sq = self._proto_distances(f[0])
+            sq = self._distances(self._proto_buf[: self._n], self._pnorm_buf[: self._n], f[0])
             ref = float(sq.min())
-            num, den = _weighted_mean(exp(-(sq - ref) * self._scale), self._pot_buf[: self._n])
+            w = exp(-(sq - ref) * self._scale)
+            num, den = math.fsum((w * self._pot_buf[: self._n]).tolist()), math.fsum(w.tolist())  # exactly rounded
             row = self._k
             self._index[key] = row
             if self._feat_buf is None:

@@ -1,20 +1,5 @@
-"""The two scales of the hybrid reward, set per task by one stated rule (issue 41).
-
-MountainCar-v0's alpha 5 and kin_scale 2 are the paper's scales; on another task they mean
-something else (on DoorKey the dense term could pay 2.8 per episode against the goal's 1.0). The
-rule sizes each shaping term against what reaching the goal is worth:
-
-* ``goal_return``: the return a success earns over a failure (the zoo reference's mean return
-  minus a failing episode's return);
-* the potential term telescopes to at most ``alpha x span`` per episode (``span``: the label map's
-  largest minus smallest potential), so ``alpha = potential_share x goal_return / span``;
-* Eq. 1's dense term pays at most ``kin_scale x peak`` per step (``peak``: its per-step maximum at
-  scale 1 and the default offset), ``horizon`` steps per episode, so
-  ``kin_scale = dense_share x goal_return / (horizon x peak)``.
-
-Both are rounded to 3 significant figures. With both shares at a quarter, neither term can pay
-more than a quarter of the goal, and the two together half: lingering cannot out-earn finishing.
-"""
+"""The two scales of the hybrid reward (alpha, kin_scale), set per task by one stated rule
+(issue 41): each term can pay at most a share of the goal's return. See docs/method.md."""
 
 from __future__ import annotations
 
@@ -28,8 +13,7 @@ DENSE_SHARE = 0.25
 
 @dataclass(frozen=True)
 class TaskScales:
-    """A task's alpha and kin_scale and how they were set (``rule``: one line for reports); a task
-    whose dense term needs another offset than Eq. 1's default names it (``kin_offset``)."""
+    """A task's alpha and kin_scale, ``rule`` (one line for reports) and ``kin_offset`` (None: Eq. 1's)."""
 
     alpha: float
     kin_scale: float
@@ -56,27 +40,14 @@ class TaskScales:
 def task_scales(goal_return: float, potential_span: float, dense_peak: float, horizon: int,
                 potential_share: float = POTENTIAL_SHARE, dense_share: float = DENSE_SHARE,
                 kin_offset: float | None = None) -> TaskScales:
-    """alpha and kin_scale by the module's rule.
-
-    Example:
-        >>> s = task_scales(goal_return=0.964, potential_span=1.0, dense_peak=1.4 / 250, horizon=250)
-        >>> s.alpha, s.kin_scale
-        (0.241, 0.172)
-        >>> round(s.alpha * 1.0 / 0.964, 3), round(s.kin_scale * 1.4 / 0.964, 3)  # each a quarter of the goal
-        (0.25, 0.25)
-    """
+    """alpha and kin_scale by the module's rule, to 3 significant figures."""
     for name, value in (("goal_return", goal_return), ("potential_span", potential_span),
                         ("dense_peak", dense_peak), ("horizon", horizon)):
         if not (math.isfinite(value) and value > 0):
             raise ValueError(f"{name} must be finite and > 0, got {value}")
-    alpha = _three_figures(potential_share * goal_return / potential_span)
-    kin_scale = _three_figures(dense_share * goal_return / (horizon * dense_peak))
+    alpha = float(f"{potential_share * goal_return / potential_span:.3g}")
+    kin_scale = float(f"{dense_share * goal_return / (horizon * dense_peak):.3g}")
     rule = (f"to 3 significant figures, alpha x potential span = {potential_share:g} x goal return "
             f"({goal_return:g}); dense term's whole-episode maximum ({horizon} steps x {dense_peak:.4g} x "
             f"kin_scale) = {dense_share:g} x goal return")
     return TaskScales(alpha, kin_scale, rule, kin_offset)
-
-
-def _three_figures(value: float) -> float:
-    """``value`` to 3 significant figures (a config's number a reader can type back)."""
-    return float(f"{value:.3g}")

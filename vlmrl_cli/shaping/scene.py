@@ -1,9 +1,5 @@
-"""What the hybrid reward needs to know of a task: its observation, its dense term, its camera.
-
-A task plug-in (``vlmrl_cli.tasks``) fills a ``Scene``; the reward wrappers (``shaping.wrapper``)
-read nothing else about the environment. MountainCar's (``tasks/mountain_car``) is the paper's: observation ``[x, v]``,
-Eq. 1's kinematic term on ``x`` and a camera that images the position.
-"""
+"""What the hybrid reward knows of a task (``Scene``): its observation, its dense term, its
+camera; the reward wrappers (``shaping.wrapper``) read nothing else about the environment."""
 
 from __future__ import annotations
 
@@ -19,10 +15,8 @@ from vlmrl_cli.shaping.camera import FrameView
 #: observation only (``ShapingConfig.kin_scale`` and ``kin_offset``).
 DenseTerm = Callable[[np.ndarray, float, float], float]
 
-#: ``success(terminated, length)``: whether an episode that ended after ``length`` steps
-#: succeeded, ``terminated`` telling an end the env itself made (its goal) from a time-limit cut.
-#: A task's rule is ``Task.success``; the reward wrapper, the training callback and the detached
-#: evaluation all take that one.
+#: ``success(terminated, length)``: whether an episode that ended after ``length`` steps succeeded
+#: (``terminated``: the env ended it, not the time limit). A task's rule is ``Task.success``.
 SuccessRule = Callable[[bool, int], bool]
 
 
@@ -37,8 +31,7 @@ def ended_by_env(terminated: bool, length: int) -> bool:
 
 
 class SceneCamera(Protocol):
-    """A run's camera: the one component that reads the simulator (``sim``, the unwrapped env)
-    and turns its state into a ``FrameView`` (quantised, so that distinct frames are bounded)."""
+    """A run's camera: the one component that reads the simulator (``sim``, the unwrapped env)."""
 
     renders: int
 
@@ -49,11 +42,7 @@ class SceneCamera(Protocol):
 
 @dataclass(frozen=True)
 class Scene:
-    """A task as the reward wrapper sees it.
-
-    ``obs_shape``: the observation the dense term reads; ``dense``: that term; ``sim_type``: the
-    unwrapped env class the camera images (checked when an arm uses the VLM).
-    """
+    """A task as the reward wrappers see it; ``sim_type``: the unwrapped env class the camera images."""
 
     name: str
     obs_shape: tuple[int, ...]

@@ -1,37 +1,5 @@
-"""The macro-semantic potential Phi(s) (paper Section 3.2), built from camera views only.
-
-``SemanticOracle`` is shared by all envs of one run. It holds the Visual Prototype Cache:
-every frame the VLM labelled, with its features, label and raw potential. At a labelling step
-it reuses the label of an identical frame (and, with ``reuse_radius > 0``, of the nearest
-prototype within that feature distance) and asks the VLM otherwise. ``phi_rbf`` smooths the
-prototypes' raw potentials with an ``RBFField`` (``rbf_potential`` kept up to date per frame
-key as prototypes arrive), so the per-step cost is a dict lookup.
-
-One labelling round per vector step (issue 53): the envs of a run register the views they will
-label in this step (``request``, in the order the labels are then taken), ``fetch`` asks the VLM
-about those a label may need in ONE call (``VLMClient.ask_many``), and the labels are then taken
-env by env exactly as one env at a time would take them (``label``), the asked answers read from
-the round instead of the VLM. So the round changes when the VLM is asked, never a label, a
-prototype or a potential: a deterministic VLM may be asked about a frame that an earlier env's
-new prototype then covers (its answer goes unused), a stochastic one is asked every labelling
-view in the same order. ``max_queries`` caps the labels asked of the VLM in a run; past it a
-label is the nearest prototype's (RL-VLM-F's budget is the model: at most 20,000 labels in 1M
-steps).
-
-``EpisodePotential`` is the per-env part: when to label (every ``query_every`` steps, step 0
-of an episode included), the hysteresis lock, and the potential of the arm:
-
-============================  ======================================================
-arm (source, rbf, lock)       Phi(s)
-============================  ======================================================
-hybrid (MCQ, rbf, lock)       max(lock level, Phi_rbf(s))
-hybrid-no-lock (MCQ, rbf)     Phi_rbf(s)
-hybrid-no-rbf (MCQ, lock)     max(lock level, latest label's raw potential)
-vision-float (FLOAT)          latest float potential (parsed number mapped to [0, 1])
-============================  ======================================================
-
-Nothing here sees the environment state: the only input is a ``FrameView``.
-"""
+"""The macro-semantic potential Phi(s) (paper Section 3.2), from camera views only: one oracle per
+run (prototype cache, VLM), one ``EpisodePotential`` per env (schedule, lock). See docs/method.md."""
 
 from __future__ import annotations
 
@@ -53,48 +21,22 @@ from vlmrl_cli.vlm.client import VLMClient
 from vlmrl_cli.vlm.parsers import parse_float, parse_mcq
 from vlmrl_cli.vlm.prompts import Milestones, NumberQuestions
 
-STAT_KEYS: tuple[str, ...] = (
-    schema.METRIC_VLM_QUERIES,
-    schema.METRIC_VLM_CACHE_HITS,
-    schema.METRIC_VLM_PROTOTYPES,
-    schema.METRIC_VLM_LABEL_REUSES,
-    schema.METRIC_VLM_PARSE_FAILURES,
-    schema.METRIC_VLM_BACKEND_CALLS,
-    schema.METRIC_VLM_BACKEND_FRAMES,
-    schema.METRIC_VLM_LARGEST_BATCH,
-    schema.METRIC_VLM_BACKEND_S,
-    schema.METRIC_VLM_BUDGET_LABELS,
-    schema.METRIC_VLM_SCORED,
-    schema.METRIC_VLM_GENERATED,
-)
-
 
 class SemanticOracle:
-    """The VLM behind a Visual Prototype Cache, shared by the envs of one run.
-
-    ``source`` picks the prompt: ``MCQ`` (label -> ``cfg.potential_of(label)``) or ``FLOAT``
-    (the parsed number through ``numbers.potential``). ``rbf`` says whether arms read the smoothed
-    ``phi_rbf`` or the raw label potentials. Unparsed answers count as parse failures and add
-    no prototype. ``milestones``: the task's MCQ vocabulary and prompt; ``feature_dim``: the size
-    of its frames' features (``features.feature_dim``); ``numbers``: the task's float question
-    (needed by the FLOAT source only).
-    """
+    """The VLM behind a visual prototype cache, shared by the envs of one run: ``source`` picks the
+    prompt, ``MCQ`` (the task's milestones) or ``FLOAT`` (its float question, ``numbers``)."""
 
     def __init__(self, client: VLMClient, cfg: ShapingConfig, source: PotentialSource, milestones: Milestones,
                  feature_dim: int, rbf: bool = True, numbers: NumberQuestions | None = None,
                  max_queries: int | None = None) -> None:
         if source is PotentialSource.NONE:
             raise ValueError("a SemanticOracle needs a potential source (MCQ or FLOAT); arms without one need none.")
-        if not (math.isfinite(cfg.bandwidth) and cfg.bandwidth > 0):
-            raise ValueError(f"ShapingConfig.bandwidth must be > 0 (feature-distance units), got {cfg.bandwidth}.")
         if not (math.isfinite(cfg.reuse_radius) and cfg.reuse_radius >= 0):
             raise ValueError(f"ShapingConfig.reuse_radius must be >= 0 (0 disables reuse), got {cfg.reuse_radius}.")
         if cfg.query_every < 1 or cfg.confirm < 1:
             raise ValueError(
                 f"ShapingConfig.query_every and confirm must be >= 1, got {cfg.query_every} and {cfg.confirm}."
             )
-        if max_queries is not None and max_queries < 0:
-            raise ValueError(f"max_queries must be >= 0 labels (None: no budget), got {max_queries}.")
         self.client = client
         self.cfg = cfg
         self.source = source
@@ -111,13 +53,8 @@ class SemanticOracle:
         self._prompt = milestones.prompt if numbers is None or source is PotentialSource.MCQ else numbers.float_prompt
         self._labels = milestones.labels
         self._potential_of = dict(cfg.label_potentials)
-        self._features = np.empty((0, 0), dtype=np.int64)
-        self._potentials = np.empty(0, dtype=np.float64)
-        self._n = 0
-        self._label_of: dict[str, float] = {}
-        self._row_of: dict[str, int] = {}
-        # A stochastic VLM (a fresh draw per query) is asked every time: reusing a frame's label
-        # would freeze its first draw, and its newest answer replaces the prototype's potential.
+        self._row_of: dict[str, int] = {}  # each labelled frame's prototype
+        # A stochastic VLM is asked every time: reusing a frame's label would freeze its first draw.
         self._stochastic = bool(getattr(client, "stochastic", False))
         self._field = RBFField(cfg.bandwidth, feature_dim, unit=FEATURE_UNIT)
         self._queries = 0
@@ -131,42 +68,25 @@ class SemanticOracle:
         self._fetched_in_order: deque[tuple[str, Answer]] = deque()
 
     def __deepcopy__(self, memo: dict[int, object]) -> SemanticOracle:
-        # One oracle (its VLM client, response cache and prototypes) is shared by the envs of a
-        # run; gymnasium's RecordConstructorArgs deep-copies wrapper arguments, and a copied env
-        # must keep sharing it rather than clone an open sqlite connection.
+        # gymnasium's RecordConstructorArgs deep-copies wrapper arguments: a copied env shares the oracle
         return self
 
     @property
     def prototypes(self) -> int:
-        return self._n
-
-    def prototype_potentials(self) -> np.ndarray:
-        """The raw potentials of the cached prototypes, shape (N,), in insertion order."""
-        return self._potentials[: self._n].copy()
+        return self._field.prototypes
 
     def request(self, view: FrameView) -> None:
-        """Say that ``view`` is labelled in this vector step; requests come in the order their
-        labels are then taken (env by env; an env's step before its reset)."""
+        """Say that ``view`` is labelled in this vector step, in the order labels are then taken."""
         self._requests.append(view)
 
     def fetch(self) -> None:
-        """Ask the VLM, in one call, about every requested view whose label may need it: all of
-        them for a stochastic VLM; else those neither labelled nor within ``reuse_radius`` of a
-        prototype now, each frame once, no more than the budget has left. Labels taken after
-        this read the answers from here (``label``)."""
+        """Ask the VLM, in one call, about every requested view whose label may need it (all of
+        them for a stochastic VLM), within the budget; ``label`` then reads the answers."""
         views, self._requests = self._requests, []
         self._fetched.clear()  # what an earlier round fetched and no label took
         self._fetched_in_order.clear()
-        if self._stochastic:
-            need = views
-        else:
-            known: set[str] = set()
-            need = []
-            for view in views:
-                if view.key in self._label_of or view.key in known or self._nearby(view) is not None:
-                    continue
-                known.add(view.key)
-                need.append(view)
+        need = views if self._stochastic else list({  # each new frame once, in the order first requested
+            v.key: v for v in views if v.key not in self._row_of and self._nearby(v) is None}.values())
         if self.max_queries is not None:
             need = need[: max(self.max_queries - self._queries, 0)]
         if not need:
@@ -178,28 +98,19 @@ class SemanticOracle:
             self._fetched.update((view.key, answer) for view, answer in zip(need, answers, strict=True))
 
     def label(self, view: FrameView) -> float | None:
-        """The raw potential of the view's label (reused or asked), or None if unparsed.
-
-        A frame already labelled reuses its own label: a deterministic VLM (greedy decoding,
-        the simulated one) answers an identical frame identically, so this changes no label.
-        With ``reuse_radius > 0`` the nearest prototype's label is also reused for frames within
-        that feature distance, which saves queries but can change labels near zone edges. A
-        stochastic VLM's client (``client.stochastic``) is asked at every labelling step, and its
-        newest answer about a frame replaces that prototype's potential. Once ``max_queries``
-        labels were asked, the label is the nearest prototype's, at any distance (None before
-        the first prototype).
-        """
-        known = self._label_of.get(view.key)
-        if known is not None and not self._stochastic:
-            self._reuses += 1
-            return known
-        if not self._stochastic:
-            nearest = self._nearby(view)
-            if nearest is not None:
+        """The raw potential of the view's label (reused or asked), or None if unparsed; a
+        stochastic VLM is asked every time, its newest answer replacing the prototype's potential."""
+        if not self._stochastic:  # the frame's own label, else (reuse_radius > 0) a near prototype's
+            row = self._row_of.get(view.key)
+            row = self._nearby(view) if row is None else row
+            if row is not None:
                 self._reuses += 1
-                return float(self._potentials[nearest])
-        if self.max_queries is not None and self._queries >= self.max_queries:
-            return self._past_budget(view)
+                return float(self._field.potentials[row])
+        if self.max_queries is not None and self._queries >= self.max_queries:  # the nearest prototype's
+            if not self.prototypes:
+                return None
+            self._budget_labels += 1
+            return float(self._field.potentials[self._nearest(view)[0]])
         potential = self._ask(view)
         if potential is None:
             self._parse_failures += 1
@@ -210,21 +121,17 @@ class SemanticOracle:
         return potential
 
     def _nearby(self, view: FrameView) -> int | None:
-        """The row of the nearest prototype within ``reuse_radius`` of ``view`` (None: reuse is off,
-        or none is that near)."""
-        if not self._n or self.cfg.reuse_radius <= 0:
+        """The row of the nearest prototype within ``reuse_radius`` of ``view``, else None."""
+        if not self.prototypes or self.cfg.reuse_radius <= 0:
             return None
-        sq = squared_distances(self._features[: self._n], view.features, unit=FEATURE_UNIT)
-        nearest = int(np.argmin(sq))
-        return nearest if math.sqrt(float(sq[nearest])) < self.cfg.reuse_radius else None
+        nearest, sq = self._nearest(view)
+        return nearest if math.sqrt(sq) < self.cfg.reuse_radius else None
 
-    def _past_budget(self, view: FrameView) -> float | None:
-        """The label past the query budget: the nearest prototype's potential, or None (no prototype)."""
-        if not self._n:
-            return None
-        self._budget_labels += 1
-        sq = squared_distances(self._features[: self._n], view.features, unit=FEATURE_UNIT)
-        return float(self._potentials[int(np.argmin(sq))])
+    def _nearest(self, view: FrameView) -> tuple[int, float]:
+        """The row of the prototype nearest to ``view`` and its squared feature distance."""
+        sq = squared_distances(self._field.features, view.features, unit=FEATURE_UNIT)
+        row = int(np.argmin(sq))
+        return row, float(sq[row])
 
     def _answer(self, view: FrameView) -> Answer:
         """The VLM's answer about ``view``: the round's (``fetch``), else asked now."""
@@ -253,23 +160,10 @@ class SemanticOracle:
 
     def _add(self, view: FrameView, potential: float) -> None:
         row = self._row_of.get(view.key)
-        if row is not None:  # only a stochastic VLM asks about a known frame again
-            if self._stochastic and self._label_of[view.key] != potential:
-                self._potentials[row] = potential
-                self._label_of[view.key] = potential
-                self._field.set_potential(row, potential)
+        if row is not None:  # only a stochastic VLM asks about a known frame again: its newest answer wins
+            self._field.set_potential(row, potential)
             return
-        if self._n == self._features.shape[0]:
-            grown = np.empty((max(64, 2 * self._n), view.features.shape[0]), dtype=np.int64)
-            if self._n:
-                grown[: self._n] = self._features[: self._n]
-            self._features = grown
-            self._potentials = np.resize(self._potentials, grown.shape[0])
-        self._features[self._n] = view.features
-        self._potentials[self._n] = potential
-        self._row_of[view.key] = self._n
-        self._n += 1
-        self._label_of[view.key] = potential
+        self._row_of[view.key] = self._field.prototypes
         self._field.add_prototype(view.features, potential)
 
     def phi_rbf(self, view: FrameView) -> float:
@@ -282,11 +176,11 @@ class SemanticOracle:
         return self._field.value
 
     def stats(self) -> dict[str, float]:
-        """Counters since construction, under the keys of ``STAT_KEYS``."""
+        """Counters since construction."""
         return {
             schema.METRIC_VLM_QUERIES: float(self._queries),
             schema.METRIC_VLM_CACHE_HITS: float(self._cache_hits),
-            schema.METRIC_VLM_PROTOTYPES: float(self._n),
+            schema.METRIC_VLM_PROTOTYPES: float(self.prototypes),
             schema.METRIC_VLM_LABEL_REUSES: float(self._reuses),
             schema.METRIC_VLM_PARSE_FAILURES: float(self._parse_failures),
             schema.METRIC_VLM_BACKEND_CALLS: float(self.client.stats.backend_calls),
@@ -300,26 +194,19 @@ class SemanticOracle:
 
 
 class EpisodePotential:
-    """Phi(s) of one env: labelling schedule, hysteresis lock and the arm's combination.
-
-    Call ``reset(view)`` at the start of each episode (it labels step 0 and resets the lock)
-    and ``step(view)`` with the view of every next state; both return Phi of that state.
-    """
+    """Phi(s) of one env: ``reset(view)`` at an episode's start (it labels step 0 and resets the
+    lock), ``step(view)`` with every next state's view; both return Phi of that state."""
 
     def __init__(self, oracle: SemanticOracle, lock: bool) -> None:
         self.oracle = oracle
         self.lock = lock
         self.query_every = oracle.cfg.query_every
         self.confirm = oracle.cfg.confirm
-        self.lock_state = LockState.reset()
+        self.lock_state = LockState()
         self.held = 0.0  # the latest label's raw potential, held between labels
         self.steps_since_label = 0
         # the oracle's RBF field's value(key, features), looked up once (None without the RBF)
         self._rbf_value = oracle.field_value if oracle.rbf else None
-
-    def request_reset(self, view: FrameView) -> None:
-        """Register the reset's label with the oracle's round (``reset`` then takes it)."""
-        self.oracle.request(view)
 
     def request_step(self, view: FrameView) -> None:
         """Register the next step's label with the oracle's round, when that step labels."""
@@ -327,18 +214,16 @@ class EpisodePotential:
             self.oracle.request(view)
 
     def reset(self, view: FrameView) -> float:
-        self.lock_state = LockState.reset()
+        self.lock_state = LockState()
         self.held = 0.0
-        self.steps_since_label = 0
-        self._label(view)
-        return self._phi(view)
+        self.steps_since_label = self.query_every - 1  # so that ``step`` labels the reset's view
+        return self.step(view)
 
     def step(self, view: FrameView) -> float:
         self.steps_since_label += 1
         if self.steps_since_label >= self.query_every:
             self.steps_since_label = 0
             self._label(view)
-        # _phi, inlined: this runs every env step
         base = self._rbf_value(view.key, view.features) if self._rbf_value is not None else self.held
         return max(self.lock_state.level, base) if self.lock else base
 
@@ -349,7 +234,3 @@ class EpisodePotential:
         self.held = potential
         if self.lock:
             self.lock_state = lock_step(self.lock_state, potential, self.confirm)
-
-    def _phi(self, view: FrameView) -> float:
-        base = self.oracle.phi_rbf(view) if self.oracle.rbf else self.held
-        return max(self.lock_state.level, base) if self.lock else base

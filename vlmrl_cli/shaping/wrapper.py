@@ -1,25 +1,5 @@
-"""An arm as an ordered stack of reward wrappers (paper Eq. 2), each validating its own arguments.
-
-``R_total = R_env [+ R_kin(x) | + (gamma Phi_kin(s') - Phi_kin(s))] [+ alpha (gamma Phi(s') - Phi(s))]``:
-
-==========================  ============================================================
-wrapper                     what it adds
-==========================  ============================================================
-``KinematicReward``         Eq. 1's dense term ``R_kin`` of the observation (proprioception)
-``KinematicPotential``      the same term paid as a potential, ``Phi_kin = horizon x R_kin``
-``SemanticPotential``       the VLM milestones' potential through the camera (exteroception)
-``EpisodeStatistics``       nothing: ``shaped_return`` and ``is_success`` at an episode's end
-==========================  ============================================================
-
-``arm_wrappers`` says which an arm stacks, innermost first; ``wrap_arm`` stacks them. Each reward
-wrapper keeps the reward it was given as ``info["native_reward"]`` when no wrapper below it has,
-so the env's own reward stays visible, as gymnasium's reward wrappers do.
-
-A ``RewardStage`` can also step in two halves, ``begin_step`` and ``finish_step`` (and
-``begin_reset``/``finish_reset``): ``LabelRoundVecEnv`` begins every env's step, lets the
-``SemanticOracle`` ask the VLM about all their frames in one call, then finishes them env by env
-(issue 53). The halves give the same rewards, bit for bit, as ``step``.
-"""
+"""An arm as an ordered stack of reward wrappers (paper Eq. 2), each checking its own arguments,
+stepped whole or in labelling rounds (``LabelRoundVecEnv``). See docs/method.md."""
 
 from __future__ import annotations
 
@@ -42,7 +22,6 @@ from vlmrl_cli.shaping.semantic import EpisodePotential, SemanticOracle
 
 StepResult = tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]
 ResetResult = tuple[Any, dict[str, Any]]
-Wrap = Callable[[gym.Env], gym.Env]
 
 
 def _gamma(gamma: float) -> float:
@@ -51,18 +30,9 @@ def _gamma(gamma: float) -> float:
     return float(gamma)
 
 
-def _native(info: dict[str, Any], reward: SupportsFloat) -> dict[str, Any]:
-    """``info`` (copied) with ``native_reward``: the reward of the env below the first reward wrapper."""
-    info = dict(info)
-    info.setdefault("native_reward", float(reward))
-    return info
-
-
 class RewardStage(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorArgs):
-    """A wrapper that changes what a step returns (``_after_step``) and what a reset returns
-    (``_after_reset``), whether the step runs at once (``step``) or in the two halves of a labelling
-    round (``begin_step``, ``finish_step``), which a stage passes down to the stage that splits
-    (``SemanticPotential``) and, below that, runs whole."""
+    """A wrapper that changes what a step and a reset return, whether run whole or in the two halves
+    of a labelling round (``begin_step``, ``finish_step``): the same rewards, bit for bit."""
 
     def __init__(self, env: gym.Env, **recorded: Any) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, **recorded)
@@ -75,11 +45,17 @@ class RewardStage(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorAr
                     info: dict[str, Any]) -> StepResult:
         return obs, reward, terminated, truncated, info
 
+    def _stepped(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
+                 info: dict[str, Any]) -> StepResult:
+        """``_after_step``, the reward below the first reward wrapper kept as ``native_reward``."""
+        native = info.get("native_reward", float(reward))
+        return self._after_step(obs, reward, terminated, truncated, info | {"native_reward": native})
+
     def _after_reset(self, obs: Any, info: dict[str, Any]) -> ResetResult:
         return obs, info
 
     def step(self, action: Any) -> StepResult:
-        return self._after_step(*self.env.step(action))
+        return self._stepped(*self.env.step(action))
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> ResetResult:
         return self._after_reset(*self.env.reset(seed=seed, options=options))
@@ -95,10 +71,10 @@ class RewardStage(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorAr
     def finish_step(self) -> StepResult:
         """The second half of ``step``: what ``step`` would have returned."""
         if isinstance(self.env, RewardStage):
-            return self._after_step(*self.env.finish_step())
+            return self._stepped(*self.env.finish_step())
         result, self._begun_step = self._begun_step, None
         assert result is not None, "finish_step without begin_step"
-        return self._after_step(*result)
+        return self._stepped(*result)
 
     def begin_reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
         """The first half of ``reset``."""
@@ -137,7 +113,6 @@ class KinematicReward(RewardStage):
 
     def _after_step(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
                     info: dict[str, Any]) -> StepResult:
-        info = _native(info, reward)
         return obs, float(reward) + self._dense(obs, self._scale, self._offset), terminated, truncated, info
 
 
@@ -156,10 +131,10 @@ class KinematicPotential(RewardStage):
         True
     """
 
-    def __init__(self, env: gym.Env, dense: DenseTerm, scale: float, offset: float, horizon: int,
+    def __init__(self, env: gym.Env, dense: DenseTerm, scale: float, offset: float, horizon: int | None,
                  gamma: float) -> None:
         super().__init__(env, dense=dense, scale=scale, offset=offset, horizon=horizon, gamma=gamma)
-        if not (isinstance(horizon, int) and horizon >= 1):
+        if not isinstance(horizon, int) or horizon < 1:
             raise ValueError(f"the dense term paid as a potential needs the task's time limit as horizon (got "
                              f"{horizon}).")
         self._dense, self._scale, self._offset = dense, float(scale), float(offset)
@@ -175,7 +150,6 @@ class KinematicPotential(RewardStage):
 
     def _after_step(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
                     info: dict[str, Any]) -> StepResult:
-        info = _native(info, reward)
         phi = self._potential(obs)
         reward = float(reward) + pbrs_term(self._phi, phi, self._gamma, 1.0, terminated)
         self._phi = phi
@@ -183,11 +157,8 @@ class KinematicPotential(RewardStage):
 
 
 class SemanticPotential(RewardStage):
-    """Adds ``alpha (gamma Phi(s') - Phi(s))``, ``Phi`` the VLM milestones' potential of what the
-    ``camera`` shows (the simulator imaged as ``env.render()`` would, never the observation), as
-    the arm's ``EpisodePotential`` (labelling schedule, lock, RBF) makes it from the run's shared
-    ``oracle``. In a labelling round (``begin_step``/``finish_step``) the frame is taken in the
-    first half and labelled in the second, once the oracle has fetched the round's answers."""
+    """Adds ``alpha (gamma Phi(s') - Phi(s))``, ``Phi`` the arm's ``EpisodePotential`` of what the
+    ``camera`` shows (never the observation), from the run's shared ``oracle``."""
 
     def __init__(self, env: gym.Env, arm: ArmSpec, alpha: float, gamma: float, camera: SceneCamera,
                  oracle: SemanticOracle, sim_type: type) -> None:
@@ -214,11 +185,6 @@ class SemanticPotential(RewardStage):
         """Phi of the current state."""
         return self._phi
 
-    @property
-    def lock_level(self) -> float:
-        """The hysteresis lock's level in this episode (0.0 without a lock)."""
-        return self.episode.lock_state.level
-
     def _after_reset(self, obs: Any, info: dict[str, Any]) -> ResetResult:
         view, self._reset_view = self._reset_view, None
         self._phi = self.episode.reset(view if view is not None else self.camera.look(self._sim))
@@ -226,7 +192,6 @@ class SemanticPotential(RewardStage):
 
     def _after_step(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
                     info: dict[str, Any]) -> StepResult:
-        info = _native(info, reward)
         view, self._step_view = self._step_view, None
         phi_next = self.episode.step(view if view is not None else self.camera.look(self._sim))
         reward = float(reward) + pbrs_term(self._phi, phi_next, self._gamma, self._alpha, terminated)
@@ -242,7 +207,7 @@ class SemanticPotential(RewardStage):
     def begin_reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
         super().begin_reset(seed=seed, options=options)
         self._reset_view = self.camera.look(self._sim)
-        self.episode.request_reset(self._reset_view)
+        self.episode.oracle.request(self._reset_view)  # a reset always labels
 
     def close(self) -> None:
         self.camera.close()  # idempotent; a camera shared by other envs reopens on demand
@@ -250,10 +215,8 @@ class SemanticPotential(RewardStage):
 
 
 class EpisodeStatistics(RewardStage):
-    """Adds no reward: at an episode's end it puts ``shaped_return`` (the sum of the rewards it
-    saw) and ``is_success`` (the task's ``success(terminated, length)``, the length counted here)
-    in ``info``, and every step keeps the env's reward as ``native_reward`` (when no reward
-    wrapper below has). The outermost wrapper of every arm, baseline's only one.
+    """Adds no reward: puts ``shaped_return`` and ``is_success`` (the task's ``success`` rule) in an
+    episode's last ``info``, and ``native_reward`` in every step's. The outermost wrapper of every arm.
 
     Example:
         >>> env = EpisodeStatistics(gym.make("CartPole-v1"), success=lambda terminated, length: length >= 500)
@@ -278,7 +241,6 @@ class EpisodeStatistics(RewardStage):
 
     def _after_step(self, obs: Any, reward: SupportsFloat, terminated: bool, truncated: bool,
                     info: dict[str, Any]) -> StepResult:
-        info = _native(info, reward)
         self._return += float(reward)
         self._length += 1
         if terminated or truncated:
@@ -287,63 +249,40 @@ class EpisodeStatistics(RewardStage):
         return obs, reward, terminated, truncated, info
 
 
-def arm_wrappers(arm: ArmSpec, shaping: ShapingConfig, gamma: float, scene: Scene, camera: SceneCamera | None = None,
-                 oracle: SemanticOracle | None = None, horizon: int | None = None,
-                 success: SuccessRule | None = None) -> list[Wrap]:
-    """The wrappers of ``arm``, innermost first: its dense term (as a reward or as a potential), its
-    semantic potential (``camera`` and ``oracle``, shared by the envs of one run), then
-    ``EpisodeStatistics`` with the task's success rule. ``horizon``: the task's time limit, which
-    the dense term paid as a potential needs.
+def wrap_arm(env: gym.Env, arm: ArmSpec, shaping: ShapingConfig, gamma: float, scene: Scene,
+             camera: SceneCamera | None = None, oracle: SemanticOracle | None = None, horizon: int | None = None,
+             success: SuccessRule | None = None) -> EpisodeStatistics:
+    """``env`` (observations of ``scene.obs_shape``) under ``arm``'s wrappers, innermost first: its
+    dense term (a reward, or a potential that needs the task's time limit ``horizon``), its semantic
+    potential, then ``EpisodeStatistics``, which is returned.
 
     Example:
         >>> from vlmrl_cli.shaping.arms import ARMS
         >>> from vlmrl_cli.tasks.registry import get_task
-        >>> car = get_task("mountain-car")
-        >>> stack = arm_wrappers(ARMS["kinematic"], ShapingConfig(), 0.99, car.scene, horizon=200)
-        >>> [type(wrap(gym.make("MountainCar-v0"))).__name__ for wrap in stack]
-        ['KinematicReward', 'EpisodeStatistics']
+        >>> env = wrap_arm(gym.make("MountainCar-v0"), ARMS["kinematic"], ShapingConfig(), 0.99,
+        ...                get_task("mountain-car").scene, horizon=200)
+        >>> type(env).__name__, type(env.env).__name__
+        ('EpisodeStatistics', 'KinematicReward')
     """
-    gamma = _gamma(gamma)
-    stack: list[Wrap] = []
-    if arm.dense_potential:
-        if not (isinstance(horizon, int) and horizon >= 1):
-            raise ValueError(f"arm '{arm.name}' pays the dense term as a potential; pass the task's time limit "
-                             f"as horizon (got {horizon}).")
-        steps = horizon
-        stack.append(lambda env: KinematicPotential(env, scene.dense, shaping.kin_scale, shaping.kin_offset, steps,
-                                                    gamma))
-    elif arm.kinematic:
-        stack.append(lambda env: KinematicReward(env, scene.dense, shaping.kin_scale, shaping.kin_offset))
-    if arm.uses_vlm:
-        if camera is None or oracle is None:
-            raise ValueError(f"arm '{arm.name}' shapes with the VLM; pass the run's camera and oracle.")
-        lens, seer = camera, oracle
-        stack.append(lambda env: SemanticPotential(env, arm, shaping.alpha, gamma, lens, seer, scene.sim_type))
-    stack.append(lambda env: EpisodeStatistics(env, success))
-    return stack
-
-
-def wrap_arm(env: gym.Env, arm: ArmSpec, shaping: ShapingConfig, gamma: float, scene: Scene,
-             camera: SceneCamera | None = None, oracle: SemanticOracle | None = None, horizon: int | None = None,
-             success: SuccessRule | None = None) -> EpisodeStatistics:
-    """``env`` (an env of ``scene``'s task, its observation of ``scene.obs_shape``) under ``arm``'s
-    wrappers (``arm_wrappers``); the outermost, ``EpisodeStatistics``, is returned."""
     shape = getattr(env.observation_space, "shape", None)
     if shape != scene.obs_shape:
         raise ValueError(f"the arm's wrappers read {scene.name}, observation shape {scene.obs_shape}; "
                          f"got shape {shape}.")
-    for wrap in arm_wrappers(arm, shaping, gamma, scene, camera, oracle, horizon, success):
-        env = wrap(env)
-    assert isinstance(env, EpisodeStatistics)
-    return env
+    gamma = _gamma(gamma)
+    if arm.dense_potential:
+        env = KinematicPotential(env, scene.dense, shaping.kin_scale, shaping.kin_offset, horizon, gamma)
+    elif arm.kinematic:
+        env = KinematicReward(env, scene.dense, shaping.kin_scale, shaping.kin_offset)
+    if arm.uses_vlm:
+        if camera is None or oracle is None:
+            raise ValueError(f"arm '{arm.name}' shapes with the VLM; pass the run's camera and oracle.")
+        env = SemanticPotential(env, arm, shaping.alpha, gamma, camera, oracle, scene.sim_type)
+    return EpisodeStatistics(env, success)
 
 
 class LabelRoundVecEnv(DummyVecEnv):
-    """SB3's ``DummyVecEnv`` with one labelling round per vector step: every env's step (and the
-    reset of an env whose episode ended) is begun, the run's ``oracle`` asks the VLM about the
-    frames in one call (``SemanticOracle.fetch``), and then each env's step is finished in env
-    order, exactly as ``DummyVecEnv`` would have stepped it (same labels, prototypes, rewards).
-    Every env must be a ``RewardStage`` stack holding a ``SemanticPotential`` on ``oracle``."""
+    """SB3's ``DummyVecEnv`` with one labelling round per vector step: every env's step is begun, the
+    VLM asked about all their frames in one call, then each step finished, exactly as it would be."""
 
     def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], oracle: SemanticOracle) -> None:
         super().__init__(list(env_fns))

@@ -17,16 +17,8 @@ from vlmrl_cli.training.events import ProgressEvent
 
 
 class EpisodeTracker(BaseCallback):
-    """Logs every completed episode (native return, length, success, shaped return) stepped by
-    the global timestep; at each rollout end, the mean native return of the last 100 episodes
-    (``rollout/return_100``), VLM and throughput figures; and sends progress.
-
-    ``should_stop`` is polled every step; when it returns True training ends cleanly. ``success`` is
-    the task's rule (``Task.success(terminated, length)``, the one ``EpisodeStatistics`` writes as
-    ``is_success``), applied to every episode here, on Monitor's length and on SB3's
-    ``TimeLimit.truncated`` (an episode the env ended itself is terminated), so that no other rule
-    in the env stack decides; without it an episode succeeds when the env itself ended it.
-    """
+    """Logs every completed episode (success by the task's rule) and, at each rollout end,
+    ``rollout/return_100``, VLM and throughput figures; sends progress; stops when ``should_stop``."""
 
     def __init__(
         self,

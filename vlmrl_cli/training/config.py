@@ -1,14 +1,10 @@
-"""The configuration of `vlmrl run`: one frozen object, checked whole by ``training/validation.py``.
-
-It is resolved in layers, each overriding the one before: the PPO preset < a TOML config file <
-``--set KEY=VALUE`` < flags typed on the command line (``RunConfig.from_sources``), merged by
-``training/overrides.py``. Every key of a file is optional; ``vlmrl run --dry-run`` prints a
-complete one (``to_toml``), sections ``[ppo]``, ``[vlm]``, ``[vlm.sim]``, ``[shaping]`` included.
-"""
+"""The configuration of `vlmrl run`: one frozen ``RunConfig``, resolved from layers (preset < TOML
+file < ``--set`` < flags, ``training/overrides.py``) and checked whole (``training/validation.py``)."""
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import os
 import tomllib
@@ -30,7 +26,7 @@ from vlmrl_cli.shaping.config import ShapingConfig
 from vlmrl_cli.tasks.base import Task, TaskLookup
 from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.overrides import nest, parse_assignment, parse_value, resolve_raw, task_ref
-from vlmrl_cli.training.presets import PPOConfig, ppo_identity, preset_names, preset_of
+from vlmrl_cli.training.presets import PPOConfig, ppo_identity, preset_of
 from vlmrl_cli.vlm.config import VLMConfig, profile_problem, vlm_identity
 
 DEFAULT_EXPERIMENT = "vlmrl"
@@ -93,8 +89,7 @@ def _no_problem(problem: Callable[[Any], str | None]) -> Callable[[Any], Any]:
 
 
 def _builtin_presets() -> list[str]:
-    """The presets of the built-in tasks this machine can run: those ``preset`` takes (the run's own
-    task's are checked against its plug-in in training/overrides.py and ``RunConfig.validate``)."""
+    """The presets of the built-in tasks this machine can run (the run's task checks its own)."""
     from vlmrl_cli.tasks.registry import BUILTIN
 
     known: list[str] = []
@@ -103,7 +98,7 @@ def _builtin_presets() -> list[str]:
             task = load()
         except BadInput:  # an optional extra missing (Pusher without MuJoCo): naming the task says why
             continue
-        known += [name for name in preset_names(task) if name not in known]
+        known += [name for name in task.presets if name not in known]
     return known
 
 
@@ -149,8 +144,7 @@ class RunConfig:
                                                        "help": "how often a training run refreshes its heartbeat"})
     stale_after_s: float = field(default=300.0, metadata={"rules": (Gt(0),),
         "help": "a RUNNING run whose heartbeat is older is taken as dead and its job redone"})
-    # the Task that ``task`` names, resolved once where the config is built (``resolve``): carried
-    # whole from there, never looked up again; ``task`` stays the name that is hashed and logged
+    # the Task ``task`` names, resolved once where the config is built (``resolve``), never again
     plugin: Task = field(default_factory=_default_plugin, compare=False, repr=False, metadata=CARRIED)
 
     def __post_init__(self) -> None:
@@ -162,22 +156,12 @@ class RunConfig:
     @classmethod
     def from_sources(cls, file: Path | None, flags: Mapping[str, Any] | None = None, overrides: Iterable[str] = (),
                      tasks: TaskLookup | None = None) -> RunConfig:
-        """The validated config of a TOML ``file`` (or None), ``overrides`` (``--set`` strings,
-        ``"ppo.n_envs=4"``) and ``flags`` typed on the command line (dotted keys, ``{"arms":
-        ["baseline"], "ppo.timesteps": 512}``), in the order preset < file < overrides < flags; the
-        task they name is looked up by ``tasks`` (the command's registry; None: the built-in tasks).
-        ``BadInput`` for an unreadable file, a malformed assignment or an invalid value.
-
-        Example:
-            >>> cfg = RunConfig.from_sources(None, {"seeds": [0]}, ["preset=smoke", "seeds=[1, 2]"])
-            >>> cfg.preset, cfg.seeds, cfg.budget
-            ('smoke', (0,), 1024)
-        """
+        """The validated config of a TOML ``file``, ``--set`` ``overrides`` and dotted-key ``flags``
+        (preset < file < overrides < flags), its task looked up by ``tasks`` (None: the built-ins)."""
         return resolve(source_layers(file, flags or {}, overrides), tasks)
 
     def validate(self) -> None:
-        """Raise ``BadInput`` for anything that would fail later; nothing is trained before. For a
-        config built by hand: one built from its sources (``from_sources``, ``resolve``) is valid."""
+        """Raise ``BadInput`` for anything that would fail later (for a config built by hand)."""
         from vlmrl_cli.training.validation import validate_as
 
         validate_as(RunConfig, to_jsonable(self), plugin=self.plugin)
@@ -238,8 +222,7 @@ class TrainJob:
     shaping: ShapingConfig
     regime: str | None = None
     task: str = field(kw_only=True)  # the run's task (tasks/registry.py), as it is hashed and logged
-    # the Task ``task`` names, carried from the RunConfig; None after pickling (a job crosses to a
-    # worker as its name, and the worker resolves it once at its entry: ``sweep.worker.with_task``)
+    # the RunConfig's; None after pickling (a worker resolves it at its entry: ``sweep.worker.with_task``)
     plugin: Task | None = field(default=None, kw_only=True, compare=False, repr=False, metadata=CARRIED)
 
     def __post_init__(self) -> None:
@@ -270,10 +253,8 @@ class TrainJob:
         return self.ppo.eval_episodes
 
     def identity(self) -> dict[str, Any]:
-        """What makes two runs the same experiment cell, seed excluded: the resolved values, not
-        the preset's name, so two routes to the same knobs share runs and any changed knob is a
-        new cell. The VLM and the shaping knobs count only for arms that use them, so tuning the
-        VLM does not redo the baseline. Cache settings never count: they change speed, not answers."""
+        """What makes two runs the same experiment cell, seed excluded: the resolved values, not the
+        preset's name; the VLM and shaping knobs only for arms that use them; never cache settings."""
         ident: dict[str, Any] = {"arm": self.arm.identity(), "ppo": ppo_identity(self.ppo), "eval_seed": EVAL_SEED}
         if self.task_plugin.name_in_identity:  # False for MountainCar-v0: its runs predate tasks
             ident["task"] = self.task
@@ -292,8 +273,7 @@ class TrainJob:
         return {"seed": self.seed, "preset": self.preset, **self.identity()}
 
     def overrides(self) -> dict[str, str]:
-        """The knobs of this job that differ from its preset and the shaping/VLM defaults, as
-        dotted keys (``{"ppo.n_envs": "1"}``); only knobs the job's identity depends on count."""
+        """The identity's knobs that differ from the preset's and the defaults, as dotted keys."""
         reference = dataclasses.replace(self, ppo=preset_of(self.task_plugin, self.preset), vlm=VLMConfig(),
                                         shaping=self.task_plugin.default_shaping())
         ref = flatten(reference.identity())
@@ -304,35 +284,27 @@ class TrainJob:
 
 
 def resolve(layers: Iterable[Mapping[str, Any]], tasks: TaskLookup | None = None) -> RunConfig:
-    """The validated ``RunConfig`` of ``layers`` (lowest first: config file, ``--set``, flags): the
-    one place a config's task name becomes its Task, looked up with ``tasks`` (the command's
-    registry, ``tasks.registry.get_task``; None: the built-in tasks alone), and carried from here."""
+    """The validated ``RunConfig`` of ``layers`` (lowest first): the one place a config's task name
+    becomes its Task, looked up with ``tasks`` (None: the built-in tasks alone)."""
+    from vlmrl_cli.tasks.registry import builtin_task
     from vlmrl_cli.training.validation import validate_as
 
     layers = list(layers)
-    ref = task_ref(layers, DEFAULT_TASK)
-    task = lookup_task(ref, tasks) if isinstance(ref, str) else None  # else the schema says what is wrong
+    ref, task = task_ref(layers, DEFAULT_TASK), None
+    if isinstance(ref, str):  # else the schema says what is wrong
+        try:
+            task = (tasks or builtin_task)(ref)
+        except BadInput as exc:
+            msg = str(exc).removesuffix(".")
+            raise BadInput(f"invalid task = {json.dumps(ref)}: {msg[:1].lower() + msg[1:]}.") from None
     raw = resolve_raw(layers, task)
     cfg: RunConfig = validate_as(RunConfig, raw) if task is None else validate_as(RunConfig, raw, plugin=task)
     cfg._check_task()
     return cfg
 
 
-def lookup_task(ref: str, tasks: TaskLookup | None = None) -> Task:
-    """The Task ``ref`` names, by ``tasks`` (None: the built-in tasks alone); ``BadInput`` in the
-    words of an invalid config value."""
-    from vlmrl_cli.tasks.registry import builtin_task
-
-    try:
-        return (tasks or builtin_task)(ref)
-    except BadInput as exc:
-        msg = str(exc).removesuffix(".")
-        raise BadInput(f"invalid task = {json.dumps(ref)}: {msg[:1].lower() + msg[1:]}.") from None
-
-
 def once(tasks: TaskLookup | None) -> TaskLookup:
-    """``tasks`` (None: the built-in tasks alone) looking each name up once: the lookup of a command
-    that builds many configs of one task (a calibration's or a study's regimes).
+    """``tasks`` (None: the built-in tasks alone) looking each name up once.
 
     Example:
         >>> lookup = once(None)
@@ -341,20 +313,11 @@ def once(tasks: TaskLookup | None) -> TaskLookup:
     """
     from vlmrl_cli.tasks.registry import builtin_task
 
-    found: dict[str, Task] = {}
-    get = tasks or builtin_task
-
-    def lookup(ref: str) -> Task:
-        if ref not in found:
-            found[ref] = get(ref)
-        return found[ref]
-
-    return lookup
+    return functools.cache(tasks or builtin_task)
 
 
 def _check_plugin(task: str, plugin: Task) -> None:
-    """A config's ``plugin`` is the Task its ``task`` names (a built-in name is checked; a user's
-    ``module:NAME`` or entry point may name a Task of another name)."""
+    """A config's ``plugin`` is the Task its ``task`` names (checked for a built-in name)."""
     from vlmrl_cli.tasks.registry import BUILTIN
 
     if task in BUILTIN and plugin.name != task:
@@ -364,8 +327,7 @@ def _check_plugin(task: str, plugin: Task) -> None:
 
 def source_layers(file: Path | None, flags: Mapping[str, Any], sets: Iterable[str]) -> list[dict[str, Any]]:
     """The raw layers above the preset, lowest first: the config ``file`` (or none), the ``--set``
-    assignments ``sets``, then ``flags`` (dotted keys). Commands with sections of their own
-    (``[calibrate]``, ``[study]``) take these before resolving."""
+    assignments ``sets``, then ``flags`` (dotted keys)."""
     file_layer = load_config_file(file) if file is not None else {}
     assignments = [parse_assignment(text) for text in sets]
     twice = first_repeated([key for key, _ in assignments])

@@ -28,26 +28,10 @@ def make_train_env(
     task: Task,
     max_queries: int | None = None,
 ) -> tuple[VecEnv, SemanticOracle | None]:
-    """The training VecEnv of one run of ``task`` and its oracle (None for arms without a VLM).
-    A ``shaping`` that names no label map takes the task's (``Task.shaping_for``).
-
-    Per env: ``task.make_env()`` -> ``as_float`` (a non-float Box observation cast to float32: SB3's
-    rollout buffer keeps the space's dtype, so a ``uint8`` one under ``VecNormalize`` would be
-    truncated to integers) -> ``Monitor`` (SB3's episode stats are the NATIVE
-    return and length) -> the arm's wrappers (``shaping.wrapper.arm_wrappers``: its dense term, its
-    semantic potential, then ``EpisodeStatistics`` with ``is_success`` by the task's rule,
-    ``task.success``; baseline's only one). Then ``DummyVecEnv`` of ``preset.n_envs`` (one
-    process, so the camera and oracle are shared by all envs; ``LabelRoundVecEnv`` for an arm with
-    a VLM: one labelling round per vector step, ``max_queries`` its labels' budget) ->
-    ``VecNormalize`` (observations if ``ppo.normalize_obs``, rewards if ``ppo.normalize_reward``,
-    with the learner's gamma; no wrapper when both are off). Env ``i`` is seeded ``seed + i``. A
-    placebo arm's oracle maps labels through ``placebo.oracle_shaping`` (the label map shuffled by
-    ``seed``). The PBRS discount is ``shaping.gamma``, or ``ppo.gamma`` when that is None.
-    """
+    """The training VecEnv of one run of ``task`` (env ``i`` seeded ``seed + i``; ``Monitor`` below the
+    arm's wrappers, so episode stats are NATIVE) and its oracle (None for arms without a VLM)."""
     if arm.uses_vlm and client is None:
         raise ValueError(f"arm '{arm.name}' queries a VLM; pass a VLMClient (e.g. the simulated one).")
-    if ppo.n_envs < 1:
-        raise ValueError(f"n_envs={ppo.n_envs}; a run needs at least one env.")
     shaping = task.shaping_for(shaping)
     gamma = shaping.gamma if shaping.gamma is not None else ppo.gamma
     camera = task.camera.make(shaping) if arm.uses_vlm else None
@@ -64,14 +48,14 @@ def make_train_env(
     fns: list[Callable[[], gym.Env]] = [make_one] * ppo.n_envs
     venv: VecEnv = LabelRoundVecEnv(fns, oracle) if oracle is not None else DummyVecEnv(fns)
     venv.seed(seed)
-    if ppo.vec_normalize:
+    if ppo.normalize_obs or ppo.normalize_reward:
         venv = VecNormalize(venv, norm_obs=ppo.normalize_obs, norm_reward=ppo.normalize_reward, gamma=ppo.gamma)
     return venv, oracle
 
 
 def as_float(env: gym.Env) -> gym.Env:
-    """``env`` with a non-float ``Box`` observation cast to float32 (gymnasium's
-    ``DtypeObservation``, which the env's spec can recreate); any other env as it is.
+    """``env`` with a non-float ``Box`` observation cast to float32 (SB3's rollout buffer keeps the
+    space's dtype, so ``VecNormalize`` would truncate a ``uint8`` one); any other env as it is.
 
     Example:
         >>> space = gym.spaces.Box(0, 255, (3,), np.uint8)

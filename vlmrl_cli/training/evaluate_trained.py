@@ -1,17 +1,9 @@
-"""`vlmrl evaluate`: re-evaluate a trained run from MLflow and watch one of its episodes.
-
-The policy plays its task's native env (no shaping, no VLM in the loop), as in the detached
-evaluation of training. One episode is played again with ``render_mode="rgb_array"`` and
-written as an animated GIF whose captions give, per frame, the step, the observation
-(MountainCar's x and v), the action, the dense term R_kin of the step, the native return so far
-and, for arms that use a VLM, the label the run's VLM gives the frame (as the camera of
-training renders it) and that label's raw potential.
-"""
+"""`vlmrl evaluate`: re-evaluate a trained run from MLflow (detached, no VLM in the loop) and write
+one episode as a captioned GIF, with the run's VLM's label of each frame for arms that use one."""
 
 from __future__ import annotations
 
 import json
-import math
 import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -77,13 +69,8 @@ class EvaluateConfig:
 
 @dataclass(frozen=True)
 class PlayedStep:
-    """The state after ``t`` steps of an episode and the step that led there.
-
-    ``action`` and ``r_kin`` belong to step ``t`` (None and 0.0 at the reset state, t = 0);
-    ``native_return`` is the sum of native rewards so far. ``obs`` is the whole observation;
-    ``pixels`` is the rendered frame (MountainCar's (400, 600, 3) uint8), kept only for the frames
-    the GIF shows, and ``view`` the training camera's view of them, when one was asked for.
-    """
+    """The state after ``t`` steps of an episode, and ``action`` and ``r_kin`` of step ``t`` (None
+    and 0.0 at the reset); ``pixels`` (and the training camera's ``view``) only for the GIF's frames."""
 
     t: int
     obs: tuple[float, ...]
@@ -94,30 +81,10 @@ class PlayedStep:
     pixels: np.ndarray | None = field(default=None, repr=False)
     view: FrameView | None = field(default=None, repr=False)
 
-    @property
-    def x(self) -> float:
-        """MountainCar's position, ``obs[0]`` (NaN for an empty observation)."""
-        return self.obs[0] if self.obs else math.nan
-
-    @property
-    def v(self) -> float:
-        """MountainCar's velocity, ``obs[1]`` (NaN without one)."""
-        return self.obs[1] if len(self.obs) > 1 else math.nan
-
 
 def play_episode(policy: Policy, seed: int, shaping: ShapingConfig, task: Task, frame_every: int = 2,
                  camera: SceneCamera | None = None) -> list[PlayedStep]:
-    """Play one native episode of ``task`` reset with ``seed``,
-    rendering every ``frame_every``-th state (and the last one) with gymnasium's ``rgb_array``
-    renderer; with ``camera`` (the training camera) those states' views are kept too.
-
-    Example:
-        >>> from vlmrl_cli.tasks.registry import get_task
-        >>> steps = play_episode(lambda obs: 2 if obs[1] >= 0 else 0, seed=0, shaping=ShapingConfig(),
-        ...                      task=get_task("mountain-car"), frame_every=50)
-        >>> steps[-1].terminated, [s.t for s in steps if s.pixels is not None][:2]
-        (True, [0, 50])
-    """
+    """One native episode of ``task`` from ``seed``, every ``frame_every``-th state and the last rendered."""
     env: Any = task.make_env(render_mode="rgb_array")  # gymnasium's rgb_array renderer, headless
 
     def step_of(t: int, obs: np.ndarray, action: Any, r_kin: float, total: float, terminated: bool,
@@ -156,8 +123,7 @@ def _plain(action: Any) -> Any:
 
 @dataclass(frozen=True)
 class FrameLabel:
-    """What the run's VLM says about one frame: its parsed answer (or why none) and the raw
-    potential that answer maps to (None when unparsed)."""
+    """The run's VLM's parsed answer about one frame (or why none) and its raw potential."""
 
     answer: str
     potential: float | None
@@ -169,8 +135,7 @@ class FrameLabel:
 
 
 def label_frames(run: TrainedRun, views: list[FrameView], cfg: EvaluateConfig) -> list[FrameLabel]:
-    """Ask the run's VLM (its own config; cache as ``cfg`` says) about each view of the training
-    camera (snapped to its grid, as in training)."""
+    """Ask the run's VLM (its own config; cache as ``cfg`` says) about each of the camera's views."""
     from vlmrl_cli.shaping.placebo import oracle_shaping
     from vlmrl_cli.vlm.parsers import parse_float, parse_mcq
     from vlmrl_cli.vlm.registry import build_client
@@ -202,43 +167,26 @@ def label_frames(run: TrainedRun, views: list[FrameView], cfg: EvaluateConfig) -
 
 
 def describe_step(task: Task, obs: tuple[float, ...], action: Any) -> tuple[dict[str, Any], str]:
-    """A played step's observation as the evaluation's JSON fields and its caption line: the
-    task's own (``Task.caption``), else the raw observation and action."""
+    """A played step as JSON fields and a caption line: the task's (``Task.caption``), else raw."""
     if task.caption is not None:
         return task.caption(obs, action)
     shown = "-" if action is None else (f"{action:+.2f}" if isinstance(action, float) else str(action))
     return {"obs": list(obs)}, f"obs [{' '.join(f'{v:+.2f}' for v in obs[:6])}]  action {shown}"
 
 
-def _captions(run: TrainedRun, step: PlayedStep, last: int, index: int) -> list[str]:
-    _, state = describe_step(run.task, step.obs, step.action)
-    return [
-        f"{run.name}  episode {index}  step {step.t}/{last}",
-        state,
-        f"R_kin {step.r_kin:.2f}  native return {step.native_return:.0f}",
-    ]
-
-
 @dataclass(frozen=True)
 class EvaluateResult:
     run: TrainedRun
     result: EvalResult
-    out: Path
     gif: Path
     summary: Path
     frames: int
     gif_bytes: int
-    episode: list[PlayedStep] = field(repr=False)
 
 
 def evaluate_run(cfg: EvaluateConfig, tasks: TaskLookup) -> EvaluateResult:
-    """Evaluate run ``cfg.run_id`` (its task resolved by ``tasks``, the command's registry) and write
-    ``episode-<i>.gif`` and ``evaluation.json`` to
-    ``cfg.out_dir``, logged as artifacts of that run under ``evaluate/``.
-
-    Raises ``BadInput`` (before any folder is made) for a missing tracking database, an
-    unknown run, a run without a model, or an unavailable VLM backend.
-    """
+    """Evaluate run ``cfg.run_id``; write ``episode-<i>.gif`` and ``evaluation.json`` to ``cfg.out_dir``
+    and log them as the run's artifacts (``BadInput`` before any folder is made)."""
     cfg.validate()
     client = store.connect_existing(cfg.tracking_uri)
     with tempfile.TemporaryDirectory(prefix="vlmrl-evaluate-") as tmp:
@@ -258,7 +206,9 @@ def evaluate_run(cfg: EvaluateConfig, tasks: TaskLookup) -> EvaluateResult:
     alert = SIMULATED_ALERT if run.arm.uses_vlm and run.simulated else None
     images = []
     for i, (step, pixels) in enumerate((s, s.pixels) for s in shown if s.pixels is not None):
-        lines = _captions(run, step, steps[-1].t, cfg.episode_index)
+        lines = [f"{run.name}  episode {cfg.episode_index}  step {step.t}/{steps[-1].t}",
+                 describe_step(task, step.obs, step.action)[1],
+                 f"R_kin {step.r_kin:.2f}  native return {step.native_return:.0f}"]
         if labels is not None:
             lines.append(labels[i].caption)
         images.append(captioned(pixels, lines, cfg.width, alert))
@@ -274,7 +224,7 @@ def evaluate_run(cfg: EvaluateConfig, tasks: TaskLookup) -> EvaluateResult:
     figures = _summary(run, result, cfg, steps, shown, labels, gif)
     summary.write_text(json.dumps(figures, indent=2) + "\n", encoding="utf-8")
     store.log_artifacts(client, run.run_id, [gif, summary], artifact_path=ARTIFACT_PATH)
-    return EvaluateResult(run, result, out, gif, summary, len(images), gif.stat().st_size, steps)
+    return EvaluateResult(run, result, gif, summary, len(images), gif.stat().st_size)
 
 
 def _summary(

@@ -16,12 +16,8 @@ Policy = Callable[[np.ndarray], Any]  # an observation -> an action (an int for 
 
 @dataclass(frozen=True)
 class EvalResult:
-    """Per-episode figures of a detached evaluation, each shape (episodes,).
-
-    ``positions``: one array of shape ``(length_i,)`` per episode, the task's position after each
-    step (for the hovering diagnostic; empty when not recorded), ``hover_from`` where hovering
-    starts (``Task.hover``).
-    """
+    """Per-episode figures of a detached evaluation, each shape (episodes,); ``positions``: the
+    task's position after each step, one ``(length_i,)`` array per episode (empty if not recorded)."""
 
     returns: np.ndarray
     lengths: np.ndarray
@@ -50,19 +46,8 @@ class EvalResult:
 
 
 def evaluate_detached(policy: Policy, episodes: int, seed: int, task: Task) -> EvalResult:
-    """Run ``episodes`` native episodes of ``task``; episode ``i`` resets with ``seed + i``.
-
-    ``policy`` maps a raw observation (MountainCar's [x, v]) to an action (it applies any
-    observation normalisation itself). Success is the task's rule (``Task.success``: terminated
-    at the goal within the time limit). ``positions`` records the task's hovering coordinate
-    (MountainCar's x) when it has one.
-
-    Example:
-        >>> from vlmrl_cli.tasks.registry import get_task
-        >>> r = evaluate_detached(lambda obs: 2 if obs[1] >= 0 else 0, 3, 0, get_task("mountain-car"))
-        >>> r.success_rate, bool(r.mean_length < 200)
-        (1.0, True)
-    """
+    """Run ``episodes`` native episodes of ``task`` (episode ``i`` reset with ``seed + i``) under
+    ``policy``, which maps a raw observation to an action (normalising it itself)."""
     env = task.make_env()
     position = None if task.hover is None else task.hover.position
     returns, lengths, successes, positions = [], [], [], []

@@ -1,5 +1,4 @@
-"""What a sweep and its workers exchange: plain values, importable without SB3 or torch
-(the CLI's progress display and help must not pay for those imports)."""
+"""What a sweep and its workers exchange: plain values, importable without SB3 or torch."""
 
 from __future__ import annotations
 
@@ -82,8 +81,7 @@ class SweepSummary:
 
 
 class StopFlag:
-    """A flag the sweep sets once and jobs read: the body of the Ray executor's stop actor. It
-    lives here, with no heavy import, because an actor process imports its class's module."""
+    """A flag the sweep sets once and jobs read: the body of the Ray executor's stop actor."""
 
     def __init__(self) -> None:
         self.value = False

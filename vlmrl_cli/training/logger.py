@@ -1,8 +1,4 @@
-"""SB3's own training diagnostics (``train/approx_kl``, ``train/value_loss``, ...) into MLflow.
-
-Tracking plugs in as an SB3 logger output format, so nothing in the training loop calls
-MLflow: ``model.set_logger(Logger(folder=None, output_formats=[MetricsOutputFormat(metrics)]))``.
-"""
+"""SB3's own training diagnostics (``train/approx_kl``, ...) into MLflow, as an SB3 output format."""
 
 from __future__ import annotations
 
@@ -14,9 +10,6 @@ from stable_baselines3.common.logger import KVWriter
 
 from vlmrl_cli.tracking import schema
 
-#: The SB3 key prefixes forwarded by default: the PPO update's diagnostics.
-TRAIN_PREFIXES: tuple[str, ...] = (schema.TRAIN_METRIC_PREFIX,)
-
 
 class MetricSink(Protocol):
     """Where the metrics go: ``tracking.store.BatchLogger`` or a test double."""
@@ -25,19 +18,10 @@ class MetricSink(Protocol):
 
 
 class MetricsOutputFormat(KVWriter):
-    """An SB3 ``KVWriter`` that forwards the numeric values under ``prefixes`` to ``metrics``,
-    keys unchanged, at ``step`` (SB3 dumps with ``step=num_timesteps``).
+    """An SB3 ``KVWriter`` forwarding the numeric values under ``prefixes`` (by default the PPO update's
+    diagnostics) to ``metrics``."""
 
-    Non-numeric values (strings, videos, figures) and keys excluded for ``"mlflow"`` are skipped.
-
-    Example:
-        >>> class Sink:
-        ...     def log(self, metrics, step): print(step, dict(metrics))
-        >>> MetricsOutputFormat(Sink()).write({"train/approx_kl": 0.01, "time/fps": 900, "train/n": "x"}, {}, step=128)
-        128 {'train/approx_kl': 0.01}
-    """
-
-    def __init__(self, metrics: MetricSink, prefixes: tuple[str, ...] = TRAIN_PREFIXES) -> None:
+    def __init__(self, metrics: MetricSink, prefixes: tuple[str, ...] = (schema.TRAIN_METRIC_PREFIX,)) -> None:
         self.metrics = metrics
         self.prefixes = prefixes
 

@@ -1,8 +1,9 @@
-"""The PPO learner of one run, built in one place so that every knob of ``PPOConfig`` reaches
-both the worker (``sweep/worker.py``) and the determinism probe (``training/trace.py``)."""
+"""The PPO learner of one run, built in one place for the worker and the determinism probe."""
 
 from __future__ import annotations
 
+import functools
+import operator
 from collections.abc import Callable
 from typing import Any
 
@@ -19,28 +20,18 @@ def learning_rate(ppo: PPOConfig) -> float | Callable[[float], float]:
         >>> lr(1.0), lr(0.25)
         (0.001, 0.00025)
     """
-    if ppo.lr_schedule == "linear":
-        initial = ppo.learning_rate
-
-        def linear(progress_remaining: float) -> float:
-            return progress_remaining * initial
-
-        return linear
+    if ppo.lr_schedule == "linear":  # the rate times the remaining progress
+        return functools.partial(operator.mul, ppo.learning_rate)
     return ppo.learning_rate
 
 
-#: Adam's multi-tensor implementation: one ``torch._foreach_*`` call per update step instead of a
-#: Python loop over the parameter tensors (on CPU torch's default is the loop). It is part of the
-#: numeric path (``core.numeric_pin.PIN_ID``), not a knob: it rounds differently from the loop
-#: (plain PPO, seed 0, 30,000 steps: 171 episodes against 192) and trained about 25% faster here.
+#: Adam's multi-tensor update: part of the numeric path, not a knob (docs/development.md).
 OPTIMIZER_KWARGS = {"foreach": True}
 
 
 def make_model(ppo: PPOConfig, env: Any, seed: int) -> Any:
-    """A ``PPO("MlpPolicy", env)`` with every knob of ``ppo``, on the CPU, seeded ``seed``, with
-    Adam's multi-tensor update (``OPTIMIZER_KWARGS``), and a logger that writes nowhere: without one
-    SB3's ``learn()`` makes an empty ``SB3-<date-time>`` folder in the temp folder on every call (a
-    worker replaces it with its MLflow logger; the logger draws no random numbers)."""
+    """A ``PPO("MlpPolicy", env)`` with every knob of ``ppo``, on the CPU, seeded ``seed``, and a
+    logger that writes nowhere (without one ``learn()`` makes an empty temp folder every call)."""
     from stable_baselines3 import PPO
     from stable_baselines3.common.logger import Logger
 

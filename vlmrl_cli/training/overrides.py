@@ -1,17 +1,5 @@
-"""Merge a run's configuration layers: preset < config file < ``--set`` < flags.
-
-Every layer is a nested dict of plain values keyed like the TOML file (``{"ppo": {"n_envs": 1}}``).
-The preset named by the highest layer that names one fills ``[ppo]``; each layer then overrides
-the keys it sets; the simulated VLM's profile (``vlm.sim.profile``) fills the ``[vlm.sim]`` knobs
-that no layer set (an explicit knob, in any layer, beats the profile's value). The merged dict is
-plain data: ``training/config.py`` checks it whole (``training/validation.py``) and makes it the frozen
-``RunConfig``, so this module does not depend on that class. Nothing is read or written
-elsewhere: a bad value fails before any store, folder or run exists.
-
-``--set KEY=VALUE`` takes a dotted key and a TOML value (``3``, ``0.3``, ``false``,
-``[64, 64]``, ``"hf"``); a value that is not TOML is a string, and one with commas a list
-(``--set ppo.net_arch_pi=32,32``).
-"""
+"""Merge a run's configuration layers (preset < config file < ``--set`` < flags) into one raw
+nested dict, before ``training/validation.py`` checks it (docs/commands/run.md)."""
 
 from __future__ import annotations
 
@@ -32,14 +20,7 @@ MOVED_TO_PPO = ("timesteps", "eval_episodes")
 
 
 def parse_value(text: str) -> Any:
-    """A ``--set`` value: a TOML value if it parses as one, else a list if it has commas, else a string.
-
-    Example:
-        >>> parse_value("3"), parse_value("0.3"), parse_value("false"), parse_value("[64, 64]")
-        (3, 0.3, False, [64, 64])
-        >>> parse_value("hf"), parse_value("32,32"), parse_value("big")
-        ('hf', [32, 32], 'big')
-    """
+    """A ``--set`` value: a TOML value if it parses as one, else a list if it has commas, else a string."""
     text = text.strip()
     try:
         return tomllib.loads(f"v = {text}")["v"]
@@ -51,16 +32,9 @@ def parse_value(text: str) -> Any:
 
 
 def parse_values(text: str) -> list[Any]:
-    """A ``--grid`` value list: comma-separated TOML values (``1,4,16``; ``true,false``;
-    ``[64,64],[256,256]``), bare words as strings.
-
-    Example:
-        >>> parse_values("1,4,16"), parse_values("[64,64],[8]"), parse_values("hf,sim")
-        ([1, 4, 16], [[64, 64], [8]], ['hf', 'sim'])
-    """
+    """A ``--grid`` value list: comma-separated TOML values (``1,4,16``), bare words as strings."""
     try:
-        values = tomllib.loads(f"v = [{text}]")["v"]
-        return list(values)
+        return list(tomllib.loads(f"v = [{text}]")["v"])
     except tomllib.TOMLDecodeError:
         return [parse_value(part) for part in text.split(",")]
 
@@ -75,12 +49,7 @@ def parse_assignment(text: str, flag: str = "--set") -> tuple[str, str]:
 
 
 def nest(assignments: Iterable[tuple[str, Any]]) -> dict[str, Any]:
-    """Dotted keys -> a nested dict; later assignments win.
-
-    Example:
-        >>> nest([("ppo.n_envs", 1), ("shaping.alpha", 3), ("ppo.n_envs", 4)])
-        {'ppo': {'n_envs': 4}, 'shaping': {'alpha': 3}}
-    """
+    """Dotted keys -> a nested dict; later assignments win."""
     tree: dict[str, Any] = {}
     for key, value in assignments:
         *path, leaf = key.split(".")
@@ -97,12 +66,7 @@ def nest(assignments: Iterable[tuple[str, Any]]) -> dict[str, Any]:
 
 
 def dotted(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
-    """A nested table -> ``{dotted key: value}`` (``nest``'s inverse; an empty table sets nothing).
-
-    Example:
-        >>> dotted({"ppo": {"n_envs": 4, "gamma": 0.99}, "preset": "smoke", "shaping": {}})
-        {'ppo.n_envs': 4, 'ppo.gamma': 0.99, 'preset': 'smoke'}
-    """
+    """A nested table -> ``{dotted key: value}`` (``nest``'s inverse; an empty table sets nothing)."""
     out: dict[str, Any] = {}
     for key, value in table.items():
         if isinstance(value, Mapping):
@@ -113,12 +77,7 @@ def dotted(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
 
 
 def merge(base: Mapping[str, Any], top: Mapping[str, Any]) -> dict[str, Any]:
-    """``top`` laid over ``base``: tables merge key by key, any other value replaces.
-
-    Example:
-        >>> merge({"ppo": {"n_envs": 16, "gamma": 0.99}, "seeds": [0]}, {"ppo": {"n_envs": 1}})
-        {'ppo': {'n_envs': 1, 'gamma': 0.99}, 'seeds': [0]}
-    """
+    """``top`` laid over ``base``: tables merge key by key, any other value replaces."""
     out = dict(base)
     for key, value in top.items():
         if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
@@ -157,9 +116,8 @@ def task_ref(layers: Iterable[Mapping[str, Any]], default: str) -> Any:
 
 
 def resolve_raw(layers: Iterable[Mapping[str, Any]], task: Task | None) -> dict[str, Any]:
-    """The merged raw configuration of ``layers`` (lowest first) over the named preset's ``[ppo]``
-    (the task's default preset when none is named), ``task`` the Task the layers name (None when
-    they name none that resolves: the schema then says what is wrong)."""
+    """The merged raw configuration of ``layers`` (lowest first) over the named preset's ``[ppo]``,
+    for ``task`` (None when the layers name none that resolves: the schema says what is wrong)."""
     lifted = [_lift_moved(layer) for layer in layers]
     preset: Any = None
     for layer in lifted:

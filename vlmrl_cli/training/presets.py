@@ -1,9 +1,4 @@
-"""PPO hyperparameters: one frozen ``PPOConfig`` and the named presets that fill it.
-
-A preset is only the bottom layer of a run's PPO configuration: a config file's ``[ppo]`` table
-and ``--set ppo.KEY=VALUE`` override any field (see ``training/overrides.py``). The ranges each
-field must respect are declared once, in ``training/validation.py``.
-"""
+"""PPO hyperparameters: one frozen ``PPOConfig`` and the task's named presets that fill it."""
 
 from __future__ import annotations
 
@@ -16,6 +11,7 @@ from pydantic import AfterValidator
 
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.core.fields import AtMost
+from vlmrl_cli.core.provenance import to_jsonable
 
 if TYPE_CHECKING:
     from vlmrl_cli.tasks.base import Task
@@ -67,8 +63,7 @@ class PPOConfig:
     eval_episodes: int = field(default=100, metadata={"rules": (Ge(1), AtMost(10_000, (
         "each is a whole episode after training; 100 give a success rate to within about 0.1"))),
         "help": "detached evaluation episodes"})
-    # Added with the continuous tasks (rl-baselines3-zoo's MountainCarContinuous-v0 uses them);
-    # ``ppo_identity`` leaves them out at these neutral values, so older runs keep their hashes.
+    # Added with the continuous tasks: ``ppo_identity`` leaves them out at these neutral values (older hashes).
     use_sde: bool = field(default=False, metadata={"help": "generalised state-dependent exploration "
                                                            "(continuous actions only)"})
     log_std_init: float = field(default=0.0, metadata={"help": "initial log std of a continuous policy"})
@@ -84,11 +79,6 @@ class PPOConfig:
             kwargs["ortho_init"] = False
         return kwargs
 
-    @property
-    def vec_normalize(self) -> bool:
-        """Whether the env stack has a ``VecNormalize`` at all."""
-        return self.normalize_obs or self.normalize_reward
-
 
 #: Knobs added after runs existed, with the value that leaves training as it was.
 NEUTRAL_PPO_KNOBS: dict[str, object] = {"use_sde": False, "log_std_init": 0.0, "ortho_init": True}
@@ -101,8 +91,6 @@ def ppo_identity(ppo: PPOConfig) -> dict[str, object]:
         >>> "use_sde" in ppo_identity(PPOConfig()), ppo_identity(PPOConfig(use_sde=True))["use_sde"]
         (False, True)
     """
-    from vlmrl_cli.core.provenance import to_jsonable
-
     ident: dict[str, object] = to_jsonable(ppo)
     for key, neutral in NEUTRAL_PPO_KNOBS.items():
         if ident.get(key) == neutral:
@@ -110,14 +98,8 @@ def ppo_identity(ppo: PPOConfig) -> dict[str, object]:
     return ident
 
 
-def preset_names(task: Task) -> list[str]:
-    """The presets of ``task`` (``Task.presets``)."""
-    return list(task.presets)
-
-
 def preset_of(task: Task, name: str) -> PPOConfig:
-    """The PPO preset ``name`` of ``task`` (``Task.presets``), checked like a config file; an
-    unknown one is a ``BadInput`` naming the task's presets."""
+    """The PPO preset ``name`` of ``task``, checked like a config file (``BadInput`` if unknown)."""
     table = task.presets
     if name not in table:
         raise BadInput(f"unknown preset '{name}' for task {task.name}{did_you_mean(name, table)}; "

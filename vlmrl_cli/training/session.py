@@ -1,9 +1,4 @@
-"""What training one job needs, built the one way every run builds it: its VLM client (none for an
-arm without one), its env stack (``envs.make_train_env``) and its PPO learner (``model.make_model``).
-
-A sweep's worker (``sweep/worker.py``) trains inside it and records everything; the determinism
-probe (``trace.py``) trains inside it and keeps the learning curve. Neither builds a piece itself.
-"""
+"""What training one job needs, built the one way every run builds it: VLM client, envs, learner."""
 
 from __future__ import annotations
 
@@ -28,10 +23,8 @@ class Session:
 
 @contextmanager
 def session(job: TrainJob, transcript: Path | None = None) -> Iterator[Session]:
-    """``job``'s learner, env stack and oracle; the env stack (and with it a camera's renderer) and
-    the VLM client (writing ``transcript`` when given, its simulated draws seeded by the job's
-    seed) are closed when the block ends, not left to the interpreter's exit, where a MuJoCo
-    renderer outliving its EGL display prints errors."""
+    """``job``'s learner, env stack and oracle, closed when the block ends (a MuJoCo renderer that
+    outlives its EGL display prints errors at the interpreter's exit)."""
     from vlmrl_cli.training.envs import make_train_env
     from vlmrl_cli.training.model import make_model
     from vlmrl_cli.vlm.registry import build_client

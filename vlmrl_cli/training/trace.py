@@ -1,14 +1,5 @@
-"""A training run reduced to its learning curve, in this process and with no tracking.
-
-``native_returns(job)`` trains exactly as a ``vlmrl run`` worker does (same env stack, same PPO
-arguments, same seed, one torch thread: the thread count is part of the numeric path) and
-returns the native return of every completed episode, in order.
-It is the probe for determinism checks: two code paths that give the same list trained the
-same agent. ``train_trace(job)`` also gives a digest of the trained policy's parameters, bit for
-bit: two numeric paths that part in the last bit of one weight part there, long before their
-episodes do (chaotic divergence takes tens of thousands of steps to reach the returns).
-Nothing is written to MLflow and no evaluation is run.
-"""
+"""A training run reduced to its learning curve and weights' digest, in this process, no tracking:
+the probe of determinism checks (two code paths that give the same trace trained the same agent)."""
 
 from __future__ import annotations
 
@@ -23,10 +14,10 @@ from vlmrl_cli.training.config import TrainJob
 
 @dataclass(frozen=True)
 class TrainTrace:
-    """What a training run leaves to compare: its learning curve and its weights."""
+    """What a training run leaves to compare: its learning curve and its weights' digest."""
 
     native_returns: list[float]
-    weights_sha256: str  # of every parameter tensor's bytes, in the state dict's order
+    weights_sha256: str
 
 
 def weights_digest(state_dict: Any) -> str:
@@ -49,7 +40,7 @@ def weights_digest(state_dict: Any) -> str:
 
 
 def train_trace(job: TrainJob) -> TrainTrace:
-    """Train ``job`` as a worker does; its native returns in episode order and its weights' digest."""
+    """Train ``job`` as a worker does (one torch thread: part of the numeric path)."""
     import torch
 
     from vlmrl_cli.training.session import session

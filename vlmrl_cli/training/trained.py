@@ -1,13 +1,5 @@
-"""A trained run read back from MLflow: its policy and configs, read without unpickling anything.
-
-A run keeps its policy in SB3's ``model.zip`` and its observation statistics in
-``vecnormalize.npz``. Both may come from an export file, so neither is loaded the way SB3 loads
-them (``PPO.load`` cloudpickles the zip's ``data``; ``VecNormalize.load`` unpickles a whole
-object): the policy is rebuilt from the run's own PPO config and given the zip's ``policy.pth``
-weights through ``torch.load(weights_only=True)``, and the statistics are plain arrays
-(``numpy.load(allow_pickle=False)``). Runs saved before the arrays existed keep a
-``vecnormalize.pkl``, which is read only with the user's explicit ``trust_pickle``.
-"""
+"""A trained run read back from MLflow: its policy and configs, without unpickling anything
+(docs/commands/export-import.md); an old run's ``vecnormalize.pkl`` only with ``trust_pickle``."""
 
 from __future__ import annotations
 
@@ -40,8 +32,7 @@ PICKLE_WARNING = ("a pickle, and loading a pickle runs whatever code it holds; p
 
 
 def deterministic_policy(model: Any, env: Any) -> Policy:
-    """The trained policy on raw observations, applying the training obs normalisation
-    (when ``env`` is a ``VecNormalize``)."""
+    """The trained policy on raw observations (normalised when ``env`` is a ``VecNormalize``)."""
     from gymnasium.spaces import Discrete
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -79,13 +70,8 @@ class TrainedRun:
 
 def load_trained_run(client: Any, run_id: str, workdir: Path, tasks: TaskLookup,
                      trust_pickle: bool = False) -> TrainedRun:
-    """Download run ``run_id``'s model, normaliser and config into ``workdir`` and load them, without
-    unpickling (see the module's docstring; ``trust_pickle`` lets an old run's pickled normaliser
-    load); the task its config names is resolved once, by the command's ``tasks``.
-
-    ``BadInput`` when the store has no such run, the run saved no model (it failed, was stopped,
-    or is not a training run), or its files do not fit its config.
-    """
+    """Download run ``run_id``'s model, normaliser and config into ``workdir`` and load them without
+    unpickling; ``BadInput`` for no such run, no model, or files that do not fit its config."""
     from mlflow.exceptions import MlflowException
 
     try:
@@ -124,10 +110,8 @@ def load_trained_run(client: Any, run_id: str, workdir: Path, tasks: TaskLookup,
 
 
 def _load_policy(workdir: Path, task: Task, ppo: PPOConfig, run_id: str) -> Policy:
-    """The run's deterministic policy: an ``ActorCriticPolicy`` built from its PPO config (as
-    ``PPO("MlpPolicy")`` builds it) holding the weights of ``policy.pth`` (the artifact, else the
-    entry of ``model.zip``), read with ``torch.load(weights_only=True)``, on the observation
-    statistics of ``load_normalizer``."""
+    """The run's deterministic policy: an ``ActorCriticPolicy`` built from its PPO config holding the
+    weights of ``policy.pth`` (the artifact, else ``model.zip``'s), read with ``weights_only``."""
     import io
     import pickle
     import zipfile
@@ -160,8 +144,7 @@ def _load_policy(workdir: Path, task: Task, ppo: PPOConfig, run_id: str) -> Poli
 
 
 def save_normalizer(env: Any, path: Path) -> None:
-    """Write the observation statistics of the ``VecNormalize`` ``env`` to ``path`` as plain arrays
-    (``numpy.savez``): what evaluation needs, with nothing to unpickle."""
+    """Write the observation statistics of the ``VecNormalize`` ``env`` to ``path`` as plain arrays."""
     rms = env.obs_rms
     np.savez(path, obs_mean=np.asarray(rms.mean, dtype=np.float64), obs_var=np.asarray(rms.var, dtype=np.float64),
              obs_count=np.float64(rms.count), clip_obs=np.float64(env.clip_obs), epsilon=np.float64(env.epsilon),
@@ -169,9 +152,8 @@ def save_normalizer(env: Any, path: Path) -> None:
 
 
 def load_normalizer(workdir: Path, task: Task) -> Any:
-    """The run's observation normaliser (a ``VecNormalize`` that no longer updates), or None for a run
-    without one: from ``vecnormalize.npz`` (``numpy.load(allow_pickle=False)``), else from the
-    pickle of an older run, which ``load_trained_run`` downloads only when trusted."""
+    """The run's frozen ``VecNormalize`` (None without one), from ``vecnormalize.npz``, else from an
+    older run's pickle (downloaded only when trusted)."""
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     arrays, pickled = workdir / NORMALIZER, workdir / PICKLED_NORMALIZER

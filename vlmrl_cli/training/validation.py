@@ -1,17 +1,5 @@
-"""The typed input schema of a run's configuration, checked whole before anything runs.
-
-Field names, types and defaults come from the frozen dataclasses themselves (``RunConfig``,
-``PPOConfig``, ``VLMConfig``, ``SimKnobs``, ``ShapingConfig``). Each field declares its ranges
-and value checks once, in its own metadata (``core.fields``: ``metadata={"rules": ..., "help":
-...}``); the rules over several fields of a section are ``CHECKS`` here. pydantic builds one
-model per dataclass from both and validates a raw configuration (the merged layers of preset,
-config file, ``--set`` and flags) with TOML's typing: strict JSON mode, so ``alpha = "big"`` or
-``n_envs = 1.5`` is an error, while an integer is a valid float.
-
-Every failure becomes one ``BadInput`` sentence that names the dotted key, e.g.
-``invalid ppo.gamma = 1.5: input should be less than or equal to 1.`` or
-``unknown key 'ppo.nenvs' (did you mean 'ppo.n_envs'?).``
-"""
+"""The typed input schema of a run's configuration (pydantic models of the frozen dataclasses and
+their fields' ``rules``), checked whole before anything runs: one ``BadInput`` naming the key."""
 
 from __future__ import annotations
 
@@ -27,6 +15,7 @@ from pydantic import model_validator as _model_validator
 
 from vlmrl_cli.core.errors import BadInput, did_you_mean
 from vlmrl_cli.core.fields import is_carried, rules_of
+from vlmrl_cli.core.provenance import to_jsonable
 
 
 def batch_sizes_near(rollout: int, batch_size: int) -> list[int]:
@@ -44,9 +33,8 @@ def batch_sizes_near(rollout: int, batch_size: int) -> list[int]:
 
 
 def _ppo_consistent(ppo: Any) -> Any:
-    """The rules SB3's PPO sets over several knobs, refused here rather than warned about or
-    asserted once a run has started: its rollout (n_envs x n_steps samples) must be at least 2,
-    and its minibatches (it normalises the advantages of each) at least 2 samples each, all whole."""
+    """SB3's PPO's rules over several knobs, refused before a run starts: a rollout of at least 2
+    samples, cut into whole minibatches of at least 2 (it normalises each one's advantages)."""
     rollout = ppo.n_envs * ppo.n_steps
     product = f"ppo.n_envs x ppo.n_steps ({ppo.n_envs} x {ppo.n_steps} = {rollout})"
     if ppo.batch_size > rollout:
@@ -70,8 +58,7 @@ CHECKS: dict[str, Callable[[Any], Any]] = {"ppo": _ppo_consistent}
 
 @functools.cache
 def _model(cls: type, prefix: str = "") -> type[BaseModel]:
-    """A pydantic model with the fields of dataclass ``cls``, its nested dataclasses as nested
-    models, each field's own rules (``rules_of``) and the ``CHECKS`` of keys under ``prefix``."""
+    """A pydantic model of dataclass ``cls`` (nested ones nested), its fields' rules and ``CHECKS``."""
     hints = typing.get_type_hints(cls)
     fields: dict[str, Any] = {}
     for f in dataclasses.fields(cls):
@@ -86,14 +73,10 @@ def _model(cls: type, prefix: str = "") -> type[BaseModel]:
         rules = rules_of(f)
         if rules:
             tp = Annotated[tp, *rules]
-        if f.default is not dataclasses.MISSING:
-            default = f.default
-        elif f.default_factory is not dataclasses.MISSING:
-            default = f.default_factory()
-        else:
-            default = ...
+        default: Any = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
+        default = ... if default is dataclasses.MISSING else default
         if dataclasses.is_dataclass(default) and not isinstance(default, type):
-            default = _model(type(default), f"{key}.").model_validate_json(json.dumps(_jsonable(default)))
+            default = _model(type(default), f"{key}.").model_validate_json(json.dumps(to_jsonable(default)))
         fields[f.name] = (tp, default)
     validators: dict[str, Any] = {}
     check = CHECKS.get(prefix.removesuffix("."))
@@ -114,12 +97,6 @@ def _dataclass_in(tp: Any) -> type | None:
         if isinstance(t, type) and dataclasses.is_dataclass(t):
             return t
     return None
-
-
-def _jsonable(obj: Any) -> Any:
-    from vlmrl_cli.core.provenance import to_jsonable
-
-    return to_jsonable(obj)
 
 
 def _to_dataclass(cls: type, model: BaseModel, carried: dict[str, Any] | None = None) -> Any:
@@ -158,26 +135,20 @@ def _sentence(err: Any, cls: type, at: str = "") -> str:
 
 
 def _section_fields(cls: type, section: list[str]) -> list[str]:
-    model = _model(cls)
+    """The keys of the table ``section`` of ``cls`` (none when it is no table)."""
     for part in section:
-        annotation = model.model_fields[part].annotation
-        sub = next(
-            (t for t in (annotation, *typing.get_args(annotation)) if isinstance(t, type) and issubclass(t, BaseModel)),
-            None,
-        )
-        if sub is None:
+        nested = _dataclass_in(typing.get_type_hints(cls)[part])
+        if nested is None:
             return []
-        model = sub
-    return list(model.model_fields)
+        cls = nested
+    return [f.name for f in dataclasses.fields(cls) if not is_carried(f)]
 
 
 def validate_as(cls: type, raw: dict[str, Any], at: str = "", **carried: Any) -> Any:
-    """``raw`` (nested plain values, as TOML gives them) checked against the schema of dataclass
-    ``cls`` and built into it, with the values of its ``CARRIED`` fields given as ``carried``;
-    ``BadInput`` naming the first wrong key otherwise (under ``at``, the table ``raw`` is, e.g.
-    ``study``)."""
+    """``raw`` (plain values, as TOML gives them) checked against dataclass ``cls`` and built into it
+    with its ``CARRIED`` fields from ``carried``; else ``BadInput`` naming the first wrong key."""
     try:
-        blob = json.dumps(_jsonable(raw))
+        blob = json.dumps(to_jsonable(raw))
     except (TypeError, ValueError) as exc:
         raise BadInput(f"the configuration holds a value that is no number, string, boolean or list ({exc}).") from exc
     try:

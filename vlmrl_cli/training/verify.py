@@ -1,19 +1,12 @@
-"""Retrain recorded runs from their configs and compare their learning curves bit for bit.
-
-A committed result counts once it reproduces: ``recorded_runs`` reads the FINISHED training
-runs of an export file (``vlmrl export``) or of a tracking store, ``rebuild_job`` turns a run's
-``config.json`` back into the ``TrainJob`` that trained it (refusing when the rebuilt config
-hashes differently: this code would train another experiment), and ``verify_run`` retrains it
-in this process (``trace.native_returns``, the worker's own training path, no tracking) and
-compares the per-episode native returns with the recorded ones, float for float.
-"""
+"""Retrain recorded runs from their ``config.json`` and compare their learning curves bit for bit
+(`vlmrl verify`): a rebuilt config that hashes differently is refused."""
 
 from __future__ import annotations
 
 import json
 import random
 from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -26,9 +19,9 @@ from vlmrl_cli.training.config import TrainJob
 if TYPE_CHECKING:
     from vlmrl_cli.tasks.base import TaskLookup
 
-#: The tags that say which numeric path a run computed on (printed beside each verdict).
-PATH_TAGS = (schema.TAG_PIN, schema.TAG_PIN_ENV, f"{schema.TAG_CPU_PREFIX}numpy_simd",
-             f"{schema.TAG_CPU_PREFIX}torch", f"{schema.TAG_CPU_PREFIX}model")
+#: The tags that say which numeric path a run computed on (printed beside each verdict), and their short names.
+PATH_TAGS = {schema.TAG_PIN: "pin", schema.TAG_PIN_ENV: "env", f"{schema.TAG_CPU_PREFIX}numpy_simd": "numpy",
+             f"{schema.TAG_CPU_PREFIX}torch": "torch", f"{schema.TAG_CPU_PREFIX}model": "cpu"}
 
 
 @dataclass(frozen=True)
@@ -58,10 +51,10 @@ class Outcome:
     run: RecordedRun
     returns: list[float]
     wall_s: float
-    first_difference: int | None = field(init=False)
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "first_difference", first_difference(self.run.native_returns, self.returns))
+    @property
+    def first_difference(self) -> int | None:
+        return first_difference(self.run.native_returns, self.returns)
 
     @property
     def identical(self) -> bool:
@@ -77,8 +70,7 @@ class Outcome:
         return f"differs from episode {k} ({both})"
 
     def lines(self, here_tags: dict[str, str]) -> list[str]:
-        """The verdict and the run's recorded numeric path; this process's too where the run differs
-        or was pinned otherwise."""
+        """The verdict and the recorded numeric path; this process's too where they differ."""
         run = self.run
         lines = [f"{run.run_id[:12]}  {run.name}: {self.verdict()} in {self.wall_s:.0f} s",
                  f"    recorded: {describe_paths(run.tags)}"]
@@ -168,11 +160,8 @@ def recorded_runs(source: Path | None, experiment: str, tracking_uri: str | None
 def choose(runs: Sequence[RecordedRun], *, run_ids: Iterable[str] = (), seeds: Iterable[int] = (),
            arms: Iterable[str] = (), sample: int | None = None, sample_seed: int = 0,
            source: str = "the source") -> list[RecordedRun]:
-    """The runs to verify: those named by id (a prefix of 8 or more characters will do), else
-    those of the given seeds and arms; then ``sample`` of them drawn with ``sample_seed``
-    (the same draw on every machine), in their recorded order. A ``sample`` larger than what
-    there is to draw from is ``BadInput`` naming how many runs ``source`` holds: verifying them
-    all is another order of cost, and never a silent one.
+    """The runs to verify: those named by id (a prefix of 8+ characters will do), else those of the
+    given seeds and arms; then ``sample`` of them drawn with ``sample_seed``, in recorded order.
 
     Example:
         >>> rs = [RecordedRun(f"id{i}", f"r{i}", {"seed": i % 2, "arm": {"name": "a"}}, {}, []) for i in range(6)]
@@ -210,11 +199,8 @@ def choose(runs: Sequence[RecordedRun], *, run_ids: Iterable[str] = (), seeds: I
 
 
 def job_of(config: Mapping[str, Any], tags: Mapping[str, str], tasks: TaskLookup, where: str) -> TrainJob:
-    """The ``TrainJob`` a run's ``config.json`` (``config``) describes, its task resolved by ``tasks``
-    (the command's registry): the one way a recorded run becomes a job again (``verify`` retrains it,
-    ``evaluate`` reads its arm, shaping and VLM). A config without ``shaping`` takes its task's
-    default scales, one without ``vlm`` the default VLM; the response cache is off (a job rebuilt to
-    check a result asks its VLM afresh). ``BadInput`` naming ``where`` when it cannot be rebuilt."""
+    """The ``TrainJob`` a run's ``config.json`` describes (response cache off), its task resolved by
+    ``tasks``; ``BadInput`` naming ``where`` when it cannot be rebuilt."""
     from vlmrl_cli.shaping.arms import ARMS
     from vlmrl_cli.shaping.config import ShapingConfig
     from vlmrl_cli.tasks.registry import recorded_task
@@ -238,8 +224,7 @@ def job_of(config: Mapping[str, Any], tags: Mapping[str, str], tasks: TaskLookup
 
 
 def rebuild_job(run: RecordedRun, tasks: TaskLookup) -> TrainJob:
-    """The ``TrainJob`` that trained ``run`` (``job_of`` its ``config.json``); ``BadInput`` when this
-    code cannot rebuild it with the recorded config hash (another version changed what it means)."""
+    """The ``TrainJob`` that trained ``run``; ``BadInput`` when it rebuilds with another config hash."""
     job = job_of(run.config, run.tags, tasks, f"run {run.run_id} ({run.name})")
     recorded = run.config.get("config_hash") or run.tags.get(schema.TAG_CONFIG_HASH)
     if job.config_hash != recorded:
@@ -262,23 +247,18 @@ def verify_run(run: RecordedRun, tasks: TaskLookup) -> Outcome:
 
 def here_paths() -> dict[str, str]:
     """This process's numeric path, keyed like ``PATH_TAGS``."""
-    record = pin_record()
-    paths = cpu_paths()
-    return {schema.TAG_PIN: record["pin"], schema.TAG_PIN_ENV: record["pin.env"],
-            f"{schema.TAG_CPU_PREFIX}numpy_simd": paths["numpy_simd"], f"{schema.TAG_CPU_PREFIX}torch": paths["torch"],
-            f"{schema.TAG_CPU_PREFIX}model": record["cpu.model"]}
+    record, paths = pin_record(), cpu_paths()
+    values = (record["pin"], record["pin.env"], paths["numpy_simd"], paths["torch"], record["cpu.model"])
+    return dict(zip(PATH_TAGS, values, strict=True))
 
 
 def describe_paths(tags: dict[str, str]) -> str:
     """A run's numeric path in one line (``unrecorded`` for tags an older run lacks)."""
-    short = {schema.TAG_PIN: "pin", schema.TAG_PIN_ENV: "env", f"{schema.TAG_CPU_PREFIX}numpy_simd": "numpy",
-             f"{schema.TAG_CPU_PREFIX}torch": "torch", f"{schema.TAG_CPU_PREFIX}model": "cpu"}
-    return "; ".join(f"{short[t]} {tags.get(t, 'unrecorded')}" for t in PATH_TAGS)
+    return "; ".join(f"{short} {tags.get(t, 'unrecorded')}" for t, short in PATH_TAGS.items())
 
 
 def verify_many(runs: Sequence[RecordedRun], tasks: TaskLookup, workers: int = 1) -> Iterator[Outcome]:
-    """Verify ``runs`` in ``workers`` spawned processes (each inherits this process's numeric pin;
-    ``verify_run`` trains on one torch thread), yielding each outcome as it finishes."""
+    """Verify ``runs`` in ``workers`` spawned processes, yielding each outcome as it finishes."""
     if workers <= 1:
         yield from (verify_run(run, tasks) for run in runs)
         return
