@@ -158,7 +158,26 @@ class KinematicPotential(RewardStage):
 
 class SemanticPotential(RewardStage):
     """Adds ``alpha (gamma Phi(s') - Phi(s))``, ``Phi`` the arm's ``EpisodePotential`` of what the
-    ``camera`` shows (never the observation), from the run's shared ``oracle``."""
+    ``camera`` shows (never the observation), from the run's shared ``oracle``.
+
+    Example:
+        >>> from vlmrl_cli.shaping.arms import ARMS
+        >>> from vlmrl_cli.shaping.semantic import SemanticOracle
+        >>> from vlmrl_cli.tasks.registry import get_task
+        >>> from vlmrl_cli.vlm.config import VLMConfig
+        >>> from vlmrl_cli.vlm.registry import build_client
+        >>> task, arm = get_task("mountain-car"), ARMS["semantic"]
+        >>> cfg = task.shaping_for(ShapingConfig())
+        >>> client = build_client(VLMConfig(backend="sim", use_cache=False), reader=task.reader)
+        >>> oracle = SemanticOracle(client, cfg, arm.potential, task.milestones, task.camera.feature_dim)
+        >>> env = SemanticPotential(gym.make("MountainCar-v0"), arm, 2.0, 0.99, task.camera.make(cfg), oracle,
+        ...                         task.scene.sim_type)
+        >>> _ = env.reset(seed=0)
+        >>> phi0 = env.potential
+        >>> _, reward, *_ = env.step(2)
+        >>> reward == -1.0 + 2.0 * (0.99 * env.potential - phi0)
+        True
+    """
 
     def __init__(self, env: gym.Env, arm: ArmSpec, alpha: float, gamma: float, camera: SceneCamera,
                  oracle: SemanticOracle, sim_type: type) -> None:
