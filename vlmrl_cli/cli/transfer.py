@@ -32,7 +32,7 @@ def export(
     from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
     from vlmrl_cli.core.paths import file_problem
     from vlmrl_cli.tracking import access, store
-    from vlmrl_cli.tracking.transfer import export_runs, exported_ids
+    from vlmrl_cli.tracking.transfer import export_runs, read_records
 
     with exit_codes():
         problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
@@ -49,7 +49,7 @@ def export(
         missing = [p for p in skip_exported or [] if not p.is_file()]
         if missing:
             raise BadInput(f"--skip-exported {missing[0]}: no such export file.")
-        skip = exported_ids(skip_exported or [])
+        skip = {r["source_run_id"] for p in skip_exported or [] for r in read_records(p)}
         access.check_store(tracking_uri, write=False, existing=True)
         client = store.connect_existing(tracking_uri)
         summary = export_runs(client, experiment, out, models=models, skip=skip)

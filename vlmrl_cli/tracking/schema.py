@@ -1,14 +1,5 @@
-"""The tracking contract: every MLflow tag key, tag value and metric key vlmrl writes or reads.
-
-Writers (the training worker, the sweep, the callbacks, report, calibration, study) and
-readers (analysis, evaluate, study's cost estimate) spell keys only through these names, so
-the contract lives in one place. ``search_all`` is the one paginated ``search_runs``.
-
-Tags: ``vlmrl.*`` (``TAG_*``), MLflow's own ``mlflow.*`` (``MLFLOW_*``); ``TAG_KIND`` takes one of
-the ``KIND_*`` values. Metrics (``METRIC_*``): ``episode/*`` stepped by the global timestep at
-the episode's end, ``eval/*`` of the detached evaluation (``eval/episode_*`` stepped by episode
-index), ``rollout/*``, ``perf/*``, ``vlm/*`` at each rollout end, SB3's ``train/*`` per update.
-"""
+"""The tracking contract: every MLflow tag key, tag value and metric key vlmrl writes or reads,
+spelled only through these names; ``search_all`` is the one paginated ``search_runs``."""
 
 from __future__ import annotations
 
@@ -37,7 +28,6 @@ TAG_VERSION_PREFIX = f"{TAG_PREFIX}version."  # + package name
 TAG_CPU_PREFIX = f"{TAG_PREFIX}cpu."  # + numpy_simd / blas / torch / model
 TAG_PIN = f"{TAG_PREFIX}pin"  # core.numeric_pin.PIN_ID, or "unpinned"
 TAG_PIN_ENV = f"{TAG_PREFIX}pin.env"  # the pin variables' values in force
-TAG_PIN_USER = f"{TAG_PREFIX}pin.user"  # the ones the user set ("none")
 TAG_NOTE = f"{TAG_PREFIX}note"  # set only on runs of the simulated VLM
 
 # ---- what a run is -----------------------------------------------------------------------------
@@ -96,10 +86,9 @@ METRIC_VLM_CACHE_HITS = "vlm/cache_hits"
 METRIC_VLM_PROTOTYPES = "vlm/prototypes"
 METRIC_VLM_LABEL_REUSES = "vlm/label_reuses"
 METRIC_VLM_PARSE_FAILURES = "vlm/parse_failures"
-#: What the VLM cost a run (issue 53): the backend calls (one per labelling round with a miss), the
-#: frames they carried and the largest round, the seconds spent waiting for them, their share of
-#: the run's wall time, and the labels that came from the nearest prototype once ``vlm.max_queries``
-#: was spent.
+#: What the VLM cost a run (issue 53): backend calls (one per labelling round with a miss), their
+#: frames, the largest round, the seconds waited and their share of wall time, and the labels taken
+#: from the nearest prototype once ``vlm.max_queries`` was spent.
 METRIC_VLM_BACKEND_CALLS = "vlm/backend_calls"
 METRIC_VLM_BACKEND_FRAMES = "vlm/backend_frames"
 METRIC_VLM_LARGEST_BATCH = "vlm/largest_batch"
@@ -171,8 +160,7 @@ def finished_train_runs(client: Any, experiment: str) -> list[Any]:
 
 
 def search_all(client: Any, experiment_id: str, filter_string: str, page_size: int = PAGE_SIZE) -> list[Any]:
-    """Every run of ``experiment_id`` that matches ``filter_string``, following MLflow's page tokens
-    (one ``search_runs`` call answers at most one page)."""
+    """Every run of ``experiment_id`` that matches ``filter_string``, following MLflow's page tokens."""
     runs: list[Any] = []
     token: str | None = None
     while True:
