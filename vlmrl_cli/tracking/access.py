@@ -109,12 +109,7 @@ DB_DRIVERS = {"postgresql": ("psycopg2", "psycopg2-binary"), "mysql": ("MySQLdb"
 
 
 def _driver_problem(uri: str) -> str | None:
-    """Why the database store of ``uri`` lacks its driver, or None (MLflow would fail after seconds).
-
-    Example:
-        >>> _driver_problem("postgresql+nosuchdriver://h/db").split(": ", 1)[1]
-        'no Python module nosuchdriver for its database driver; install it (pip install nosuchdriver)'
-    """
+    """Why the database store of ``uri`` lacks its driver, or None (MLflow would fail after seconds)."""
     import importlib.util
     import urllib.parse
 
@@ -131,15 +126,7 @@ def _driver_problem(uri: str) -> str | None:
 
 def store_problem(uri: str | None, write: bool = True, existing: bool = False) -> str | None:
     """Why the tracking store of ``uri`` cannot be used, or None: an unknown scheme, a missing
-    driver, or a sqlite database this process cannot use (``_sqlite_problem``). No server is contacted.
-
-    Example:
-        >>> store_problem("nope://x").endswith("MLflow has no store for the scheme 'nope' (a typo?); pass "
-        ...     "sqlite:///PATH/mlflow.db or http://HOST:PORT")
-        True
-        >>> "cannot be reached: no file can be written in /proc" in store_problem("sqlite:////proc/vlmrl.db")
-        True
-    """
+    driver, or a sqlite database this process cannot use (``_sqlite_problem``). No server is contacted."""
     import importlib.metadata
 
     resolved = resolve_tracking_uri(uri)

@@ -37,21 +37,7 @@ class RunHandle:
 @contextmanager
 def tracked_run(client: Any, run_id: str) -> Iterator[RunHandle]:
     """Close ``run_id`` when the block ends: ``handle.status`` if it completes; on an exception (which
-    propagates, whatever the store does) KILLED for a Ctrl-C or a handle set KILLED, else FAILED.
-
-    Example:
-        >>> class Client:
-        ...     def set_terminated(self, run_id, status, end_time=None): print(run_id, status)
-        >>> with tracked_run(Client(), "r1"):
-        ...     pass
-        r1 FINISHED
-        >>> try:
-        ...     with tracked_run(Client(), "r2"):
-        ...         raise ValueError("boom")
-        ... except ValueError:
-        ...     pass
-        r2 FAILED
-    """
+    propagates, whatever the store does) KILLED for a Ctrl-C or a handle set KILLED, else FAILED."""
     handle = RunHandle(run_id)
     try:
         yield handle

@@ -9,7 +9,7 @@ from typing import Any
 from vlmrl_cli.core.errors import BadInput
 
 TAG_PREFIX = "vlmrl."
-#: The per-episode table a training run writes at its end (one row per episode, ``EPISODE_TABLE_COLUMNS``).
+#: The per-episode table a training run writes at its end: ``timestep``, then ``EPISODE_METRICS``.
 EPISODES_TABLE = "episodes.csv"
 #: A training run's artifacts: its config, SB3's model (a zip whose ``policy.pth`` entry holds the
 #: policy's weights; the rest of it is cloudpickle), those weights alone as an export carries them,
@@ -77,6 +77,7 @@ METRIC_NATIVE_RETURN = "episode/native_return"
 METRIC_LENGTH = "episode/length"
 METRIC_SUCCESS = "episode/success"
 METRIC_SHAPED_RETURN = "episode/shaped_return"
+EPISODE_METRICS = (METRIC_NATIVE_RETURN, METRIC_LENGTH, METRIC_SUCCESS, METRIC_SHAPED_RETURN)
 
 # ---- metrics: at each rollout end (step = global timestep) --------------------------------------
 METRIC_RETURN_100 = "rollout/return_100"  # mean native return of the last 100 episodes
@@ -120,12 +121,7 @@ PAGE_SIZE = 1000
 
 
 def runs_filter(tags: Mapping[str, str], finished: bool = False) -> str:
-    """An MLflow ``filter_string`` matching every tag of ``tags`` (and status FINISHED if asked).
-
-    Example:
-        >>> runs_filter({TAG_KIND: KIND_TRAIN}, finished=True)
-        "tags.`vlmrl.kind` = 'train' and attributes.status = 'FINISHED'"
-    """
+    """An MLflow ``filter_string`` matching every tag of ``tags`` (and status FINISHED if asked)."""
     terms = [f"tags.`{key}` = '{value}'" for key, value in tags.items()]
     if finished:
         terms.append("attributes.status = 'FINISHED'")

@@ -27,24 +27,22 @@ INIT_LOCK_TIMEOUT_S = 120.0
 
 
 def connect(uri: str | None, wait_s: float = 0.0, write: bool = True, existing: bool = False) -> Any:
-    """An ``MlflowClient`` for ``uri``, checked to answer (``BadInput`` if not, after retrying a server
-    for ``wait_s`` seconds); ``write`` and ``existing`` as in ``access.check_store``."""
+    """An ``MlflowClient`` for ``uri``, checked first as ``access.check_store`` does, then to answer."""
     import logging
 
+    resolved = resolve_tracking_uri(uri)
+    check_store(resolved, write, existing, wait_s)
     from mlflow.tracking import MlflowClient
 
     logging.getLogger("alembic").setLevel(logging.WARNING)
     logging.getLogger("mlflow").setLevel(logging.WARNING)
-    resolved = resolve_tracking_uri(uri)
-    check_store(resolved, write, existing, wait_s)
     lock: contextlib.AbstractContextManager[object] = contextlib.nullcontext()
     db_path: Path | None = None
     if resolved.startswith("sqlite:///"):
         db_path = Path(resolved.removeprefix("sqlite:///"))
-        parent = db_path.parent if str(db_path.parent) else Path(".")
-        if not parent.exists():
+        if not db_path.parent.exists():
             try:
-                parent.mkdir(parents=True, exist_ok=True)
+                db_path.parent.mkdir(parents=True, exist_ok=True)
             except OSError as exc:
                 raise BadInput(f"cannot create the folder of the tracking database {db_path}.") from exc
         lock = init_lock(db_path)
@@ -53,7 +51,17 @@ def connect(uri: str | None, wait_s: float = 0.0, write: bool = True, existing: 
         import mlflow.store.tracking.sqlalchemy_store  # noqa: F401
     try:
         with lock:
-            client = MlflowClient(tracking_uri=resolved) if db_path is None else _open_sqlite_store(db_path)
+            template = schema_template() if db_path is not None and not db_path.exists() else None
+            if db_path is not None and template is not None:  # put in place whole: a copy, then a hard link
+                part = db_path.with_name(f".{db_path.name}.{os.getpid()}.part")
+                try:
+                    shutil.copyfile(template, part)
+                    os.link(part, db_path)  # refuses to replace a file that appeared meanwhile
+                except OSError:
+                    pass  # MLflow creates the schema (or opens the file that appeared)
+                finally:
+                    part.unlink(missing_ok=True)
+            client = MlflowClient(tracking_uri=resolved)
             client.search_experiments(max_results=1)
     except filelock.Timeout as exc:
         raise BadInput(f"another process has been setting up the MLflow store '{resolved}' for over "
@@ -66,30 +74,13 @@ def connect(uri: str | None, wait_s: float = 0.0, write: bool = True, existing: 
     return client
 
 
-def _open_sqlite_store(db_path: Path) -> Any:
-    """An ``MlflowClient`` on the sqlite file ``db_path`` (under its ``init_lock``); a new file starts
-    as a copy of ``schema_template()``, put in place whole (a copy, then a hard link)."""
-    from mlflow.tracking import MlflowClient
-
-    template = None if db_path.exists() else schema_template()
-    if template is not None:
-        part = db_path.with_name(f".{db_path.name}.{os.getpid()}.part")
-        try:
-            shutil.copyfile(template, part)
-            os.link(part, db_path)  # refuses to replace a file that appeared meanwhile
-        except OSError:
-            pass  # MLflow creates the schema (or opens the file that appeared)
-        finally:
-            part.unlink(missing_ok=True)
-    return MlflowClient(tracking_uri=f"sqlite:///{db_path}")
-
-
 def schema_template() -> Path | None:
     """An empty sqlite store of this MLflow version's schema in the user's cache folder, built once
     (rebuilt if at another revision); None where it cannot be written (MLflow then builds each schema)."""
     import mlflow
     import platformdirs
-    from mlflow.store.db.utils import _get_latest_schema_revision
+    import sqlalchemy
+    from mlflow.store.db.utils import _get_latest_schema_revision, _initialize_tables
 
     head = _get_latest_schema_revision()
     folder = platformdirs.user_cache_path("vlmrl")
@@ -100,8 +91,20 @@ def schema_template() -> Path | None:
     try:
         folder.mkdir(parents=True, exist_ok=True)
         with lock:
-            if _schema_revision(path) != head:
-                _build_schema(path)
+            if _schema_revision(path) != head:  # MLflow's own schema creation, beside it, then renamed
+                part = path.with_name(f"{path.name}.{os.getpid()}.part")
+                part.unlink(missing_ok=True)
+                engine = sqlalchemy.create_engine(f"sqlite:///{part}")
+                try:
+                    _initialize_tables(engine)
+                except Exception as exc:  # an MLflow without this helper, or a failed migration: no template
+                    raise OSError(f"cannot build MLflow's schema: {exc}") from exc
+                finally:
+                    engine.dispose()
+                try:
+                    os.replace(part, path)
+                finally:
+                    part.unlink(missing_ok=True)
     except (OSError, filelock.Timeout):
         return None
     finally:
@@ -121,26 +124,6 @@ def _schema_revision(path: Path) -> str | None:
     except sqlite3.Error:
         return None
     return None if row is None else str(row[0])
-
-
-def _build_schema(path: Path) -> None:
-    """Build MLflow's schema (its sqlite store's own ``_initialize_tables``) beside ``path``, then rename it there."""
-    import sqlalchemy
-    from mlflow.store.db.utils import _initialize_tables
-
-    part = path.with_name(f"{path.name}.{os.getpid()}.part")
-    part.unlink(missing_ok=True)
-    engine = sqlalchemy.create_engine(f"sqlite:///{part}")
-    try:
-        _initialize_tables(engine)
-    except Exception as exc:  # an MLflow without this helper, or a failed migration: no template
-        raise OSError(f"cannot build MLflow's schema: {exc}") from exc
-    finally:
-        engine.dispose()
-    try:
-        os.replace(part, path)
-    finally:
-        part.unlink(missing_ok=True)
 
 
 def _remove_lock_file(lock: object) -> None:
@@ -164,22 +147,18 @@ def init_lock(db_path: Path) -> filelock.FileLock:
     return filelock.FileLock(Path(tempfile.gettempdir()) / f"vlmrl-mlflow-{key}.lock", timeout=INIT_LOCK_TIMEOUT_S)
 
 
-def artifact_root(tracking_uri: str) -> str | None:
-    """Where new experiments keep artifacts: ``mlartifacts/`` beside a sqlite database; else MLflow's default."""
-    if tracking_uri.startswith("sqlite:///"):
-        db_path = Path(tracking_uri.removeprefix("sqlite:///")).resolve()
-        return (db_path.parent / "mlartifacts").as_uri()
-    return None
-
-
 def ensure_experiment(client: Any, name: str) -> str:
-    """The id of experiment ``name``, created if missing (and restored if deleted)."""
+    """The id of experiment ``name``, created if missing (artifacts in ``mlartifacts/`` beside a sqlite
+    database), and restored if deleted."""
     from mlflow.exceptions import MlflowException
 
     exp = client.get_experiment_by_name(name)
     if exp is None:
+        uri = client.tracking_uri
+        root = (Path(uri.removeprefix("sqlite:///")).resolve().parent / "mlartifacts").as_uri() \
+            if uri.startswith("sqlite:///") else None
         try:
-            return str(client.create_experiment(name, artifact_location=artifact_root(client.tracking_uri)))
+            return str(client.create_experiment(name, artifact_location=root))
         except MlflowException:
             # another process (a second sweep started at the same moment) created it first
             exp = client.get_experiment_by_name(name)
@@ -194,13 +173,10 @@ def provenance_tags(vlm_label: str, simulated: bool) -> dict[str, str]:
     """Tags every vlmrl run carries: VLM (simulated said plainly), commit, versions, CPU paths, numeric pin."""
     commit = git_commit()
     tags = {schema.TAG_VLM: vlm_label, schema.TAG_SIMULATED: "true" if simulated else "false",
-            schema.TAG_GIT_COMMIT: commit, schema.MLFLOW_GIT_COMMIT: commit}
-    for name, version in package_versions().items():
-        tags[f"{schema.TAG_VERSION_PREFIX}{name}"] = version
-    for name, path in cpu_paths().items():
-        tags[f"{schema.TAG_CPU_PREFIX}{name}"] = path
-    for name, value in pin_record().items():  # the pinned kernels in force, and the CPU model
-        tags[f"{schema.TAG_PREFIX}{name}"] = value
+            schema.TAG_GIT_COMMIT: commit, schema.MLFLOW_GIT_COMMIT: commit,
+            **{f"{schema.TAG_VERSION_PREFIX}{name}": v for name, v in package_versions().items()},
+            **{f"{schema.TAG_CPU_PREFIX}{name}": path for name, path in cpu_paths().items()},
+            **{f"{schema.TAG_PREFIX}{name}": v for name, v in pin_record().items()}}  # the pin and the CPU model
     if simulated:
         tags[schema.TAG_NOTE] = ("Produced with the SIMULATED VLM (a pixel-reading stand-in), not a real "
                                  "vision-language model.")
@@ -289,16 +265,10 @@ def log_artifacts(client: Any, run_id: str, paths: Iterable[Path], artifact_path
 
 def download_artifacts(client: Any, run_id: str, names: Iterable[str], dst: Path) -> None:
     """Download the run's artifacts ``names`` into the existing folder ``dst``, without progress bars."""
+    from unittest import mock
+
     from mlflow.environment_variables import MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR
 
-    key = MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR.name
-    before = os.environ.get(key)
-    os.environ[key] = "false"
-    try:
+    with mock.patch.dict(os.environ, {MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR.name: "false"}):
         for name in names:
             client.download_artifacts(run_id, name, str(dst))
-    finally:
-        if before is None:
-            os.environ.pop(key, None)
-        else:
-            os.environ[key] = before

@@ -33,10 +33,8 @@ FORMAT_NAME = "vlmrl-runs"
 FORMAT_VERSION = 2
 FORMAT = f"{FORMAT_NAME}/{FORMAT_VERSION}"
 READABLE = tuple(f"{FORMAT_NAME}/{v}" for v in range(1, FORMAT_VERSION + 1))
-HISTORY_KEYS: tuple[str, ...] = (
-    schema.METRIC_NATIVE_RETURN, schema.METRIC_LENGTH, schema.METRIC_SUCCESS, schema.METRIC_SHAPED_RETURN,
-    schema.METRIC_EVAL_EPISODE_RETURN, schema.METRIC_EVAL_EPISODE_LENGTH, schema.METRIC_EVAL_EPISODE_SUCCESS,
-)
+HISTORY_KEYS: tuple[str, ...] = (*schema.EPISODE_METRICS, schema.METRIC_EVAL_EPISODE_RETURN,
+                                  schema.METRIC_EVAL_EPISODE_LENGTH, schema.METRIC_EVAL_EPISODE_SUCCESS)
 TEXT_ARTIFACTS: tuple[str, ...] = (schema.ARTIFACT_CONFIG,)
 #: What ``--models`` carries: the policy's weights and the observation statistics, neither a pickle.
 MODEL_ARTIFACTS: tuple[str, ...] = (schema.ARTIFACT_POLICY, schema.ARTIFACT_NORMALIZER)
@@ -221,10 +219,6 @@ def record_problem(record: object) -> str | None:
     Example:
         >>> record_problem({"format": FORMAT, "source_run_id": "abc"})
         'tags: Field required (and 4 more: params, latest, histories, artifacts)'
-        >>> record_problem({"format": "vlmrl-runs/7"})
-        'written by a newer vlmrl (format 7; this one reads up to 2): upgrade vlmrl'
-        >>> record_problem({"format": "mlflow-export"})
-        'not a vlmrl run export (vlmrl-runs/2)'
     """
     tag = record.get("format") if isinstance(record, dict) else None
     if tag not in READABLE:
@@ -248,9 +242,8 @@ def record_problem(record: object) -> str | None:
 
 
 def read_export(path: Path) -> ExportFile:
-    """Every record of the export file ``path``, each checked (``record_problem``, ``check_binary``),
-    and the file against its digest line; ``BadInput`` naming the line otherwise. Nothing is
-    returned before the whole file has passed."""
+    """Every record of the export file ``path`` once the whole file has passed its checks
+    (``record_problem``, ``check_binary``, the digest line); ``BadInput`` naming the line otherwise."""
     records: list[dict[str, Any]] = []
     digest = hashlib.sha256()
     trailer: dict[str, Any] | None = None
