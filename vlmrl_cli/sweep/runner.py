@@ -174,7 +174,11 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
     # The Ctrl-C flag covers the parent's creation to its close, so that no Ctrl-C leaves it RUNNING.
     with _stop_on_sigint() as interrupted:
         try:
-            parent = client.create_run(experiment_id, tags=_parent_tags(cfg, vlm_label, simulated))
+            tags = {**store.provenance_tags(vlm_label, simulated), schema.TAG_KIND: schema.KIND_SWEEP,
+                    schema.MLFLOW_RUN_NAME: f"sweep-{time.strftime('%Y%m%d-%H%M%S')}",
+                    schema.TAG_CONFIG_HASH: config_hash(cfg), schema.TAG_EXECUTOR: cfg.executor,
+                    schema.TAG_TASK: cfg.task, **({schema.TAG_REGIME: cfg.regime} if cfg.regime is not None else {})}
+            parent = client.create_run(experiment_id, tags=tags)
         except BaseException:
             release(executor)
             raise
@@ -199,14 +203,6 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
     if run.status == RunStatus.KILLED:
         raise KeyboardInterrupt
     return summary
-
-
-def _parent_tags(cfg: RunConfig, vlm_label: str, simulated: bool) -> dict[str, str]:
-    return {**store.provenance_tags(vlm_label, simulated),
-            schema.MLFLOW_RUN_NAME: f"sweep-{time.strftime('%Y%m%d-%H%M%S')}",
-            schema.TAG_KIND: schema.KIND_SWEEP, schema.TAG_CONFIG_HASH: config_hash(cfg),
-            schema.TAG_EXECUTOR: cfg.executor, schema.TAG_TASK: cfg.task,
-            **({schema.TAG_REGIME: cfg.regime} if cfg.regime is not None else {})}
 
 
 def _follow(executor: Executor, reporter: SweepReporter, summary: SweepSummary, run: Any,

@@ -57,15 +57,6 @@ def init_worker(progress: Any, stop: Any, ignore_sigint: bool = True) -> None:
     _channels.stop = stop
 
 
-def scales_tag(job: TrainJob) -> str:
-    """A shaped run's alpha and kin_scale and their source: the task's rule, the paper's, or the run's."""
-    task, shaping = job.task_plugin, job.shaping
-    own = task.default_shaping()
-    source = ("set for this run" if (shaping.alpha, shaping.kin_scale) != (own.alpha, own.kin_scale)
-              else "the task's rule: " + task.scales.rule if task.scales is not None else "the paper's")
-    return f"alpha {shaping.alpha:g}, kin_scale {shaping.kin_scale:g} ({source})"
-
-
 def run_tags(job: TrainJob, parent_run_id: str | None, vlm_label: str, simulated: bool) -> dict[str, str]:
     if not job.arm.uses_vlm:
         vlm_label, simulated = "none (this arm queries no VLM)", False
@@ -82,8 +73,12 @@ def run_tags(job: TrainJob, parent_run_id: str | None, vlm_label: str, simulated
     }
     if job.regime is not None:
         tags[schema.TAG_REGIME] = job.regime
-    if job.arm.kinematic or job.arm.uses_vlm:
-        tags[schema.TAG_SCALES] = scales_tag(job)
+    if job.arm.kinematic or job.arm.uses_vlm:  # alpha and kin_scale: the task's rule, the paper's, or the run's
+        task, shaping = job.task_plugin, job.shaping
+        own = task.default_shaping()
+        source = ("set for this run" if (shaping.alpha, shaping.kin_scale) != (own.alpha, own.kin_scale)
+                  else "the task's rule: " + task.scales.rule if task.scales is not None else "the paper's")
+        tags[schema.TAG_SCALES] = f"alpha {shaping.alpha:g}, kin_scale {shaping.kin_scale:g} ({source})"
     if job.arm.uses_vlm and job.vlm.backend == "sim":
         tags[schema.TAG_SIM_PROFILE] = job.vlm.sim.profile
     if job.arm.uses_vlm and job.vlm.backend == "sim" and job.vlm.sim.query_flicker > 0:
@@ -135,7 +130,9 @@ def run_claimed(job: TrainJob, ctx: JobContext, body: Body) -> JobResult:
                 with leases.heartbeat(client, run_id, ctx.heartbeat_s):
                     result = body(job, client, run_id, channels)
                 run.status = RunStatus(result.status)
-                rival = _finished_rival(client, ctx.experiment_id, job, run_id) if result.status == "FINISHED" else None
+                finished = leases.job_runs(client, ctx.experiment_id, job.name, job.arm.name, job.seed,
+                                           job.config_hash, finished=True) if result.status == "FINISHED" else []
+                rival = next((r.info.run_id for r in finished if r.info.run_id != run_id), None)
                 if rival is not None:  # two claimants raced past each other: keep the first FINISHED run only
                     store.set_tags(client, run_id, {schema.TAG_ERROR: f"duplicate of FINISHED run {rival}"})
                     run.status = RunStatus.KILLED
@@ -153,11 +150,6 @@ def run_claimed(job: TrainJob, ctx: JobContext, body: Body) -> JobResult:
     except BaseException as exc:  # a failed job must not take the sweep down; nor a store that failed too
         return JobResult(job.name, run_id, "FAILED", time.perf_counter() - start,
                          error=message or f"{type(exc).__name__}: {exc}", superseded=decision.superseded)
-
-
-def _finished_rival(client: Any, experiment_id: str, job: TrainJob, run_id: str) -> str | None:
-    runs = leases.job_runs(client, experiment_id, job.name, job.arm.name, job.seed, job.config_hash, finished=True)
-    return next((r.info.run_id for r in runs if r.info.run_id != run_id), None)
 
 
 def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> JobResult:
