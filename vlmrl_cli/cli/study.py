@@ -1,8 +1,4 @@
-"""`vlmrl study`: regimes x arms x seeds and the hybrid's VLM-quality variants, one regime map and report.
-
-Its options: one per ``StudySettings`` field (``SETTING_OPTIONS``), `vlmrl run`'s (``RUN_OPTIONS``),
-the VLM options, and ``CLI_ONLY``, which set no config key.
-"""
+"""`vlmrl study`: regimes x arms x seeds and the hybrid's VLM-quality variants, one regime map and report."""
 
 from __future__ import annotations
 
