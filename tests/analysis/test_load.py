@@ -9,7 +9,7 @@ import pytest
 
 from vlmrl_cli.analysis.load import _episodes, check_one_task
 from vlmrl_cli.core.errors import BadInput
-from vlmrl_cli.sweep.worker import EPISODE_TABLE_METRICS, write_episodes_table
+from vlmrl_cli.sweep.worker import write_episodes_table
 from vlmrl_cli.tracking import schema, store
 
 
@@ -22,7 +22,7 @@ def test_the_table_and_the_histories_give_identical_frames_and_a_missing_table_f
                 for i, t in enumerate([200, 400, 400, 590, 800])]  # two episodes end at one step
     logger = store.BatchLogger(client, run_id)
     for e in episodes:
-        logger.log({k: e[k] for k in EPISODE_TABLE_METRICS}, step=int(e["timestep"]))
+        logger.log({k: e[k] for k in schema.EPISODE_METRICS}, step=int(e["timestep"]))
     logger.flush()
     write_episodes_table(episodes, tmp_path / schema.EPISODES_TABLE)
     store.log_artifacts(client, run_id, [tmp_path / schema.EPISODES_TABLE])

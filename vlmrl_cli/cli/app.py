@@ -9,11 +9,11 @@ from typing import Annotated, Any
 
 import typer
 
-from vlmrl_cli.cli.exit_codes import EXIT_BAD_INPUT, EXIT_INTERRUPTED
+from vlmrl_cli.cli.exit_codes import EXIT_BAD_INPUT, EXIT_INTERRUPTED, ExitCodes
 
 app = typer.Typer(
     name="vlmrl",
-    help="Reproduce 'Macro Semantics, Micro Kinematics' (VLM milestone shaping for PPO on MountainCar-v0).",
+    cls=ExitCodes,
     no_args_is_help=True,
     rich_markup_mode=None,  # plain click help: flags shown as flags (rich help printed <bool> after them)
     add_completion=False,
@@ -45,9 +45,8 @@ def _root(
     """Reproduce 'Macro Semantics, Micro Kinematics' (VLM milestone shaping for PPO on MountainCar-v0)."""
 
 
-#: Each command's one-line summary in `vlmrl --help`, whole: click would cut a docstring's first
-#: sentence at the width left beside the names (with "..."). At most ``SUMMARY_WIDTH`` characters,
-#: so that a summary fits one line of an 80-column terminal.
+#: Each command's summary in `vlmrl --help` (click would cut a docstring's), at most ``SUMMARY_WIDTH``
+#: characters: one line of an 80-column terminal.
 SUMMARIES = {
     "taxonomy": "Table 1 and Figure 1: float, box and MCQ answers of a VLM.",
     "run": "Train PPO arms x seeds, tracked in MLflow; resumable.",
@@ -82,11 +81,8 @@ _register()
 
 
 def cli(args: Sequence[str] | None = None) -> int:
-    """Run ``vlmrl ARGS`` and return its exit code; every refusal is one ``error:`` line.
-
-    click's own usage errors (an unknown flag, ``--seeds two``) are printed in the same one-line
-    format as ours, with the command's ``--help`` named, instead of click's Usage/Try/Error block.
-    """
+    """Run ``vlmrl ARGS`` and return its exit code; every refusal, click's usage errors included, is
+    one ``error:`` line."""
     try:  # typer >= 0.22 runs its own copy of click; older versions run click itself
         from typer._click import exceptions as click
     except ImportError:  # pragma: no cover - depends on the installed typer
@@ -113,19 +109,15 @@ def cli(args: Sequence[str] | None = None) -> int:
 
 
 def _unraisable(info: Any) -> None:
-    """A Ctrl-C that lands in a finalizer (Ray's ``ActorHandle.__del__`` as a sweep closes) can
-    only be ignored there: Python would print it as a traceback. The sweep has handled the
-    interrupt or finished; anything else goes to the default hook."""
-    if isinstance(info.exc_value, KeyboardInterrupt):
-        return
-    sys.__unraisablehook__(info)
+    """Drop a Ctrl-C raised in a finalizer (Ray's ``ActorHandle.__del__`` as a sweep closes), which
+    Python would print as a traceback; anything else goes to the default hook."""
+    if not isinstance(info.exc_value, KeyboardInterrupt):
+        sys.__unraisablehook__(info)
 
 
 def main() -> None:
     sys.unraisablehook = _unraisable
     code = cli()
-    # The command is over (its runs closed, its exit code known); interpreter exit now runs atexit
-    # callbacks, such as Ray's shutdown, which sleeps. A Ctrl-C there would print a traceback from
-    # inside them and change nothing, so the exit is left to finish.
+    # the command is over: a Ctrl-C in the atexit callbacks (Ray's shutdown sleeps) would only print a traceback
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     sys.exit(code)

@@ -12,8 +12,8 @@ import typer
 from rich.console import Console
 
 from vlmrl_cli.cli import options as opt
-from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.progress import exit_if_failed, regime_reporter
+from vlmrl_cli.training.config import source_layers
 
 Grid = Annotated[
     list[str] | None,
@@ -56,36 +56,35 @@ def calibrate(
     from vlmrl_cli.tracking.access import check_store
 
     console = Console()
-    with exit_codes():
-        file_layer, *upper = opt.config_layers(ctx, config, sets)
-        file_grid = calibrate_section(file_layer.pop("calibrate", {}))
-        regimes = build_regimes([file_layer, *upper], file_grid | grid_flags(grid or []), command_tasks([task]))
-        opt.check_sim_flags(ctx, regimes[0].run.arms, regimes[0].run.vlm.backend,
-                            remedy="drop it: calibrate trains the baseline arm alone")
-        check_out_folder(out)
-        check_store(regimes[0].run.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
-        cfg = calibrate_config(regimes, out=out)  # its target profile loads pandas and scipy (seconds)
-        base = cfg.base
-        # these load torch and MLflow (seconds): only once the store is known to be usable
-        from vlmrl_cli.calibration.pipeline import calibrate as run_calibration
-        from vlmrl_cli.sweep.cost import estimate_sweeps
+    file_layer, *upper = source_layers(config, opt.typed_flags(ctx), sets or [])
+    file_grid = calibrate_section(file_layer.pop("calibrate", {}))
+    regimes = build_regimes([file_layer, *upper], file_grid | grid_flags(grid or []), command_tasks([task]))
+    opt.check_sim_flags(ctx, regimes[0].run.arms, regimes[0].run.vlm.backend,
+                        remedy="drop it: calibrate trains the baseline arm alone")
+    check_out_folder(out)
+    check_store(regimes[0].run.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
+    cfg = calibrate_config(regimes, out=out)  # its target profile loads pandas and scipy (seconds)
+    base = cfg.base
+    # these load torch and MLflow (seconds): only once the store is known to be usable
+    from vlmrl_cli.calibration.pipeline import calibrate as run_calibration
+    from vlmrl_cli.sweep.cost import estimate_sweeps
 
-        console.print(f"[bold]vlmrl calibrate[/]: {len(cfg.regimes)} regime(s) x seeds {list(base.seeds)} of the "
-                      f"baseline, task {base.task}, preset {base.preset}, {base.budget:,} steps each, experiment "
-                      f"'{base.experiment}'")
-        console.print(f"target: {cfg.target.source}", markup=False)
-        console.print(f"cost estimate: {estimate_sweeps([r.run for r in cfg.regimes]).line()}", markup=False)
-        if dry_run:
-            for regime in cfg.regimes:
-                console.print(f"  {regime.id}: {regime.label}", markup=False)
-            console.print("dry run: nothing was trained.")
-            return
-        result = run_calibration(cfg, functools.partial(regime_reporter, console),
-                                 command=" ".join(["vlmrl", *sys.argv[1:]]))
-        exit_if_failed(console, result.failed, "scored")
-        best = result.table.iloc[0]
-        console.print(f"closest regime: {best['id']} ({best['regime']}), distance {best['distance']:.3f} "
-                      f"[{best['distance_low']:.3f}, {best['distance_high']:.3f}]", markup=False)
-        console.print(f"cost: {result.wall_s:,.0f} s wall time now ({result.trained} run(s) trained); the runs' own "
-                      f"wall times sum to {result.train_wall_s:,.0f} s")
-        console.print(f"wrote {', '.join(p.name for p in result.files)} to {out}; MLflow run {result.run_id}")
+    console.print(f"[bold]vlmrl calibrate[/]: {len(cfg.regimes)} regime(s) x seeds {list(base.seeds)} of the "
+                  f"baseline, task {base.task}, preset {base.preset}, {base.budget:,} steps each, experiment "
+                  f"'{base.experiment}'")
+    console.print(f"target: {cfg.target.source}", markup=False)
+    console.print(f"cost estimate: {estimate_sweeps([r.run for r in cfg.regimes]).line()}", markup=False)
+    if dry_run:
+        for regime in cfg.regimes:
+            console.print(f"  {regime.id}: {regime.label}", markup=False)
+        console.print("dry run: nothing was trained.")
+        return
+    result = run_calibration(cfg, functools.partial(regime_reporter, console),
+                             command=" ".join(["vlmrl", *sys.argv[1:]]))
+    exit_if_failed(console, result.failed, "scored")
+    best = result.table.iloc[0]
+    console.print(f"closest regime: {best['id']} ({best['regime']}), distance {best['distance']:.3f} "
+                  f"[{best['distance_low']:.3f}, {best['distance_high']:.3f}]", markup=False)
+    console.print(f"cost: {result.wall_s:,.0f} s wall time now ({result.trained} run(s) trained); the runs' own "
+                  f"wall times sum to {result.train_wall_s:,.0f} s")
+    console.print(f"wrote {', '.join(p.name for p in result.files)} to {out}; MLflow run {result.run_id}")

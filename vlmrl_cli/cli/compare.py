@@ -8,7 +8,6 @@ from typing import Annotated
 
 import typer
 
-from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import AllowMixedPaths, UserTasks, choices
 from vlmrl_cli.report.config import DEFAULT_NORMALISATION, NORMALISATIONS
 
@@ -50,31 +49,30 @@ def compare(
     from vlmrl_cli.report.config import CompareConfig, check_compare
     from vlmrl_cli.tasks.registry import command_tasks
 
-    with exit_codes():
-        lookup = command_tasks(user_task or ())
-        cfg = CompareConfig(files=tuple(files), out=out or fresh_scratch_folder("compare"), normalise=normalise,
-                            config_hashes=tuple(config_hash or ()), n_boot=n_boot, seed=seed,
-                            allow_mixed_paths=allow_mixed_paths)
-        check_compare(cfg)  # before the analysis stack loads (seconds)
-        from vlmrl_cli.report.compare import compare as run_compare
+    lookup = command_tasks(user_task or ())
+    cfg = CompareConfig(files=tuple(files), out=out or fresh_scratch_folder("compare"), normalise=normalise,
+                        config_hashes=tuple(config_hash or ()), n_boot=n_boot, seed=seed,
+                        allow_mixed_paths=allow_mixed_paths)
+    check_compare(cfg)  # before the analysis stack loads (seconds)
+    from vlmrl_cli.report.compare import compare as run_compare
 
-        result = run_compare(cfg, lookup)
-        typer.echo(f"{len(result.arms)} arm(s) on {len(result.tasks)} task(s) ({', '.join(result.tasks)}); "
-                   f"normalisation {normalise}" + ("; SIMULATED VLM" if result.simulated else ""))
-        if result.estimated:
-            typer.echo("ANCHORS ESTIMATED FROM THE DATA: 0 and 1 are arms' own means; read random-zoo for verdicts")
-        for task, r in result.pairs.iterrows():
-            typer.echo(f"  {task:<24} 0 = {r.lo:.4g} ({r.lo_from}); 1 = {r.hi:.4g} ({r.hi_from})")
-        for r in result.table.itertuples(index=False):
-            poi = "" if r.arm == "baseline" else (f"; P(> baseline) {r.poi_over_baseline:.2f} "
-                                                   f"[{r.poi_over_baseline_low:.2f}, {r.poi_over_baseline_high:.2f}]")
-            typer.echo(f"  {r.arm:<16} IQM {r.iqm:.2f} [{r.iqm_low:.2f}, {r.iqm_high:.2f}]{poi}")
-        if result.counted_once:
-            typer.echo(f"counted once: {result.counted_once} run(s) that a second file also holds (same task, arm, "
-                       "seed and config hash)")
-        for arm, tasks in result.left_out.items():
-            typer.echo(f"left out: {arm} (missing on {', '.join(tasks)})")
-        if result.other_configs:
-            typer.echo(f"not compared: {len(result.other_configs)} other configuration(s), the arm's configuration "
-                       f"with the most runs kept (name one with --config-hash): {'; '.join(result.other_configs)}")
-        typer.echo(f"written to {result.out}/ (aggregate.md, aggregate.csv, per_task.csv, performance_profile.png)")
+    result = run_compare(cfg, lookup)
+    typer.echo(f"{len(result.arms)} arm(s) on {len(result.tasks)} task(s) ({', '.join(result.tasks)}); "
+               f"normalisation {normalise}" + ("; SIMULATED VLM" if result.simulated else ""))
+    if result.estimated:
+        typer.echo("ANCHORS ESTIMATED FROM THE DATA: 0 and 1 are arms' own means; read random-zoo for verdicts")
+    for task, r in result.pairs.iterrows():
+        typer.echo(f"  {task:<24} 0 = {r.lo:.4g} ({r.lo_from}); 1 = {r.hi:.4g} ({r.hi_from})")
+    for r in result.table.itertuples(index=False):
+        poi = "" if r.arm == "baseline" else (f"; P(> baseline) {r.poi_over_baseline:.2f} "
+                                               f"[{r.poi_over_baseline_low:.2f}, {r.poi_over_baseline_high:.2f}]")
+        typer.echo(f"  {r.arm:<16} IQM {r.iqm:.2f} [{r.iqm_low:.2f}, {r.iqm_high:.2f}]{poi}")
+    if result.counted_once:
+        typer.echo(f"counted once: {result.counted_once} run(s) that a second file also holds (same task, arm, "
+                   "seed and config hash)")
+    for arm, tasks in result.left_out.items():
+        typer.echo(f"left out: {arm} (missing on {', '.join(tasks)})")
+    if result.other_configs:
+        typer.echo(f"not compared: {len(result.other_configs)} other configuration(s), the arm's configuration "
+                   f"with the most runs kept (name one with --config-hash): {'; '.join(result.other_configs)}")
+    typer.echo(f"written to {result.out}/ (aggregate.md, aggregate.csv, per_task.csv, performance_profile.png)")

@@ -1,10 +1,5 @@
-"""The ``vlmrl`` command's entry point: pin the numeric path, choose a headless video driver,
-then load the app.
-
-``core.numeric_pin.apply`` must run before anything imports torch or numpy, and importing the
-app imports both, so this module imports nothing else until the pin is set. The process's settings
-are made here, where it starts, and nowhere in the library.
-"""
+"""The ``vlmrl`` entry point: pin the numeric path before anything imports torch or numpy, choose
+headless rendering, then load the app (the process's settings are made here, not in the library)."""
 
 from __future__ import annotations
 

@@ -9,7 +9,6 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import CachePath, TrackingUri, TrustPickle, UseCache, UserTasks
 from vlmrl_cli.vlm.config import DEFAULT_CACHE
 
@@ -26,16 +25,8 @@ SIMULATED_NOTICE = ("WARNING: SIMULATED VLM (not a real model): the GIF's VLM la
 
 
 def pick_child(run_id: str, children: Sequence[ChildRow], arm: str | None, seed: int | None) -> str:
-    """The run id of the training run of ``arm`` and ``seed`` among a sweep's ``children`` (``run_id``
-    is the sweep's parent run), or ``BadInput`` that says which of the two to give, or that no
-    child has them, and lists the children to pick from.
-
-    Example:
-        >>> from vlmrl_cli.report.children import ChildRow
-        >>> kids = [ChildRow(arm, 0, f"r-{arm}", "FINISHED", 0.0, 1.0) for arm in ("baseline", "hybrid")]
-        >>> pick_child("p", kids, "hybrid", 0)
-        'r-hybrid'
-    """
+    """The run id of the child of ``arm`` and ``seed`` of the sweep's parent run ``run_id``, or
+    ``BadInput`` that says what to give and lists the children."""
     from vlmrl_cli.core.errors import BadInput
 
     picked = [c for c in children if (arm is None or c.arm == arm) and (seed is None or c.seed == seed)]
@@ -59,17 +50,15 @@ def pick_child(run_id: str, children: Sequence[ChildRow], arm: str | None, seed:
 
 
 def resolve_child(run_id: str, tracking_uri: str | None, arm: str | None, seed: int | None) -> str:
-    """``run_id`` itself for a training run; for a sweep's parent run, its child of ``--arm``/``--seed``
-    (``pick_child``)."""
+    """``run_id`` for a training run; for a sweep's parent run, its child of ``--arm``/``--seed``."""
     from vlmrl_cli.core.errors import BadInput
-    from vlmrl_cli.tracking import access, schema, store
+    from vlmrl_cli.tracking import schema, store
 
-    access.check_store(tracking_uri, write=False, existing=True)  # before MLflow loads (a second)
+    client = store.connect_existing(tracking_uri)  # checked before MLflow loads (a second)
     from mlflow.exceptions import MlflowException
 
     from vlmrl_cli.report.children import children_of
 
-    client = store.connect_existing(tracking_uri)
     try:
         run = client.get_run(run_id)
     except MlflowException:
@@ -107,14 +96,13 @@ def evaluate(
     from vlmrl_cli.tasks.registry import command_tasks
     from vlmrl_cli.training.evaluate_trained import EvaluateConfig, evaluate_run
 
-    with exit_codes():
-        tasks = command_tasks(user_task or ())
-        cfg = EvaluateConfig(run_id=run_id, tracking_uri=tracking_uri, out=out, episodes=episodes,
-                             episode_index=episode_index, use_cache=use_cache, cache_path=cache_path,
-                             trust_pickle=trust_pickle)
-        cfg.validate()  # the flags, before the store is opened
-        cfg = dataclasses.replace(cfg, run_id=resolve_child(run_id, tracking_uri, arm, seed))
-        done = evaluate_run(cfg, tasks)
+    tasks = command_tasks(user_task or ())
+    cfg = EvaluateConfig(run_id=run_id, tracking_uri=tracking_uri, out=out, episodes=episodes,
+                         episode_index=episode_index, use_cache=use_cache, cache_path=cache_path,
+                         trust_pickle=trust_pickle)
+    cfg.validate()  # the flags, before the store is opened
+    cfg = dataclasses.replace(cfg, run_id=resolve_child(run_id, tracking_uri, arm, seed))
+    done = evaluate_run(cfg, tasks)
 
     run = done.run
     if run.arm.uses_vlm and run.simulated:  # first, and on the results' own stream: no capture can reorder them

@@ -19,7 +19,7 @@ from vlmrl_cli.core.fields import help_of, rules_of
 from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.study.settings import StudySettings
 from vlmrl_cli.tasks.registry import get_task
-from vlmrl_cli.training.config import DEFAULT_PRESET, DEFAULT_TASK, RunConfig, seed_count_problem, source_layers
+from vlmrl_cli.training.config import DEFAULT_PRESET, DEFAULT_TASK, RunConfig, seed_count_problem
 from vlmrl_cli.training.events import EXECUTORS
 from vlmrl_cli.training.overrides import nest
 from vlmrl_cli.training.presets import PPOConfig
@@ -32,25 +32,19 @@ TrackingUri = Annotated[
 OutDir = Annotated[Path | None, typer.Option("--out", help="Output folder (default under results/).")]
 Experiment = Annotated[str, typer.Option("--experiment", help="MLflow experiment name.")]
 
+
 def choices(names: Sequence[str]) -> str:
-    """The metavar listing an option's choices in the help (``[a|b|c]``); the values are checked,
-    with one-sentence errors, where the config is validated, before anything runs."""
+    """The metavar ``[a|b|c]`` of an option's choices (checked where the config is validated)."""
     return "[" + "|".join(names) + "]"
 
 
-
-
-# --- options built from a config's fields --------------------------------------------------
-
-#: Where a ``fields_command`` leaves the options typed on the command line for the command to read.
+#: Where a ``fields_command`` leaves the field options typed, for the command to read.
 _TYPED = "vlmrl.typed_fields"
 
 
 def field_option(f: dataclasses.Field[Any], hint: Any, flag: str, shown_default: bool | str = True) -> Any:
-    """The ``Annotated`` typer option ``flag`` (``--a/--no-a`` for a switch) of config field ``f``
-    (of type ``hint``), declared by the field alone: the help is the field's ``help``, the range
-    its ``Ge``/``Interval`` rules (an ``AtMost``, refused with its reason, and a ``Gt``, open, are
-    left to the config's validation)."""
+    """The ``Annotated`` typer option ``flag`` of config field ``f`` (of type ``hint``): the field's
+    help, and its ``Ge``/``Interval`` rules as the range (the others are left to validation)."""
     bounds: dict[str, Any] = {}
     for rule in rules_of(f):
         if isinstance(rule, Ge | Interval) and rule.ge is not None:
@@ -66,8 +60,8 @@ Syntax = Mapping[Any, tuple[Any, Callable[[Any, str], Any]]]
 
 @dataclass(frozen=True)
 class FieldOption:
-    """The option of one config field: its parameter name, the dotted config key it sets, its
-    flag, its ``Annotated`` typer option, its default and the parser of the flag's value."""
+    """The option of one config field: parameter name, dotted config key, flag, ``Annotated`` option,
+    default, and the parser of the flag's value."""
 
     name: str
     key: str
@@ -81,7 +75,6 @@ class FieldOption:
         from typer import main
         from typer.models import ParamMeta
 
-        # what typer does with an ``Annotated`` parameter: its first string is the flag
         kind, info = typing.get_args(self.annotation)[0], copy.copy(self.annotation.__metadata__[0])
         info.param_decls, info.default = (info.default, *(info.param_decls or ())), self.default
         meta = ParamMeta(name=self.name, default=info, annotation=kind)
@@ -90,28 +83,17 @@ class FieldOption:
         return main.get_click_param(meta)[0]  # type: ignore[attr-defined]  # pragma: no cover - older typer
 
 
-def _as_typed(value: Any, flag: str) -> Any:
-    return value
-
-
 def field_options(cls: type, key: str, flag_prefix: str = "", defaults: bool = True, shown_default: bool | str = True,
                   syntax: Syntax | None = None) -> tuple[FieldOption, ...]:
-    """One option per field of config dataclass ``cls`` (a nested dataclass field gets none: give
-    it its own ``field_options``): the flag ``--{flag_prefix}{name}`` (or the field's ``flag``),
-    setting the config key ``{key}.{name}`` when typed. Its default is the field's (else None,
-    where the default comes from elsewhere), the help states ``shown_default`` where it is text.
-    ``syntax`` maps a field type to the option's type and the parser of its text, where they differ.
-
-    Example:
-        >>> [o.flag for o in field_options(SimKnobs, "vlm.sim", "sim-")][:2]
-        ['--sim-flicker', '--sim-float-noise']
-    """
+    """One option per non-dataclass field of ``cls``: the flag ``--{flag_prefix}{name}`` (or the
+    field's ``flag``) sets ``{key}.{name}``; its default is the field's (None unless ``defaults``);
+    ``syntax`` maps a field type to the option's type and parser where they differ."""
     hints = typing.get_type_hints(cls)
     out = []
     for f in dataclasses.fields(cls):
         if dataclasses.is_dataclass(hints[f.name]):
             continue
-        kind, parse = (syntax or {}).get(hints[f.name], (hints[f.name] | None, _as_typed))
+        kind, parse = (syntax or {}).get(hints[f.name], (hints[f.name] | None, lambda value, _flag: value))
         default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc,operator]
         flag = str(f.metadata.get("flag", f"--{flag_prefix}{f.name.replace('_', '-')}"))
         out.append(FieldOption(f"{key}.{f.name}".replace(".", "_"), f"{key}.{f.name}", flag.split("/")[0],
@@ -120,9 +102,7 @@ def field_options(cls: type, key: str, flag_prefix: str = "", defaults: bool = T
 
 
 def fields_command(*options: FieldOption) -> type[TyperCommand]:
-    """The typer command class that adds ``options`` to a command's own: a command's options that
-    only set config keys, built from the config's fields (``field_options``). The command reads
-    those typed with ``typed_fields(ctx)``."""
+    """The typer command class that adds the field ``options`` to a command's own (read with ``typed_fields``)."""
 
     class FieldsCommand(TyperCommand):
         def __init__(self, *args: Any, params: list[Any], **kwargs: Any) -> None:
@@ -137,18 +117,11 @@ def fields_command(*options: FieldOption) -> type[TyperCommand]:
 
 
 def typed_fields(ctx: typer.Context) -> dict[str, Any]:
-    """The field options (``fields_command``) typed on the command line, as dotted config keys
-    (``{"vlm.sim.flicker": 0.3}``), each parsed to its field's value."""
+    """The field options typed on the command line, parsed, by dotted config key (``{"vlm.sim.flicker": 0.3}``)."""
     return {o.key: o.parse(value, o.flag) for o, value in ctx.meta.get(_TYPED, [])}
 
 
-def typed_flags_of(ctx: typer.Context, prefix: str) -> list[str]:
-    """The flags of the field options typed whose config key starts with ``prefix``."""
-    return [o.flag for o, _ in ctx.meta.get(_TYPED, []) if o.key.startswith(prefix)]
-
-
-#: The VLM options of the commands that ask a VLM: one per ``VLMConfig`` field and one per
-#: ``SimKnobs`` field (``--sim-*``, laid over the profile's knobs).
+#: The VLM options: one per ``VLMConfig`` and ``SimKnobs`` field (``--sim-*``, over the profile's knobs).
 VLM_OPTIONS = (*field_options(VLMConfig, "vlm"),
                *field_options(SimKnobs, "vlm.sim", "sim-", defaults=False, shown_default="the profile's"))
 _PROFILE_TASK = get_task(DEFAULT_TASK)
@@ -159,8 +132,7 @@ CachePath = _BY_KEY["vlm.cache_path"]
 
 
 def vlm_config(ctx: typer.Context) -> VLMConfig:
-    """The ``VLMConfig`` of the VLM options typed (``VLM_OPTIONS``), validated: the profile's
-    knobs (a generic one or the default task's), then the knobs given."""
+    """The validated ``VLMConfig`` of the VLM options typed, over the default task's profile knobs."""
     from vlmrl_cli.training.validation import validate_as
 
     raw = nest(typed_fields(ctx).items()).get("vlm", {})
@@ -176,11 +148,9 @@ def given(ctx: typer.Context, name: str) -> bool:
 
 def check_sim_flags(ctx: typer.Context, arms: Sequence[str], backend: str,
                     remedy: str = "drop it, or add an arm that uses the VLM (e.g. --arms baseline,hybrid)") -> None:
-    """``BadInput`` for a simulated-VLM knob (``--sim-*``) typed for runs that never ask it: no arm
-    of ``arms`` queries a VLM (the message then ends with ``remedy``), or the VLM is not the
-    simulated one (``backend``). A knob from a config file is left alone: one file may serve
-    several commands."""
-    typed = typed_flags_of(ctx, "vlm.sim.")
+    """``BadInput`` for a ``--sim-*`` flag typed for runs that never ask the simulated VLM (no arm of
+    ``arms`` asks a VLM: then ``remedy``; or another ``backend``); a config file's knobs are left alone."""
+    typed = [o.flag for o, _ in ctx.meta.get(_TYPED, []) if o.key.startswith("vlm.sim.")]
     if not typed:
         return
     if not any(ARMS[arm].uses_vlm for arm in arms):
@@ -191,8 +161,6 @@ def check_sim_flags(ctx: typer.Context, arms: Sequence[str], backend: str,
                        "pass --vlm sim.")
 
 
-# --- the options of commands that train (`run`, `calibrate`) and how they layer -----------
-
 def _field(cls: type, name: str) -> dataclasses.Field[Any]:
     return next(f for f in dataclasses.fields(cls) if f.name == name)
 
@@ -200,9 +168,6 @@ def _field(cls: type, name: str) -> dataclasses.Field[Any]:
 #: The verdicts' knobs of `report`, declared with the study's (``StudySettings``).
 Margin = field_option(_field(StudySettings, "margin"), float, "--margin", shown_default=False)
 Adjust = field_option(_field(StudySettings, "adjust"), str, "--adjust", shown_default=False)
-
-
-
 Arms = Annotated[str, typer.Option("--arms", help=f"Comma-separated arms, any of: {', '.join(ARMS)}.")]
 Seeds = Annotated[int, typer.Option("--seeds", help="Number of seeds: 0..N-1.")]
 SeedList = Annotated[str | None, typer.Option("--seed-list", help="Explicit seeds, e.g. 3,7,11.")]
@@ -251,13 +216,7 @@ _RUN_KEYS = {"arms": "arms", "task": "task", "preset": "preset", "timesteps": "p
 
 
 def list_entries(text: str, flag: str) -> list[str]:
-    """``"a, b"`` -> ["a", "b"]; an empty entry (``"a,,b"``, a trailing comma, an empty string) is
-    ``BadInput``: a typo or an empty shell variable, not a choice.
-
-    Example:
-        >>> list_entries("baseline, hybrid", "--arms")
-        ['baseline', 'hybrid']
-    """
+    """``"a, b"`` -> ["a", "b"]; an empty entry (``"a,,b"``, ``""``) is ``BadInput``."""
     entries = [t.strip() for t in text.split(",")]
     if not text.strip() or any(not t for t in entries):
         raise BadInput(f"{flag} '{text}' has an empty entry; list the values separated by single commas.")
@@ -283,9 +242,8 @@ def seeds_of(n: int, seed_list: str | None) -> tuple[int, ...]:
 
 
 def typed_flags(ctx: typer.Context) -> dict[str, Any]:
-    """The options of a training command typed on the command line, as dotted config keys: the top
-    layer of its configuration (``{"arms": ["baseline"], "ppo.timesteps": 512}``), its field
-    options (``typed_fields``) included."""
+    """The options of a training command typed on the command line, by dotted config key: the top
+    layer of its configuration (``{"arms": ["baseline"], "ppo.timesteps": 512}``)."""
     p = ctx.params
     flags: dict[str, Any] = {key: p[param] for param, key in _RUN_KEYS.items() if given(ctx, param)}
     if "arms" in flags:
@@ -295,9 +253,3 @@ def typed_flags(ctx: typer.Context) -> dict[str, Any]:
     if given(ctx, "seeds") or given(ctx, "seed_list"):
         flags["seeds"] = list(seeds_of(p["seeds"], p.get("seed_list")))
     return flags | typed_fields(ctx)
-
-
-def config_layers(ctx: typer.Context, config: Path | None, sets: list[str] | None) -> list[dict[str, Any]]:
-    """The raw layers of a training command's configuration above the preset, lowest first: the
-    config file, ``--set`` assignments, then the flags typed on the command line."""
-    return source_layers(config, typed_flags(ctx), sets or [])

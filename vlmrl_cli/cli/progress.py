@@ -1,5 +1,4 @@
-"""Progress: rich rows for a sweep (one per (arm, seed) run and an overall row with the ETA), and
-plain lines for a log or a pipe."""
+"""Progress: rich rows for a sweep or a retrain on a terminal, plain lines for a log or a pipe."""
 
 from __future__ import annotations
 
@@ -7,7 +6,6 @@ import math
 import sys
 import time
 from collections.abc import Sequence
-from types import TracebackType
 from typing import TYPE_CHECKING
 
 import typer
@@ -54,9 +52,7 @@ class RichSweepReporter:
         self._bars.start()
         return self
 
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
+    def __exit__(self, *exc: object) -> None:
         self._bars.stop()
 
     def planned(self, pending: list[TrainJob], done: list[TrainJob]) -> None:
@@ -89,10 +85,9 @@ class RichSweepReporter:
         if result.status == "FINISHED":
             status = (f"[green]done[/] eval success {result.eval_success_rate:.0%}, "
                       f"len {result.eval_mean_length:.0f}")
-        elif result.status in ("SKIPPED", "CANCELLED"):
-            status = f"[yellow]{result.status}[/] {result.error or ''}"[:80]
         else:
-            status = f"[red]{result.status}[/] {result.error or ''}"[:80]
+            color = "yellow" if result.status in ("SKIPPED", "CANCELLED") else "red"
+            status = f"[{color}]{result.status}[/] {result.error or ''}"[:80]
         self._bars.update(task, status=status)
         self._finished += 1
         if not self.console.is_terminal:
@@ -116,23 +111,8 @@ def exit_if_failed(console: Console, failed: Sequence[JobResult], skipped: str =
     raise typer.Exit(1)
 
 
-def progress_line(runs_done: int, runs: int, steps_done: int, steps: int, elapsed_s: float) -> str:
-    """One plain line of progress for a log: runs and steps done, the time spent, and the time left
-    at the pace so far (steps, so that a long run weighs as long).
-
-    Example:
-        >>> progress_line(1, 4, 25_000, 100_000, 90.0)
-        'progress: 1/4 run(s), 25,000/100,000 steps, 1.5 min elapsed, about 4.5 min left'
-    """
-    left = elapsed_s * (steps - steps_done) / steps_done if steps_done else math.nan
-    tail = "" if math.isnan(left) else f", about {left / 60:,.1f} min left"
-    return (f"progress: {runs_done}/{runs} run(s), {steps_done:,}/{steps:,} steps, {elapsed_s / 60:,.1f} min "
-            f"elapsed{tail}")
-
-
 class RetrainProgress:
-    """Retraining's progress on stderr, in steps so that a long run weighs as long: a bar on a
-    terminal; in a log or a pipe, a plain line per finished run."""
+    """Retraining's progress on stderr in steps: a bar on a terminal, else a line per finished run."""
 
     def __init__(self, runs: int, steps: int) -> None:
         err = Console(stderr=True, highlight=False, soft_wrap=True)
@@ -158,6 +138,9 @@ class RetrainProgress:
         self._bar.advance(self._task, steps)
         self.runs_done += 1
         self.steps_done += steps
-        if self.out is not None:
-            print(progress_line(self.runs_done, self.runs, self.steps_done, self.steps,
-                                time.monotonic() - self.started), file=self.out, flush=True)
+        if self.out is not None:  # the time left at the pace so far, in steps
+            elapsed = time.monotonic() - self.started
+            left = elapsed * (self.steps - self.steps_done) / self.steps_done if self.steps_done else math.nan
+            tail = "" if math.isnan(left) else f", about {left / 60:,.1f} min left"
+            print(f"progress: {self.runs_done}/{self.runs} run(s), {self.steps_done:,}/{self.steps:,} steps, "
+                  f"{elapsed / 60:,.1f} min elapsed{tail}", file=self.out, flush=True)

@@ -10,7 +10,6 @@ from rich.console import Console
 
 from vlmrl_cli.analysis.defaults import DEFAULT_MARGIN
 from vlmrl_cli.analysis.multiplicity import DEFAULT_ADJUST
-from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import Adjust, AllowMixedPaths, Experiment, Margin, OutDir, TrackingUri, UserTasks
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.report.config import check_thresholds
@@ -22,12 +21,7 @@ DEFAULT_OUT = Path("results/report")
 
 
 def parse_thresholds(text: str) -> tuple[float, ...]:
-    """``"-190,-160,-130"`` -> ``(-190.0, -160.0, -130.0)``; anything else is ``BadInput``.
-
-    Example:
-        >>> parse_thresholds("-190, -130")
-        (-190.0, -130.0)
-    """
+    """``"-190,-160,-130"`` -> ``(-190.0, -160.0, -130.0)``; anything else is ``BadInput``."""
     try:
         values = tuple(float(v) for v in text.split(",") if v.strip())
     except ValueError:
@@ -39,8 +33,7 @@ def parse_thresholds(text: str) -> tuple[float, ...]:
 
 
 def console_summary(table: Table2, experiment: str) -> list[str]:
-    """Table 2's headline rows as short plain lines (readable at 80 columns and in a pipe); the
-    full table is in table2.md."""
+    """Table 2's headline rows as short plain lines (the full table is in table2.md)."""
     from vlmrl_cli.report.markdown import format_cell, format_speedup
     from vlmrl_cli.report.table2 import BASELINE, threshold_key
 
@@ -77,24 +70,23 @@ def report(
     from vlmrl_cli.tasks.registry import command_tasks
     from vlmrl_cli.tracking.access import check_store
 
-    with exit_codes():
-        tasks = command_tasks(user_task or ())
-        cfg = ReportConfig(experiment=experiment, tracking_uri=tracking_uri, out=out or DEFAULT_OUT,
-                           thresholds=parse_thresholds(thresholds) if thresholds is not None else None,
-                           window=window, margin=margin, adjust=adjust,
-                           allow_mixed_paths=allow_mixed_paths)
-        # every flag, the folder and the store are checked before the analysis stack loads (seconds)
-        check_report(cfg)
-        check_out_folder(cfg.out)
-        check_store(cfg.tracking_uri, write=False, existing=True)
-        from vlmrl_cli.report.writer import write_report
+    tasks = command_tasks(user_task or ())
+    cfg = ReportConfig(experiment=experiment, tracking_uri=tracking_uri, out=out or DEFAULT_OUT,
+                       thresholds=parse_thresholds(thresholds) if thresholds is not None else None,
+                       window=window, margin=margin, adjust=adjust,
+                       allow_mixed_paths=allow_mixed_paths)
+    # every flag, the folder and the store are checked before the analysis stack loads (seconds)
+    check_report(cfg)
+    check_out_folder(cfg.out)
+    check_store(cfg.tracking_uri, write=False, existing=True)
+    from vlmrl_cli.report.writer import write_report
 
-        result = write_report(cfg, tasks)
-        console = Console()
-        for line in console_summary(result.table, experiment):
-            console.print(line, markup=False, highlight=False, soft_wrap=True)
-        for w in result.warnings:
-            console.print(f"[yellow]warning:[/] {w}")
-        console.print(f"Report written to {result.out}/ ({len(result.files)} files; see report.md)")
-        if result.report_run_id:
-            console.print(f"Logged as MLflow run {result.report_run_id} (vlmrl.kind=report).")
+    result = write_report(cfg, tasks)
+    console = Console()
+    for line in console_summary(result.table, experiment):
+        console.print(line, markup=False, highlight=False, soft_wrap=True)
+    for w in result.warnings:
+        console.print(f"[yellow]warning:[/] {w}")
+    console.print(f"Report written to {result.out}/ ({len(result.files)} files; see report.md)")
+    if result.report_run_id:
+        console.print(f"Logged as MLflow run {result.report_run_id} (vlmrl.kind=report).")

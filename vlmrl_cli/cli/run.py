@@ -7,7 +7,6 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import (
     Arms,
     ConfigFile,
@@ -66,31 +65,30 @@ def run(
     from vlmrl_cli.tracking.access import check_store
 
     console = Console(stderr=False)
-    with exit_codes():
-        cfg = RunConfig.from_sources(config, typed_flags(ctx), sets or [], tasks=command_tasks([task]))
-        check_sim_flags(ctx, cfg.arms, cfg.vlm.backend)
-        check_store(cfg.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
-        # the sweep's modules load torch and MLflow (seconds): only once the store is known to be usable
-        from vlmrl_cli.sweep.preflight import preflight
-        from vlmrl_cli.sweep.runner import run_sweep
+    cfg = RunConfig.from_sources(config, typed_flags(ctx), sets or [], tasks=command_tasks([task]))
+    check_sim_flags(ctx, cfg.arms, cfg.vlm.backend)
+    check_store(cfg.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
+    # the sweep's modules load torch and MLflow (seconds): only once the store is known to be usable
+    from vlmrl_cli.sweep.preflight import preflight
+    from vlmrl_cli.sweep.runner import run_sweep
 
-        if dry_run:
-            typer.echo(dry_run_text(cfg, vlm_qps), nl=False)
-            return
-        preflight(cfg)  # refuse before the header; run_sweep(checked=True) then does not check again
-        print_header(console, cfg)
-        with RichSweepReporter(console) as reporter:
-            summary = run_sweep(cfg, reporter, checked=True)
-        if summary.elsewhere:
-            console.print(f"[yellow]{len(summary.elsewhere)} job(s) are being trained by another live sweep and "
-                          f"were left to it: {', '.join(summary.elsewhere)}[/]")
-        if summary.parent_run_id is None:
-            if not summary.elsewhere:
-                console.print("Nothing to train: every (arm, seed) run of this configuration is already FINISHED.")
-            return
-        console.print(sweep_summary_line(summary))
-        print_children(console, cfg, summary.experiment_id)
-        exit_if_failed(console, summary.failed)
+    if dry_run:
+        typer.echo(dry_run_text(cfg, vlm_qps), nl=False)
+        return
+    preflight(cfg)  # refuse before the header; run_sweep(checked=True) then does not check again
+    print_header(console, cfg)
+    with RichSweepReporter(console) as reporter:
+        summary = run_sweep(cfg, reporter, checked=True)
+    if summary.elsewhere:
+        console.print(f"[yellow]{len(summary.elsewhere)} job(s) are being trained by another live sweep and "
+                      f"were left to it: {', '.join(summary.elsewhere)}[/]")
+    if summary.parent_run_id is None:
+        if not summary.elsewhere:
+            console.print("Nothing to train: every (arm, seed) run of this configuration is already FINISHED.")
+        return
+    console.print(sweep_summary_line(summary))
+    print_children(console, cfg, summary.experiment_id)
+    exit_if_failed(console, summary.failed)
 
 
 def print_header(console: Console, cfg: RunConfig) -> None:
@@ -121,8 +119,7 @@ def sweep_summary_line(summary: SweepSummary) -> str:
 
 
 def print_children(console: Console, cfg: RunConfig, experiment_id: str) -> None:
-    """The sweep's training runs, one plain line each (readable at 80 columns and in a pipe): the ids
-    `vlmrl evaluate` takes."""
+    """The sweep's training runs, one plain line each: the ids `vlmrl evaluate` takes."""
     from vlmrl_cli.report.children import child_rows, format_rows, header
     from vlmrl_cli.tracking import store
 
@@ -138,10 +135,8 @@ def print_children(console: Console, cfg: RunConfig, experiment_id: str) -> None
 
 
 def dry_run_text(cfg: RunConfig, vlm_qps: float = 3.0) -> str:
-    """The resolved config as TOML, then the job list as TOML comments (with the run id, steps to
-    the task's top threshold (MountainCar's -130) and detached success of each job already
-    FINISHED) and what the pending runs will cost (wall time; a real VLM's queries and time at
-    ``vlm_qps``), so the whole text is a config file that ``--config`` reads back."""
+    """The resolved config as TOML, then as comments the jobs (a FINISHED one's run id, steps to the
+    top threshold and detached success) and the pending runs' cost: a file ``--config`` reads back."""
     from vlmrl_cli.report.children import child_rows, format_rows
     from vlmrl_cli.sweep.cost import estimate_sweeps, vlm_cost
     from vlmrl_cli.sweep.runner import dry_plan

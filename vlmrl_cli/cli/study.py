@@ -1,11 +1,4 @@
-"""`vlmrl study`: regimes x arms x seeds and the hybrid's VLM-quality variants, one regime map and report.
-
-The study's own options are the fields of ``StudySettings`` (``study/settings.py``), one option
-per field, built from the field (``SETTING_OPTIONS``, ``options.field_options``); its runs take
-`vlmrl run`'s options (``RUN_OPTIONS``, in the signature) and the VLM options (``VLM_OPTIONS``);
-``CLI_ONLY`` are the few that set no config key. Which layer wins (file < ``--set`` < flags)
-is ``StudyConfig.from_sources``'s business, not this module's.
-"""
+"""`vlmrl study`: regimes x arms x seeds and the hybrid's VLM-quality variants, one regime map and report."""
 
 from __future__ import annotations
 
@@ -18,7 +11,6 @@ import typer
 from rich.console import Console
 
 from vlmrl_cli.cli import options as opt
-from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.progress import exit_if_failed, regime_reporter
 from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.study.settings import DEFAULT_ARMS, DEFAULT_EXPERIMENT, DEFAULT_SEEDS, Regimes, StudySettings
@@ -43,8 +35,7 @@ CLI_ONLY = ("config", "sets", "dry_run", "no_train")
 
 
 def _names(text: str, flag: str) -> list[str]:
-    """``"a,b"`` -> ["a", "b"]; ``"none"`` -> []; ``""`` or ``","`` is ``BadInput`` (an empty
-    shell variable, not a choice: 'none' says it on purpose)."""
+    """``"a,b"`` -> ["a", "b"]; ``"none"`` -> []; ``""`` or ``","`` is ``BadInput``."""
     if text.strip().lower() == "none":
         return []
     names = [t.strip() for t in text.split(",") if t.strip()]
@@ -66,14 +57,12 @@ def _regimes(texts: list[str], flag: str) -> dict[str, dict[str, Any]]:
     return regimes_of(texts)
 
 
-#: How the text of a flag becomes its field's value, by the field's type: (the option's type, the parser).
 _SYNTAX: opt.Syntax = {
     tuple[str, ...]: (str | None, _names),
     tuple[float, ...]: (str | None, _numbers),
     Regimes: (list[str] | None, _regimes),
 }
-#: The study's own options, one per ``StudySettings`` field; with the VLM options, the options
-#: that `vlmrl study` adds to its signature's (``cli/app.py`` registers it with them).
+#: The options `vlmrl study` adds to its signature's (``cli/app.py`` registers it with them).
 SETTING_OPTIONS = opt.field_options(StudySettings, "study", defaults=False, shown_default=False, syntax=_SYNTAX)
 FIELD_OPTIONS = (*SETTING_OPTIONS, *opt.VLM_OPTIONS)
 
@@ -103,24 +92,23 @@ def study(
     from vlmrl_cli.tracking.access import check_store
 
     console = Console()
-    with exit_codes():
-        cfg = StudyConfig.from_sources(config, opt.typed_flags(ctx), sets or [],
-                                       tasks=command_tasks([task]))
-        check_out_folder(cfg.out)  # the pipeline checks it again; here, before its modules load (seconds)
-        check_store(cfg.base.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
-        # the pipeline loads torch and MLflow (seconds): only once the store is known to be usable
-        from vlmrl_cli.study.pipeline import estimate_cost, finished_per_seed, power_lines, run_study
+    cfg = StudyConfig.from_sources(config, opt.typed_flags(ctx), sets or [],
+                                   tasks=command_tasks([task]))
+    check_out_folder(cfg.out)  # the pipeline checks it again; here, before its modules load (seconds)
+    check_store(cfg.base.tracking_uri, write=not dry_run)  # before MLflow, the header or any file
+    # the pipeline loads torch and MLflow (seconds): only once the store is known to be usable
+    from vlmrl_cli.study.pipeline import estimate_cost, finished_per_seed, power_lines, run_study
 
-        print_grid(console, cfg)
-        cost = estimate_cost(cfg)
-        console.print(f"cost estimate: {cost.line()}", markup=False)
-        if dry_run:
-            for line in power_lines(cfg, finished_per_seed(cfg)):
-                console.print(line, markup=False)
-            return
-        result = run_study(cfg, functools.partial(regime_reporter, console),
-                           command=" ".join(["vlmrl", *sys.argv[1:]]), cost=cost, train=not no_train)
-        print_result(console, result, cfg.out)
+    print_grid(console, cfg)
+    cost = estimate_cost(cfg)
+    console.print(f"cost estimate: {cost.line()}", markup=False)
+    if dry_run:
+        for line in power_lines(cfg, finished_per_seed(cfg)):
+            console.print(line, markup=False)
+        return
+    result = run_study(cfg, functools.partial(regime_reporter, console),
+                       command=" ".join(["vlmrl", *sys.argv[1:]]), cost=cost, train=not no_train)
+    print_result(console, result, cfg.out)
 
 
 def print_grid(console: Console, cfg: StudyConfig) -> None:
@@ -141,8 +129,7 @@ def print_grid(console: Console, cfg: StudyConfig) -> None:
 
 
 def print_result(console: Console, result: StudyResult, out: Path) -> None:
-    """What the study did: the failed runs (then exit 1: nothing was analysed), else its summary,
-    wall time and files."""
+    """What the study did: the failed runs (then exit 1), else its summary, wall time and files."""
     exit_if_failed(console, result.failed, "analysed")
     for line in result.summary:
         console.print(line, markup=False)

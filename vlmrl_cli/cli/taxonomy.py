@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import math
 import sys
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -13,7 +11,6 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import Experiment, OutDir, TaskOpt, TrackingUri, vlm_config
 from vlmrl_cli.vlm.config import VLMConfig
 
@@ -27,19 +24,6 @@ States = Annotated[
 ]
 
 
-@contextmanager
-def _probe_progress(console: Console) -> Iterator[Callable[[int, int], None]]:
-    """A transient "probing frames" bar on stderr (off in a pipe); yields its ``progress(done, total)``."""
-    with Progress(TextColumn("probing frames"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  console=console, transient=True, disable=not sys.stderr.isatty()) as bar:
-        probe_bar = bar.add_task("probe", total=None)
-
-        def progress(done: int, total: int) -> None:
-            bar.update(probe_bar, completed=done, total=total)
-
-        yield progress
-
-
 def taxonomy(
     ctx: typer.Context,
     task: TaskOpt = None,
@@ -49,29 +33,29 @@ def taxonomy(
     experiment: Experiment = "vlmrl-taxonomy",
 ) -> None:
     """Probe a VLM with float, box and MCQ prompts (paper Section 2); write Table 1 and Figure 1."""
-    with exit_codes():
-        vlm_cfg = vlm_config(ctx)
-        _check_flags(vlm_cfg, states, out, tracking_uri, experiment)
+    vlm_cfg = vlm_config(ctx)
+    _check_flags(vlm_cfg, states, out, tracking_uri, experiment)
     # the probe's modules load scipy and pandas (seconds): only once the flags are known to be usable
     from vlmrl_cli.probe.states import DEFAULT_STATES
     from vlmrl_cli.probe.taxonomy import TaxonomyConfig, run_taxonomy
     from vlmrl_cli.tasks.registry import command_tasks, paper_task
-    from vlmrl_cli.tracking.access import check_store
 
-    with exit_codes():
-        chosen = paper_task() if task is None else command_tasks([task])(task)
-        numbers = chosen.numbers is not None  # else the milestone MCQ alone (``probe/milestones.py``)
-        default_out = vlm_cfg.backend if numbers else f"{chosen.name}-{vlm_cfg.backend}"
-        cfg = TaxonomyConfig(
-            vlm=vlm_cfg,
-            states=states if states is not None or (numbers and vlm_cfg.backend == "replay") else DEFAULT_STATES,
-            out=out if out is not None else Path("results") / "taxonomy" / default_out,
-            tracking_uri=tracking_uri,
-            experiment=experiment,
-        )
-        check_store(cfg.tracking_uri)  # before MLflow, the VLM or any file
-        with _probe_progress(Console(stderr=True)) as progress:
-            result = run_taxonomy(cfg, progress=progress, task=None if task is None else chosen)
+    chosen = paper_task() if task is None else command_tasks([task])(task)
+    numbers = chosen.numbers is not None  # else the milestone MCQ alone (``probe/milestones.py``)
+    default_out = vlm_cfg.backend if numbers else f"{chosen.name}-{vlm_cfg.backend}"
+    cfg = TaxonomyConfig(
+        vlm=vlm_cfg,
+        states=states if states is not None or (numbers and vlm_cfg.backend == "replay") else DEFAULT_STATES,
+        out=out if out is not None else Path("results") / "taxonomy" / default_out,
+        tracking_uri=tracking_uri,
+        experiment=experiment,
+    )
+    # a transient bar on stderr, off in a pipe
+    with Progress(TextColumn("probing frames"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  console=Console(stderr=True), transient=True, disable=not sys.stderr.isatty()) as bar:
+        probe = bar.add_task("probe", total=None)
+        result = run_taxonomy(cfg, progress=lambda done, total: bar.update(probe, completed=done, total=total),
+                              task=None if task is None else chosen)
     if result.simulated:
         typer.secho("WARNING: SIMULATED VLM (not a real model): the answers come from a pixel reader with "
                     "noise.", fg=typer.colors.YELLOW, err=True)
@@ -115,9 +99,7 @@ def _milestone_lines(result: TaxonomyResult, task: Task) -> list[str]:
 
 def _check_flags(vlm_cfg: VLMConfig, states: int | None, out: Path | None, tracking_uri: str | None,
                  experiment: str) -> None:
-    """The checks of the probe's configuration (``TaxonomyConfig``, ``run_taxonomy``) that need no
-    task, made before the probe's modules load, in the order the probe makes them: the sweep's
-    size and the names, the store, the output folder, the VLM."""
+    """The probe's checks that need no task, before its modules load (seconds), in the probe's order."""
     from vlmrl_cli.core.errors import BadInput
     from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
     from vlmrl_cli.core.paths import check_out_folder

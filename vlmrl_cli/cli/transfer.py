@@ -7,7 +7,6 @@ from typing import Annotated
 
 import typer
 
-from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import Experiment, TrackingUri, TrustPickle
 from vlmrl_cli.core.errors import BadInput
 
@@ -31,30 +30,28 @@ def export(
     histories, config; models with --models) to one file that `vlmrl import` reads into another store."""
     from vlmrl_cli.core.names import experiment_problem, tracking_uri_problem
     from vlmrl_cli.core.paths import file_problem
-    from vlmrl_cli.tracking import access, store
-    from vlmrl_cli.tracking.transfer import export_runs, exported_ids
+    from vlmrl_cli.tracking import store
+    from vlmrl_cli.tracking.transfer import export_runs, read_records
 
-    with exit_codes():
-        problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
-        if problem:
-            raise BadInput(problem + ".")
-        if out.exists() and out.is_dir():
-            raise BadInput(f"--out {out} is a folder; name the export file, e.g. {out / 'runs.jsonl.gz'}.")
-        if not out.parent.is_dir():
-            raise BadInput(f"--out {out}: the folder {out.parent} does not exist; create it first.")
-        unwritable = file_problem(out)
-        if unwritable:
-            raise BadInput(f"--out {out}: cannot write the export file there ({unwritable}); pass --out to a file in "
-                           "a writable folder.")
-        missing = [p for p in skip_exported or [] if not p.is_file()]
-        if missing:
-            raise BadInput(f"--skip-exported {missing[0]}: no such export file.")
-        skip = exported_ids(skip_exported or [])
-        access.check_store(tracking_uri, write=False, existing=True)
-        client = store.connect_existing(tracking_uri)
-        summary = export_runs(client, experiment, out, models=models, skip=skip)
-        typer.echo(f"exported {summary.written} FINISHED training run(s) of '{experiment}' to {out} "
-                   f"({out.stat().st_size / 1e6:.1f} MB); {summary.skipped} left out as exported before")
+    problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
+    if problem:
+        raise BadInput(problem + ".")
+    if out.exists() and out.is_dir():
+        raise BadInput(f"--out {out} is a folder; name the export file, e.g. {out / 'runs.jsonl.gz'}.")
+    if not out.parent.is_dir():
+        raise BadInput(f"--out {out}: the folder {out.parent} does not exist; create it first.")
+    unwritable = file_problem(out)
+    if unwritable:
+        raise BadInput(f"--out {out}: cannot write the export file there ({unwritable}); pass --out to a file in "
+                       "a writable folder.")
+    missing = [p for p in skip_exported or [] if not p.is_file()]
+    if missing:
+        raise BadInput(f"--skip-exported {missing[0]}: no such export file.")
+    skip = {r["source_run_id"] for p in skip_exported or [] for r in read_records(p)}
+    client = store.connect_existing(tracking_uri)
+    summary = export_runs(client, experiment, out, models=models, skip=skip)
+    typer.echo(f"exported {summary.written} FINISHED training run(s) of '{experiment}' to {out} "
+               f"({out.stat().st_size / 1e6:.1f} MB); {summary.skipped} left out as exported before")
 
 
 def import_(
@@ -70,20 +67,19 @@ def import_(
     from vlmrl_cli.tracking import access, store
     from vlmrl_cli.tracking.transfer import import_runs, read_export, refuse_pickles
 
-    with exit_codes():
-        problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
-        if problem:
-            raise BadInput(problem + ".")
-        access.check_store(tracking_uri)  # before MLflow or any file
-        for path in paths:
-            if not path.is_file():
-                raise BadInput(f"there is no export file {path}; write one with `vlmrl export --out FILE`.")
-        exports = [read_export(path) for path in paths]  # every file whole, before the store exists
-        for export in exports:
-            refuse_pickles(export, trust_pickle)
-        client = store.connect(tracking_uri)
-        for export in exports:
-            summary = import_runs(client, export, experiment, trust_pickle=trust_pickle)
-            checked = "" if export.digest_checked else " (format 1: the file carries no digest to check)"
-            typer.echo(f"{export.path}: imported {summary.written} run(s) into '{experiment}'; {summary.skipped} "
-                       f"already present{checked}")
+    problem = experiment_problem(experiment) or tracking_uri_problem(tracking_uri)
+    if problem:
+        raise BadInput(problem + ".")
+    access.check_store(tracking_uri)  # before MLflow or any file
+    for path in paths:
+        if not path.is_file():
+            raise BadInput(f"there is no export file {path}; write one with `vlmrl export --out FILE`.")
+    exports = [read_export(path) for path in paths]  # every file whole, before the store exists
+    for export in exports:
+        refuse_pickles(export, trust_pickle)
+    client = store.connect(tracking_uri)
+    for export in exports:
+        summary = import_runs(client, export, experiment, trust_pickle=trust_pickle)
+        checked = "" if export.digest_checked else " (format 1: the file carries no digest to check)"
+        typer.echo(f"{export.path}: imported {summary.written} run(s) into '{experiment}'; {summary.skipped} "
+                   f"already present{checked}")

@@ -8,7 +8,6 @@ from typing import Annotated
 
 import typer
 
-from vlmrl_cli.cli.exit_codes import exit_codes
 from vlmrl_cli.cli.options import Experiment, TrackingUri, UserTasks, given
 from vlmrl_cli.cli.progress import RetrainProgress
 from vlmrl_cli.core.errors import BadInput
@@ -52,38 +51,37 @@ def verify(
     from vlmrl_cli.training import verify as lib
 
     console = Console(highlight=False, soft_wrap=True)
-    with exit_codes():
-        store_flags = [flag for flag, name in (("--tracking-uri", "tracking_uri"), ("--experiment", "experiment"))
-                       if given(ctx, name)]
-        if source is not None and store_flags:  # the file's runs would be verified, the store's ignored
-            verb = "choose" if len(store_flags) > 1 else "chooses"
-            raise BadInput(f"{' and '.join(store_flags)} {verb} a store's runs, and {source} is an export file: verify "
-                           f"reads one or the other; drop {' and '.join(store_flags)} to verify the file, or the file "
-                           "to verify the store's runs.")
-        tasks = command_tasks(user_task or ())
-        runs, where = lib.recorded_runs(source, experiment, tracking_uri)
-        chosen = lib.choose(runs, run_ids=run_id or (), seeds=seed or (), arms=arm or (), sample=sample,
-                            sample_seed=sample_seed, source=where)
-        jobs = [lib.rebuild_job(run, tasks) for run in chosen]  # every config is rebuilt before anything trains
-        cost = retrain_estimate([(job, run.wall_s) for job, run in zip(jobs, chosen, strict=True)], workers)
-        console.print(f"verifying {len(chosen)} of {len(runs)} run(s) of {where}: {cost.minutes_range()} on "
-                      f"{cost.workers} worker(s) ({cost.how})")
-        here_tags = lib.here_paths()  # once: this process's path does not change while it runs
-        console.print(f"here: {lib.describe_paths(here_tags)}")
-        for run, job in zip(chosen, jobs, strict=True):
-            console.print(f"  {run.run_id[:12]}  {run.name:<28} {len(run.native_returns)} episodes, "
-                          f"{job.timesteps:,} steps")
-        if dry_run:
-            return
-        differ = 0
-        steps = {run.run_id: job.timesteps for run, job in zip(chosen, jobs, strict=True)}
-        with RetrainProgress(len(chosen), sum(steps.values())) as progress:
-            for outcome in lib.verify_many(chosen, tasks, workers=workers):
-                progress.advance(steps[outcome.run.run_id])
-                differ += not outcome.identical
-                for line in outcome.lines(here_tags):  # both sides' paths, run by run
-                    console.print(line)
-        console.print(f"{len(chosen) - differ} identical, {differ} differ")
+    store_flags = [flag for flag, name in (("--tracking-uri", "tracking_uri"), ("--experiment", "experiment"))
+                   if given(ctx, name)]
+    if source is not None and store_flags:  # the file's runs would be verified, the store's ignored
+        verb = "choose" if len(store_flags) > 1 else "chooses"
+        raise BadInput(f"{' and '.join(store_flags)} {verb} a store's runs, and {source} is an export file: verify "
+                       f"reads one or the other; drop {' and '.join(store_flags)} to verify the file, or the file "
+                       "to verify the store's runs.")
+    tasks = command_tasks(user_task or ())
+    runs, where = lib.recorded_runs(source, experiment, tracking_uri)
+    chosen = lib.choose(runs, run_ids=run_id or (), seeds=seed or (), arms=arm or (), sample=sample,
+                        sample_seed=sample_seed, source=where)
+    jobs = [lib.rebuild_job(run, tasks) for run in chosen]  # every config is rebuilt before anything trains
+    cost = retrain_estimate([(job, run.wall_s) for job, run in zip(jobs, chosen, strict=True)], workers)
+    console.print(f"verifying {len(chosen)} of {len(runs)} run(s) of {where}: {cost.minutes_range()} on "
+                  f"{cost.workers} worker(s) ({cost.how})")
+    here_tags = lib.here_paths()  # once: this process's path does not change while it runs
+    console.print(f"here: {lib.describe_paths(here_tags)}")
+    for run, job in zip(chosen, jobs, strict=True):
+        console.print(f"  {run.run_id[:12]}  {run.name:<28} {len(run.native_returns)} episodes, "
+                      f"{job.timesteps:,} steps")
+    if dry_run:
+        return
+    differ = 0
+    steps = {run.run_id: job.timesteps for run, job in zip(chosen, jobs, strict=True)}
+    with RetrainProgress(len(chosen), sum(steps.values())) as progress:
+        for outcome in lib.verify_many(chosen, tasks, workers=workers):
+            progress.advance(steps[outcome.run.run_id])
+            differ += not outcome.identical
+            for line in outcome.lines(here_tags):  # both sides' paths, run by run
+                console.print(line)
+    console.print(f"{len(chosen) - differ} identical, {differ} differ")
     if differ:
         print(f"error: {differ} of {len(chosen)} run(s) did not reproduce here; the paths above say where each "
               "was trained.", file=sys.stderr)

@@ -1,13 +1,5 @@
-"""What a set of pending jobs will cost in wall time, from runs this store has already timed.
-
-A finished training run's wall time (MLflow start to end: set-up, training, evaluation and
-logging) over its steps gives seconds per step for its arm, measured with as many workers as its
-sweep had. With ``W`` workers on ``C`` cores each worker gets ``min(1, C / W)`` of a core, so a
-per-step time measured at ``W0`` workers is scaled by ``max(1, W / C) / max(1, W0 / C)``. The
-sweeps' own utilisation (the children's wall time over the sweep's wall time x workers: the
-start-up and the tail where some workers are idle) divides the total. Runs trained while the
-machine did other work make the estimate pessimistic; the text says what it rests on.
-"""
+"""What pending jobs will cost: wall time, from the runs this store has timed, and a real VLM's
+queries. See docs/commands/run.md (the cost estimate) and docs/real-vlm.md."""
 
 from __future__ import annotations
 
@@ -22,21 +14,17 @@ from vlmrl_cli.shaping.arms import ARMS
 from vlmrl_cli.tracking import schema
 from vlmrl_cli.training.config import RunConfig, TrainJob
 
-#: Seconds per environment step of one run on one worker, when the store has no finished run to
-#: measure: `nox -s repro` on 2 cores trained 20 runs of 300,000 steps in 665 s of wall time.
+#: Seconds per step and worker with nothing measured: `nox -s repro` on 2 cores, 20 runs x 300,000 steps in 665 s.
 FALLBACK_S_PER_STEP = 665.0 * 2 / (20 * 300_000)
 
-
-#: How much slower than the machine that recorded a run the machine retraining it may be: `vlmrl
-#: verify` gives its estimate as a range, from the recorded speed to this many times slower. `nox -s
-#: repro` took 906 s on a 2-core machine beside other work and 430 s on a Zen 5 EPYC (2.1x).
+#: How much slower a retraining machine may be (`vlmrl verify`'s range): `nox -s repro` took 906 s on
+#: a busy 2-core machine, 430 s on a Zen 5 EPYC.
 SLOWER_MACHINE = 3.0
 
 
 @dataclass(frozen=True)
 class Timings:
-    """Per-arm seconds per step with the worker count they were measured at, and the sweeps'
-    median utilisation; empty when nothing was measured."""
+    """Per-arm seconds per step and the worker count measured at, and the sweeps' median utilisation."""
 
     per_arm: dict[str, tuple[float, int]]
     utilisation: float = 1.0
@@ -45,8 +33,7 @@ class Timings:
 
 @dataclass(frozen=True)
 class CostEstimate:
-    """``pending`` runs (``done`` already FINISHED), about ``per_run_s`` seconds each on one of
-    ``workers`` workers, ``total_s`` of wall time in all; ``how``: what the figure rests on."""
+    """``pending`` runs (``done`` FINISHED) of ``per_run_s`` each, ``total_s`` on ``workers``; ``how``: its basis."""
 
     pending: int
     done: int
@@ -56,12 +43,7 @@ class CostEstimate:
     how: str
 
     def minutes_range(self, slower: float = SLOWER_MACHINE) -> str:
-        """The total as a range of minutes: at the recorded speed, and on a machine ``slower`` times slower.
-
-        Example:
-            >>> CostEstimate(2, 0, 60.0, 120.0, 1, "").minutes_range()
-            'about 2.0-6.0 min (2.0 at the recorded speed, 6.0 on a machine 3x slower)'
-        """
+        """The total in minutes, from the recorded speed to ``slower`` times slower."""
         low, high = self.total_s / 60, self.total_s * slower / 60
         return f"about {low:,.1f}-{high:,.1f} min ({low:,.1f} at the recorded speed, {high:,.1f} on a machine " \
                f"{slower:g}x slower)"
@@ -73,12 +55,7 @@ class CostEstimate:
 
 
 def contention(workers: int, cores: int) -> float:
-    """How much slower one run is with ``workers`` busy workers on ``cores`` cores than alone.
-
-    Example:
-        >>> contention(1, 2), contention(2, 2), contention(4, 2)
-        (1.0, 1.0, 2.0)
-    """
+    """How much slower one run is with ``workers`` busy workers on ``cores`` cores than alone."""
     return max(1.0, workers / max(1, cores))
 
 
@@ -111,8 +88,7 @@ def measure(client: Any, experiment_id: str) -> Timings:
 
 
 def unmeasured(job: TrainJob) -> float:
-    """Seconds per step and worker of ``job`` when nothing in the store has timed it: its task's
-    ``step_seconds`` (measured on its committed runs), else MountainCar-v0's repro figure."""
+    """Seconds per step of ``job`` with nothing timed: its task's ``step_seconds``, else the fallback."""
     return job.task_plugin.step_seconds or FALLBACK_S_PER_STEP
 
 
@@ -147,19 +123,8 @@ def estimate(pending: Sequence[TrainJob], done: int, workers: int, timings: Timi
 
 def retrain_estimate(runs: Sequence[tuple[TrainJob, float | None]], workers: int,
                      cores: int | None = None) -> CostEstimate:
-    """The wall time of retraining recorded runs (``vlmrl verify``) with ``workers`` workers on
-    ``cores`` (this machine's): ``runs`` pairs each rebuilt job with the wall time its run recorded
-    (None: none recorded). A run's steps are costed at its own recorded seconds per step (its
-    set-up and evaluation included, which a retrain skips: an upper bound), else at its task's
-    declared figure (``unmeasured``); workers beyond the cores slow every run (``contention``).
-
-    Example:
-        >>> from vlmrl_cli.training.config import RunConfig
-        >>> job = RunConfig.from_sources(None, {"preset": "smoke", "seeds": [0], "arms": ["baseline"]}).jobs()[0]
-        >>> cost = retrain_estimate([(job, 10.24), (job, None)], workers=1, cores=2)
-        >>> job.timesteps, round(cost.total_s, 2)  # 1,024 steps at 10 ms, then at MountainCar-v0's 0.22 ms
-        (1024, 10.47)
-    """
+    """The wall time of retraining ``runs`` (each job with its recorded wall time, or None) with
+    ``workers`` on ``cores``: a recorded wall time (set-up included: an upper bound), else ``unmeasured``."""
     cores = cores or os.cpu_count() or 1
     workers = max(1, min(workers, len(runs)))
     measured = [(job, wall) for job, wall in runs if wall is not None and wall > 0]
@@ -180,8 +145,7 @@ def retrain_estimate(runs: Sequence[tuple[TrainJob, float | None]], workers: int
 
 
 def estimate_sweeps(cfgs: Sequence[RunConfig]) -> CostEstimate:
-    """The cost of training what ``cfgs`` (sweeps into one experiment, e.g. a calibration's or a
-    study's regimes) still miss, read without writing; a job two sweeps share counts once."""
+    """The cost of what the sweeps ``cfgs`` (into one experiment) still miss; a shared job counts once."""
     from vlmrl_cli.sweep.runner import dry_plan
     from vlmrl_cli.tracking import store
 
@@ -200,19 +164,15 @@ def estimate_sweeps(cfgs: Sequence[RunConfig]) -> CostEstimate:
 
 # --- what a run will ask of a real VLM ---------------------------------------------------------
 
-#: Queries per second a user's VLM answers when ``--vlm-qps`` is not given: a 7B-class VLM under HF
-#: transformers at batch 1 (olmo-eval PR #347 measured 2.0 it/s for transformers against 11.9 for
-#: vLLM on Qwen3-VL-4B; LLaVA's own code batches no faster than one at a time, LLaVA issue #1009).
+#: ``--vlm-qps``'s default: a 7B VLM under HF transformers at batch 1 (olmo-eval PR #347: 2.0 it/s
+#: against vLLM's 11.9 on Qwen3-VL-4B; LLaVA issue #1009).
 DEFAULT_VLM_QPS = 3.0
 
 
 @dataclass(frozen=True)
 class VlmHitRate:
-    """How often a task's hybrid runs ask the VLM, measured on committed runs: ``events`` labelling
-    steps per ``T / k`` (a run of ``T`` steps labelling every ``k``: episode starts add some), and
-    ``miss``, the share of them that reach the VLM client (a frame new to the run: neither labelled
-    before nor within ``reuse_radius`` of a prototype), medians over ``runs`` runs. A run alone with
-    an empty response cache asks ``T / k x events x miss`` queries: ``Q = T / k x (1 - h)``."""
+    """A task's hybrid runs' labelling steps per ``T / k`` (``events``) and the share that reach the
+    VLM (``miss``), medians over ``runs`` committed runs; see docs/real-vlm.md."""
 
     events: float
     miss: float
@@ -224,10 +184,7 @@ class VlmHitRate:
         return self.events * self.miss
 
 
-#: Measured from the committed exports' hybrid runs (``measure_hit_rates``) with
-#: ``python -c "from vlmrl_cli.sweep.cost import *; print(measure_hit_rates(committed_exports()))"``;
-#: tests/sweep/test_cost.py measures them again. MountainCar's camera has 601 distinct frames, so
-#: nearly every label is reused; a 7-DoF arm's frames (Pusher) hardly repeat.
+#: ``measure_hit_rates(committed_exports())``, which tests/sweep/test_cost.py checks.
 VLM_HIT_RATES: dict[str, VlmHitRate] = {
     "mountain-car": VlmHitRate(events=1.0431, miss=0.018631, runs=153),
     "mountain-car-continuous": VlmHitRate(events=1.01045, miss=0.053466, runs=60),
@@ -258,8 +215,7 @@ def _rate_of_run(record: Mapping[str, Any]) -> tuple[str, float, float] | None:
 
 
 def measure_hit_rates(paths: Iterable[Path]) -> dict[str, VlmHitRate]:
-    """``VlmHitRate`` per task from the hybrid runs in the export files ``paths`` (metrics
-    ``vlm/queries`` and ``vlm/label_reuses``; a run found in two files counts once)."""
+    """``VlmHitRate`` per task from the hybrid runs in the export files ``paths`` (a run counts once)."""
     from vlmrl_cli.tracking.transfer import read_records
 
     seen: dict[str, tuple[str, float, float]] = {}
@@ -289,12 +245,7 @@ class VlmCost:
         return self.queries / self.qps
 
     def line(self) -> str:
-        """One line for a terminal.
-
-        Example:
-            >>> VlmCost(10, 58_000.0, 3.0, "basis").line()[46:]
-            'at 3 queries/s (--vlm-qps) ~5.4 h of VLM time (22% of a GPU-day); basis'
-        """
+        """One line for a terminal."""
         hours = self.seconds / 3600
         return (f"{self.runs} run(s) ask the VLM ~{self.queries:,.0f} queries in all; at {self.qps:g} queries/s "
                 f"(--vlm-qps) ~{hours:,.1f} h of VLM time ({hours / 24:.0%} of a GPU-day); {self.how}")
@@ -302,21 +253,11 @@ class VlmCost:
 
 def vlm_cost(jobs: Sequence[TrainJob], qps: float = DEFAULT_VLM_QPS,
              rates: Mapping[str, VlmHitRate] = VLM_HIT_RATES) -> VlmCost | None:
-    """The VLM queries of ``jobs`` (those whose arm asks the VLM; None when none does) and their
-    time at ``qps``: each run ``T / k x (1 - h)`` with its task's measured rate (``VLM_HIT_RATES``),
-    or ``h = 0`` (every labelling step asked) for a task with none.
-
-    Example:
-        >>> from vlmrl_cli.training.config import RunConfig
-        >>> jobs = RunConfig.from_sources(None, {"preset": "paper", "seeds": [0], "arms": ["hybrid"]}).jobs()
-        >>> round(vlm_cost(jobs).queries)  # 300,000 steps / 10 x 1.0431 x 0.018631
-        583
-    """
+    """The VLM queries of ``jobs`` whose arm asks it (None: none does), each ``T / k x (1 - h)`` with
+    its task's rate (``h = 0`` without one), and their time at ``qps``."""
     asking = [job for job in jobs if job.arm.uses_vlm]
     if not asking:
         return None
-    if qps <= 0:
-        raise ValueError("queries per second must be > 0")
     queries, basis = 0.0, {}
     for job in asking:
         task = job.task_plugin.name

@@ -1,11 +1,5 @@
-"""Where a sweep's jobs run: a local process pool, or Ray tasks on a cluster.
-
-Executors only dispatch. Both call the same job function (``worker.train_job`` unless a
-benchmark passes another), so a run trains the same way whichever executor ran it. The sweep
-talks to an executor through four calls: ``submit`` every job, ``poll`` for finished results
-and progress events, ``stop`` (Ctrl-C: running jobs end their runs KILLED, queued jobs return
-CANCELLED without a run) and ``close``.
-"""
+"""Where a sweep's jobs run: a local process pool, or Ray tasks on a cluster; both only dispatch
+the same job function. ``stop`` (Ctrl-C) ends running jobs KILLED and queued ones CANCELLED."""
 
 from __future__ import annotations
 
@@ -24,24 +18,18 @@ from vlmrl_cli.core.errors import BadInput
 from vlmrl_cli.training.config import RunConfig, TrainJob
 from vlmrl_cli.training.events import JobContext, JobResult, ProgressEvent
 
-RAY_MISSING = "--executor ray needs Ray, which is not installed: pip install 'vlmrl[ray]'."
-
 #: What an executor dispatches: one job, the sweep's shared context -> its result.
 JobFn = Callable[[TrainJob, JobContext], JobResult]
 
 
-#: What the local pool's fork server imports once, before it forks any worker: torch,
-#: stable-baselines3, gymnasium and vlmrl's training code (``sweep.worker``), and MLflow's client and
-#: sqlite store (about 5 s of CPU that each spawned worker used to spend on its own). None of them
-#: starts a thread on import, so forking from that process is safe.
+#: What the local pool's fork server imports once before it forks any worker (about 5 s of CPU a
+#: spawned worker spent on its own); none starts a thread on import, so forking it is safe.
 PRELOAD: tuple[str, ...] = ("vlmrl_cli.sweep.worker", "mlflow.tracking", "mlflow.store.tracking.sqlalchemy_store")
 
 
 def init_worker(progress: Any, stop: Any, environ: dict[str, str] | None = None) -> None:
-    """The pool's initializer (``worker.init_worker``), imported in the worker: the sweep's own
-    process never loads torch or stable-baselines3 (about 2.3 s of each ``vlmrl run``'s start).
-    ``environ``: the sweep's environment when it made the pool, which a forked worker takes over
-    (the fork server's copy dates from its own start)."""
+    """The pool's initializer (``worker.init_worker``, imported in the worker: the sweep never loads
+    torch); ``environ``: the sweep's environment, which a forked worker takes over."""
     if environ is not None:
         os.environ.clear()
         os.environ.update(environ)
@@ -51,7 +39,7 @@ def init_worker(progress: Any, stop: Any, environ: dict[str, str] | None = None)
 
 
 def train_job(job: TrainJob, ctx: JobContext) -> JobResult:
-    """The default job (``worker.train_job``), imported in the worker, as ``init_worker``."""
+    """The default job (``worker.train_job``), imported in the worker."""
     from vlmrl_cli.sweep.worker import train_job as train
 
     return train(job, ctx)
@@ -64,8 +52,6 @@ class Polled:
 
 
 class Executor(Protocol):
-    name: str
-
     def submit(self, jobs: Sequence[TrainJob], job_fn: JobFn, ctx: JobContext) -> None: ...
 
     def poll(self, timeout_s: float) -> Polled: ...
@@ -79,14 +65,13 @@ class Executor(Protocol):
 
 
 def check_executor(cfg: RunConfig) -> None:
-    """What can be known before anything is created: Ray installed, and a tracking store that
-    machines other than this one can reach when the Ray cluster is remote."""
+    """``BadInput`` unless Ray is installed and, for a remote cluster, the store is a server."""
     if cfg.executor != "ray":
         return
     if is_remote_address(cfg.ray_address) and not is_server_uri(cfg.tracking_uri):
         raise BadInput(SHARED_STORE_NEEDED)
     if find_spec("ray") is None:
-        raise BadInput(RAY_MISSING)
+        raise BadInput("--executor ray needs Ray, which is not installed: pip install 'vlmrl[ray]'.")
 
 
 SHARED_STORE_NEEDED = (
@@ -124,13 +109,8 @@ def _sigint_blocked() -> Iterator[None]:
 
 
 class LocalExecutor:
-    """A pool of ``workers`` processes on this machine (one torch thread each), forked from
-    multiprocessing's fork server: a clean single-threaded process started once per sweep process
-    (on the first pool's first job, with SIGINT blocked, which it and its children keep) that has
-    imported ``PRELOAD``. A worker so costs a fork, not a fresh interpreter importing torch and
-    MLflow; it shares no state with the sweep (no open store, no thread), as a spawned one did."""
-
-    name = "local"
+    """A pool of ``workers`` processes (one torch thread each) forked from multiprocessing's fork
+    server, which imported ``PRELOAD`` once: a worker costs a fork and shares no state with the sweep."""
 
     def __init__(self, workers: int) -> None:
         if "forkserver" in mp.get_all_start_methods():
@@ -147,17 +127,13 @@ class LocalExecutor:
 
     @property
     def reusable(self) -> bool:
-        """Whether another sweep may use this pool: no worker process was lost (that breaks a
-        ``ProcessPoolExecutor`` for good) and no stop was asked (its workers cancel every job)."""
+        """Whether another sweep may use this pool: no worker was lost (which breaks it) and no stop asked."""
         return not self._lost and not self._stop.is_set()
 
     def submit(self, jobs: Sequence[TrainJob], job_fn: JobFn, ctx: JobContext) -> None:
-        # The pool starts its processes here (and, the first time in this process, the fork server,
-        # which imports PRELOAD before it ignores SIGINT). A terminal's Ctrl-C goes to the whole
-        # process group, and a worker or fork server still importing would die with a traceback and
-        # break the pool; with SIGINT blocked while they start, they inherit the block (the fork
-        # server passes it to every worker it forks later) and never see it. Here a Ctrl-C waits
-        # until the block ends, then reaches the sweep.
+        # The pool (and the first time, the fork server) starts its processes here. A terminal's Ctrl-C
+        # reaches the whole process group and would kill one still importing; started with SIGINT
+        # blocked, they inherit the block, and the sweep gets the Ctrl-C once the block ends.
         with _sigint_blocked():
             for job in jobs:
                 self._futures[self._pool.submit(job_fn, job, ctx)] = job
@@ -167,10 +143,7 @@ class LocalExecutor:
         results = []
         for fut in finished:
             job = self._futures.pop(fut)
-            if fut.cancelled():
-                results.append(JobResult(job.name, "", "CANCELLED", 0.0))
-                continue
-            exc = fut.exception()
+            exc = fut.exception()  # no future is ever cancelled (``stop``)
             self._lost = self._lost or exc is not None
             results.append(fut.result() if exc is None else
                            JobResult(job.name, "", "FAILED", 0.0, error=f"worker process lost: {exc}"))
@@ -181,10 +154,8 @@ class LocalExecutor:
         return len(self._futures)
 
     def stop(self) -> None:
-        # Queued jobs see the event as they start and return CANCELLED without a run; running ones
-        # end their run KILLED and return. No future is cancelled: in CPython 3.11 a result that
-        # arrives for a future cancelled meanwhile raises InvalidStateError in the pool's manager
-        # thread, which then never finishes and hangs the sweep.
+        # No future is cancelled: in CPython 3.11 a result for a future cancelled meanwhile raises
+        # InvalidStateError in the pool's manager thread, which then hangs the sweep.
         self._stop.set()
 
     def close(self) -> None:

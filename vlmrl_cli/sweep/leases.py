@@ -1,26 +1,8 @@
-"""Who trains a job: heartbeats, stale runs and atomic claims, so that sweeps can share a store.
-
-Every training run carries an owner tag (``host:pid``) and a heartbeat tag (Unix seconds),
-refreshed every ``heartbeat_s`` by a thread of the process that trains it. A RUNNING run is
-*live* unless
-
-- its owner process runs on this host and is gone (a crash, SIGKILL, a killed Ray worker), or
-- its heartbeat is older than ``stale_after_s`` (a process on another machine that died, or a
-  machine that lost the network), or
-- it has no heartbeat at all (a run from before heartbeats existed), or
-- it is an earlier attempt of the same dispatch (same parent sweep run): Ray retries a task
-  only after its worker died.
-
-A job is claimed by creating its run first and then reading every run of the same job
-(same arm, seed and config hash): the job belongs to the earliest live run (start time, then
-run id), and a FINISHED run beats every RUNNING one. Each competitor reads the same rows in the
-same order and reaches the same verdict, so two sweeps on one experiment never train a job twice
-at the same time and never mark each other's live runs FAILED. The rule (``decide``) is pure;
-``claim`` does the reading and writing.
-"""
+"""Who trains a job: heartbeats, stale runs and atomic claims (see docs/commands/run.md)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import socket
 import threading
@@ -74,10 +56,6 @@ class Liveness:
         return cls(time.time(), stale_after_s, socket.gethostname(), pid_alive)
 
 
-def owner_tag() -> str:
-    return f"{socket.gethostname()}:{os.getpid()}"
-
-
 def pid_alive(pid: int) -> bool:
     """Whether process ``pid`` exists on this host and is not a zombie."""
     try:
@@ -94,7 +72,7 @@ def pid_alive(pid: int) -> bool:
 
 
 def is_stale(run: RunRecord, live: Liveness) -> bool:
-    """Whether an active run can no longer be training (see the module docstring)."""
+    """Whether an active run can no longer be training (see docs/commands/run.md)."""
     if run.heartbeat is None:
         return True
     if run.owner is not None:
@@ -133,11 +111,8 @@ def decide(own: RunRecord, runs: Iterable[RunRecord], live: Liveness) -> Decisio
 
 def job_runs(client: Any, experiment_id: str, name: str, arm: str, seed: int, config_hash: str,
              finished: bool = False) -> list[Any]:
-    """Every run of one job (kind train, arm, seed, config hash) in the experiment.
-
-    The store is asked for the job's run name only (a column of MLflow's runs table) and the
-    tags are checked here: a filter on four tags joins MLflow's tag table four times, and its
-    cost grows with the store faster (at 1,000 runs in sqlite: 27 ms against 16 ms a lookup)."""
+    """Every run of one job (kind train, arm, seed, config hash) in the experiment, searched by run
+    name and checked here: a filter on four tags costs more (1,000 sqlite runs: 27 ms against 16 ms)."""
     query = f"attributes.run_name = '{name}'" + (" and attributes.status = 'FINISHED'" if finished else "")
     return [r for r in schema.search_all(client, experiment_id, query)
             if r.data.tags.get(schema.TAG_KIND) == schema.KIND_TRAIN
@@ -146,8 +121,7 @@ def job_runs(client: Any, experiment_id: str, name: str, arm: str, seed: int, co
 
 def claim(client: Any, experiment_id: str, run_id: str, name: str, arm: str, seed: int, config_hash: str,
           stale_after_s: float) -> Decision:
-    """Decide whether run ``run_id`` (already created) trains its job, and act on it: stale runs
-    it supersedes are marked FAILED; a losing run is deleted (it trained nothing)."""
+    """Whether the new run ``run_id`` trains its job (``decide``): a loser is deleted, superseded runs FAILED."""
     runs = [RunRecord.of(r) for r in job_runs(client, experiment_id, name, arm, seed, config_hash)]
     own = next((r for r in runs if r.run_id == run_id), None)
     if own is None:  # our own row must be visible to us; without it the rule cannot be applied
@@ -168,22 +142,19 @@ def mark_stale(client: Any, run_id: str, why: str) -> None:
 
 def heartbeat_tags() -> dict[str, str]:
     """The owner and a first heartbeat, set when the run is created."""
-    return {schema.TAG_OWNER: owner_tag(), schema.TAG_HEARTBEAT: f"{time.time():.3f}"}
+    return {schema.TAG_OWNER: f"{socket.gethostname()}:{os.getpid()}", schema.TAG_HEARTBEAT: f"{time.time():.3f}"}
 
 
 @contextmanager
 def heartbeat(client: Any, run_id: str, every_s: float) -> Iterator[None]:
-    """Refresh the run's heartbeat every ``every_s`` seconds from a thread while the block runs.
-    A store that does not answer is skipped over (the next beat tries again): a missed beat only
-    makes the run look stale later, it never stops training."""
+    """Refresh the run's heartbeat every ``every_s`` seconds from a thread while the block runs; a
+    store that does not answer is skipped over (a missed beat never stops training)."""
     done = threading.Event()
 
     def beat() -> None:
         while not done.wait(every_s):
-            try:
+            with contextlib.suppress(Exception):  # MLflow raises many types for an unreachable store
                 store.set_tags(client, run_id, {schema.TAG_HEARTBEAT: f"{time.time():.3f}"})
-            except Exception:  # MLflow raises many types for an unreachable store
-                continue
 
     thread = threading.Thread(target=beat, name=f"vlmrl-heartbeat-{run_id[:8]}", daemon=True)
     thread.start()

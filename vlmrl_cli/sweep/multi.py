@@ -1,6 +1,5 @@
-"""Many sweeps as one piece of work (`vlmrl calibrate`'s regimes, `vlmrl study`'s regimes, variants
-and cells): train them on one pool, find each one's runs in a loaded experiment, read a run's wall
-time, and log the summary run that holds the outputs drawn from them."""
+"""Many sweeps as one piece of work (`vlmrl calibrate`'s and `vlmrl study`'s): train them on one
+pool, find their runs, and log the summary run of their outputs."""
 
 from __future__ import annotations
 
@@ -30,9 +29,7 @@ S = TypeVar("S", bound=Sweep)
 
 def train_sweeps(sweeps: Sequence[S], reporter_for: Callable[[S], AbstractContextManager[SweepReporter]]
                  ) -> tuple[int, list[JobResult]]:
-    """Train what is missing of each sweep (one resumable sweep each, with a fresh
-    ``reporter_for(sweep)``, all on one ``SharedPool`` of local workers): the number of runs
-    trained now and the failed ones."""
+    """Train what each sweep misses, on one ``SharedPool``: the number of runs trained and the failed ones."""
     trained, failed = 0, []
     with SharedPool() as pool:
         for sweep in sweeps:
@@ -56,9 +53,8 @@ def wall_s(client: Any, run_id: str) -> float:
 
 def log_summary_run(client: Any, experiment_id: str, kind: str, key: str, params: dict[str, str],
                     files: list[Path], vlm: tuple[str, bool]) -> str:
-    """One MLflow run tagged ``vlmrl.kind=kind`` holding ``files``: the existing run of the same
-    ``key`` (config hash) when there is one, else a new one with ``params``; ``vlm``: its
-    (label, simulated) provenance."""
+    """The run of ``kind`` and config hash ``key`` (a new one with ``params`` and the (label,
+    simulated) ``vlm`` unless there is one), holding ``files``."""
     keys = {schema.TAG_KIND: kind, schema.TAG_CONFIG_HASH: key}
     found = client.search_runs([experiment_id], filter_string=schema.runs_filter(keys), max_results=1)
     if found:

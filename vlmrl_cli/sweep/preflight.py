@@ -1,5 +1,5 @@
-"""The one check of a sweep's configuration before anything is created (store, parent run,
-VLM cache): the executor can start, and the VLM the shaped arms need can answer them."""
+"""The one check of a sweep's configuration before anything is created: the executor can start,
+and the VLM the shaped arms need can answer them."""
 
 from __future__ import annotations
 
@@ -10,8 +10,7 @@ from vlmrl_cli.vlm.preflight import check_coverage, check_vlm
 
 
 def preflight(cfg: RunConfig) -> None:
-    """``BadInput`` for anything that would fail a job once the sweep has started. ``cfg`` is
-    valid (built from its sources, or ``RunConfig.validate``'d), and not validated again."""
+    """``BadInput`` for anything that would fail a job once the sweep has started (``cfg`` is valid)."""
     check_executor(cfg)
     shaped = [job for job in cfg.jobs() if job.arm.uses_vlm]
     if not shaped:

@@ -1,16 +1,6 @@
-"""The Ray executor: each job is a Ray task (``num_cpus=1``, one torch thread) running the same
-job function as the local pool. Imported only for ``--executor ray`` (Ray is the optional extra
-``vlmrl[ray]``).
-
-Connection: ``--ray-address ADDR`` joins that cluster. Without it, a cluster already running on
-this machine (``ray start --head``, or ``RAY_ADDRESS``) is joined (Ray's ``auto``); failing that,
-a local Ray instance with ``--workers`` CPUs is started for this process.
-
-Progress comes back through a ``ray.util.queue.Queue``; a stop request (Ctrl-C) is a flag actor
-that each task polls from a thread once a second, so running jobs end their runs KILLED exactly as
-in the local pool. A task whose worker process dies (SIGKILL, a lost node) is retried by Ray up to
-``max_retries`` times; the retry's claim marks the dead attempt's run FAILED.
-"""
+"""The Ray executor (``--executor ray``, the extra ``vlmrl[ray]``): each job a Ray task
+(``num_cpus=1``) running the local pool's job function; progress through a Ray queue, Ctrl-C
+through a flag actor the tasks poll. See docs/cluster.md."""
 
 from __future__ import annotations
 
@@ -31,8 +21,7 @@ POLL_STOP_S = 1.0
 
 
 class _RemoteFlag:
-    """``is_set()`` over the flag actor without an actor call per training step: a thread copies
-    the actor's value into a local event every ``POLL_STOP_S`` seconds."""
+    """``is_set()`` of the flag actor, copied into a local event by a thread every ``POLL_STOP_S`` seconds."""
 
     def __init__(self, actor: Any) -> None:
         import ray
@@ -42,12 +31,10 @@ class _RemoteFlag:
 
         def poll() -> None:
             while not self._closed.wait(POLL_STOP_S):
-                try:
+                with contextlib.suppress(Exception):  # the driver is gone or busy: keep training, ask again
                     if ray.get(actor.is_set.remote(), timeout=10):
                         self._local.set()
                         return
-                except Exception:  # the driver is gone or busy: keep training, ask again
-                    continue
 
         threading.Thread(target=poll, name="vlmrl-stop-poll", daemon=True).start()
 
@@ -77,55 +64,43 @@ def ray_job(job_fn: JobFn, job: TrainJob, ctx: JobContext, progress: Any, stop: 
         flag.close()
 
 
-#: Options of every ``ray.init`` here: no dashboard, workers' output kept off the progress display.
-INIT_OPTIONS: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "logging_level": logging.WARNING}
-
-
 def init_options() -> dict[str, Any]:
-    """``ray.init``'s options: ``INIT_OPTIONS`` and a runtime_env that starts every worker on the
-    driver's numeric pin (``core.numeric_pin``), also on a cluster started elsewhere."""
+    """``ray.init``'s options: no dashboard, workers' output kept off the progress display, and every
+    worker on the driver's numeric pin."""
     import os
 
     pinned = pinned_environ(os.environ)
-    return {**INIT_OPTIONS, "runtime_env": {"env_vars": {k: pinned[k] for k in PIN_VARIABLES}}}
+    return {"include_dashboard": False, "log_to_driver": False, "logging_level": logging.WARNING,
+            "runtime_env": {"env_vars": {k: pinned[k] for k in PIN_VARIABLES}}}
 
 
 def start_local(num_cpus: int) -> None:
-    """Start a local Ray instance for this process. Its workers run at the driver's priority:
-    Ray's default worker niceness (15) starves training jobs whenever anything else runs on the
-    machine (measured here beside a 2-worker sweep: importing torch took 27 s in a niced Ray
-    worker against 1.9 s). On a cluster started with ``ray start``, set ``RAY_worker_niceness=0``."""
+    """Start a local Ray instance whose workers run at the driver's priority (Ray's niceness 15
+    starved them: importing torch took 27 s beside a 2-worker sweep, against 1.9 s)."""
     import ray
 
     ray.init(num_cpus=num_cpus, _system_config={"worker_niceness": 0}, **init_options())
 
 
 def connect(address: str | None, workers: int, tracking_uri: str | None) -> None:
-    """Join or start Ray (see the module docstring); a cluster of several machines needs a
-    tracking server every machine can reach."""
+    """Join ``address``, else a cluster on this machine (Ray's ``auto``), else start one with
+    ``workers`` CPUs; a cluster of several machines needs a tracking server."""
     import ray
 
-    if not ray.is_initialized():
-        if address is not None and address != "local":
-            try:
-                ray.init(address=address, **init_options())
-            except (ConnectionError, RuntimeError) as exc:
+    if not ray.is_initialized() and address != "local":
+        try:
+            ray.init(address=address or "auto", **init_options())
+        except (ConnectionError, RuntimeError) as exc:
+            if address is not None:
                 raise BadInput(f"cannot join the Ray cluster at '{address}': {exc}") from exc
-        elif address is None:
-            try:
-                ray.init(address="auto", **init_options())
-            except (ConnectionError, RuntimeError):
-                start_local(workers)
-        else:
-            start_local(workers)
+    if not ray.is_initialized():
+        start_local(workers)
     alive = [n for n in ray.nodes() if n.get("Alive")]
     if len(alive) > 1 and not is_server_uri(tracking_uri):
         raise BadInput(SHARED_STORE_NEEDED)
 
 
 class RayExecutor:
-    name = "ray"
-
     def __init__(self, address: str | None, workers: int, max_retries: int, tracking_uri: str | None) -> None:
         import ray
         from ray.util.queue import Queue

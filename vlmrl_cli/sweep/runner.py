@@ -1,13 +1,5 @@
-"""Run every (arm, seed) job of a ``RunConfig`` through an executor (a local process pool or Ray),
-resumably and safely beside other sweeps on the same store.
-
-Resume rule: a job whose (arm, seed, config hash) already has a FINISHED run in the experiment
-is skipped. A job with a *live* RUNNING run (fresh heartbeat, owner process alive: see
-``leases``) belongs to another sweep and is left to it. RUNNING runs that are stale (a crash,
-a killed worker) are marked FAILED and their job is trained again. Each job is claimed
-atomically when it starts, so two sweeps started together never train the same job twice.
-One parent run records each invocation that trains anything.
-"""
+"""Run every (arm, seed) job of a ``RunConfig`` through an executor, resumably and beside other
+sweeps on the same store (``leases``; see docs/commands/run.md); one parent run per invocation."""
 
 from __future__ import annotations
 
@@ -56,10 +48,8 @@ class SilentReporter:
 
 
 def vlm_identity(cfg: RunConfig) -> tuple[str, bool]:
-    """The VLM label and simulated flag of the sweep, checking the backend starts at all
-    (unreachable server, unreadable transcript: ``BadInput`` before anything trains). An hf model
-    is not loaded for this: ``preflight`` (``vlm.preflight.check_vlm``) has found its files, and
-    each worker loads it once."""
+    """The sweep's VLM label and simulated flag, starting the backend once (``BadInput`` before
+    anything trains); an hf model is not loaded here (``preflight`` has found its files)."""
     if not any(ARMS[name].uses_vlm for name in cfg.arms):
         return "none (no arm uses a VLM)", False
     if cfg.vlm.backend == "hf":
@@ -78,12 +68,14 @@ def vlm_identity(cfg: RunConfig) -> tuple[str, bool]:
 class Plan:
     pending: list[TrainJob]  # to train here
     done: list[TrainJob]  # a FINISHED run exists
-    stale: list[Any]  # RUNNING runs of pending jobs whose process is gone: to mark FAILED
+    stale: list[Any] = field(default_factory=list)  # RUNNING runs of pending jobs whose process is gone
     elsewhere: list[TrainJob] = field(default_factory=list)  # a live run of another sweep trains it
+    note: str = ""  # a dry plan's: where the answer came from (or why every job is pending)
+    experiment_id: str | None = None  # a dry plan's: the experiment checked, when it exists
 
 
 def plan(client: Any, experiment_id: str, jobs: list[TrainJob], stale_after_s: float = 300.0) -> Plan:
-    """Split jobs into pending, done and owned elsewhere, and list the stale runs of pending jobs."""
+    """Split jobs into pending, done and owned elsewhere, with the stale runs of pending jobs."""
     by_key = schema.train_runs_by_job(client, experiment_id)
     result = Plan([], [], [], [])
     live = Liveness.here(stale_after_s)
@@ -102,60 +94,38 @@ def plan(client: Any, experiment_id: str, jobs: list[TrainJob], stale_after_s: f
     return result
 
 
-@dataclass(frozen=True)
-class DryPlan:
-    """What a sweep would do, read without writing: ``done`` jobs already have a FINISHED run."""
-
-    pending: list[TrainJob]
-    done: list[TrainJob]
-    note: str  # where the answer came from (or why every job is pending)
-    experiment_id: str | None = None  # the experiment checked, when it exists
-
-
-def dry_plan(cfg: RunConfig) -> DryPlan:
-    """Plan ``cfg``'s jobs against the store, read-only: a sqlite store that does not exist is
-    not created, a missing experiment is not created, stale runs are not touched."""
+def dry_plan(cfg: RunConfig) -> Plan:
+    """Plan ``cfg``'s jobs against the store without writing anything (no store, experiment or mark)."""
     uri = store.resolve_tracking_uri(cfg.tracking_uri)
     jobs = cfg.jobs()
     if uri.startswith("sqlite:///") and not Path(uri.removeprefix("sqlite:///")).exists():
-        return DryPlan(jobs, [], f"the tracking store {uri} does not exist (not created): every job is pending")
+        return Plan(jobs, [], note=f"the tracking store {uri} does not exist (not created): every job is pending")
     client = store.connect(uri)
     exp = client.get_experiment_by_name(cfg.experiment)
     if exp is None or exp.lifecycle_stage == "deleted":
-        return DryPlan(jobs, [], f"experiment '{cfg.experiment}' does not exist in {uri}: every job is pending")
+        return Plan(jobs, [], note=f"experiment '{cfg.experiment}' does not exist in {uri}: every job is pending")
     found = plan(client, str(exp.experiment_id), jobs, cfg.stale_after_s)
-    return DryPlan(found.pending, found.done, f"checked against experiment '{cfg.experiment}' in {uri}",
-                   str(exp.experiment_id))
-
-
-def make_executor(cfg: RunConfig, n_jobs: int) -> Executor:
-    if cfg.executor == "ray":
-        from vlmrl_cli.sweep.ray_executor import RayExecutor
-
-        return RayExecutor(cfg.ray_address, cfg.workers, cfg.max_retries, cfg.tracking_uri)
-    return LocalExecutor(min(cfg.workers, n_jobs))
+    return dataclasses.replace(found, note=f"checked against experiment '{cfg.experiment}' in {uri}",
+                               experiment_id=str(exp.experiment_id))
 
 
 class SharedPool:
-    """One local process pool lent to the successive sweeps of one command (a study's or a
-    calibration's regimes), so that its workers start and import torch and MLflow once, not once
-    per sweep; a worker already trains job after job within a sweep, each from a fresh seed and
-    env. A pool that lost a worker or was stopped is replaced; a sweep with another worker count
-    gets a new pool; a sweep on Ray gets an executor of its own, closed when that sweep ends.
-    Use it as a context manager: it closes the pool at the end, or when a Ctrl-C or an error
-    leaves the command."""
+    """One local process pool lent to the successive sweeps of one command (its workers import torch
+    and MLflow once), replaced when it lost a worker, was stopped or has another size; a Ray sweep
+    gets its own executor. A context manager: the pool closes when the command ends."""
 
     def __init__(self) -> None:
         self._local: LocalExecutor | None = None
         self._workers = 0
 
-    def executor(self, cfg: RunConfig, n_jobs: int) -> Executor:
-        if cfg.executor != "local":
-            return make_executor(cfg, n_jobs)
+    def executor(self, cfg: RunConfig) -> Executor:
+        if cfg.executor == "ray":
+            from vlmrl_cli.sweep.ray_executor import RayExecutor
+
+            return RayExecutor(cfg.ray_address, cfg.workers, cfg.max_retries, cfg.tracking_uri)
         if self._local is None or self._workers != cfg.workers or not self._local.reusable:
             self.close()
-            # sized for the command, not this sweep: the pool starts a process per job up to that
-            # size, so a sweep of one job still starts one
+            # a pool starts a process per job up to its size: a sweep of fewer jobs starts fewer
             self._local, self._workers = LocalExecutor(cfg.workers), cfg.workers
         return self._local
 
@@ -178,11 +148,8 @@ class SharedPool:
 
 def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job,
               checked: bool = False, pool: SharedPool | None = None) -> SweepSummary:
-    """Validate, plan, train the pending jobs through ``cfg.executor``, record the sweep.
-    ``job_fn`` is what each job runs (a benchmark passes a fake trainer); ``checked``: the caller
-    has just run ``preflight(cfg)`` itself (the CLI does, before its header), so it is not run twice;
-    ``pool``: a ``SharedPool`` that lends the local executor (its owner closes it), else the sweep
-    starts and closes its own."""
+    """Check, plan and train the pending jobs, recording the sweep; ``checked``: the caller has run
+    ``preflight(cfg)``; ``pool``: a ``SharedPool`` lending the local executor."""
     start = time.perf_counter()
     if not checked:
         preflight(cfg)
@@ -202,16 +169,16 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
     if not pending:
         summary.wall_s = time.perf_counter() - start
         return summary
-    # before the parent run: Ray may refuse the store
-    executor = pool.executor(cfg, len(pending)) if pool is not None else make_executor(cfg, len(pending))
+    executor = (pool or SharedPool()).executor(cfg)  # before the parent run: Ray may refuse the store
     release = pool.release if pool is not None else (lambda ex: ex.close())
-    # The flag handler is installed before the parent run exists and stays installed through the
-    # shutdown: a Ctrl-C while the parent is being created or its params logged, while the executor
-    # closes (Ray's shutdown sleeps) or the parent run is being closed must not escape half-way and
-    # leave the parent RUNNING; it marks the parent KILLED and the sweep exits 130.
+    # The Ctrl-C flag covers the parent's creation to its close, so that no Ctrl-C leaves it RUNNING.
     with _stop_on_sigint() as interrupted:
         try:
-            parent = client.create_run(experiment_id, tags=_parent_tags(cfg, vlm_label, simulated))
+            tags = {**store.provenance_tags(vlm_label, simulated), schema.TAG_KIND: schema.KIND_SWEEP,
+                    schema.MLFLOW_RUN_NAME: f"sweep-{time.strftime('%Y%m%d-%H%M%S')}",
+                    schema.TAG_CONFIG_HASH: config_hash(cfg), schema.TAG_EXECUTOR: cfg.executor,
+                    schema.TAG_TASK: cfg.task, **({schema.TAG_REGIME: cfg.regime} if cfg.regime is not None else {})}
+            parent = client.create_run(experiment_id, tags=tags)
         except BaseException:
             release(executor)
             raise
@@ -238,19 +205,9 @@ def run_sweep(cfg: RunConfig, reporter: SweepReporter, job_fn: JobFn = train_job
     return summary
 
 
-def _parent_tags(cfg: RunConfig, vlm_label: str, simulated: bool) -> dict[str, str]:
-    """The tags of a sweep's parent run."""
-    return {**store.provenance_tags(vlm_label, simulated),
-            schema.MLFLOW_RUN_NAME: f"sweep-{time.strftime('%Y%m%d-%H%M%S')}",
-            schema.TAG_KIND: schema.KIND_SWEEP, schema.TAG_CONFIG_HASH: config_hash(cfg),
-            schema.TAG_EXECUTOR: cfg.executor, schema.TAG_TASK: cfg.task,
-            **({schema.TAG_REGIME: cfg.regime} if cfg.regime is not None else {})}
-
-
 def _follow(executor: Executor, reporter: SweepReporter, summary: SweepSummary, run: Any,
             interrupted: threading.Event) -> None:
-    """Report the jobs' progress and results until none is outstanding; after a Ctrl-C, stop the
-    executor and mark the parent ``run`` KILLED."""
+    """Report progress and results until no job is outstanding; on a Ctrl-C stop, and mark ``run`` KILLED."""
     while executor.outstanding:
         polled = executor.poll(0.2)
         for event in polled.events:
@@ -265,10 +222,8 @@ def _follow(executor: Executor, reporter: SweepReporter, summary: SweepSummary, 
 
 @contextmanager
 def _stop_on_sigint() -> Iterator[threading.Event]:
-    """While the sweep runs, Ctrl-C sets a flag (the loop then asks the executor to stop) instead
-    of raising KeyboardInterrupt inside ``concurrent.futures`` or Ray, whose locks an asynchronous
-    exception can leave held. A second Ctrl-C raises at once. The previous handler is restored
-    on exit; off the main thread nothing is installed."""
+    """A flag that Ctrl-C sets (a second one raises) instead of raising inside ``concurrent.futures``
+    or Ray, whose locks it could leave held; main thread only."""
     flag = threading.Event()
     if threading.current_thread() is not threading.main_thread():
         yield flag

@@ -1,9 +1,4 @@
-"""One (arm, seed) job: train PPO, evaluate detached, record everything in its MLflow child run.
-
-Runs inside a worker process (one torch thread each: 2 cores, 2 workers). The process-wide
-progress queue and stop event arrive once through ``init_worker`` (they can only be shared by
-inheritance), never as module state that the library reads elsewhere.
-"""
+"""One (arm, seed) job in a worker process: train PPO, evaluate detached, record its MLflow run."""
 
 from __future__ import annotations
 
@@ -35,8 +30,7 @@ from vlmrl_cli.training.trained import deterministic_policy as _policy
 
 @dataclass
 class Channels:
-    """How a job reaches its sweep: ``progress.put(event)`` and ``stop.is_set()`` (a multiprocessing
-    queue and event in the local pool; adapters over Ray actors on a cluster), or None."""
+    """How a job reaches its sweep: ``progress.put(event)`` and ``stop.is_set()``, or None."""
 
     progress: Any = None
     stop: Any = None
@@ -49,9 +43,8 @@ Body = Callable[[TrainJob, Any, str, Channels], JobResult]
 
 
 def init_worker(progress: Any, stop: Any, ignore_sigint: bool = True) -> None:
-    """Worker set-up: single-threaded torch, Ctrl-C left to the sweep, a headless video driver
-    (SDL's dummy one unless the process has one), channels kept (the pool's initializer; Ray tasks
-    call it before each job)."""
+    """Worker set-up (once per process; Ray's per job): one torch thread, Ctrl-C left to the sweep,
+    headless rendering, the sweep's channels."""
     import torch
 
     torch.set_num_threads(1)
@@ -62,16 +55,6 @@ def init_worker(progress: Any, stop: Any, ignore_sigint: bool = True) -> None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     _channels.progress = progress
     _channels.stop = stop
-
-
-def scales_tag(job: TrainJob) -> str:
-    """A shaped run's alpha and kin_scale and where they came from: the task's rule
-    (``Task.scales``), the paper's (MountainCar-v0's defaults), or the run's own settings."""
-    task, shaping = job.task_plugin, job.shaping
-    own = task.default_shaping()
-    source = ("set for this run" if (shaping.alpha, shaping.kin_scale) != (own.alpha, own.kin_scale)
-              else "the task's rule: " + task.scales.rule if task.scales is not None else "the paper's")
-    return f"alpha {shaping.alpha:g}, kin_scale {shaping.kin_scale:g} ({source})"
 
 
 def run_tags(job: TrainJob, parent_run_id: str | None, vlm_label: str, simulated: bool) -> dict[str, str]:
@@ -90,8 +73,12 @@ def run_tags(job: TrainJob, parent_run_id: str | None, vlm_label: str, simulated
     }
     if job.regime is not None:
         tags[schema.TAG_REGIME] = job.regime
-    if job.arm.kinematic or job.arm.uses_vlm:
-        tags[schema.TAG_SCALES] = scales_tag(job)
+    if job.arm.kinematic or job.arm.uses_vlm:  # alpha and kin_scale: the task's rule, the paper's, or the run's
+        task, shaping = job.task_plugin, job.shaping
+        own = task.default_shaping()
+        source = ("set for this run" if (shaping.alpha, shaping.kin_scale) != (own.alpha, own.kin_scale)
+                  else "the task's rule: " + task.scales.rule if task.scales is not None else "the paper's")
+        tags[schema.TAG_SCALES] = f"alpha {shaping.alpha:g}, kin_scale {shaping.kin_scale:g} ({source})"
     if job.arm.uses_vlm and job.vlm.backend == "sim":
         tags[schema.TAG_SIM_PROFILE] = job.vlm.sim.profile
     if job.arm.uses_vlm and job.vlm.backend == "sim" and job.vlm.sim.query_flicker > 0:
@@ -109,8 +96,7 @@ def train_job(job: TrainJob, ctx: JobContext) -> JobResult:
 
 
 def with_task(job: TrainJob) -> TrainJob:
-    """``job`` with its Task: a job crosses to a worker process as its task's name (its ``plugin``
-    is not pickled), and the worker resolves it here, once, at the job's entry."""
+    """``job`` with its Task resolved from its name (a job crosses to a worker without it)."""
     if job.plugin is not None:
         return job
     from vlmrl_cli.tasks.registry import job_task
@@ -119,9 +105,8 @@ def with_task(job: TrainJob) -> TrainJob:
 
 
 def run_claimed(job: TrainJob, ctx: JobContext, body: Body) -> JobResult:
-    """Create the job's run, claim the job (``leases.claim``), then run ``body`` under a heartbeat.
-    Never raises: failures end as a FAILED run. A job that starts after a stop request returns
-    CANCELLED without creating a run; a job another live run owns returns SKIPPED."""
+    """Create and claim the job's run, then run ``body`` under a heartbeat. Never raises: a failure
+    is a FAILED run; after a stop, CANCELLED without a run; a job another live run owns, SKIPPED."""
     start = time.perf_counter()
     job = with_task(job)
     channels = _channels
@@ -145,7 +130,9 @@ def run_claimed(job: TrainJob, ctx: JobContext, body: Body) -> JobResult:
                 with leases.heartbeat(client, run_id, ctx.heartbeat_s):
                     result = body(job, client, run_id, channels)
                 run.status = RunStatus(result.status)
-                rival = _finished_rival(client, ctx.experiment_id, job, run_id) if result.status == "FINISHED" else None
+                finished = leases.job_runs(client, ctx.experiment_id, job.name, job.arm.name, job.seed,
+                                           job.config_hash, finished=True) if result.status == "FINISHED" else []
+                rival = next((r.info.run_id for r in finished if r.info.run_id != run_id), None)
                 if rival is not None:  # two claimants raced past each other: keep the first FINISHED run only
                     store.set_tags(client, run_id, {schema.TAG_ERROR: f"duplicate of FINISHED run {rival}"})
                     run.status = RunStatus.KILLED
@@ -165,14 +152,8 @@ def run_claimed(job: TrainJob, ctx: JobContext, body: Body) -> JobResult:
                          error=message or f"{type(exc).__name__}: {exc}", superseded=decision.superseded)
 
 
-def _finished_rival(client: Any, experiment_id: str, job: TrainJob, run_id: str) -> str | None:
-    runs = leases.job_runs(client, experiment_id, job.name, job.arm.name, job.seed, job.config_hash, finished=True)
-    return next((r.info.run_id for r in runs if r.info.run_id != run_id), None)
-
-
 def train_body(job: TrainJob, client: Any, run_id: str, channels: Channels) -> JobResult:
-    """Train PPO, evaluate detached, log metrics and artifacts; the run's end status is returned
-    (``run_claimed`` sets it). Raises on failure."""
+    """Train PPO, evaluate detached, log metrics and artifacts; the result's status closes the run."""
     from stable_baselines3.common.logger import Logger
 
     from vlmrl_cli.training.logger import MetricsOutputFormat
@@ -238,18 +219,12 @@ def _log_eval(metrics: store.BatchLogger, result: EvalResult) -> None:
 
 
 def write_episodes_table(episodes: list[dict[str, float]], path: Path) -> None:
-    """The run's episodes as one CSV table (the metric histories hold the same values, for the
-    MLflow UI): ``timestep`` then each ``episode/*`` metric, floats written exactly (repr)."""
+    """The run's episodes as one CSV table: ``timestep`` then each ``episode/*`` metric, floats exact."""
     import pandas as pd
 
-    columns = ["timestep", *EPISODE_TABLE_METRICS]
+    columns = ["timestep", *schema.EPISODE_METRICS]
     table = pd.DataFrame([[e[c] for c in columns] for e in episodes], columns=columns, dtype=float)
     table.to_csv(path, index=False)
-
-
-#: The metric keys of ``EpisodeTracker``'s records, in the table's column order.
-EPISODE_TABLE_METRICS = (schema.METRIC_NATIVE_RETURN, schema.METRIC_LENGTH, schema.METRIC_SUCCESS,
-                         schema.METRIC_SHAPED_RETURN)
 
 
 def _save_artifacts(out: Path, job: TrainJob, model: Any, env: Any) -> None:

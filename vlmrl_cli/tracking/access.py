@@ -1,6 +1,5 @@
-"""Whether this process can use a tracking store, found without MLflow and in well under a second:
-commands check before they print anything or create any file, and ``store.connect`` before it
-connects."""
+"""Whether this process can use a tracking store, found without MLflow in well under a second,
+before a command prints anything or creates any file."""
 
 from __future__ import annotations
 
@@ -21,15 +20,13 @@ def resolve_tracking_uri(uri: str | None) -> str:
     return uri or os.environ.get("MLFLOW_TRACKING_URI") or DEFAULT_TRACKING_URI
 
 
-#: The URI schemes MLflow's own tracking stores take (``mlflow.tracking._tracking_service.utils``);
-#: a plug-in adds its own through the ``mlflow.tracking_store`` entry point group.
+#: The URI schemes of MLflow's own tracking stores (plug-ins add theirs as ``mlflow.tracking_store`` entry points).
 MLFLOW_SCHEMES = ("", "file", "databricks", "databricks-uc", "uc", "http", "https", "sqlite", "postgresql",
                   "mysql", "mssql")
 
 
 def _scheme(uri: str) -> str:
-    """The store scheme of ``uri`` as MLflow reads it: ``postgresql+psycopg2`` is ``postgresql``,
-    a Windows drive letter is a path.
+    """The store scheme of ``uri`` as MLflow reads it (a one-letter scheme is a Windows drive).
 
     Example:
         >>> _scheme("sqlite:///m.db"), _scheme("postgresql+psycopg2://h/db"), _scheme("mlruns"), _scheme("nope://x")
@@ -48,11 +45,9 @@ def _unreachable(uri: str, why: str) -> str:
 
 
 def _sqlite_problem(uri: str, write: bool, existing: bool) -> str | None:
-    """Why this process cannot use the sqlite database of ``uri`` (read, or read and write), or
-    None; ``existing``: a missing database is refused rather than created. Read from the file
-    system alone (a folder is probed with an anonymous temporary file, which leaves nothing; a
-    database is opened read-only): a store in memory or named with a query, and a file that is no
-    MLflow store, are refused before MLflow could add its tables to them."""
+    """Why this process cannot read (or, with ``write``, write) the sqlite database of ``uri``, or
+    None; ``existing``: a missing database is refused. Nothing is written (a folder is probed with
+    an anonymous temporary file); a store in memory or with a query, or a foreign database, is refused."""
     if not uri.startswith("sqlite:///") or uri.removeprefix("sqlite:///") in ("", ":memory:"):
         return _unreachable(uri, "an in-memory sqlite store keeps nothing and each worker would open its own; "
                                  "pass --tracking-uri sqlite:///PATH/mlflow.db")
@@ -93,8 +88,7 @@ def _sqlite_problem(uri: str, write: bool, existing: bool) -> str | None:
 
 
 def _foreign_database(db_path: Path) -> str | None:
-    """Why the existing file ``db_path`` is no MLflow sqlite store, or None (an MLflow store, or an
-    empty file, which MLflow makes one): read through a read-only connection, which writes nothing."""
+    """Why the existing file ``db_path`` is no MLflow sqlite store (an empty file is one), or None."""
     import sqlite3
 
     if db_path.stat().st_size == 0:
@@ -109,20 +103,13 @@ def _foreign_database(db_path: Path) -> str | None:
     return None
 
 
-#: The database drivers SQLAlchemy loads by default for MLflow's database stores (a ``+driver`` in
-#: the scheme names another), with what to install.
+#: The driver module SQLAlchemy loads by default for each database scheme, and its pip package.
 DB_DRIVERS = {"postgresql": ("psycopg2", "psycopg2-binary"), "mysql": ("MySQLdb", "mysqlclient"),
               "mssql": ("pyodbc", "pyodbc")}
 
 
 def _driver_problem(uri: str) -> str | None:
-    """Why the database store of ``uri`` cannot be opened for want of its driver, or None: MLflow
-    would print its header and then fail on the import after seconds.
-
-    Example:
-        >>> _driver_problem("postgresql+nosuchdriver://h/db").split(": ", 1)[1]
-        'no Python module nosuchdriver for its database driver; install it (pip install nosuchdriver)'
-    """
+    """Why the database store of ``uri`` lacks its driver, or None (MLflow would fail after seconds)."""
     import importlib.util
     import urllib.parse
 
@@ -138,18 +125,8 @@ def _driver_problem(uri: str) -> str | None:
 
 
 def store_problem(uri: str | None, write: bool = True, existing: bool = False) -> str | None:
-    """Why the tracking store of ``uri`` (resolved by ``resolve_tracking_uri``) cannot be used,
-    or None, found without MLflow: a scheme no MLflow store takes, or a sqlite database that
-    this process cannot read (``write`` False) or write, or that is missing (``existing``).
-    A server's URI is not contacted here (``check_store`` does).
-
-    Example:
-        >>> store_problem("nope://x").endswith("MLflow has no store for the scheme 'nope' (a typo?); pass "
-        ...     "sqlite:///PATH/mlflow.db or http://HOST:PORT")
-        True
-        >>> "cannot be reached: no file can be written in /proc" in store_problem("sqlite:////proc/vlmrl.db")
-        True
-    """
+    """Why the tracking store of ``uri`` cannot be used, or None: an unknown scheme, a missing
+    driver, or a sqlite database this process cannot use (``_sqlite_problem``). No server is contacted."""
     import importlib.metadata
 
     resolved = resolve_tracking_uri(uri)
@@ -164,20 +141,14 @@ def store_problem(uri: str | None, write: bool = True, existing: bool = False) -
 
 
 def check_store(uri: str | None, write: bool = True, existing: bool = False, wait_s: float = 0.0) -> None:
-    """``BadInput`` for a tracking store a command cannot use (``store_problem``; a server that
-    does not answer after ``wait_s`` seconds), before MLflow is imported (MLflow itself retries a
-    sqlite file it cannot open for over a minute, with some 40 lines of warnings)."""
+    """``BadInput`` for a tracking store a command cannot use (``store_problem``), or a server that
+    does not answer within ``wait_s`` seconds, before MLflow is imported (MLflow retries for minutes)."""
     problem = store_problem(uri, write, existing)
     if problem:
         raise BadInput(problem + ".")
     resolved = resolve_tracking_uri(uri)
-    if resolved.startswith(("http://", "https://")):
-        _check_server(resolved, wait_s)
-
-
-def _check_server(uri: str, wait_s: float = 0.0) -> None:
-    """Fail fast on a tracking server that does not answer (MLflow's own client retries for
-    minutes before giving up), after retrying for ``wait_s`` seconds."""
+    if not resolved.startswith(("http://", "https://")):
+        return
     import httpx
 
     retrying = Retrying(stop=stop_after_delay(wait_s), wait=wait_fixed(1.0),
@@ -185,6 +156,6 @@ def _check_server(uri: str, wait_s: float = 0.0) -> None:
     try:
         for attempt in retrying:
             with attempt:
-                httpx.get(uri.rstrip("/") + "/health", timeout=5.0)
+                httpx.get(resolved.rstrip("/") + "/health", timeout=5.0)
     except httpx.HTTPError as exc:
-        raise BadInput(f"the MLflow tracking server '{uri}' cannot be reached; check --tracking-uri.") from exc
+        raise BadInput(f"the MLflow tracking server '{resolved}' cannot be reached; check --tracking-uri.") from exc

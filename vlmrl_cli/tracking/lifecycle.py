@@ -1,9 +1,5 @@
-"""The one place an MLflow run is closed: ``terminate``, and ``tracked_run`` around a block.
-
-Every run vlmrl creates (training jobs, sweeps, taxonomy probes, reports, calibration and study
-summaries, imports) ends through here with a ``RunStatus``: FINISHED when its block completes,
-KILLED on Ctrl-C, FAILED on any other error, so that no run is left RUNNING by an exception.
-"""
+"""The one place an MLflow run is closed (``terminate``, ``tracked_run``): no run vlmrl creates
+is left RUNNING by an exception."""
 
 from __future__ import annotations
 
@@ -31,8 +27,7 @@ def terminate(client: Any, run_id: str, status: RunStatus, end_time: int | None 
 
 @dataclass
 class RunHandle:
-    """The run a ``tracked_run`` block works in; set ``status`` to close it otherwise than
-    FINISHED when the block ends normally, ``end_time`` to keep an original end time."""
+    """The run of a ``tracked_run`` block: the ``status`` and ``end_time`` it closes with if the block completes."""
 
     run_id: str
     status: RunStatus = RunStatus.FINISHED
@@ -41,24 +36,8 @@ class RunHandle:
 
 @contextmanager
 def tracked_run(client: Any, run_id: str) -> Iterator[RunHandle]:
-    """Close ``run_id`` when the block ends: ``handle.status`` (FINISHED unless changed) when it
-    completes; on an exception (which propagates) KILLED for a KeyboardInterrupt or a block that
-    set ``handle.status`` KILLED (it was stopping), FAILED otherwise. A store that fails to close
-    the run then does not hide the exception.
-
-    Example:
-        >>> class Client:
-        ...     def set_terminated(self, run_id, status, end_time=None): print(run_id, status)
-        >>> with tracked_run(Client(), "r1"):
-        ...     pass
-        r1 FINISHED
-        >>> try:
-        ...     with tracked_run(Client(), "r2"):
-        ...         raise ValueError("boom")
-        ... except ValueError:
-        ...     pass
-        r2 FAILED
-    """
+    """Close ``run_id`` when the block ends: ``handle.status`` if it completes; on an exception (which
+    propagates, whatever the store does) KILLED for a Ctrl-C or a handle set KILLED, else FAILED."""
     handle = RunHandle(run_id)
     try:
         yield handle

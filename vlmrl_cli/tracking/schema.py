@@ -1,14 +1,5 @@
-"""The tracking contract: every MLflow tag key, tag value and metric key vlmrl writes or reads.
-
-Writers (the training worker, the sweep, the callbacks, report, calibration, study) and
-readers (analysis, evaluate, study's cost estimate) spell keys only through these names, so
-the contract lives in one place. ``search_all`` is the one paginated ``search_runs``.
-
-Tags: ``vlmrl.*`` (``TAG_*``), MLflow's own ``mlflow.*`` (``MLFLOW_*``); ``TAG_KIND`` takes one of
-the ``KIND_*`` values. Metrics (``METRIC_*``): ``episode/*`` stepped by the global timestep at
-the episode's end, ``eval/*`` of the detached evaluation (``eval/episode_*`` stepped by episode
-index), ``rollout/*``, ``perf/*``, ``vlm/*`` at each rollout end, SB3's ``train/*`` per update.
-"""
+"""The tracking contract: every MLflow tag key, tag value and metric key vlmrl writes or reads,
+spelled only through these names; ``search_all`` is the one paginated ``search_runs``."""
 
 from __future__ import annotations
 
@@ -18,7 +9,7 @@ from typing import Any
 from vlmrl_cli.core.errors import BadInput
 
 TAG_PREFIX = "vlmrl."
-#: The per-episode table a training run writes at its end (one row per episode, ``EPISODE_TABLE_COLUMNS``).
+#: The per-episode table a training run writes at its end: ``timestep``, then ``EPISODE_METRICS``.
 EPISODES_TABLE = "episodes.csv"
 #: A training run's artifacts: its config, SB3's model (a zip whose ``policy.pth`` entry holds the
 #: policy's weights; the rest of it is cloudpickle), those weights alone as an export carries them,
@@ -37,7 +28,6 @@ TAG_VERSION_PREFIX = f"{TAG_PREFIX}version."  # + package name
 TAG_CPU_PREFIX = f"{TAG_PREFIX}cpu."  # + numpy_simd / blas / torch / model
 TAG_PIN = f"{TAG_PREFIX}pin"  # core.numeric_pin.PIN_ID, or "unpinned"
 TAG_PIN_ENV = f"{TAG_PREFIX}pin.env"  # the pin variables' values in force
-TAG_PIN_USER = f"{TAG_PREFIX}pin.user"  # the ones the user set ("none")
 TAG_NOTE = f"{TAG_PREFIX}note"  # set only on runs of the simulated VLM
 
 # ---- what a run is -----------------------------------------------------------------------------
@@ -87,6 +77,7 @@ METRIC_NATIVE_RETURN = "episode/native_return"
 METRIC_LENGTH = "episode/length"
 METRIC_SUCCESS = "episode/success"
 METRIC_SHAPED_RETURN = "episode/shaped_return"
+EPISODE_METRICS = (METRIC_NATIVE_RETURN, METRIC_LENGTH, METRIC_SUCCESS, METRIC_SHAPED_RETURN)
 
 # ---- metrics: at each rollout end (step = global timestep) --------------------------------------
 METRIC_RETURN_100 = "rollout/return_100"  # mean native return of the last 100 episodes
@@ -96,10 +87,9 @@ METRIC_VLM_CACHE_HITS = "vlm/cache_hits"
 METRIC_VLM_PROTOTYPES = "vlm/prototypes"
 METRIC_VLM_LABEL_REUSES = "vlm/label_reuses"
 METRIC_VLM_PARSE_FAILURES = "vlm/parse_failures"
-#: What the VLM cost a run (issue 53): the backend calls (one per labelling round with a miss), the
-#: frames they carried and the largest round, the seconds spent waiting for them, their share of
-#: the run's wall time, and the labels that came from the nearest prototype once ``vlm.max_queries``
-#: was spent.
+#: What the VLM cost a run (issue 53): backend calls (one per labelling round with a miss), their
+#: frames, the largest round, the seconds waited and their share of wall time, and the labels taken
+#: from the nearest prototype once ``vlm.max_queries`` was spent.
 METRIC_VLM_BACKEND_CALLS = "vlm/backend_calls"
 METRIC_VLM_BACKEND_FRAMES = "vlm/backend_frames"
 METRIC_VLM_LARGEST_BATCH = "vlm/largest_batch"
@@ -131,12 +121,7 @@ PAGE_SIZE = 1000
 
 
 def runs_filter(tags: Mapping[str, str], finished: bool = False) -> str:
-    """An MLflow ``filter_string`` matching every tag of ``tags`` (and status FINISHED if asked).
-
-    Example:
-        >>> runs_filter({TAG_KIND: KIND_TRAIN}, finished=True)
-        "tags.`vlmrl.kind` = 'train' and attributes.status = 'FINISHED'"
-    """
+    """An MLflow ``filter_string`` matching every tag of ``tags`` (and status FINISHED if asked)."""
     terms = [f"tags.`{key}` = '{value}'" for key, value in tags.items()]
     if finished:
         terms.append("attributes.status = 'FINISHED'")
@@ -171,8 +156,7 @@ def finished_train_runs(client: Any, experiment: str) -> list[Any]:
 
 
 def search_all(client: Any, experiment_id: str, filter_string: str, page_size: int = PAGE_SIZE) -> list[Any]:
-    """Every run of ``experiment_id`` that matches ``filter_string``, following MLflow's page tokens
-    (one ``search_runs`` call answers at most one page)."""
+    """Every run of ``experiment_id`` that matches ``filter_string``, following MLflow's page tokens."""
     runs: list[Any] = []
     token: str | None = None
     while True:

@@ -1,9 +1,5 @@
-"""MLflow connection, provenance tags and batched metric logging.
-
-Tracking plugs in here only: library code hands results to these helpers instead of calling
-``mlflow.log_*`` all over. Everything goes through an explicit ``MlflowClient`` (no global
-active-run state), so worker processes and tests never share hidden state.
-"""
+"""MLflow connection, provenance tags and batched logging, all through an explicit ``MlflowClient``
+(no global active run). The sqlite set-up lock and schema template: see docs/development.md."""
 
 from __future__ import annotations
 
@@ -31,27 +27,22 @@ INIT_LOCK_TIMEOUT_S = 120.0
 
 
 def connect(uri: str | None, wait_s: float = 0.0, write: bool = True, existing: bool = False) -> Any:
-    """An ``MlflowClient`` for ``uri``, checked to answer; unreachable stores are ``BadInput``.
-    A tracking server that does not answer is retried for up to ``wait_s`` seconds first
-    (workers wait out a server restart; commands typed by a user fail fast). A sqlite database
-    is checked first, without MLflow, to be writable (``write``; readable only, when False) and,
-    with ``existing``, to exist (``store_problem``)."""
+    """An ``MlflowClient`` for ``uri``, checked first as ``access.check_store`` does, then to answer."""
     import logging
 
+    resolved = resolve_tracking_uri(uri)
+    check_store(resolved, write, existing, wait_s)
     from mlflow.tracking import MlflowClient
 
     logging.getLogger("alembic").setLevel(logging.WARNING)
     logging.getLogger("mlflow").setLevel(logging.WARNING)
-    resolved = resolve_tracking_uri(uri)
-    check_store(resolved, write, existing, wait_s)
     lock: contextlib.AbstractContextManager[object] = contextlib.nullcontext()
     db_path: Path | None = None
     if resolved.startswith("sqlite:///"):
         db_path = Path(resolved.removeprefix("sqlite:///"))
-        parent = db_path.parent if str(db_path.parent) else Path(".")
-        if not parent.exists():
+        if not db_path.parent.exists():
             try:
-                parent.mkdir(parents=True, exist_ok=True)
+                db_path.parent.mkdir(parents=True, exist_ok=True)
             except OSError as exc:
                 raise BadInput(f"cannot create the folder of the tracking database {db_path}.") from exc
         lock = init_lock(db_path)
@@ -60,7 +51,17 @@ def connect(uri: str | None, wait_s: float = 0.0, write: bool = True, existing: 
         import mlflow.store.tracking.sqlalchemy_store  # noqa: F401
     try:
         with lock:
-            client = MlflowClient(tracking_uri=resolved) if db_path is None else _open_sqlite_store(db_path)
+            template = schema_template() if db_path is not None and not db_path.exists() else None
+            if db_path is not None and template is not None:  # put in place whole: a copy, then a hard link
+                part = db_path.with_name(f".{db_path.name}.{os.getpid()}.part")
+                try:
+                    shutil.copyfile(template, part)
+                    os.link(part, db_path)  # refuses to replace a file that appeared meanwhile
+                except OSError:
+                    pass  # MLflow creates the schema (or opens the file that appeared)
+                finally:
+                    part.unlink(missing_ok=True)
+            client = MlflowClient(tracking_uri=resolved)
             client.search_experiments(max_results=1)
     except filelock.Timeout as exc:
         raise BadInput(f"another process has been setting up the MLflow store '{resolved}' for over "
@@ -73,37 +74,13 @@ def connect(uri: str | None, wait_s: float = 0.0, write: bool = True, existing: 
     return client
 
 
-def _open_sqlite_store(db_path: Path) -> Any:
-    """An ``MlflowClient`` on the sqlite file ``db_path``, under its ``init_lock``. A file that does
-    not exist yet starts as a copy of ``schema_template()``, put in place whole (a copy, then a
-    hard link), so that MLflow finds its tables complete and only adds the Default experiment, with
-    this process's artifact root and time, as it does on a schema of its own. Where there is no
-    template, MLflow creates the schema itself."""
-    from mlflow.tracking import MlflowClient
-
-    template = None if db_path.exists() else schema_template()
-    if template is not None:
-        part = db_path.with_name(f".{db_path.name}.{os.getpid()}.part")
-        try:
-            shutil.copyfile(template, part)
-            os.link(part, db_path)  # refuses to replace a file that appeared meanwhile
-        except OSError:
-            pass  # MLflow creates the schema (or opens the file that appeared)
-        finally:
-            part.unlink(missing_ok=True)
-    return MlflowClient(tracking_uri=f"sqlite:///{db_path}")
-
-
 def schema_template() -> Path | None:
-    """An empty sqlite store with every table of this MLflow version's schema (its migrations run,
-    no experiment yet), made once per user and MLflow version in the user's cache folder
-    (``platformdirs.user_cache_path("vlmrl")``) and copied for every new sqlite store: MLflow's
-    migrations cost about a CPU-second per new store (measured on a 2-core Zen 3), a copy 0.05 s.
-    A file there at another schema revision, or not a database, is rebuilt. None where the folder
-    cannot be written (MLflow then creates each schema itself)."""
+    """An empty sqlite store of this MLflow version's schema in the user's cache folder, built once
+    (rebuilt if at another revision); None where it cannot be written (MLflow then builds each schema)."""
     import mlflow
     import platformdirs
-    from mlflow.store.db.utils import _get_latest_schema_revision
+    import sqlalchemy
+    from mlflow.store.db.utils import _get_latest_schema_revision, _initialize_tables
 
     head = _get_latest_schema_revision()
     folder = platformdirs.user_cache_path("vlmrl")
@@ -114,8 +91,20 @@ def schema_template() -> Path | None:
     try:
         folder.mkdir(parents=True, exist_ok=True)
         with lock:
-            if _schema_revision(path) != head:
-                _build_schema(path)
+            if _schema_revision(path) != head:  # MLflow's own schema creation, beside it, then renamed
+                part = path.with_name(f"{path.name}.{os.getpid()}.part")
+                part.unlink(missing_ok=True)
+                engine = sqlalchemy.create_engine(f"sqlite:///{part}")
+                try:
+                    _initialize_tables(engine)
+                except Exception as exc:  # an MLflow without this helper, or a failed migration: no template
+                    raise OSError(f"cannot build MLflow's schema: {exc}") from exc
+                finally:
+                    engine.dispose()
+                try:
+                    os.replace(part, path)
+                finally:
+                    part.unlink(missing_ok=True)
     except (OSError, filelock.Timeout):
         return None
     finally:
@@ -137,76 +126,39 @@ def _schema_revision(path: Path) -> str | None:
     return None if row is None else str(row[0])
 
 
-def _build_schema(path: Path) -> None:
-    """Run MLflow's own schema creation (``mlflow.store.db.utils._initialize_tables``, what its
-    sqlite store runs on an empty file) into ``path``, written beside it and renamed into place."""
-    import sqlalchemy
-    from mlflow.store.db.utils import _initialize_tables
-
-    part = path.with_name(f"{path.name}.{os.getpid()}.part")
-    part.unlink(missing_ok=True)
-    engine = sqlalchemy.create_engine(f"sqlite:///{part}")
-    try:
-        _initialize_tables(engine)
-    except Exception as exc:  # an MLflow without this helper, or a failed migration: no template
-        raise OSError(f"cannot build MLflow's schema: {exc}") from exc
-    finally:
-        engine.dispose()
-    try:
-        os.replace(part, path)
-    finally:
-        part.unlink(missing_ok=True)
-
-
 def _remove_lock_file(lock: object) -> None:
-    """Delete the lock file once its holder is done, so that none is left in the temp folder.
-
-    Safe because the lock guards only the creation of a fresh schema: a process that opens the
-    path after this unlink makes a new lock file, while one still waiting on the old file goes on
-    once it is released; either then finds the schema complete (or creates it alone if the holder
-    failed, which is the rare case the unlocked race of two creators remains possible in)."""
+    """Delete the released lock file so that none is left in the temp folder (safe: a process that
+    opens it afterwards makes a new one, and finds the schema complete)."""
     if isinstance(lock, filelock.BaseFileLock) and not lock.is_locked:
         with contextlib.suppress(OSError):
             os.unlink(lock.lock_file)
 
 
 def connect_existing(uri: str | None) -> Any:
-    """``connect`` for commands that read runs: a sqlite database that does not exist is
-    ``BadInput`` instead of a new empty store (``connect`` would create it and its folder)."""
+    """``connect`` for commands that read runs: a missing sqlite database is ``BadInput``, not created."""
     return connect(uri, write=False, existing=True)
 
 
 def init_lock(db_path: Path) -> filelock.FileLock:
-    """An inter-process lock for the first connection to one sqlite tracking database.
-
-    MLflow creates and migrates a fresh sqlite schema with no lock of its own: two processes
-    opening the same new file at once fail with "table ... already exists" or "duplicate column
-    name: step", and can leave the file half-migrated for good (seen with MLflow 3.17; also
-    reported as daizutabi/hydraflow#245). Every vlmrl process (sweep, workers, taxonomy, report)
-    connects under this lock, keyed by the file's absolute path. The lock file lives in the temp
-    folder, not beside the results; ``flock`` releases it when its holder dies.
-    """
+    """The inter-process lock (in the temp folder, keyed by the absolute path) every vlmrl process
+    takes to connect to a sqlite database: MLflow migrates a fresh schema unlocked, and two at once
+    can leave it half-migrated for good (MLflow 3.17; daizutabi/hydraflow#245)."""
     key = hashlib.sha256(str(db_path.resolve()).encode()).hexdigest()[:16]
     return filelock.FileLock(Path(tempfile.gettempdir()) / f"vlmrl-mlflow-{key}.lock", timeout=INIT_LOCK_TIMEOUT_S)
 
 
-def artifact_root(tracking_uri: str) -> str | None:
-    """Where new experiments keep artifacts: beside a sqlite database (``mlartifacts/``), so
-    that ``--tracking-uri sqlite:///D/mlflow.db`` keeps everything under D; else MLflow's default."""
-    if tracking_uri.startswith("sqlite:///"):
-        db_path = Path(tracking_uri.removeprefix("sqlite:///")).resolve()
-        return (db_path.parent / "mlartifacts").as_uri()
-    return None
-
-
 def ensure_experiment(client: Any, name: str) -> str:
-    """The id of experiment ``name``, created if missing (and restored if deleted)."""
+    """The id of experiment ``name``, created if missing (artifacts in ``mlartifacts/`` beside a sqlite
+    database), and restored if deleted."""
     from mlflow.exceptions import MlflowException
 
     exp = client.get_experiment_by_name(name)
     if exp is None:
+        uri = client.tracking_uri
+        root = (Path(uri.removeprefix("sqlite:///")).resolve().parent / "mlartifacts").as_uri() \
+            if uri.startswith("sqlite:///") else None
         try:
-            return str(client.create_experiment(name, artifact_location=artifact_root(client.tracking_uri)))
+            return str(client.create_experiment(name, artifact_location=root))
         except MlflowException:
             # another process (a second sweep started at the same moment) created it first
             exp = client.get_experiment_by_name(name)
@@ -218,17 +170,13 @@ def ensure_experiment(client: Any, name: str) -> str:
 
 
 def provenance_tags(vlm_label: str, simulated: bool) -> dict[str, str]:
-    """Tags every vlmrl run carries: VLM (simulated said plainly), commit, versions, CPU paths and
-    the numeric pin."""
+    """Tags every vlmrl run carries: VLM (simulated said plainly), commit, versions, CPU paths, numeric pin."""
     commit = git_commit()
     tags = {schema.TAG_VLM: vlm_label, schema.TAG_SIMULATED: "true" if simulated else "false",
-            schema.TAG_GIT_COMMIT: commit, schema.MLFLOW_GIT_COMMIT: commit}
-    for name, version in package_versions().items():
-        tags[f"{schema.TAG_VERSION_PREFIX}{name}"] = version
-    for name, path in cpu_paths().items():
-        tags[f"{schema.TAG_CPU_PREFIX}{name}"] = path
-    for name, value in pin_record().items():  # the pinned kernels in force, and the CPU model
-        tags[f"{schema.TAG_PREFIX}{name}"] = value
+            schema.TAG_GIT_COMMIT: commit, schema.MLFLOW_GIT_COMMIT: commit,
+            **{f"{schema.TAG_VERSION_PREFIX}{name}": v for name, v in package_versions().items()},
+            **{f"{schema.TAG_CPU_PREFIX}{name}": path for name, path in cpu_paths().items()},
+            **{f"{schema.TAG_PREFIX}{name}": v for name, v in pin_record().items()}}  # the pin and the CPU model
     if simulated:
         tags[schema.TAG_NOTE] = ("Produced with the SIMULATED VLM (a pixel-reading stand-in), not a real "
                                  "vision-language model.")
@@ -236,22 +184,11 @@ def provenance_tags(vlm_label: str, simulated: bool) -> dict[str, str]:
 
 
 class BatchLogger:
-    """Buffers metrics and flushes them with ``log_batch`` (one sqlite call per point costs
-    ~4 ms; batches of up to 1000 cost about the same as one).
-
-    The buffer is written when it holds ``max_buffer`` points or when ``max_age_s`` seconds have
-    passed since the last write, whichever comes first, so a long run shows its curves in
-    MLflow's UI while it trains instead of only every few tens of thousands of steps.
-
-    A write that fails (a tracking server restarting) keeps the buffer and is tried again at the
-    next write, so no point is lost; ``flush`` itself retries for ``retry_s`` seconds and then
-    raises, and the run fails cleanly (the next sweep redoes it).
-
-    Every ``log`` call gets its own timestamp, strictly increasing (ms): MLflow's stores keep one
-    row per (key, value, step, timestamp), so two envs finishing identical episodes at the same
-    global step would otherwise collapse into one point, and the records of one call share a
-    timestamp so readers can line their metrics up.
-    """
+    """Buffers metrics for ``log_batch`` (a point alone costs ~4 ms in sqlite, 1000 about the same),
+    written at ``max_buffer`` points or ``max_age_s`` seconds. A failed write keeps the buffer for the
+    next; ``flush`` retries for ``retry_s`` seconds, then raises. Each ``log`` call gets its own
+    strictly increasing ms timestamp: MLflow keeps one row per (key, value, step, timestamp), so two
+    identical episodes at one step would otherwise collapse."""
 
     def __init__(self, client: Any, run_id: str, max_buffer: int = 900, max_age_s: float = 5.0,
                  clock: Callable[[], float] = time.monotonic, retry_s: float = 300.0,
@@ -327,18 +264,11 @@ def log_artifacts(client: Any, run_id: str, paths: Iterable[Path], artifact_path
 
 
 def download_artifacts(client: Any, run_id: str, names: Iterable[str], dst: Path) -> None:
-    """Download the run's artifacts ``names`` into the existing folder ``dst``, without
-    MLflow's progress bars (the variable that turns them off is restored afterwards)."""
+    """Download the run's artifacts ``names`` into the existing folder ``dst``, without progress bars."""
+    from unittest import mock
+
     from mlflow.environment_variables import MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR
 
-    key = MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR.name
-    before = os.environ.get(key)
-    os.environ[key] = "false"
-    try:
+    with mock.patch.dict(os.environ, {MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR.name: "false"}):
         for name in names:
             client.download_artifacts(run_id, name, str(dst))
-    finally:
-        if before is None:
-            os.environ.pop(key, None)
-        else:
-            os.environ[key] = before

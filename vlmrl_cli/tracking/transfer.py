@@ -1,32 +1,8 @@
-"""Move finished training runs between MLflow stores as one compact file (export / import).
+"""Move finished training runs between MLflow stores as one gzip JSON-lines file (export / import).
 
-A study trained on a cluster, or over sessions on machines that do not keep their store, is read
-and resumed elsewhere: ``export_runs`` writes each FINISHED training run as one JSON line of a gzip
-file (the histories the analysis reads, with steps and timestamps; the last value of every other
-metric; ``config.json``; the model when asked), and ``import_runs`` recreates them as FINISHED runs
-with the same tags, which a sweep's resume rule and ``vlmrl report`` take for runs trained there.
-
-An export file is untrusted input. ``read_records`` checks every line against ``Record`` (types,
-lengths, the tags a training run has, MLflow's limits) and the file against its digest before a
-caller sees a record; an artifact is one of the names below, never a path; nothing in a file is
-ever unpickled: the policy travels as the ``state_dict`` that ``torch.load(weights_only=True)``
-reads, the normaliser as ``numpy`` arrays, and a pickle (SB3's ``model.zip`` carries cloudpickled
-objects; older runs' ``vecnormalize.pkl``) is refused unless the user passes ``trust_pickle``.
-``import_runs`` writes all of a file's runs or none.
-
-Format (``FORMAT``), one object per line, then one digest line::
-
-    {"format": "vlmrl-runs/2", "source_run_id": ..., "run_name": ..., "start_time": ms, "end_time": ms,
-     "tags": {...}, "params": {...}, "latest": {key: [0, end_time, last value]},
-     "histories": {key: {"step": [...], "ts": [...], "value": [...]}},
-     "artifacts": {"config.json": "<text>"}, "binary": {"policy.pth": "<base64>"}}
-    {"format": "vlmrl-runs/2", "records": N, "sha256": "<hex of the bytes of the N lines above>"}
-
-Files of format 1 (no digest line) are still read; their integrity cannot be checked, and
-``read_records`` says so through ``digest_checked``. The digest detects a truncated or edited
-file; it is no signature (whoever edits a file can write a new digest): safety rests on the
-checks above, which every record passes whatever its digest.
-
+An export file is untrusted input: every record is checked (``Record``, ``check_binary``) and the
+file against its digest line before a caller sees it, and nothing in it is unpickled. The format,
+and what an import refuses, are in docs/commands/export-import.md.
 """
 
 from __future__ import annotations
@@ -41,7 +17,7 @@ import json
 import tempfile
 import zipfile
 import zlib
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any
@@ -53,29 +29,24 @@ from vlmrl_cli.tracking import schema, store
 from vlmrl_cli.tracking.lifecycle import tracked_run
 
 FORMAT_NAME = "vlmrl-runs"
-#: The version of the format this package writes; it reads this one and every older one
-#: (``READABLE``), and refuses a file of a newer one with "upgrade vlmrl".
+#: The format written; every older one (``READABLE``) is read, a newer one refused with "upgrade vlmrl".
 FORMAT_VERSION = 2
 FORMAT = f"{FORMAT_NAME}/{FORMAT_VERSION}"
 READABLE = tuple(f"{FORMAT_NAME}/{v}" for v in range(1, FORMAT_VERSION + 1))
-HISTORY_KEYS: tuple[str, ...] = (
-    schema.METRIC_NATIVE_RETURN, schema.METRIC_LENGTH, schema.METRIC_SUCCESS, schema.METRIC_SHAPED_RETURN,
-    schema.METRIC_EVAL_EPISODE_RETURN, schema.METRIC_EVAL_EPISODE_LENGTH, schema.METRIC_EVAL_EPISODE_SUCCESS,
-)
+HISTORY_KEYS: tuple[str, ...] = (*schema.EPISODE_METRICS, schema.METRIC_EVAL_EPISODE_RETURN,
+                                  schema.METRIC_EVAL_EPISODE_LENGTH, schema.METRIC_EVAL_EPISODE_SUCCESS)
 TEXT_ARTIFACTS: tuple[str, ...] = (schema.ARTIFACT_CONFIG,)
 #: What ``--models`` carries: the policy's weights and the observation statistics, neither a pickle.
 MODEL_ARTIFACTS: tuple[str, ...] = (schema.ARTIFACT_POLICY, schema.ARTIFACT_NORMALIZER)
 #: Pickles: an import refuses them unless the user trusts the file (``trust_pickle``).
 PICKLED_ARTIFACTS: tuple[str, ...] = (schema.ARTIFACT_MODEL, schema.ARTIFACT_PICKLED_NORMALIZER)
-#: Tags that name the source store's runs or processes; an imported run gets ``TAG_IMPORTED_FROM``.
-# the per-episode table is not exported (its histories are): an imported run reads those
+# the source store's runs and processes; the episodes table is not exported (its histories are)
 _DROPPED_TAGS = (schema.MLFLOW_PARENT_RUN_ID, schema.TAG_OWNER, schema.TAG_HEARTBEAT, schema.TAG_EPISODES_TABLE)
 TAG_IMPORTED_FROM = f"{schema.TAG_PREFIX}imported_from"
 #: The tags without which a record is no training run of vlmrl's (the resume key and the kind).
 REQUIRED_TAGS = (schema.TAG_KIND, schema.TAG_ARM, schema.TAG_SEED, schema.TAG_CONFIG_HASH)
-#: MLflow's limits (``mlflow.utils.validation``: MAX_ENTITY_KEY_LENGTH, MAX_TAG_VAL_LENGTH,
-#: MAX_PARAM_VAL_LENGTH), checked before anything is written so that an import cannot fail halfway;
-#: written here because importing that module costs seconds (a test keeps them equal).
+#: MLflow's limits (``mlflow.utils.validation``; importing it costs seconds, a test keeps them equal),
+#: checked before anything is written so that an import cannot fail halfway.
 MAX_KEY = 250
 MAX_TAG_VALUE = 8000
 MAX_PARAM_VALUE = 6000
@@ -137,9 +108,8 @@ class Record(_Strict):
             if bad:
                 raise ValueError(f"{field}: the artifact name {bad[0]!r} is none of {', '.join(allowed)} (an "
                                  "artifact is named, never a path)")
-        config = self.artifacts.get(schema.ARTIFACT_CONFIG, "{}")
         try:
-            parsed = json.loads(config)
+            parsed = json.loads(self.artifacts.get(schema.ARTIFACT_CONFIG, "{}"))
         except json.JSONDecodeError as exc:
             raise ValueError(f"artifacts: {schema.ARTIFACT_CONFIG} is not JSON ({exc.msg})") from None
         if not isinstance(parsed, dict):
@@ -149,7 +119,7 @@ class Record(_Strict):
 
 @dataclass(frozen=True)
 class TransferSummary:
-    """What an export or import did: runs written (or created) and runs skipped as present."""
+    """Runs written (or created) and runs skipped as present."""
 
     written: int
     skipped: int = 0
@@ -157,8 +127,7 @@ class TransferSummary:
 
 @dataclass(frozen=True)
 class ExportFile:
-    """The checked records of an export file, and whether its digest was there to check (format 1
-    files have none)."""
+    """The checked records of an export file, and whether it had a digest to check (format 1 has none)."""
 
     path: Path
     records: list[dict[str, Any]]
@@ -171,53 +140,37 @@ def _history(client: Any, run_id: str, key: str) -> dict[str, list[Any]]:
             "value": [float(p.value) for p in points]}
 
 
-def _binary(present: set[str], workdir: Path) -> dict[str, bytes]:
-    """The model files of a run whose artifacts ``present`` were downloaded to ``workdir``: the
-    policy's weights (SB3's ``model.zip`` holds them as ``policy.pth``, the one entry of it exported;
-    the rest of the zip is cloudpickle), the normaliser's arrays, or an older run's pickled normaliser."""
-    files: dict[str, bytes] = {}
-    if schema.ARTIFACT_MODEL in present:
-        with zipfile.ZipFile(workdir / schema.ARTIFACT_MODEL) as archive:
-            files[schema.ARTIFACT_POLICY] = archive.read(schema.ARTIFACT_POLICY)
-    for name in (schema.ARTIFACT_NORMALIZER, schema.ARTIFACT_PICKLED_NORMALIZER):
-        if name in present:
-            files[name] = (workdir / name).read_bytes()
-            break
-    return files
-
-
 def _record(client: Any, run: Any, models: bool, workdir: Path) -> dict[str, Any]:
     run_id = run.info.run_id
-    # other metrics keep their last value only (their histories, e.g. train/*, serve MLflow's UI, not
-    # the analysis), at step 0 and the run's end time
+    # metrics without a history (e.g. train/*) keep their last value, at step 0 and the run's end time
     when = int(run.info.end_time or run.info.start_time or 0)
     latest = {k: [0, when, float(v)] for k, v in run.data.metrics.items() if k not in HISTORY_KEYS}
     present = {a.path for a in client.list_artifacts(run_id)}
     model_files = (schema.ARTIFACT_MODEL, schema.ARTIFACT_NORMALIZER, schema.ARTIFACT_PICKLED_NORMALIZER)
     wanted = [n for n in (*TEXT_ARTIFACTS, *(model_files if models else ())) if n in present]
     store.download_artifacts(client, run_id, wanted, workdir)
+    binary: dict[str, bytes] = {}
+    if schema.ARTIFACT_MODEL in wanted:  # its policy.pth entry alone: the rest of the zip is cloudpickle
+        with zipfile.ZipFile(workdir / schema.ARTIFACT_MODEL) as archive:
+            binary[schema.ARTIFACT_POLICY] = archive.read(schema.ARTIFACT_POLICY)
+    # the normaliser's arrays, or an older run's pickle
+    normalizer = next((n for n in model_files[1:] if n in wanted), None)
+    if normalizer is not None:
+        binary[normalizer] = (workdir / normalizer).read_bytes()
     return {
         "format": FORMAT, "source_run_id": run_id, "run_name": run.info.run_name,
         "start_time": run.info.start_time, "end_time": run.info.end_time,
         "tags": dict(run.data.tags), "params": dict(run.data.params), "latest": latest,
         "histories": {key: _history(client, run_id, key) for key in HISTORY_KEYS if key in run.data.metrics},
         "artifacts": {n: (workdir / n).read_text(encoding="utf-8") for n in wanted if n in TEXT_ARTIFACTS},
-        "binary": {n: base64.b64encode(blob).decode("ascii")
-                   for n, blob in (_binary(set(wanted), workdir) if models else {}).items()},
+        "binary": {n: base64.b64encode(blob).decode("ascii") for n, blob in binary.items()},
     }
 
 
-def exported_ids(paths: Sequence[Path]) -> set[str]:
-    """The source run ids already in the export files ``paths`` (for an incremental export)."""
-    return {r["source_run_id"] for p in paths for r in read_records(p)}
-
-
 def export_runs(client: Any, experiment: str, path: Path, models: bool = False,
-                progress: Callable[[int, int], None] | None = None, skip: set[str] | None = None) -> TransferSummary:
-    """Write the FINISHED training runs of ``experiment`` to the gzip JSON-lines file ``path``
-    (written to a temporary name first, so a failed export leaves no partial file), but those whose
-    run id is in ``skip`` (exported before: ``skipped`` counts them), and the digest line.
-    ``progress(done, total)`` is called after each run. ``BadInput`` when there is nothing to export."""
+                skip: set[str] | None = None) -> TransferSummary:
+    """Write the FINISHED training runs of ``experiment`` but those in ``skip`` to ``path``
+    (``write_records``); ``BadInput`` when none is left."""
     runs = schema.finished_train_runs(client, experiment)
     before = len(runs)
     runs = [r for r in runs if r.info.run_id not in (skip or set())]
@@ -226,19 +179,17 @@ def export_runs(client: Any, experiment: str, path: Path, models: bool = False,
                        + (f" that is not in the earlier exports ({before} are)." if before else "."))
 
     def records() -> Iterator[dict[str, Any]]:
-        for i, run in enumerate(runs, start=1):
+        for run in runs:
             with tempfile.TemporaryDirectory(prefix="vlmrl-export-") as tmp:
                 yield _record(client, run, models, Path(tmp))
-            if progress is not None:
-                progress(i, len(runs))
 
     write_records(path, records())
     return TransferSummary(len(runs), before - len(runs))
 
 
 def write_records(path: Path, records: Iterable[dict[str, Any]]) -> int:
-    """Write ``records`` (this format's) to the gzip JSON-lines file ``path`` with their digest line,
-    through a temporary name, so that a failed write leaves no partial file; how many were written."""
+    """Write ``records`` and their digest line to the gzip JSON-lines file ``path`` through a
+    temporary name (a failed write leaves no partial file); how many were written."""
     partial = path.with_name(path.name + ".partial")
     digest, count = hashlib.sha256(), 0
     try:
@@ -258,28 +209,8 @@ def write_records(path: Path, records: Iterable[dict[str, Any]]) -> int:
 
 
 def digest_line(records: int, sha256: str) -> dict[str, Any]:
-    """The last line of an export file of this format: how many records precede it and the sha256
-    of their bytes (each line as written, newline included)."""
+    """The last line of an export file: the record count and the sha256 of their lines' bytes."""
     return {"format": FORMAT, "records": records, "sha256": sha256}
-
-
-def format_problem(tag: object) -> str | None:
-    """Why a record whose ``format`` field is ``tag`` cannot be read here, or None.
-
-    Example:
-        >>> format_problem(FORMAT) is None, format_problem("vlmrl-runs/1") is None
-        (True, True)
-        >>> format_problem("vlmrl-runs/7")
-        'written by a newer vlmrl (format 7; this one reads up to 2): upgrade vlmrl'
-        >>> format_problem("mlflow-export")
-        'not a vlmrl run export (vlmrl-runs/2)'
-    """
-    if tag in READABLE:
-        return None
-    name, _, version = str(tag).partition("/")
-    if name == FORMAT_NAME and version.isdigit() and int(version) > FORMAT_VERSION:
-        return f"written by a newer vlmrl (format {int(version)}; this one reads up to {FORMAT_VERSION}): upgrade vlmrl"
-    return f"not a vlmrl run export ({FORMAT})"
 
 
 def record_problem(record: object) -> str | None:
@@ -288,37 +219,31 @@ def record_problem(record: object) -> str | None:
     Example:
         >>> record_problem({"format": FORMAT, "source_run_id": "abc"})
         'tags: Field required (and 4 more: params, latest, histories, artifacts)'
-        >>> record_problem({"format": "vlmrl-runs/7"})
-        'written by a newer vlmrl (format 7; this one reads up to 2): upgrade vlmrl'
     """
-    problem = format_problem(record.get("format") if isinstance(record, dict) else None)
-    if problem:
-        return problem
+    tag = record.get("format") if isinstance(record, dict) else None
+    if tag not in READABLE:
+        name, _, version = str(tag).partition("/")
+        if name == FORMAT_NAME and version.isdigit() and int(version) > FORMAT_VERSION:
+            return f"written by a newer vlmrl (format {int(version)}; this one reads up to {FORMAT_VERSION}): " \
+                "upgrade vlmrl"
+        return f"not a vlmrl run export ({FORMAT})"
     try:
         Record.model_validate(record)
-    except ValidationError as exc:
-        return _one_line(exc)
+    except ValidationError as exc:  # one line: the first problem (where, what), and how many more
+        errors = exc.errors(include_url=False, include_input=False)
+        where = ".".join(str(p) for p in errors[0]["loc"])
+        what = str(errors[0]["msg"]).removeprefix("Value error, ")
+        line = f"{where}: {what}" if where else what
+        if len(errors) > 1:
+            shown = list(dict.fromkeys(".".join(str(p) for p in e["loc"][:1]) for e in errors[1:]))
+            line += f" (and {len(errors) - 1} more: {', '.join(shown[:4])}{', ...' if len(shown) > 4 else ''})"
+        return line[:400]
     return None
 
 
-def _one_line(exc: ValidationError) -> str:
-    """A pydantic error as one line: the first problem (where, what), and how many more."""
-    errors = exc.errors(include_url=False, include_input=False)
-    first = errors[0]
-    where = ".".join(str(p) for p in first["loc"])
-    what = str(first["msg"]).removeprefix("Value error, ")
-    line = f"{where}: {what}" if where else what
-    if len(errors) > 1:
-        more = [".".join(str(p) for p in e["loc"][:1]) for e in errors[1:]]
-        shown = list(dict.fromkeys(more))
-        line += (f" (and {len(errors) - 1} more: {', '.join(shown[:4])}{', ...' if len(shown) > 4 else ''})")
-    return line[:400]
-
-
 def read_export(path: Path) -> ExportFile:
-    """Every record of the export file ``path``, each checked (``record_problem``, ``check_binary``),
-    and the file against its digest line; ``BadInput`` naming the line for anything else. Nothing is
-    returned before the whole file has passed."""
+    """Every record of the export file ``path`` once the whole file has passed its checks
+    (``record_problem``, ``check_binary``, the digest line); ``BadInput`` naming the line otherwise."""
     records: list[dict[str, Any]] = []
     digest = hashlib.sha256()
     trailer: dict[str, Any] | None = None
@@ -344,22 +269,17 @@ def read_export(path: Path) -> ExportFile:
         raise BadInput(f"cannot read the run export {path}: {exc}.") from None
     if not records:
         raise BadInput(f"{path} holds no run; write one with `vlmrl export`.")
-    return ExportFile(path, records, _check_digest(path, records, trailer, digest.hexdigest()))
-
-
-def _check_digest(path: Path, records: list[dict[str, Any]], trailer: dict[str, Any] | None, sha256: str) -> bool:
-    """Whether the file's digest was checked (format 1 has none); ``BadInput`` when it does not hold."""
     versions = {r["format"] for r in records}
     if versions == {f"{FORMAT_NAME}/1"} and trailer is None:
-        return False
+        return ExportFile(path, records, False)
     if len(versions) > 1:
         raise BadInput(f"{path} mixes formats {', '.join(sorted(versions))}; the file was edited.")
     if trailer is None:
         raise BadInput(f"{path} has no digest line: the file is truncated or was edited; export it again.")
-    if trailer != digest_line(len(records), sha256):
+    if trailer != digest_line(len(records), digest.hexdigest()):
         raise BadInput(f"{path}: its records do not match its digest line: the file was edited or damaged; "
                        "export it again.")
-    return True
+    return ExportFile(path, records, True)
 
 
 def read_records(path: Path) -> Iterator[dict[str, Any]]:
@@ -368,10 +288,10 @@ def read_records(path: Path) -> Iterator[dict[str, Any]]:
 
 
 def check_binary(record: dict[str, Any]) -> None:
-    """``BadInput`` unless every model file of ``record`` is what its name says: base64;
-    ``policy.pth`` a tensor dictionary that ``torch.load(weights_only=True)`` reads;
-    ``vecnormalize.npz`` arrays that ``numpy.load(allow_pickle=False)`` reads. Reading them this
-    way runs nothing; a pickle is not opened here (``refuse_pickles``)."""
+    """``BadInput`` unless every model file of ``record`` is base64 of what its name says:
+    ``policy.pth`` tensors that ``torch.load(weights_only=True)`` reads, ``vecnormalize.npz``
+    numeric arrays that ``numpy.load(allow_pickle=False)`` reads (neither runs anything); a pickle
+    is not opened here (``refuse_pickles``)."""
     for name, text in record.get("binary", {}).items():
         where = f"run {record['source_run_id']}: {name}"
         try:
@@ -380,49 +300,30 @@ def check_binary(record: dict[str, Any]) -> None:
             raise BadInput(f"{where} is not base64; the file is damaged.") from None
         try:
             if name == schema.ARTIFACT_POLICY:
-                _check_weights(blob)
+                import torch
+
+                state = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=True)
+                if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
+                    raise TypeError("not a dictionary of tensors")
             elif name == schema.ARTIFACT_NORMALIZER:
-                _check_arrays(blob)
+                import numpy as np
+
+                with np.load(io.BytesIO(blob), allow_pickle=False) as saved:
+                    if any(saved[key].dtype.kind not in "biuf" for key in saved.files):
+                        raise TypeError("an array of other values")
         except Exception as exc:  # whatever a crafted file makes the readers raise: refused, not run
             raise BadInput(f"{where} is not a plain {'tensor' if name == schema.ARTIFACT_POLICY else 'array'} "
                            f"file ({type(exc).__name__}); nothing of it was loaded.") from None
 
 
 def refuse_pickles(export: ExportFile, trust_pickle: bool = False) -> None:
-    """``BadInput`` for a pickled model file (``PICKLED_ARTIFACTS``) in ``export`` unless the user
-    trusts the file: a store that keeps one hands it to whoever evaluates the run."""
-    if trust_pickle:
-        return
-    for record in export.records:
-        for name in set(record.get("binary", {})) & set(PICKLED_ARTIFACTS):
-            raise BadInput(f"{export.path}: run {record['source_run_id']}: {name} is a pickle, and loading a pickle "
-                           "runs whatever code it holds; import it with --trust-pickle only if you trust where "
-                           "the file came from.")
-
-
-def _check_weights(blob: bytes) -> None:
-    import torch
-
-    state = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=True)
-    if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
-        raise TypeError("not a dictionary of tensors")
-
-
-def _check_arrays(blob: bytes) -> None:
-    import numpy as np
-
-    with np.load(io.BytesIO(blob), allow_pickle=False) as saved:
-        for key in saved.files:
-            if saved[key].dtype.kind not in "biuf":
-                raise TypeError(f"{key} holds {saved[key].dtype} values")
-
-
-def _present(client: Any, experiment_id: str) -> tuple[set[tuple[str, str, str]], set[str]]:
-    runs = schema.search_all(client, experiment_id,
-                             schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN}, finished=True))
-    keys = {schema.job_key(r.data.tags) for r in runs}
-    sources = {r.data.tags[TAG_IMPORTED_FROM] for r in runs if TAG_IMPORTED_FROM in r.data.tags}
-    return keys, sources
+    """``BadInput`` for a pickled model file in ``export`` unless the user trusts the file: a store
+    that keeps one hands it to whoever evaluates the run."""
+    pickled = [(r["source_run_id"], n) for r in export.records for n in r.get("binary", {}) if n in PICKLED_ARTIFACTS]
+    if pickled and not trust_pickle:
+        raise BadInput(f"{export.path}: run {pickled[0][0]}: {pickled[0][1]} is a pickle, and loading a pickle runs "
+                       "whatever code it holds; import it with --trust-pickle only if you trust where the file "
+                       "came from.")
 
 
 def _create(client: Any, experiment_id: str, record: dict[str, Any], created: list[str]) -> None:
@@ -445,32 +346,30 @@ def _create(client: Any, experiment_id: str, record: dict[str, Any], created: li
         for i in range(0, len(metrics), 1000):
             client.log_batch(run_id, metrics=metrics[i : i + 1000])
         with tempfile.TemporaryDirectory(prefix="vlmrl-import-") as tmp:
-            files = []
-            # the names are TEXT_ARTIFACTS', MODEL_ARTIFACTS' or PICKLED_ARTIFACTS' (Record): plain file names
-            for name, text in record["artifacts"].items():
-                (Path(tmp) / name).write_text(text, encoding="utf-8")
-                files.append(Path(tmp) / name)
-            for name, blob in record.get("binary", {}).items():
-                (Path(tmp) / name).write_bytes(base64.b64decode(blob))
-                files.append(Path(tmp) / name)
-            store.log_artifacts(client, run_id, files)
+            # the names are plain file names (Record checks them)
+            files = {Path(tmp) / name: text.encode("utf-8") for name, text in record["artifacts"].items()}
+            files |= {Path(tmp) / name: base64.b64decode(blob) for name, blob in record.get("binary", {}).items()}
+            for file, blob in files.items():
+                file.write_bytes(blob)
+            store.log_artifacts(client, run_id, list(files))
 
 
-def import_runs(client: Any, path: Path | ExportFile, experiment: str,
-                progress: Callable[[int, int], None] | None = None, trust_pickle: bool = False) -> TransferSummary:
+def import_runs(client: Any, path: Path | ExportFile, experiment: str, trust_pickle: bool = False) -> TransferSummary:
     """Create the runs of the export ``path`` (or a file ``read_export`` has read) in ``experiment``
-    (created if missing); runs already there are skipped. All or nothing: the whole file is checked
-    first (``read_export``, ``refuse_pickles``), and a failure while writing deletes the runs this
-    call made. ``progress(done, total)`` after each record."""
+    (created if missing), skipping those already there. All or nothing: the whole file is checked
+    first, and a failure while writing deletes the runs (and the experiment) this call made."""
     export = path if isinstance(path, ExportFile) else read_export(path)
     refuse_pickles(export, trust_pickle)
     existed = client.get_experiment_by_name(experiment) is not None
     experiment_id = store.ensure_experiment(client, experiment)
-    keys, sources = _present(client, experiment_id)
+    present = schema.search_all(client, experiment_id,
+                                schema.runs_filter({schema.TAG_KIND: schema.KIND_TRAIN}, finished=True))
+    keys = {schema.job_key(r.data.tags) for r in present}
+    sources = {r.data.tags[TAG_IMPORTED_FROM] for r in present if TAG_IMPORTED_FROM in r.data.tags}
     written = skipped = 0
     created: list[str] = []
     try:
-        for i, record in enumerate(export.records, start=1):
+        for record in export.records:
             key = schema.job_key(record["tags"])
             if key in keys or record["source_run_id"] in sources:
                 skipped += 1
@@ -478,24 +377,16 @@ def import_runs(client: Any, path: Path | ExportFile, experiment: str,
                 _create(client, experiment_id, record, created)
                 keys.add(key)
                 written += 1
-            if progress is not None:
-                progress(i, len(export.records))
     except BaseException:
-        _undo(client, created, None if existed else experiment_id)
+        # FAILED, then deleted (MLflow keeps deleted runs out of every search); a store that fails
+        # here too leaves them FAILED at worst (tracked_run), never FINISHED
+        for run_id in created:
+            with contextlib.suppress(Exception):
+                client.set_terminated(run_id, "FAILED")
+            with contextlib.suppress(Exception):
+                client.delete_run(run_id)
+        if not existed:
+            with contextlib.suppress(Exception):
+                client.delete_experiment(experiment_id)
         raise
     return TransferSummary(written, skipped)
-
-
-def _undo(client: Any, run_ids: Iterable[str], experiment_id: str | None) -> None:
-    """Mark the runs an import made FAILED and delete them (and the experiment it created), so that a
-    failed import leaves the store as it found it: MLflow keeps deleted runs out of every search, and
-    restoring the experiment (which restores its runs) brings back no run taken for a finished one."""
-    # a store that fails here too leaves the runs FAILED at worst (tracked_run), never FINISHED
-    for run_id in run_ids:
-        with contextlib.suppress(Exception):
-            client.set_terminated(run_id, "FAILED")
-        with contextlib.suppress(Exception):
-            client.delete_run(run_id)
-    if experiment_id is not None:
-        with contextlib.suppress(Exception):
-            client.delete_experiment(experiment_id)
