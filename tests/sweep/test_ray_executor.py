@@ -19,6 +19,7 @@ from mlflow.tracking import MlflowClient
 from vlmrl_cli.sweep.ray_executor import start_local
 from vlmrl_cli.sweep.runner import SilentReporter, run_sweep
 from vlmrl_cli.tasks.registry import get_task
+from vlmrl_cli.tracking.store import connect
 from vlmrl_cli.training.config import RunConfig
 from vlmrl_cli.training.events import ProgressEvent
 from vlmrl_cli.training.presets import preset_of
@@ -68,14 +69,16 @@ def test_a_killed_ray_worker_is_retried_and_finishes_once(tmp_path: Path, local_
     ppo = dataclasses.replace(preset_of(get_task("mountain-car"), "smoke"), timesteps=12_000)
     cfg = RunConfig(arms=("baseline",), seeds=(0,), preset="smoke", ppo=ppo, workers=2, tracking_uri=uri,
                     executor="ray", max_retries=2)
+    # the store is set up (under vlmrl's lock, whole) before the sweep starts: a bare MlflowClient
+    # would build its schema unlocked while the sweep checks the file, and the sweep refuses it
+    client = connect(uri)
     box: dict[str, Any] = {}
     thread = threading.Thread(target=lambda: box.update(summary=run_sweep(cfg, SilentReporter())))
     thread.start()
-    client = MlflowClient(tracking_uri=uri)
     killed = None
     deadline = time.monotonic() + 240
     while killed is None and time.monotonic() < deadline and thread.is_alive():
-        exp = client.get_experiment_by_name("vlmrl") if (tmp_path / "m.db").exists() else None
+        exp = client.get_experiment_by_name("vlmrl")
         runs = [] if exp is None else client.search_runs(
             [exp.experiment_id], "tags.`vlmrl.kind` = 'train' and attributes.status = 'RUNNING'")
         for run in runs:  # the job's run is open: its worker is building the env or training
