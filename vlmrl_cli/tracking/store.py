@@ -51,16 +51,8 @@ def connect(uri: str | None, wait_s: float = 0.0, write: bool = True, existing: 
         import mlflow.store.tracking.sqlalchemy_store  # noqa: F401
     try:
         with lock:
-            template = schema_template() if db_path is not None and not db_path.exists() else None
-            if db_path is not None and template is not None:  # put in place whole: a copy, then a hard link
-                part = db_path.with_name(f".{db_path.name}.{os.getpid()}.part")
-                try:
-                    shutil.copyfile(template, part)
-                    os.link(part, db_path)  # refuses to replace a file that appeared meanwhile
-                except OSError:
-                    pass  # MLflow creates the schema (or opens the file that appeared)
-                finally:
-                    part.unlink(missing_ok=True)
+            if db_path is not None and not db_path.exists():
+                _start_from_template(db_path)
             client = MlflowClient(tracking_uri=resolved)
             client.search_experiments(max_results=1)
     except filelock.Timeout as exc:
@@ -72,6 +64,22 @@ def connect(uri: str | None, wait_s: float = 0.0, write: bool = True, existing: 
     finally:
         _remove_lock_file(lock)
     return client
+
+
+def _start_from_template(db_path: Path) -> None:
+    """Put a copy of ``schema_template()`` at the new ``db_path`` whole (a copy, then a hard link);
+    where there is no template, or a file appeared meanwhile, MLflow opens or creates it itself."""
+    template = schema_template()
+    if template is None:
+        return
+    part = db_path.with_name(f".{db_path.name}.{os.getpid()}.part")
+    try:
+        shutil.copyfile(template, part)
+        os.link(part, db_path)  # refuses to replace a file that appeared meanwhile
+    except OSError:
+        pass
+    finally:
+        part.unlink(missing_ok=True)
 
 
 def schema_template() -> Path | None:
