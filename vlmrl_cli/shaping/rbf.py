@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from vlmrl_cli.core.fp import exp
+from vlmrl_cli.core.fp import exp, fsum
 
 _INT64_MAX = np.iinfo(np.int64).max
 
@@ -123,13 +123,13 @@ class RBFField:
         k = self._k
         ref, num, den = self._ref_buf[:k], self._num_buf[:k], self._den_buf[:k]
         sq = self._key_distances(row[0])
-        closer = sq < ref
-        # rebase keys whose nearest prototype is the new one, so no weight underflows
-        # (the others get exp(0) = 1; clipping first keeps exp from overflowing on them)
-        rescale = exp(-np.maximum(ref - sq, 0.0) * self._scale)
-        num *= rescale
-        den *= rescale
-        ref[:] = np.where(closer, sq, ref)
+        closer = np.flatnonzero(sq < ref)
+        # rebase keys whose nearest prototype is the new one, so no weight underflows (the others'
+        # factor would be exp(-0.0) = 1.0 exactly, so they are left as they are)
+        rescale = exp(-(ref[closer] - sq[closer]) * self._scale)
+        num[closer] *= rescale
+        den[closer] *= rescale
+        ref[closer] = sq[closer]
         w = exp(-(sq - ref) * self._scale)
         num += w * float(potential)
         den += w
@@ -183,7 +183,7 @@ class RBFField:
             sq = self._distances(self._proto_buf[: self._n], self._pnorm_buf[: self._n], f[0])
             ref = float(sq.min())
             w = exp(-(sq - ref) * self._scale)
-            num, den = math.fsum((w * self._pot_buf[: self._n]).tolist()), math.fsum(w.tolist())  # exactly rounded
+            num, den = fsum(w * self._pot_buf[: self._n]), fsum(w)  # exactly rounded
             row = self._k
             self._index[key] = row
             if self._feat_buf is None:
