@@ -61,6 +61,17 @@ def test_an_empty_store_estimates_each_task_from_its_own_measured_step_time(tmp_
     assert f"minigrid-doorkey {step_s * 1e3:.2f} ms per step" in cost.how
 
 
+def test_an_empty_store_estimates_a_vlm_arm_from_its_tasks_vlm_figure(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    # Pusher's VLM arms render and smooth: their declared figure, not the plain arms', prices them
+    cfg = RunConfig(task="pusher", plugin=get_task("pusher"), preset="pusher", arms=("baseline", "hybrid"),
+                    seeds=(0,), tracking_uri=f"sqlite:///{tmp_path}/none.db")
+    plain, vlm = cfg.task_plugin.step_seconds, cfg.task_plugin.vlm_step_seconds
+    assert plain is not None and vlm is not None and vlm > 5 * plain
+    cost = estimate_sweeps([cfg])
+    assert cost.per_run_s == pytest.approx(cfg.budget * (plain + vlm) / 2)
+    assert f"pusher {plain * 1e3:.2f} ms (VLM arms {vlm * 1e3:.2f} ms) per step" in cost.how
+
+
 # --- a real VLM's queries ------------------------------------------------------------------------
 
 def test_the_hit_rate_table_is_what_the_committed_exports_measure() -> None:

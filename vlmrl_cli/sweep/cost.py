@@ -88,8 +88,25 @@ def measure(client: Any, experiment_id: str) -> Timings:
 
 
 def unmeasured(job: TrainJob) -> float:
-    """Seconds per step of ``job`` with nothing timed: its task's ``step_seconds``, else the fallback."""
-    return job.task_plugin.step_seconds or FALLBACK_S_PER_STEP
+    """Seconds per step of ``job`` with nothing timed: its task's ``step_seconds`` (``vlm_step_seconds``
+    for an arm that asks the VLM, where declared), else the fallback."""
+    task = job.task_plugin
+    return (task.vlm_step_seconds if job.arm.uses_vlm else None) or task.step_seconds or FALLBACK_S_PER_STEP
+
+
+def _declared(jobs: Iterable[TrainJob]) -> str:
+    """Each task's seconds per step with nothing timed, for a line: ``pusher 0.52 ms (VLM arms 4.60 ms)``."""
+    figures: dict[str, dict[bool, float]] = {}
+    for job in jobs:
+        figures.setdefault(job.task_plugin.name, {})[job.arm.uses_vlm] = unmeasured(job)
+    parts = []
+    for task, by_kind in sorted(figures.items()):
+        plain, vlm = by_kind.get(False), by_kind.get(True)
+        if plain is not None and vlm is not None and vlm != plain:
+            parts.append(f"{task} {plain * 1e3:.2f} ms (VLM arms {vlm * 1e3:.2f} ms)")
+        else:
+            parts.append(f"{task} {(plain if plain is not None else vlm or 0.0) * 1e3:.2f} ms")
+    return ", ".join(parts)
 
 
 def estimate(pending: Sequence[TrainJob], done: int, workers: int, timings: Timings,
@@ -113,9 +130,7 @@ def estimate(pending: Sequence[TrainJob], done: int, workers: int, timings: Timi
                + ("; no arm that asks the VLM is timed yet, so those runs count at the other arms' rate: a lower "
                   "bound" if guessed else ""))
     else:
-        by_task = {job.task_plugin.name: unmeasured(job) for job in pending}
-        figures = ", ".join(f"{t} {s * 1e3:.2f} ms" for t, s in sorted(by_task.items())) or \
-            f"{FALLBACK_S_PER_STEP * 1e3:.2f} ms"
+        figures = _declared(pending) or f"{FALLBACK_S_PER_STEP * 1e3:.2f} ms"
         how = (f"no finished run to measure yet: {figures} per step and worker on 2 cores (each task's "
                "committed runs; MountainCar-v0's from `nox -s repro`, 20 runs x 300,000 steps in 665 s)")
     return CostEstimate(len(pending), done, seconds / len(pending) if pending else 0.0, total, workers, how)
@@ -136,9 +151,8 @@ def retrain_estimate(runs: Sequence[tuple[TrainJob, float | None]], workers: int
         parts.append(f"{len(measured)} run(s) at the wall time per step they recorded (with their set-up and "
                      "evaluation, which a retrain skips)")
     if declared:
-        by_task = {job.task_plugin.name: unmeasured(job) for job in declared}
-        figures = ", ".join(f"{t} {s * 1e3:.2f} ms" for t, s in sorted(by_task.items()))
-        parts.append(f"{len(declared)} run(s), which recorded no wall time, at their task's {figures} per step")
+        parts.append(f"{len(declared)} run(s), which recorded no wall time, at their task's {_declared(declared)} "
+                     "per step")
     how = (f"{sum(job.timesteps for job, _ in runs):,} steps in all: " + "; ".join(parts) +
            f"; {cores} core(s)")
     return CostEstimate(len(runs), 0, seconds / len(runs) if runs else 0.0, total, workers, how)

@@ -107,6 +107,8 @@ class Task:
     wrap: Callable[[gym.Env[Any, Any]], gym.Env[Any, Any]] | None = None
     # seconds per env step and worker of the committed runs, for cost estimates (None: MountainCar-v0's)
     step_seconds: float | None = None
+    # the same for an arm that asks the VLM, where rendering and the RBF field cost more (None: step_seconds)
+    vlm_step_seconds: float | None = None
     scales: TaskScales | None = None
     success_rule: SuccessRule | None = None
     sim_profiles: tuple[SimProfile, ...] = ()

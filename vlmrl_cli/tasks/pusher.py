@@ -221,6 +221,11 @@ def pusher_task() -> Any:
         probe_states=random_states,
         wrap=sparse_push,
         window=50,
+        # medians of the committed runs' wall time per step (2 workers on 2 cores): 22 without a VLM,
+        # quartiles 0.47-1.52 ms; 8 with the simulated VLM, 2.47-6.05 ms (rendering, and an RBF field
+        # whose work per step grows with the run)
+        step_seconds=0.52e-3,
+        vlm_step_seconds=4.6e-3,
         random_score=RandomScore(-100.0),  # measured by RANDOM_SCORE_COMMAND on 2026-12-07 (0/200 successes)
         # goal: about 50 steps (-50) over a failure's -100; Eq. 1 pays at most 1 per step at scale 1
         scales=task_scales(goal_return=50.0, potential_span=1.0, dense_peak=1.0, horizon=MAX_STEPS, kin_offset=1.0),
