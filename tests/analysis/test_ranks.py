@@ -25,7 +25,7 @@ def test_dnf_is_kept_as_the_slowest_not_dropped() -> None:
     # make b look faster; censored, b's DNF seeds are slower than every seed of a.
     a = [200.0, 210.0, 220.0]
     b = [100.0, np.nan, np.nan]
-    t = censored_rank_test(a, b, _rng(), budget_a=1000, budget_b=1000)
+    t = censored_rank_test(a, b, budget_a=1000, budget_b=1000)
     # U counts pairs with a_i > b_j (a slower) plus half the ties: every a is slower than b's 100 only: U = 3
     assert t.u == 3.0 and t.p_faster == pytest.approx(1 - 3 / 9)
     assert (t.n_dnf_a, t.n_dnf_b) == (0, 2) and t.note == ""
@@ -41,17 +41,17 @@ def test_dnf_is_kept_as_the_slowest_not_dropped() -> None:
 
 
 def test_all_dnf_on_both_sides_is_no_evidence() -> None:
-    t = censored_rank_test([np.nan] * 5, [np.nan] * 5, _rng())
+    t = censored_rank_test([np.nan] * 5, [np.nan] * 5)
     assert t.p_value == 1.0 and t.p_faster == 0.5
 
 
 def test_complete_separation_of_five_vs_five_is_exact() -> None:
-    t = censored_rank_test([1.0, 2, 3, 4, 5], [6.0, 7, 8, 9, np.nan], _rng())
+    t = censored_rank_test([1.0, 2, 3, 4, 5], [6.0, 7, 8, 9, np.nan])
     assert t.p_faster == 1.0 and t.p_value == pytest.approx(2 / math.comb(10, 5))
 
 
 def test_different_budgets_and_single_seeds_are_noted() -> None:
-    t = censored_rank_test([1.0], [np.nan, 3.0], _rng(), budget_a=10, budget_b=20)
+    t = censored_rank_test([1.0], [np.nan, 3.0], budget_a=10, budget_b=20)
     assert "budgets differ" in t.note and "no test" in t.note and np.isnan(t.p_value) and t.p_faster == 1.0
 
 
@@ -87,12 +87,12 @@ def test_a_crossing_after_the_budget_is_a_dnf_in_the_rank_test() -> None:
     over = [100_240.0, 100_416.0, 101_200.0, np.nan]
     same_as_dnf = [np.nan] * 4
     finished = [50_000.0, 60_000.0, 70_000.0, 80_000.0]
-    t_over = censored_rank_test(finished, over, _rng(), budget_a=budget, budget_b=budget)
-    t_nan = censored_rank_test(finished, same_as_dnf, _rng(), budget_a=budget, budget_b=budget)
+    t_over = censored_rank_test(finished, over, budget_a=budget, budget_b=budget)
+    t_nan = censored_rank_test(finished, same_as_dnf, budget_a=budget, budget_b=budget)
     assert t_over.n_dnf_b == 4
     assert (t_over.u, t_over.p_value) == (t_nan.u, t_nan.p_value)
     # among the DNFs of b, the over-budget crossings and the NaN are tied: U of b vs a DNF-only arm is 8
-    t_b = censored_rank_test(over, [np.nan, np.nan], _rng(), budget_a=budget, budget_b=budget)
+    t_b = censored_rank_test(over, [np.nan, np.nan], budget_a=budget, budget_b=budget)
     assert t_b.u == 4.0 and t_b.p_faster == 0.5
 
 
@@ -128,12 +128,12 @@ def test_the_exact_p_is_scipys_exact_mann_whitney_without_ties() -> None:
 def test_ten_vs_ten_is_exact_where_the_normal_approximation_is_not() -> None:
     # issue 51: complete separation at 10 vs 10 is 2 / C(20, 10) = 1.1e-5, not the normal 0.00018;
     # heavy DNF ties: 1 finish and 9 DNF against 10 DNF is 1.0 exactly
-    sep = censored_rank_test(list(range(1, 11)), [np.nan] * 10, _rng())
+    sep = censored_rank_test(list(range(1, 11)), [np.nan] * 10)
     assert sep.method == "exact" and sep.p_value == pytest.approx(2 / math.comb(20, 10))
-    ties = censored_rank_test([5.0] + [np.nan] * 9, [np.nan] * 10, _rng())
+    ties = censored_rank_test([5.0] + [np.nan] * 9, [np.nan] * 10)
     assert ties.method == "exact" and ties.p_value == 1.0
 
 
 def test_beyond_the_counted_splits_the_test_says_it_is_approximate() -> None:
-    t = censored_rank_test(list(range(1, 11)), [np.nan] * 10, _rng(), n_perm=1000)
+    t = censored_rank_test(list(range(1, 11)), [np.nan] * 10, n_perm=1000)
     assert t.method == "asymptotic" and t.p_value > 2 / math.comb(20, 10)

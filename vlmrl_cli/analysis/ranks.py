@@ -54,12 +54,12 @@ def _single_budget(budget: npt.ArrayLike | None) -> float | None:
 
 
 def censored_rank_test(
-    steps_a: npt.ArrayLike, steps_b: npt.ArrayLike, rng: np.random.Generator, n_perm: int = DEFAULT_N_PERM,
+    steps_a: npt.ArrayLike, steps_b: npt.ArrayLike, n_perm: int = DEFAULT_N_PERM,
     budget_a: npt.ArrayLike | None = None, budget_b: npt.ArrayLike | None = None,
 ) -> RankTest:
     """Mann-Whitney U test on steps (shapes ``(n_a,)``, ``(n_b,)``, NaN = DNF) with each DNF censored
-    at its budget (``censor``), the p exact up to ``n_perm`` splits (``rank_sum_p``); ``rng`` is
-    unused. The note says when the budgets differ (a DNF only exceeds its own budget).
+    at its budget (``censor``), the p exact up to ``n_perm`` splits (``rank_sum_p``). The note
+    says when the budgets differ (a DNF only exceeds its own budget).
     """
     a, b = censor(steps_a, budget_a), censor(steps_b, budget_b)
     dnf_a, dnf_b = int(np.isinf(a).sum()), int(np.isinf(b).sum())

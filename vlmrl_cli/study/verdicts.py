@@ -297,7 +297,7 @@ def _share_comparison(a: np.ndarray, b: np.ndarray, rng: np.random.Generator, n_
     Mann-Whitney p on the shares (NaN when every seed ties)."""
     diff = stats.difference_of_means(a, b, rng, n_boot, ci)
     tied = np.unique(np.concatenate([a, b])).size <= 1
-    return diff, float("nan") if tied else censored_rank_test(a, b, rng).p_value
+    return diff, float("nan") if tied else censored_rank_test(a, b).p_value
 
 
 def hacking_answer(per_seed: pd.DataFrame, rng: np.random.Generator, alpha: float = 0.05,
