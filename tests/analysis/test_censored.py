@@ -69,18 +69,16 @@ def test_restricted_means_keep_every_seed_and_stay_within_the_budget(values: lis
 
 
 def test_verdicts_faster_equivalent_inconclusive() -> None:
-    rng = np.random.default_rng(0)
-    same = censored.steps_verdict([500.0, 510.0, 490.0] * 4, [505.0, 495.0, 500.0] * 4, BUDGET, BUDGET, 0.8, rng,
-                                  400)
+    same = censored.steps_verdict([500.0, 510.0, 490.0] * 4, [505.0, 495.0, 500.0] * 4, BUDGET, BUDGET, 0.8)
     assert same.text == censored.equivalent(1.15) and 1 / 1.15 < same.tost_low <= same.tost_high < 1.15
-    fast = censored.steps_verdict([800.0] * 10, [400.0] * 10, BUDGET, BUDGET, 0.001, rng, 400)
+    fast = censored.steps_verdict([800.0] * 10, [400.0] * 10, BUDGET, BUDGET, 0.001)
     assert fast.text == censored.FASTER and fast.speedup.value == pytest.approx(2.0)
-    slow = censored.steps_verdict([400.0] * 10, [800.0] * 10, BUDGET, BUDGET, 0.001, rng, 400)
+    slow = censored.steps_verdict([400.0] * 10, [800.0] * 10, BUDGET, BUDGET, 0.001)
     assert slow.text == censored.SLOWER
-    wide = censored.steps_verdict([200.0, 900.0, 300.0], [250.0, 800.0, 600.0], BUDGET, BUDGET, 0.5, rng, 400)
+    wide = censored.steps_verdict([200.0, 900.0, 300.0], [250.0, 800.0, 600.0], BUDGET, BUDGET, 0.5)
     assert wide.text == censored.INCONCLUSIVE
     # alike only because almost every seed DNFs: no equivalence claim
-    dnf = censored.steps_verdict([np.nan] * 9 + [900.0], [np.nan] * 10, BUDGET, BUDGET, 0.9, rng, 400)
+    dnf = censored.steps_verdict([np.nan] * 9 + [900.0], [np.nan] * 10, BUDGET, BUDGET, 0.9)
     assert dnf.text == censored.INCONCLUSIVE and dnf.speedup.value == pytest.approx(0.99)
 
 

@@ -169,11 +169,9 @@ class Verdict:
 
 
 def steps_verdict(ref_steps: npt.ArrayLike, arm_steps: npt.ArrayLike, ref_budget: npt.ArrayLike,
-                  arm_budget: npt.ArrayLike, p_value: float, rng: np.random.Generator,
-                  n_boot: int = DEFAULT_N_BOOT, ci: float = 0.95, alpha: float = 0.05,
+                  arm_budget: npt.ArrayLike, p_value: float, ci: float = 0.95, alpha: float = 0.05,
                   margin: float = DEFAULT_MARGIN, direction: float = math.nan) -> Verdict:
-    """The verdict of arm vs reference on one threshold's steps, on ``p_value`` as given (``judge_speedup``;
-    ``rng`` and ``n_boot`` are unused)."""
+    """The verdict of arm vs reference on one threshold's steps, on ``p_value`` as given (``judge_speedup``)."""
     est = speedup(ref_steps, arm_steps, ref_budget, arm_budget, ci)
     tost = speedup(ref_steps, arm_steps, ref_budget, arm_budget, 1 - 2 * alpha)
     finished = min(float(reached(ref_steps, ref_budget).mean()) if np.size(ref_steps) else 0.0,

@@ -332,8 +332,7 @@ def judge_steps(
     a, r = per_seed.loc[mine, key].to_numpy(dtype=float), per_seed.loc[theirs, key].to_numpy(dtype=float)
     budget_a = per_seed.loc[mine, "budget"].to_numpy(dtype=float)
     budget_r = per_seed.loc[theirs, "budget"].to_numpy(dtype=float)
-    skey = f"speedup_{threshold:g}/{arm}-vs-{ref}"  # one stream: Table 2 and the attribution table show one CI
     test = censored_rank_test(a, r, n_perm, budget_a, budget_r)
-    judged = censored.steps_verdict(r, a, budget_r, budget_a, test.p_value, stats.stream(rng, skey), n_boot, ci,
-                                    alpha, margin, direction=test.p_faster - 0.5)
+    judged = censored.steps_verdict(r, a, budget_r, budget_a, test.p_value, ci, alpha, margin,
+                                    direction=test.p_faster - 0.5)
     return judged, test, censored_logrank(a, r, budget_a, budget_r)
