@@ -115,7 +115,7 @@ def compare_arms(
     for pair in chosen:
         da, db = per_seed[per_seed["arm"] == pair.a], per_seed[per_seed["arm"] == pair.b]
         for t in thresholds:
-            judged, test, logrank = judge_steps(per_seed, pair.a, pair.b, t, rng, n_boot, ci, n_perm, alpha, margin)
+            judged, test, logrank = judge_steps(per_seed, pair.a, pair.b, t, ci, n_perm, alpha, margin)
             rows.append(_row(pair, f"speedup_{t:g}", f"Speedup to {t:g} ({pair.a} over {pair.b})", "x",
                              judged.speedup, test.p_value,
                              f"Mann-Whitney U on steps, DNF censored ({test.method} p)", test.n_a, test.n_b,

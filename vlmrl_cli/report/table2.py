@@ -185,7 +185,7 @@ def build_table2(
         cells += _success_cells(d, arm, reported, thresholds, ci, detached_cut)
         cells.append(_length_cell(d, ev, arm, reported, thresholds, rng, n_boot, ci))
         cells += _final_cells(d, arm, window, rng, n_boot, ci)
-    speed_rows = _speedup_rows(per_seed, arms, reported, thresholds, rng, n_boot, ci, n_perm)
+    speed_rows = _speedup_rows(per_seed, arms, reported, thresholds, ci, n_perm)
     paper_values = {m: _paper_values(reported, m, thresholds) for m in labels}
     return Table2(arms, tuple(thresholds), pd.DataFrame(cells), pd.DataFrame(speed_rows, columns=list(SPEED_COLUMNS)),
                   labels, ci, paper_values)
@@ -288,8 +288,7 @@ SPEED_COLUMNS = ("metric", "arm", "value", "ci_low", "ci_high", "n", "paper", "n
 
 
 def _speedup_rows(per_seed: pd.DataFrame, arms: Sequence[str], reported: dict[str, Any], thresholds: Sequence[float],
-                  rng: np.random.Generator | stats.Streams, n_boot: int, ci: float, n_perm: int
-                  ) -> list[dict[str, Any]]:
+                  ci: float, n_perm: int) -> list[dict[str, Any]]:
     """Every other arm's speedup over the baseline to each threshold with its censored rank test (NaN
     without a baseline); the paper's speedup beside the hybrid's."""
     rows: list[dict[str, Any]] = []
@@ -299,7 +298,7 @@ def _speedup_rows(per_seed: pd.DataFrame, arms: Sequence[str], reported: dict[st
             if arm == BASELINE:
                 continue
             if BASELINE in arms:
-                est, test = compare_steps(per_seed, arm, BASELINE, t, rng, n_boot, ci, n_perm)
+                est, test = compare_steps(per_seed, arm, BASELINE, t, ci, n_perm)
             else:
                 est, test = stats.Estimate(float("nan"), note=NEEDS_BASELINE), None
             rows.append({"metric": threshold_key(t), "arm": arm, "value": est.value, "ci_low": est.low,
@@ -311,19 +310,17 @@ def _speedup_rows(per_seed: pd.DataFrame, arms: Sequence[str], reported: dict[st
 
 
 def compare_steps(
-    per_seed: pd.DataFrame, arm: str, ref: str, threshold: float, rng: np.random.Generator | stats.Streams,
-    n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, n_perm: int = DEFAULT_N_PERM,
+    per_seed: pd.DataFrame, arm: str, ref: str, threshold: float, ci: float = 0.95, n_perm: int = DEFAULT_N_PERM,
 ) -> tuple[stats.Estimate, RankTest]:
-    """Speedup of ``arm`` over ``ref`` to ``threshold`` (ratio of restricted mean steps, bootstrap CI)
-    and the censored rank test: ``judge_steps`` without its verdict."""
-    judged, test, _ = judge_steps(per_seed, arm, ref, threshold, rng, n_boot, ci, n_perm)
+    """Speedup of ``arm`` over ``ref`` to ``threshold`` (ratio of restricted mean steps, delta-method
+    interval on its log: ``censored.speedup``) and the censored rank test: ``judge_steps`` without its verdict."""
+    judged, test, _ = judge_steps(per_seed, arm, ref, threshold, ci, n_perm)
     return judged.speedup, test
 
 
 def judge_steps(
-    per_seed: pd.DataFrame, arm: str, ref: str, threshold: float, rng: np.random.Generator | stats.Streams,
-    n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95, n_perm: int = DEFAULT_N_PERM, alpha: float = 0.05,
-    margin: float = censored.DEFAULT_MARGIN,
+    per_seed: pd.DataFrame, arm: str, ref: str, threshold: float, ci: float = 0.95, n_perm: int = DEFAULT_N_PERM,
+    alpha: float = 0.05, margin: float = censored.DEFAULT_MARGIN,
 ) -> tuple[censored.Verdict, RankTest, LogRank]:
     """``compare_steps``, its verdict on the raw rank-test p (``censored.steps_verdict``; a family's
     adjustment re-judges it later) and the log-rank test beside it."""

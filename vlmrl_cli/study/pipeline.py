@@ -126,8 +126,8 @@ def _analyse(cfg: StudyConfig, result: StudyResult, client: Any, data: Any, accu
     made = None if any(result.missing.values()) else verdicts.family_size(rows, control_rows)
     result.power = power_lines(cfg, result.per_seed, made)
     reference = next(r for r in cfg.regimes if r.id == cfg.vlm_regime)
-    points = [verdicts.vlm_point(v.id, verdicts.paired(data, reference.run, v.run), cfg.top, accuracy[v.id], streams,
-                                 cfg.n_boot, cfg.ci) for v in cfg.variants]
+    points = [verdicts.vlm_point(v.id, verdicts.paired(data, reference.run, v.run), cfg.top, accuracy[v.id], cfg.ci)
+              for v in cfg.variants]
     result.regime_map = pd.DataFrame(rows)
     result.vlm_points = pd.DataFrame(points, columns=["variant", "mcq_accuracy", "speedup", "low", "high", "p",
                                                       "hybrid_seeds", "baseline_seeds"])

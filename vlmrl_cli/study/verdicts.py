@@ -281,11 +281,10 @@ def untestable(map_rows: Sequence[dict[str, Any]], control_rows: Sequence[dict[s
     return _count(map_rows, control_rows, registry, lambda row, key: row.get(f"{key}.verdict") == NEITHER)
 
 
-def vlm_point(name: str, data: ExperimentData, top: float, accuracy: float, streams: stats.Streams,
-              n_boot: int = stats.DEFAULT_N_BOOT, ci: float = 0.95) -> dict[str, Any]:
+def vlm_point(name: str, data: ExperimentData, top: float, accuracy: float, ci: float = 0.95) -> dict[str, Any]:
     """One VLM-quality point: the variant's MCQ accuracy and the hybrid's speedup (``data``: ``paired``)."""
     per_seed = per_seed_table(data, [top])
-    est, test = compare_steps(per_seed, METHOD, BASELINE, top, streams, n_boot, ci)
+    est, test = compare_steps(per_seed, METHOD, BASELINE, top, ci)
     return {"variant": name, "mcq_accuracy": accuracy, "speedup": est.value, "low": est.low, "high": est.high,
             "p": test.p_value, "hybrid_seeds": int((per_seed["arm"] == METHOD).sum()),
             "baseline_seeds": int((per_seed["arm"] == BASELINE).sum())}
