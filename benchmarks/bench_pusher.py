@@ -3,8 +3,9 @@
 Trains each arm in-process (one torch thread, no MLflow, the simulated VLM) for ``--timesteps``
 steps with the ``pusher`` preset (8 envs, n_steps 256, batch 64, 10 epochs, VecNormalize) and
 prints, per arm: steps per CPU-second and per wall-second; for the VLM arms the render share (CPU
-time inside the camera's renderer over the run's CPU time) and the reader's share (the simulated
-VLM answering), the camera's renders and cells, the VLM's queries and prototype label reuses;
+time inside the camera's renderer over the run's CPU time), the reader's share (the simulated
+VLM answering) and the RBF field's (smoothing the labels over the prototypes), the camera's
+renders and cells, the VLM's queries and prototype label reuses;
 each count also per 100,000 steps, scaled linearly from the measured run (so a count that grows
 faster than linearly, like the RBF field's cost per new frame, is underestimated: the steps per
 CPU-second of the run's first and second halves are printed to show it). Last, the CPU time a
@@ -34,6 +35,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from vlmrl_cli.core.provenance import package_versions
 from vlmrl_cli.shaping.arms import ARMS
+from vlmrl_cli.shaping.rbf import RBFField
 from vlmrl_cli.tasks.registry import get_task
 from vlmrl_cli.tracking import schema
 from vlmrl_cli.training.envs import make_train_env
@@ -79,14 +81,17 @@ def measure(arm_name: str, timesteps: int, seed: int) -> dict[str, Any]:
     arm = ARMS[arm_name]
     ppo = dataclasses.replace(preset_of(task, "pusher"), timesteps=timesteps)
     client = build_client(VLMConfig(backend="sim", use_cache=False), reader=task.reader) if arm.uses_vlm else None
-    render, read = [0.0], [0.0]
+    render, read, rbf = [0.0], [0.0], [0.0]
+    for name in ("value", "add_prototype", "set_potential"):  # the class's: envs look ``value`` up once
+        setattr(RBFField, name, timed(getattr(RBFField, name), rbf))
     start, cpu_start = time.perf_counter(), time.process_time()
     env, oracle = make_train_env(arm, ppo, task.default_shaping(), client, seed, task)
     camera = env.get_attr("camera", [0])[0] if arm.uses_vlm else None
     if camera is not None:
         camera._draw = timed(camera._draw, render)  # type: ignore[method-assign]
-    if client is not None:
+    if client is not None:  # one frame at a time, or a round's frames at once
         client.ask = timed(client.ask, read)  # type: ignore[method-assign]
+        client.ask_many = timed(client.ask_many, read)  # type: ignore[method-assign]
     model = make_model(ppo, env, seed)
     clock = Clock()
     model.learn(total_timesteps=timesteps, callback=clock)
@@ -94,7 +99,8 @@ def measure(arm_name: str, timesteps: int, seed: int) -> dict[str, Any]:
     env.close()
     stats = oracle.stats() if oracle is not None else {}
     return {"arm": arm_name, "steps": model.num_timesteps, "wall": wall, "cpu": cpu, "render": render[0],
-            "read": read[0], "renders": camera.renders if camera else 0, "cells": camera.cells if camera else 0,
+            "read": read[0], "rbf": rbf[0], "renders": camera.renders if camera else 0,
+            "cells": camera.cells if camera else 0,
             "stats": stats, "marks": [(0, cpu_start), *clock.marks]}
 
 
@@ -128,7 +134,8 @@ def main() -> None:
             queries = run["stats"][schema.METRIC_VLM_QUERIES]
             reuses = run["stats"][schema.METRIC_VLM_LABEL_REUSES]
             line += (f"; render share {run['render'] / cpu:.1%} ({run['renders']:,} renders, {run['cells']:,} cells), "
-                     f"reader share {run['read'] / cpu:.1%}; per 100k steps: {queries * scale:,.0f} VLM queries, "
+                     f"reader share {run['read'] / cpu:.1%}, RBF field share {run['rbf'] / cpu:.1%}; "
+                     f"per 100k steps: {queries * scale:,.0f} VLM queries, "
                      f"{reuses * scale:,.0f} prototype reuses, {run['renders'] * scale:,.0f} renders")
         line += f"; a {FULL_RUN:,}-step run at this rate: {FULL_RUN / steps * cpu / 60:.1f} CPU-min"
         print(line, flush=True)
