@@ -34,7 +34,11 @@ def squared_distances(points: np.ndarray, feature: np.ndarray, unit: float = 1.0
 
 class RBFField:
     """``sum_i w_i phi_i / sum_i w_i``, ``w_i = exp(-||f - f_i||^2 / (2 bandwidth^2))``, per frame key
-    as prototypes arrive (0.0 before the first; the nearest's when every weight would underflow)."""
+    as prototypes arrive (0.0 before the first; the nearest's when every weight would underflow).
+
+    A key's sums are brought up to date when it is looked up again: the prototypes added and the
+    potentials changed since, applied in order with the operations an update of every key at each
+    event would do (the same bits), but only for the keys seen again."""
 
     def __init__(self, bandwidth: float, dim: int, unit: float = 1.0) -> None:
         if not (math.isfinite(bandwidth) and bandwidth > 0):
@@ -50,11 +54,13 @@ class RBFField:
         self._pot_buf = np.empty(0, dtype=np.float64)
         self._index: dict[str, int] = {}
         self._feat_buf: np.ndarray | None = None  # (capacity, D)
-        self._knorm_buf = np.empty(0, dtype=np.int64)  # each key's squared norm (integer features)
         self._pnorm_buf = np.empty(0, dtype=np.int64)  # each prototype's squared norm
         self._num_buf = np.empty(0, dtype=np.float64)
         self._den_buf = np.empty(0, dtype=np.float64)
         self._ref_buf = np.empty(0, dtype=np.float64)  # squared distance the weights are relative to
+        self._synced_buf = np.empty(0, dtype=np.int64)  # how many of the events each key's sums include
+        # the events, in order: (prototype, added?, its potential if added, else the potential's change)
+        self._events: list[tuple[int, bool, float]] = []
         self._low, self._high = math.inf, -math.inf  # range of the prototype potentials
         # each key's value until the next prototype or potential change: a dict lookup per env step
         self._values: dict[str, float] = {}
@@ -118,26 +124,7 @@ class RBFField:
         self._n += 1
         self._low = min(self._low, float(potential))
         self._high = max(self._high, float(potential))
-        if self._feat_buf is None:
-            return
-        k = self._k
-        ref, num, den = self._ref_buf[:k], self._num_buf[:k], self._den_buf[:k]
-        sq = self._key_distances(row[0])
-        closer = np.flatnonzero(sq < ref)
-        # rebase keys whose nearest prototype is the new one, so no weight underflows (the others'
-        # factor would be exp(-0.0) = 1.0 exactly, so they are left as they are)
-        rescale = exp(-(ref[closer] - sq[closer]) * self._scale)
-        num[closer] *= rescale
-        den[closer] *= rescale
-        ref[closer] = sq[closer]
-        w = exp(-(sq - ref) * self._scale)
-        num += w * float(potential)
-        den += w
-
-    def _key_distances(self, proto: np.ndarray) -> np.ndarray:
-        """``squared_distances(keys, proto)``: see ``_distances``."""
-        assert self._feat_buf is not None
-        return self._distances(self._feat_buf[: self._k], self._knorm_buf[: self._k], proto)
+        self._events.append((self._n - 1, True, float(potential)))
 
     def _distances(self, rows: np.ndarray, norms: np.ndarray, f: np.ndarray) -> np.ndarray:
         """``squared_distances(rows, f)``, the same numbers: as ``|r|^2 - 2 r.f + |f|^2`` from the stored
@@ -155,7 +142,7 @@ class RBFField:
         return int(np.einsum("i,i->", row, row)) if np.issubdtype(row.dtype, np.integer) else 0
 
     def set_potential(self, index: int, potential: float) -> None:
-        """Give prototype ``index`` (insertion order) a new potential, updating every stored key."""
+        """Give prototype ``index`` (insertion order) a new potential (each stored key applies it when looked up)."""
         if self._proto_buf is None or not 0 <= index < self._n:
             raise IndexError(f"no prototype {index}; the field holds {self.prototypes}")
         old = float(self._pot_buf[index])
@@ -165,11 +152,36 @@ class RBFField:
         self._pot_buf[index] = new
         self._values.clear()
         self._low, self._high = float(self.potentials.min()), float(self.potentials.max())
-        if self._feat_buf is None:
-            return
-        k = self._k
-        sq = self._key_distances(self._proto_buf[index])
-        self._num_buf[:k] += exp(-(sq - self._ref_buf[:k]) * self._scale) * (new - old)
+        self._events.append((index, False, new - old))
+
+    def _catch_up(self, row: int) -> None:
+        """Apply to key ``row``'s sums the events since it was last brought up to date, in order: an
+        added prototype rebases the sums if it is the key's nearest (``exp(-(ref - sq) s)``, so no
+        weight underflows) and adds its weight; a changed potential adds ``w (new - old)``."""
+        assert self._feat_buf is not None and self._proto_buf is not None
+        events = self._events[int(self._synced_buf[row]):]
+        protos = np.fromiter((e[0] for e in events), dtype=np.intp, count=len(events))
+        added = np.fromiter((e[1] for e in events), dtype=bool, count=len(events))
+        values = np.fromiter((e[2] for e in events), dtype=np.float64, count=len(events))
+        sq = self._distances(self._proto_buf[protos], self._pnorm_buf[protos], self._feat_buf[row])
+        # the key's nearest squared distance before and after each event (a change moves no prototype)
+        refs = np.minimum.accumulate(np.concatenate([self._ref_buf[row: row + 1], np.where(added, sq, np.inf)]))
+        before, after = refs[:-1], refs[1:]
+        closer = added & (sq < before)
+        rescale = np.ones_like(sq)
+        rescale[closer] = exp(-(before[closer] - sq[closer]) * self._scale)
+        w = exp(-(sq - after) * self._scale)
+        terms = w * values
+        num, den = float(self._num_buf[row]), float(self._den_buf[row])
+        for rebase, r, weight, term, add in zip(closer.tolist(), rescale.tolist(), w.tolist(), terms.tolist(),
+                                                added.tolist(), strict=True):
+            if rebase:
+                num, den = num * r, den * r
+            num += term
+            if add:
+                den += weight
+        self._num_buf[row], self._den_buf[row], self._ref_buf[row] = num, den, float(after[-1])
+        self._synced_buf[row] = len(self._events)
 
     def value(self, key: str, feature: np.ndarray) -> float:
         known = self._values.get(key)
@@ -189,14 +201,16 @@ class RBFField:
             if self._feat_buf is None:
                 self._feat_buf = np.empty((0, self._dim), dtype=f.dtype)
             self._feat_buf = self._grown(self._feat_buf, row)
-            self._knorm_buf = self._grown(self._knorm_buf, row)
             self._num_buf = self._grown(self._num_buf, row)
             self._den_buf = self._grown(self._den_buf, row)
             self._ref_buf = self._grown(self._ref_buf, row)
+            self._synced_buf = self._grown(self._synced_buf, row)
             self._feat_buf[row] = f[0]
-            self._knorm_buf[row] = self._norm(f[0])
             self._num_buf[row], self._den_buf[row], self._ref_buf[row] = num, den, ref
+            self._synced_buf[row] = len(self._events)
             self._k += 1
+        elif self._synced_buf[row] < len(self._events):
+            self._catch_up(row)
         # called every env step: plain floats, and the documented bound kept exact
         value = min(max(float(self._num_buf[row]) / float(self._den_buf[row]), self._low), self._high)
         self._values[key] = value
