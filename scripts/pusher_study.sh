@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # Pusher-v5's study (issue 54), resumable: it trains, with the code of the worktree ROOT, what its
 # store lacks: a wave of 3 seeds per arm, then 10, one job per worker. Rerunning it resumes. The study
-# started at d0221fd; from 2026-12-08 its workers run at 5cbcbc2, whose RBF sums the same bits faster
-# (`vlmrl verify` retrained the d0221fd run hybrid-s1 at 63e7eda: identical, 5016 episodes). A new
-# session imports the committed partial export first:
+# started at d0221fd; on 2026-12-08 its workers moved to 5cbcbc2, then 59ce292, whose RBF gives the
+# same bits faster (`vlmrl verify` retrained the d0221fd runs hybrid-s1 at 63e7eda and hybrid-s2 at
+# 59ce292: identical, 5016 episodes each). A new session imports the committed partial export first:
 #
-#   git worktree add ../bg-pstudy2 5cbcbc2 && cd ../bg-pstudy2
+#   git worktree add ../bg-pstudy3 59ce292 && cd ../bg-pstudy3
 #   ROOT=$PWD IMPORTS=/path/to/main/results/tasks/pusher/runs-study-partial.jsonl.gz V=/path/to/venv/bin/vlmrl \
 #       nohup bash /path/to/main/scripts/pusher_study.sh > study.log 2>&1 &
 #
