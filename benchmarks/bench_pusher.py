@@ -21,12 +21,14 @@ from vlmrl_cli.core.numeric_pin import apply as pin_numeric_path
 pin_numeric_path()  # before torch and numpy load: the kernels every run of vlmrl computes with
 
 import argparse
+import contextlib
 import dataclasses
 import functools
 import os
 import time
 from collections.abc import Callable
 from typing import Any
+from unittest import mock
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # as vlmrl's entry point: before mujoco is imported
 
@@ -82,20 +84,21 @@ def measure(arm_name: str, timesteps: int, seed: int) -> dict[str, Any]:
     ppo = dataclasses.replace(preset_of(task, "pusher"), timesteps=timesteps)
     client = build_client(VLMConfig(backend="sim", use_cache=False), reader=task.reader) if arm.uses_vlm else None
     render, read, rbf = [0.0], [0.0], [0.0]
-    for name in ("value", "add_prototype", "set_potential"):  # the class's: envs look ``value`` up once
-        setattr(RBFField, name, timed(getattr(RBFField, name), rbf))
-    start, cpu_start = time.perf_counter(), time.process_time()
-    env, oracle = make_train_env(arm, ppo, task.default_shaping(), client, seed, task)
-    camera = env.get_attr("camera", [0])[0] if arm.uses_vlm else None
-    if camera is not None:
-        camera._draw = timed(camera._draw, render)  # type: ignore[method-assign]
-    if client is not None:  # one frame at a time, or a round's frames at once
-        client.ask = timed(client.ask, read)  # type: ignore[method-assign]
-        client.ask_many = timed(client.ask_many, read)  # type: ignore[method-assign]
-    model = make_model(ppo, env, seed)
-    clock = Clock()
-    model.learn(total_timesteps=timesteps, callback=clock)
-    wall, cpu = time.perf_counter() - start, time.process_time() - cpu_start
+    with contextlib.ExitStack() as patched:  # the class's methods, for this run only (envs look ``value`` up once)
+        for name in ("value", "add_prototype", "set_potential"):
+            patched.enter_context(mock.patch.object(RBFField, name, timed(getattr(RBFField, name), rbf)))
+        start, cpu_start = time.perf_counter(), time.process_time()
+        env, oracle = make_train_env(arm, ppo, task.default_shaping(), client, seed, task)
+        camera = env.get_attr("camera", [0])[0] if arm.uses_vlm else None
+        if camera is not None:
+            camera._draw = timed(camera._draw, render)  # type: ignore[method-assign]
+        if client is not None:  # one frame at a time, or a round's frames at once
+            client.ask = timed(client.ask, read)  # type: ignore[method-assign]
+            client.ask_many = timed(client.ask_many, read)  # type: ignore[method-assign]
+        model = make_model(ppo, env, seed)
+        clock = Clock()
+        model.learn(total_timesteps=timesteps, callback=clock)
+        wall, cpu = time.perf_counter() - start, time.process_time() - cpu_start
     env.close()
     stats = oracle.stats() if oracle is not None else {}
     return {"arm": arm_name, "steps": model.num_timesteps, "wall": wall, "cpu": cpu, "render": render[0],

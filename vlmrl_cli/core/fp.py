@@ -62,9 +62,10 @@ def fsum(x: np.ndarray) -> float:
     high = np.floor(whole * 2.0**-26)
     low = whole - high * 2.0**26  # whole = high * 2**26 + low, 0 <= low < 2**26, |high| <= 2**27
     lowest = int(exponent.min())
+    bins = exponent - lowest
     # per-exponent sums of < 2**26 terms of at most 27 bits: float64's partial sums stay exact
-    highs = np.bincount(exponent - lowest, weights=high).tolist()
-    lows = np.bincount(exponent - lowest, weights=low).tolist()
+    highs = np.bincount(bins, weights=high).tolist()
+    lows = np.bincount(bins, weights=low).tolist()
     total = 0
     for h, lo in zip(reversed(highs), reversed(lows), strict=True):
         total = (total << 1) + (int(h) << 26) + int(lo)
